@@ -8,6 +8,10 @@ True
 from diagnosers.base import Decision, Detection, Diagnoser, Episode, NotFittedError
 from diagnosers.registry import available, make, register
 
+# isort: split
+# Importing the model modules registers their diagnosers (after the registry exists).
+from diagnosers import baselines  # noqa: F401  (registers limits, pca, arx-band)
+
 __all__ = [
     "Decision",
     "Detection",

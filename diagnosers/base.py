@@ -1,11 +1,12 @@
 """The diagnoser contract: episodes in, alarms (with residuals and bands) out.
 
-A diagnoser is trained on healthy episodes with :meth:`Diagnoser.fit`, then watches an episode either
-sample by sample (:meth:`Diagnoser.reset` followed by :meth:`Diagnoser.update`) or all at once
-(:meth:`Diagnoser.detect`). Both paths must give the same decisions; the conformance tests check it.
+A diagnoser is trained on healthy episodes with :meth:`Diagnoser.fit`, then watches an episode
+either sample by sample (:meth:`Diagnoser.reset` followed by :meth:`Diagnoser.update`) or all at
+once (:meth:`Diagnoser.detect`). Both paths must give the same decisions; the conformance tests
+check it.
 
-Conventions follow scikit-learn's estimators: ``__init__`` stores keyword hyperparameters verbatim and
-does nothing else, ``fit`` validates them and returns ``self``, learned attributes end in ``_``.
+Conventions follow scikit-learn's estimators: ``__init__`` stores keyword hyperparameters verbatim
+and does nothing else, ``fit`` validates them and returns ``self``, learned attributes end in ``_``.
 """
 
 from __future__ import annotations
@@ -21,7 +22,6 @@ from pathlib import Path
 from typing import Any, ClassVar, Self
 
 import numpy as np
-
 
 SAVE_FORMAT = "fcc-diagnoser"
 SAVE_FORMAT_VERSION = 1
@@ -43,10 +43,12 @@ class Episode:
 
     Attributes:
         y: measurements, shape ``(n_samples, n_channels)``, physical units.
-        channels: channel names, one per column of ``y`` (for FCC-v0: ``fcc_env.MEASUREMENT_NAMES``).
+        channels: channel names, one per column of ``y`` (for FCC-v0:
+            ``fcc_env.MEASUREMENT_NAMES``).
         sample_time_s: sample period in seconds.
-        fault_onset: ground-truth onset sample, or ``None`` for a healthy record. Used only to score;
-            the harness never passes it to :meth:`Diagnoser.fit` (training data are healthy anyway).
+        fault_onset: ground-truth onset sample, or ``None`` for a healthy record. Used only to
+            score; the harness never passes it to :meth:`Diagnoser.fit` (training data are
+            healthy anyway).
         scenario: scenario name (``"nominal"``, ``"f1"``... or a file stem for external data).
         seed: seed the episode was simulated with, if any.
         y_clean: optional noise-free measurements (simulation only; for plots and diagnostics).
@@ -86,7 +88,9 @@ class Episode:
         try:
             return self.y[:, self.channels.index(name)]
         except ValueError:
-            raise ValueError(f"Unknown channel {name!r}. Available: {list(self.channels)}") from None
+            raise ValueError(
+                f"Unknown channel {name!r}. Available: {list(self.channels)}"
+            ) from None
 
 
 @dataclass(frozen=True)
@@ -94,9 +98,10 @@ class Decision:
     """What a diagnoser says about one sample.
 
     ``signal`` is what the diagnoser checks (a measured output for band detectors, a statistic such
-    as Hotelling's T² for others), ``lower``/``upper`` the limits it checks it against (``-inf``/``inf``
-    when one-sided), ``residual`` the model residual (measured − predicted) where there is a model.
-    All arrays have one entry per monitored quantity, named by :attr:`Diagnoser.signal_names_`.
+    as Hotelling's T² for others), ``lower``/``upper`` the limits it checks it against
+    (``-inf``/``inf`` when one-sided), ``residual`` the model residual (measured − predicted)
+    where there is a model. All arrays have one entry per monitored quantity, named by
+    :attr:`Diagnoser.signal_names_`.
     """
 
     alarm: bool
@@ -118,7 +123,9 @@ class Detection:
     signal_names: tuple[str, ...]
 
     @classmethod
-    def from_decisions(cls, decisions: Sequence[Decision], signal_names: tuple[str, ...]) -> Detection:
+    def from_decisions(
+        cls, decisions: Sequence[Decision], signal_names: tuple[str, ...]
+    ) -> Detection:
         return cls(
             alarm=np.array([d.alarm for d in decisions], dtype=bool),
             signal=np.stack([d.signal for d in decisions]),
@@ -139,7 +146,7 @@ class Detection:
 
 
 class Diagnoser(ABC):
-    """Base class of every diagnoser (template method: public methods check, ``_impl`` methods work).
+    """Base class of every diagnoser (template method: public methods check, ``_impl`` ones work).
 
     Subclasses implement ``_fit``, ``_reset``, ``_update`` and may override ``_detect`` with a
     vectorised version that must equal repeated ``_update`` calls.
@@ -153,9 +160,7 @@ class Diagnoser(ABC):
     def _param_names(cls) -> list[str]:
         sig = inspect.signature(cls.__init__)
         return [
-            p.name
-            for p in sig.parameters.values()
-            if p.name != "self" and p.kind is p.KEYWORD_ONLY
+            p.name for p in sig.parameters.values() if p.name != "self" and p.kind is p.KEYWORD_ONLY
         ]
 
     def get_params(self) -> dict[str, Any]:
@@ -181,6 +186,8 @@ class Diagnoser(ABC):
                     f"all training episodes must share channels; got {ep.channels} and {channels}"
                 )
         self._validate_params()
+        # A failed re-fit must not leave an object that looks fitted with half-updated state.
+        self._fitted_ = False
         self.channels_ = channels
         self.sample_time_s_ = float(episodes[0].sample_time_s)
         self._fit(episodes)
@@ -262,24 +269,48 @@ class Diagnoser(ABC):
         if not isinstance(config, dict) or config.get("format") != SAVE_FORMAT:
             raise ValueError(
                 f"{cfg_path} is not a saved diagnoser of this library "
-                f"(expected format {SAVE_FORMAT!r}, got {config.get('format') if isinstance(config, dict) else config!r})"
+                f"(expected format {SAVE_FORMAT!r}, got "
+                f"{config.get('format') if isinstance(config, dict) else config!r})"
             )
         if config.get("format_version") != SAVE_FORMAT_VERSION:
             raise ValueError(
                 f"{cfg_path}: format_version {config.get('format_version')!r} is not supported "
                 f"(this library reads version {SAVE_FORMAT_VERSION})"
             )
+        # A config with the right format tag can still be hand-edited or truncated: check the
+        # fields used below so that it fails with ValueError, not KeyError/TypeError.
+        for key, kind in (
+            ("diagnoser", str),
+            ("params", dict),
+            ("channels", list),
+            ("sample_time_s", (int, float)),
+        ):
+            if not isinstance(config.get(key), kind):
+                raise ValueError(
+                    f"{cfg_path}: field {key!r} is missing or of the wrong type "
+                    f"(got {config.get(key)!r}); the file is corrupted"
+                )
         obj = make(config["diagnoser"], **config["params"])
         if cls is not Diagnoser and not isinstance(obj, cls):
-            raise ValueError(f"{src} holds a {config['diagnoser']!r} diagnoser, not a {cls.__name__}")
+            raise ValueError(
+                f"{src} holds a {config['diagnoser']!r} diagnoser, not a {cls.__name__}"
+            )
         try:
             with np.load(src / "state.npz", allow_pickle=False) as data:
                 state = {k: data[k] for k in data.files}
         except (OSError, ValueError) as e:
-            raise ValueError(f"{src / 'state.npz'} is missing or not a numeric state file: {e}") from e
+            raise ValueError(
+                f"{src / 'state.npz'} is missing or not a numeric state file: {e}"
+            ) from e
         obj.channels_ = tuple(config["channels"])
         obj.sample_time_s_ = float(config["sample_time_s"])
-        obj._set_state(state)
+        try:
+            obj._set_state(state)
+        except KeyError as e:
+            raise ValueError(
+                f"{src / 'state.npz'} lacks the array {e} that a {config['diagnoser']!r} "
+                "diagnoser needs; the directory is corrupted or from another version"
+            ) from e
         obj._load_extra(src)
         obj._fitted_ = True
         obj.reset()

@@ -1,0 +1,309 @@
+"""The FCC converter as a Gymnasium environment (``FCC-v0``)."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from fcc_env.params import MEASUREMENT_NAMES, N_MEASUREMENTS, NOMINAL_INPUTS
+from fcc_env.physics import AUX_NAMES, aux_kernel, fault_multiplier, measure_kernel, step_kernel
+from fcc_env.scenarios import Scenario
+from fcc_env.simulation import (
+    AFTERBURN_WARNING_C,
+    FAULT_OPTION_NAMES,
+    PlantConfig,
+    add_noise,
+    draw_fault,
+    setup_episode,
+    termination_reason,
+)
+
+#: Actuator limits on the applied inputs (program + action), as fractions of nominal.
+U_F_LIMITS_REL = (0.5, 1.5)
+R_AR_LIMITS_REL = (0.85, 1.15)
+#: Physical size of a unit action (move relative to the program): catalyst valve kg/s, air t/h.
+ACTION_SCALE = np.array([0.5 * NOMINAL_INPUTS[0], 0.15 * NOMINAL_INPUTS[1]])
+
+OBS_LOW = np.array([0.0] + [-100.0] * 7, dtype=np.float32)
+OBS_HIGH = np.array([500.0] + [1500.0] * 7, dtype=np.float32)
+
+_CHUNK = 512  # samples of program and noise drawn at a time
+DEFAULT_HORIZON = 4000
+
+
+class FCCEnv(gym.Env):
+    """Fluid catalytic cracking converter (riser, reactor/stripper, two-stage regenerator).
+
+    ## Description
+    The plant of ``shared/fcc-model.md`` (after Moro & Odloak, 1995): an 11-state model integrated
+    with RK4 at the sample period, in open loop apart from the reactor level loop, with slide-valve
+    hydraulics (``valve_beta = 0.3``). An operating program excites feed temperature, air
+    temperature and air flow with random steps; the catalyst valve is held. A scenario may switch a
+    fault (f1–f4 of Patan et al., 2005) on at a given sample. The env is a plant to diagnose, not a
+    control task: the reward is always 0.
+
+    ## Action Space
+    ``Box(-1, 1, (2,))`` float32: moves of the manipulated variables relative to the operating
+    program, normalised (Gymnasium's recommendation) and held from this step until the next.
+    ``0`` follows the program (how diagnosers run episodes).
+
+    | Index | Action                                  | 1.0 means          |
+    |-------|-----------------------------------------|--------------------|
+    | 0     | regenerated-catalyst valve command Δu_F | +208.3 kg/s (50 %) |
+    | 1     | combustion air ΔR_ar                    | +22.26 t/h (15 %)  |
+
+    Out-of-range finite actions are clipped to the box, and the applied inputs to the actuator
+    limits (u_F 0.5–1.5 ×, R_ar 0.85–1.15 × nominal); ``info["action_saturated"]`` says so.
+    ``info["inputs"]`` holds the inputs actually applied (``fcc_env.INPUT_NAMES``).
+
+    ## Observation Space
+    ``Box(8,)`` float32, the paper's Table 1 measurements with white noise:
+
+    | Index | Variable | Unit | Low  | High | Noise std |
+    |-------|----------|------|------|------|-----------|
+    | 0     | R_ar     | t/h  | 0    | 500  | 0.5 %     |
+    | 1     | T_ar     | °C   | -100 | 1500 | 0.3       |
+    | 2     | T_fp     | °C   | -100 | 1500 | 0.3       |
+    | 3     | T_rx     | °C   | -100 | 1500 | 0.3       |
+    | 4     | T_rg1    | °C   | -100 | 1500 | 0.3       |
+    | 5     | T_rg2    | °C   | -100 | 1500 | 0.3       |
+    | 6     | T_d1     | °C   | -100 | 1500 | 0.5       |
+    | 7     | T_dg     | °C   | -100 | 1500 | 0.5       |
+
+    ## Faults
+    ``nominal``; ``f1`` catalyst density +10 % (onset 1900); ``f2`` weir constants −15 % (1900);
+    ``f3`` CO2/CO ratio constant −10 % (2020); ``f4`` reactor holdup +5 % (2000). ``"random"``
+    draws a scenario, onset and magnitude per episode. Profiles: ``"abrupt"`` or ``"incipient"``
+    (linear ramp over ``ramp_samples``). The label is ``info["fault_active"]``, never the observation.
+
+    ## Starting State
+    The hot steady state at nominal inputs, found by a root solver (:func:`fcc_env.steady_state`).
+
+    ## Episode End
+    Termination when the plant leaves its envelope (well below 3 t, T_rg1 below 600 °C, an ignited
+    d1 afterburn with T_d1 − T_rg1 above 80 °C, or a non-finite state);
+    ``info["termination_reason"]`` names it. The spec's 40 °C afterburn limit (§2.8) is a flag,
+    ``info["afterburn_warning"]``, not an end: with the spec's own excitation (§7.5) 15 % of healthy
+    episodes cross 40 °C (measured over 1024 seeds; 99 % stay below 64 °C), while an ignited d1
+    phase (about 0.4 % of healthy excited episodes, T_d1 ≈ 790 °C) sits 90–140 °C above T_rg1.
+    Truncation by ``max_episode_steps`` (registered: 3999 steps, i.e. 4000 samples counting the
+    reset observation as sample 0, the paper's horizon).
+
+    ## Arguments
+    | kwarg / reset option | default | meaning |
+    |---|---|---|
+    | scenario | "nominal" | nominal, f1–f4 or random |
+    | fault_time | paper's | onset sample (int, inside the horizon) |
+    | fault_magnitude | paper's | relative change ≥ 0 (direction fixed by the fault) |
+    | fault_profile | "abrupt" | or "incipient" |
+    | ramp_samples | 500 | incipient ramp length (samples) |
+    | valve_beta | 0.3 | slide-valve head share; 0 = flow mode, 0.15 = harder |
+    | sample_time_s | 10.0 | sample period (s) |
+    | rk4_substeps | 1 | RK4 steps per sample |
+    | excitation | True | False = constant inputs; a dict overrides :class:`Excitation` |
+    | noise_scale | 1.0 | multiplier on the noise stds; 0 = noise-free |
+    | render_mode | None | "rgb_array" for a trend plot |
+
+    ## Version History
+    * v0: first release (spec revision with slide-valve hydraulics and entrainment return).
+
+    Example:
+        >>> import gymnasium as gym, fcc_env
+        >>> env = gym.make("FCC-v0", scenario="f2")
+        >>> obs, info = env.reset(seed=0)
+        >>> obs.shape, info["fault_active"]
+        ((8,), False)
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
+
+    def __init__(
+        self,
+        *,
+        scenario: str = "nominal",
+        fault_time: int | None = None,
+        fault_magnitude: float | None = None,
+        fault_profile: str = "abrupt",
+        ramp_samples: int | None = None,
+        valve_beta: float = 0.3,
+        sample_time_s: float = 10.0,
+        rk4_substeps: int = 1,
+        excitation: Any = True,
+        noise_scale: float = 1.0,
+        render_mode: str | None = None,
+    ) -> None:
+        self.config = PlantConfig.build(
+            valve_beta=valve_beta,
+            sample_time_s=sample_time_s,
+            rk4_substeps=rk4_substeps,
+            excitation=excitation,
+            noise_scale=noise_scale,
+        )
+        self._fault_kwargs = {
+            "scenario": scenario,
+            "fault_time": fault_time,
+            "fault_magnitude": fault_magnitude,
+            "fault_profile": fault_profile,
+            "ramp_samples": ramp_samples,
+        }
+        # Validate now so a bad make() fails at once, not at the first reset.
+        if scenario != "random":
+            draw_fault(np.random.default_rng(0), math.inf, self._fault_kwargs)  # type: ignore[arg-type]
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(
+                f"render_mode={render_mode!r} is not supported. Allowed: "
+                f"{self.metadata['render_modes']} or None"
+            )
+        self.render_mode = render_mode
+        self.observation_space = spaces.Box(OBS_LOW, OBS_HIGH, dtype=np.float32)
+        self.action_space = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
+        self._p_base = self.config.params.as_array()
+        self._x0 = self.config.initial_state()
+        self._history: list[np.ndarray] = []
+
+    # ---- Gymnasium API -------------------------------------------------------------------------
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
+        super().reset(seed=seed)
+        options = {} if options is None else dict(options)
+        unknown = sorted(set(options) - set(FAULT_OPTION_NAMES))
+        if unknown:
+            raise ValueError(
+                f"Unknown reset option(s) {unknown}. Allowed: {list(FAULT_OPTION_NAMES)}"
+            )
+        fault_opts = {**self._fault_kwargs, **options}
+        horizon = self._horizon()
+        setup = setup_episode(self.np_random, self.config, fault_opts, horizon)
+        self.fault = setup.fault
+        self._program = setup.program
+        self._noise_rng = setup.noise_rng
+        self._u_prog = np.empty((0, len(NOMINAL_INPUTS)))
+        self._z = np.empty((0, N_MEASUREMENTS))
+        self._k = 0
+        self._x = self._x0.copy()
+        self._action = np.zeros(2)
+        self._saturated = False
+        self._terminated_reason: str | None = None
+        self._u = self._inputs(0)
+        self._y_clean = measure_kernel(
+            self._x, self._u, self._p_base, self._fault_idx(), self._mult(0)
+        )
+        self._obs = self._make_obs(0)
+        self._history = [self._obs]
+        return self._obs, self._get_info()
+
+    def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
+        if not hasattr(self, "_x"):
+            raise gym.error.ResetNeeded("call reset() before step()")
+        a = np.asarray(action, dtype=np.float64)
+        if a.shape != (2,):
+            raise ValueError(
+                f"action must have shape (2,) [Δu_F, ΔR_ar] in [-1, 1], got shape {a.shape}"
+            )
+        if not np.isfinite(a).all():
+            raise ValueError(f"action must be finite (allowed range [-1, 1]), got {a.tolist()}")
+        clipped = np.clip(a, -1.0, 1.0)
+        self._saturated = bool((clipped != a).any())
+        self._action = clipped * ACTION_SCALE
+        k = self._k
+        u = self._inputs(k)
+        x_next = self._x.copy()
+        step_kernel(
+            x_next,
+            u,
+            self._p_base,
+            self._fault_idx(),
+            self._mult(k),
+            self.config.sample_time_s / self.config.rk4_substeps,
+            self.config.rk4_substeps,
+        )
+        reason = termination_reason(x_next)
+        self._k = k + 1
+        if reason == "numerical_failure":
+            # Keep the last finite sample: observations are never NaN.
+            self._terminated_reason = reason
+            return self._obs, 0.0, True, False, self._get_info()
+        self._x = x_next
+        self._u = self._inputs(self._k)
+        self._y_clean = measure_kernel(
+            self._x, self._u, self._p_base, self._fault_idx(), self._mult(self._k)
+        )
+        self._obs = self._make_obs(self._k)
+        if reason is None and not self.observation_space.contains(self._obs):
+            reason = "measurement_out_of_range"
+            self._obs = np.clip(self._obs, OBS_LOW, OBS_HIGH)
+        self._terminated_reason = reason
+        self._history.append(self._obs)
+        if len(self._history) > 2000:
+            del self._history[:1000]
+        return self._obs, 0.0, reason is not None, False, self._get_info()
+
+    def render(self) -> np.ndarray | None:
+        if self.render_mode != "rgb_array":
+            return None
+        from fcc_env.plotting import trend_image  # matplotlib only when rendering
+
+        return trend_image(np.array(self._history[-500:]), self._k, self.config.sample_time_s)
+
+    # ---- helpers -------------------------------------------------------------------------------
+    def _horizon(self) -> int:
+        spec = self.spec
+        steps = spec.max_episode_steps if spec is not None else None
+        return DEFAULT_HORIZON if steps is None else int(steps) + 1
+
+    def _fault_idx(self) -> np.ndarray:
+        return self.fault.param_indices
+
+    def _mult(self, k: int) -> float:
+        f = self.fault
+        return fault_multiplier(k, f.onset, f.ramp, f.final_multiplier)
+
+    def _ensure(self, k: int) -> None:
+        while self._u_prog.shape[0] <= k:
+            self._u_prog = np.concatenate([self._u_prog, self._program.take(_CHUNK)])
+            self._z = np.concatenate(
+                [self._z, self._noise_rng.standard_normal((_CHUNK, N_MEASUREMENTS))]
+            )
+
+    def _inputs(self, k: int) -> np.ndarray:
+        self._ensure(k)
+        u = self._u_prog[k].copy()
+        u[0] += self._action[0]
+        u[1] += self._action[1]
+        lo_f, hi_f = U_F_LIMITS_REL[0] * NOMINAL_INPUTS[0], U_F_LIMITS_REL[1] * NOMINAL_INPUTS[0]
+        lo_a, hi_a = R_AR_LIMITS_REL[0] * NOMINAL_INPUTS[1], R_AR_LIMITS_REL[1] * NOMINAL_INPUTS[1]
+        if not (lo_f <= u[0] <= hi_f and lo_a <= u[1] <= hi_a):
+            self._saturated = True
+            u[0] = min(max(u[0], lo_f), hi_f)
+            u[1] = min(max(u[1], lo_a), hi_a)
+        return u
+
+    def _make_obs(self, k: int) -> np.ndarray:
+        self._ensure(k)
+        return add_noise(self._y_clean, self._z[k], self.config.noise_scale)
+
+    def _get_info(self) -> dict[str, Any]:
+        aux = aux_kernel(self._x, self._u, self._p_base, self._fault_idx(), self._mult(self._k))
+        return {
+            "t": self._k,
+            "time_s": self._k * self.config.sample_time_s,
+            "scenario": self.fault.scenario.value,
+            "fault_active": self.fault.active(self._k),
+            "fault_time": self.fault.onset if self.fault.scenario is not Scenario.NOMINAL else None,
+            "fault_magnitude": self.fault.magnitude,
+            "y_clean": self._y_clean.copy(),
+            "state": self._x.copy(),
+            "inputs": self._u.copy(),
+            "action_saturated": self._saturated,
+            "afterburn_warning": bool(self._x[9] - self._x[4] > AFTERBURN_WARNING_C),
+            "termination_reason": self._terminated_reason,
+            **{name: float(v) for name, v in zip(AUX_NAMES, aux, strict=True)},
+        }
+
+
+__all__ = ["MEASUREMENT_NAMES", "FCCEnv"]

@@ -1,0 +1,212 @@
+"""Every registered diagnoser goes through the same contract checks (see diagnosers/base.py).
+
+A diagnoser class may define a classmethod ``_test_params()`` returning small, fast
+hyperparameters for these tests (e.g. few epochs for a neural model); without it the defaults
+are used.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from synthetic import inject_step_fault, make_episode
+
+import diagnosers
+from diagnosers import Detection, Diagnoser, Episode, NotFittedError, make
+
+NAMES = diagnosers.available()
+
+
+def _params(name: str) -> dict:
+    cls = type(make(name))
+    hook = getattr(cls, "_test_params", None)
+    return dict(hook()) if hook is not None else {}
+
+
+def _build(name: str) -> Diagnoser:
+    return make(name, **_params(name))
+
+
+@pytest.fixture(scope="module")
+def train() -> list[Episode]:
+    return [make_episode(1500, seed=s) for s in (1, 2)]
+
+
+@pytest.fixture(scope="module")
+def test_episode() -> Episode:
+    return inject_step_fault(make_episode(1200, seed=3), onset=800, magnitude=3.0)
+
+
+@pytest.fixture(scope="module")
+def fitted(train: list[Episode]) -> dict[str, Diagnoser]:
+    """One fitted instance per diagnoser, shared by the read-only checks."""
+    return {name: _build(name).fit(train) for name in NAMES}
+
+
+def _assert_same(a: Detection, b: Detection, *, atol: float = 1e-9) -> None:
+    np.testing.assert_array_equal(a.alarm, b.alarm)
+    assert a.signal_names == b.signal_names
+    for field in ("signal", "lower", "upper", "residual"):
+        x, y = getattr(a, field), getattr(b, field)
+        assert x.shape == y.shape, field
+        np.testing.assert_allclose(x, y, rtol=1e-12, atol=atol, err_msg=field)
+
+
+def test_baselines_are_registered() -> None:
+    assert {"limits", "pca", "arx-band"} <= set(NAMES)
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_not_fitted_errors(name: str, test_episode: Episode, tmp_path: Path) -> None:
+    d = _build(name)
+    with pytest.raises(NotFittedError, match="not fitted"):
+        d.reset()
+    with pytest.raises(NotFittedError, match="not fitted"):
+        d.update(test_episode.y[0])
+    with pytest.raises(NotFittedError, match="not fitted"):
+        d.detect(test_episode)
+    with pytest.raises(NotFittedError, match="not fitted"):
+        d.save(tmp_path / "model")
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_fit_returns_self_and_params_roundtrip(name: str, train: list[Episode]) -> None:
+    d = _build(name)
+    assert d.fit(train) is d
+    assert d.name == name
+    # get_params gives back exactly what was passed, and rebuilds an equal configuration.
+    assert make(name, **d.get_params()).get_params() == d.get_params()
+    json.dumps(d.get_params())  # must be JSON-serialisable for save()
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_detection_shapes_and_types(
+    name: str, fitted: dict[str, Diagnoser], test_episode: Episode
+) -> None:
+    d = fitted[name]
+    det = d.detect(test_episode)
+    n, k = test_episode.n_samples, len(d.signal_names_)
+    assert det.alarm.shape == (n,) and det.alarm.dtype == np.bool_
+    for field in ("signal", "lower", "upper", "residual"):
+        assert getattr(det, field).shape == (n, k), field
+    assert det.signal_names == d.signal_names_
+    assert np.all(det.lower <= det.upper)
+    outside = np.any((det.signal < det.lower) | (det.signal > det.upper), axis=1)
+    np.testing.assert_array_equal(det.alarm, outside)
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_deterministic(name: str, train: list[Episode], test_episode: Episode) -> None:
+    a = _build(name).fit(train).detect(test_episode)
+    b = _build(name).fit(train).detect(test_episode)
+    _assert_same(a, b, atol=0.0)
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_detect_equals_streaming(
+    name: str, fitted: dict[str, Diagnoser], test_episode: Episode
+) -> None:
+    d = fitted[name]
+    batch = d.detect(test_episode)
+    d.reset()
+    decisions = [d.update(row) for row in test_episode.y]
+    _assert_same(batch, Detection.from_decisions(decisions, d.signal_names_))
+    # detect() must leave no streaming state behind, and reset() must really reset.
+    d.reset()
+    again = [d.update(row) for row in test_episode.y[:50]]
+    for k, dec in enumerate(again):
+        assert dec.alarm == decisions[k].alarm
+        np.testing.assert_allclose(dec.signal, decisions[k].signal, rtol=1e-12, atol=1e-9)
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_save_load_roundtrip(
+    name: str, fitted: dict[str, Diagnoser], test_episode: Episode, tmp_path: Path
+) -> None:
+    d = fitted[name]
+    d.save(tmp_path / "model")
+    loaded = Diagnoser.load(tmp_path / "model")
+    assert type(loaded) is type(d)
+    assert loaded.channels_ == d.channels_
+    assert loaded.sample_time_s_ == d.sample_time_s_
+    _assert_same(d.detect(test_episode), loaded.detect(test_episode), atol=0.0)
+    # Loading through the concrete class works too.
+    _assert_same(d.detect(test_episode), type(d).load(tmp_path / "model").detect(test_episode))
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_load_rejects_foreign_or_corrupted_directories(
+    name: str, fitted: dict[str, Diagnoser], tmp_path: Path
+) -> None:
+    path = fitted[name].save(tmp_path / "model")
+    cfg = path / "config.json"
+    good = json.loads(cfg.read_text())
+
+    cfg.write_text(json.dumps({"format": "someone-elses-model", "weights": [1, 2]}))
+    with pytest.raises(ValueError, match="not a saved diagnoser of this library"):
+        Diagnoser.load(path)
+
+    cfg.write_text('{"format": "fcc-diagnoser", "format_ver')  # truncated
+    with pytest.raises(ValueError, match="not valid JSON"):
+        Diagnoser.load(path)
+
+    cfg.write_bytes(b"\xff\xfe\x00garbage")
+    with pytest.raises(ValueError, match="not valid JSON"):
+        Diagnoser.load(path)
+
+    cfg.write_text(json.dumps({**good, "format_version": 999}))
+    with pytest.raises(ValueError, match="format_version 999 is not supported"):
+        Diagnoser.load(path)
+
+    cfg.write_text(json.dumps({k: v for k, v in good.items() if k != "params"}))
+    with pytest.raises(ValueError, match="'params' is missing"):
+        Diagnoser.load(path)
+
+    cfg.write_text(json.dumps({**good, "diagnoser": "no-such-diagnoser"}))
+    with pytest.raises(ValueError, match="Unknown diagnoser 'no-such-diagnoser'"):
+        Diagnoser.load(path)
+
+    cfg.write_text(json.dumps(good))
+    (path / "state.npz").write_bytes(b"not a zip file")
+    with pytest.raises(ValueError, match="not a numeric state file"):
+        Diagnoser.load(path)
+
+    with pytest.raises(ValueError, match=r"config\.json is missing"):
+        Diagnoser.load(tmp_path / "empty")
+
+
+def test_load_through_the_wrong_class_raises(fitted: dict[str, Diagnoser], tmp_path: Path) -> None:
+    path = fitted["limits"].save(tmp_path / "model")
+    with pytest.raises(ValueError, match="holds a 'limits' diagnoser, not a PCADetector"):
+        type(fitted["pca"]).load(path)
+
+
+def test_make_rejects_unknown_name() -> None:
+    with pytest.raises(ValueError, match=r"Unknown diagnoser 'nope'\. Available: \[.*'limits'"):
+        make("nope")
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_make_rejects_unknown_hyperparameter(name: str) -> None:
+    with pytest.raises(ValueError, match=r"Unknown hyperparameter\(s\) \['not_a_param'\]"):
+        make(name, not_a_param=1)
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_rejects_mismatched_channels(
+    name: str, fitted: dict[str, Diagnoser], test_episode: Episode
+) -> None:
+    d = fitted[name]
+    swapped = Episode(
+        y=test_episode.y[:, ::-1],
+        channels=test_episode.channels[::-1],
+        sample_time_s=test_episode.sample_time_s,
+    )
+    with pytest.raises(ValueError, match="differ from the training channels"):
+        d.detect(swapped)
+    with pytest.raises(ValueError, match="measurement must have shape"):
+        d.update(test_episode.y[0, :3])
+    d.reset()
