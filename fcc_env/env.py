@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import gymnasium as gym
@@ -106,6 +105,9 @@ class FCCEnv(gym.Env):
     | rk4_substeps | 1 | RK4 steps per sample |
     | excitation | True | False = constant inputs; a dict overrides :class:`Excitation` |
     | noise_scale | 1.0 | multiplier on the noise stds; 0 = noise-free |
+    | horizon | 4000 | samples the scenario is laid out on: onsets must fall inside it and random |
+    |  |  | onsets are drawn from its middle half. ``max_episode_steps`` (``horizon − 1``) truncates; |
+    |  |  | the env cannot see that wrapper, so pass both when you change the length. |
     | render_mode | None | "rgb_array" for a trend plot |
 
     ## Version History
@@ -134,8 +136,12 @@ class FCCEnv(gym.Env):
         rk4_substeps: int = 1,
         excitation: Any = True,
         noise_scale: float = 1.0,
+        horizon: int = DEFAULT_HORIZON,
         render_mode: str | None = None,
     ) -> None:
+        if isinstance(horizon, bool) or not isinstance(horizon, int | np.integer) or horizon < 2:
+            raise ValueError(f"horizon must be an integer number of samples >= 2, got {horizon!r}")
+        self.horizon = int(horizon)
         self.config = PlantConfig.build(
             valve_beta=valve_beta,
             sample_time_s=sample_time_s,
@@ -152,7 +158,7 @@ class FCCEnv(gym.Env):
         }
         # Validate now so a bad make() fails at once, not at the first reset.
         if scenario != "random":
-            draw_fault(np.random.default_rng(0), math.inf, self._fault_kwargs)  # type: ignore[arg-type]
+            draw_fault(np.random.default_rng(0), self.horizon, self._fault_kwargs)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(
                 f"render_mode={render_mode!r} is not supported. Allowed: "
@@ -177,7 +183,7 @@ class FCCEnv(gym.Env):
                 f"Unknown reset option(s) {unknown}. Allowed: {list(FAULT_OPTION_NAMES)}"
             )
         fault_opts = {**self._fault_kwargs, **options}
-        horizon = self._horizon()
+        horizon = self.horizon
         setup = setup_episode(self.np_random, self.config, fault_opts, horizon)
         self.fault = setup.fault
         self._program = setup.program
@@ -251,11 +257,6 @@ class FCCEnv(gym.Env):
         return trend_image(np.array(self._history[-500:]), self._k, self.config.sample_time_s)
 
     # ---- helpers -------------------------------------------------------------------------------
-    def _horizon(self) -> int:
-        spec = self.spec
-        steps = spec.max_episode_steps if spec is not None else None
-        return DEFAULT_HORIZON if steps is None else int(steps) + 1
-
     def _fault_idx(self) -> np.ndarray:
         return self.fault.param_indices
 

@@ -107,10 +107,27 @@ P_ETA1, P_ETAG, P_EAB, P_TAB, P_UAD1, P_UADG, P_R = (
 )
 
 #: Auxiliary (algebraic) outputs of :func:`rhs_aux`, in order.
-AUX_NAMES: tuple[str, ...] = ("T_rx", "F_rc", "F_sc", "X", "y1_O2", "y2_O2", "C2_wt_pct")
+AUX_NAMES: tuple[str, ...] = (
+    "T_rx",  # °C, riser outlet
+    "F_rc",  # kg/s, regenerated-catalyst circulation
+    "F_sc",  # kg/s, spent-catalyst flow
+    "X",  # -, conversion
+    "y1_O2",  # -, stage-1 outlet O2 mole fraction
+    "y2_O2",  # -, stage-2 outlet O2 mole fraction
+    "C2_wt_pct",  # wt%, coke on regenerated catalyst
+    "coke_make",  # kg/s, coke laid down in the riser
+    "R_cb1",  # kg/s, stage-1 coke burning
+    "R_cb2",  # kg/s, stage-2 coke burning
+    "Q_burn1_kW",  # kW, stage-1 combustion heat
+    "Q_burn2_kW",  # kW, stage-2 combustion heat
+    "xi1",  # kmol/s, d1 afterburn
+    "xig",  # kmol/s, dg afterburn
+)
 N_AUX = len(AUX_NAMES)
 
-_jit = functools.partial(numba.njit, cache=True, fastmath=False, nogil=True)
+# error_model="numpy": a plant driven outside its envelope yields inf/NaN (caught by the envelope
+# checks) instead of raising inside compiled code.
+_jit = functools.partial(numba.njit, cache=True, fastmath=False, nogil=True, error_model="numpy")
 
 
 @_jit
@@ -284,6 +301,13 @@ def _rhs_core(x: np.ndarray, u: np.ndarray, p: np.ndarray, dx: np.ndarray, aux: 
     aux[4] = y1
     aux[5] = y2
     aux[6] = 100.0 * C2
+    aux[7] = y_c * F_feed
+    aux[8] = Rcb1
+    aux[9] = Rcb2
+    aux[10] = Rcb1 * q1
+    aux[11] = Rcb2 * q2
+    aux[12] = xi1
+    aux[13] = xig
 
 
 @_jit
@@ -406,7 +430,7 @@ def aux_kernel(
     return aux
 
 
-@numba.njit(cache=True, nogil=True, parallel=True)
+@numba.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
 def simulate_kernel(
     x0: np.ndarray,  # (B, N_STATES)
     U: np.ndarray,  # (B, T, N_INPUTS) inputs held over each sample

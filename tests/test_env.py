@@ -1,0 +1,237 @@
+"""The Gymnasium contract of FCC-v0: check_env, seeding, batch equality, bad input."""
+
+from __future__ import annotations
+
+import warnings
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+import fcc_env
+from fcc_env.scenarios import SCENARIOS
+
+ZERO = np.zeros(2, dtype=np.float32)
+
+
+def rollout(env, seed, n, options=None, action=ZERO):
+    obs, info = env.reset(seed=seed, options=options)
+    ys, infos = [obs], [info]
+    for _ in range(n - 1):
+        obs, reward, term, trunc, info = env.step(action)
+        assert reward == 0.0
+        ys.append(obs)
+        infos.append(info)
+        if term or trunc:
+            break
+    return np.array(ys), infos
+
+
+@pytest.mark.parametrize("scenario", [*SCENARIOS, "random"])
+def test_check_env_without_warnings(scenario):
+    env = gym.make("FCC-v0", scenario=scenario, fault_time=5, render_mode="rgb_array")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        check_env(env.unwrapped)
+    assert [str(w.message) for w in caught] == []
+
+
+def test_registration_and_spaces():
+    env = gym.make("fcc_env:FCC-v0", scenario="f2")
+    assert env.spec.max_episode_steps == fcc_env.MAX_EPISODE_STEPS == 3999
+    assert env.observation_space.shape == (8,) and env.observation_space.dtype == np.float32
+    assert [m.name for m in fcc_env.MEASUREMENTS] == list(fcc_env.MEASUREMENT_NAMES)
+    assert fcc_env.MEASUREMENT_NAMES == (
+        "R_ar", "T_ar", "T_fp", "T_rx", "T_rg1", "T_rg2", "T_d1", "T_dg",
+    )  # fmt: skip
+    assert len(fcc_env.STATE_NAMES) == 11 and len(fcc_env.INPUT_NAMES) == 6
+    obs, info = env.reset(seed=0)
+    for key in ("fault_active", "scenario", "t", "time_s", "y_clean", "state"):
+        assert key in info
+    assert info["scenario"] == "f2" and info["t"] == 0 and not info["fault_active"]
+
+
+def test_full_episode_is_4000_samples_and_labels_follow_onset():
+    env = gym.make("FCC-v0", scenario="f1")
+    ys, infos = rollout(env, seed=1, n=10_000)
+    assert ys.shape == (4000, 8)
+    assert np.isfinite(ys).all()
+    labels = np.array([i["fault_active"] for i in infos])
+    assert not labels[:1900].any() and labels[1900:].all()
+    assert infos[-1]["time_s"] == 3999 * 10.0
+
+
+def test_same_seed_same_episode_different_seed_differs_and_global_rng_untouched():
+    np.random.seed(123)
+    before = np.random.get_state()[1].copy()
+    env = gym.make("FCC-v0", scenario="f3", fault_time=50)
+    a, _ = rollout(env, 11, 200)
+    b, _ = rollout(env, 11, 200)
+    c, _ = rollout(env, 12, 200)
+    np.testing.assert_array_equal(a, b)
+    assert not np.array_equal(a, c)
+    d, _ = rollout(env, None, 200)  # an unseeded reset continues the stream: a new episode
+    assert not np.array_equal(a, d)
+    assert np.array_equal(np.random.get_state()[1], before)
+
+
+def test_random_scenario_draws_differ_by_seed_and_are_reproducible():
+    env = gym.make("FCC-v0", scenario="random")
+    draws = set()
+    for seed in range(30):
+        _, info = env.reset(seed=seed)
+        _, info2 = env.reset(seed=seed)
+        assert (info["scenario"], info["fault_time"]) == (info2["scenario"], info2["fault_time"])
+        draws.add((info["scenario"], info["fault_time"], round(info["fault_magnitude"], 6)))
+    assert len({d[0] for d in draws}) == 5  # all five scenarios drawn
+    onsets = [d[1] for d in draws if d[1] is not None]
+    assert min(onsets) >= 1000 and max(onsets) < 3000  # middle half of the 4000 horizon
+
+
+def test_excitation_and_noise_do_not_depend_on_the_scenario():
+    healthy, hi = rollout(gym.make("FCC-v0"), 5, 300)
+    faulty, fi = rollout(gym.make("FCC-v0", scenario="f4", fault_time=150), 5, 300)
+    np.testing.assert_array_equal(healthy[:150], faulty[:150])
+    assert not np.array_equal(healthy[151:, 3:], faulty[151:, 3:])
+    np.testing.assert_array_equal([i["inputs"] for i in hi], [i["inputs"] for i in fi])
+
+
+@pytest.mark.parametrize(
+    "options",
+    [
+        {"scenario": "nominal"},
+        {"scenario": "f1", "fault_time": 40},
+        {"scenario": "f2", "fault_time": 10, "fault_profile": "incipient", "ramp_samples": 60},
+        {"scenario": "random"},
+    ],
+)
+def test_batch_equals_single_env(options):
+    n = 300
+    env = gym.make("FCC-v0", max_episode_steps=n - 1, horizon=n)
+    seeds = [3, 4]
+    batch = fcc_env.simulate_episodes(seeds, n, **{k: v for k, v in options.items()})
+    for b, seed in enumerate(seeds):
+        ys, infos = rollout(env, seed, n, options=options)
+        np.testing.assert_array_equal(ys, batch.observations[b])
+        np.testing.assert_array_equal([i["y_clean"] for i in infos], batch.y_clean[b])
+        np.testing.assert_array_equal([i["fault_active"] for i in infos], batch.fault_active[b])
+        assert batch.scenarios[b] == infos[0]["scenario"]
+
+
+def test_noise_free_and_unexcited_run_stays_at_steady_state():
+    env = gym.make("FCC-v0", noise_scale=0.0, excitation=False)
+    ys, _ = rollout(env, 0, 50)
+    x = fcc_env.steady_state()
+    y0 = fcc_env.measure(x, fcc_env.NOMINAL_INPUTS, fcc_env.FCCParams())
+    np.testing.assert_allclose(ys, np.tile(y0, (50, 1)), atol=1e-3)  # float32 rounding
+
+
+def test_noise_std_per_channel():
+    b = fcc_env.simulate_episodes([0, 1], 2000)
+    z = (b.observations - b.y_clean).reshape(-1, 8)
+    std = z.std(axis=0)
+    np.testing.assert_allclose(std[1:], [0.3, 0.3, 0.3, 0.3, 0.3, 0.5, 0.5], rtol=0.05)
+    assert std[0] == pytest.approx(0.005 * 148.4, rel=0.1)
+
+
+def test_incipient_fault_ramps():
+    b = fcc_env.simulate_episodes(
+        [0], 700, scenario="f4", fault_time=100, fault_profile="incipient", ramp_samples=400,
+        noise_scale=0.0, excitation=False,
+    )  # fmt: skip
+    a = fcc_env.simulate_episodes(
+        [0], 700, scenario="f4", fault_time=100, noise_scale=0.0, excitation=False
+    )
+    # the ramp's effect builds up more slowly than the step's
+    d_ramp = np.abs(b.y_clean[0, :, 4] - b.y_clean[0, 0, 4])
+    d_step = np.abs(a.y_clean[0, :, 4] - a.y_clean[0, 0, 4])
+    assert d_ramp[150] < 0.5 * d_step[150]
+    assert d_ramp[:100].max() == 0.0
+
+
+def test_actions_move_the_plant_and_saturate():
+    env = gym.make("FCC-v0", excitation=False, noise_scale=0.0)
+    env.reset(seed=0)
+    _, _, _, _, info = env.step(np.array([0.1, 0.0], dtype=np.float32))
+    assert info["inputs"][0] == pytest.approx(fcc_env.NOMINAL_INPUTS[0] + 0.1 * 208.33335, rel=1e-6)
+    assert not info["action_saturated"]
+    _, _, _, _, info = env.step(np.array([5.0, -7.0]))
+    assert info["action_saturated"]
+    assert info["inputs"][1] == pytest.approx(0.85 * 148.4)
+
+
+def test_termination_when_the_well_empties():
+    env = gym.make("FCC-v0", scenario="f1", fault_time=5, fault_magnitude=0.9)
+    ys, infos = rollout(env, 0, 200)
+    assert infos[-1]["termination_reason"] == "well_empty"
+    assert np.isfinite(ys).all()
+    assert len(ys) < 50
+
+
+def test_render_rgb_array():
+    env = gym.make("FCC-v0", render_mode="rgb_array")
+    rollout(env, 0, 30)
+    img = env.render()
+    assert img.ndim == 3 and img.shape[2] == 3 and img.dtype == np.uint8
+    assert img.std() > 0
+
+
+def test_vector_env():
+    envs = gym.make_vec(
+        "FCC-v0", num_envs=2, vectorization_mode="sync", scenario="f2", fault_time=1
+    )
+    obs, info = envs.reset(seed=[1, 2])
+    assert obs.shape == (2, 8)
+    obs, rew, term, trunc, info = envs.step(np.zeros((2, 2), dtype=np.float32))
+    assert obs.shape == (2, 8) and not term.any()
+    batch = fcc_env.simulate_episodes([1, 2], 2, scenario="f2", fault_time=1)
+    np.testing.assert_array_equal(obs, batch.observations[:, 1])
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "match"),
+    [
+        ({"scenario": "f9"}, r"Unknown scenario 'f9'. Allowed: \['nominal', 'f1'"),
+        ({"scenario": "f1", "fault_time": -1}, r"fault_time=-1 is outside the episode"),
+        ({"scenario": "f1", "fault_time": 1.5}, r"fault_time must be an integer"),
+        ({"scenario": "f2", "fault_magnitude": -0.1}, r"fault_magnitude=-0.1 is outside .*\[0, 0.9\]"),
+        ({"scenario": "f2", "fault_magnitude": float("nan")}, r"fault_magnitude=nan"),
+        ({"scenario": "f3", "fault_profile": "sudden"}, r"Unknown fault_profile 'sudden'"),
+        ({"scenario": "f3", "fault_profile": "incipient", "ramp_samples": 0}, r"ramp_samples"),
+        ({"valve_beta": 2.0}, r"valve_beta=2.0 outside the allowed range \[0, 1\]"),
+        ({"sample_time_s": 0.0}, r"sample_time_s=0.0 outside the allowed range"),
+        ({"noise_scale": -1}, r"noise_scale=-1 outside the allowed range"),
+        ({"rk4_substeps": 0}, r"rk4_substeps=0 outside the allowed range"),
+        ({"excitation": {"T_fp_halfrange": 3}}, r"Unknown excitation option"),
+        ({"excitation": {"R_ar_halfrange_rel": 0.5}}, r"R_ar_halfrange_rel=0.5 outside"),
+        ({"render_mode": "ansi"}, r"render_mode='ansi' is not supported"),
+        ({"horizon": 1}, r"horizon must be an integer number of samples >= 2, got 1"),
+        ({"scenario": "f1", "horizon": 1000}, r"fault_time=1900 is outside the episode"),
+    ],
+)
+def test_bad_make_kwargs(kwargs, match):
+    with pytest.raises(ValueError, match=match):
+        gym.make("FCC-v0", **kwargs)
+
+
+def test_bad_reset_options_and_actions():
+    env = gym.make("FCC-v0")
+    with pytest.raises(ValueError, match=r"Unknown reset option\(s\) \['onset'\]"):
+        env.reset(seed=0, options={"onset": 3})
+    with pytest.raises(ValueError, match=r"fault_time=4000 is outside the episode.*< 4000"):
+        env.reset(seed=0, options={"scenario": "f1", "fault_time": 4000})
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match=r"action must have shape \(2,\)"):
+        env.step(np.zeros(3))
+    with pytest.raises(ValueError, match=r"action must be finite"):
+        env.step(np.array([np.nan, 0.0]))
+
+
+def test_batch_bad_input():
+    with pytest.raises(ValueError, match="n_samples must be an integer >= 2"):
+        fcc_env.simulate_episodes([0], 1)
+    with pytest.raises(ValueError, match="got 2 scenarios for 1 seeds"):
+        fcc_env.simulate_episodes([0], 10, scenario=["f1", "f2"])
+    with pytest.raises(ValueError, match="Unknown scenario"):
+        fcc_env.simulate_episodes([0], 10, scenario="f5")
