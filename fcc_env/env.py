@@ -121,7 +121,7 @@ class FCCEnv(gym.Env):
         ((8,), False)
     """
 
-    metadata = {"render_modes": ["rgb_array"], "render_fps": 10}
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 10}  # noqa: RUF012 (Gymnasium API)
 
     def __init__(
         self,

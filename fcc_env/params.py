@@ -58,7 +58,19 @@ STATE_NAMES: tuple[str, ...] = (
     "T_d1",  # °C, stage-1 dilute phase
     "T_dg",  # °C, general dilute phase
 )
-STATE_UNITS: tuple[str, ...] = ("kg", "kg/kg", "kg", "kg/kg", "°C", "kg", "kg/kg", "°C", "kg", "°C", "°C")
+STATE_UNITS: tuple[str, ...] = (
+    "kg",
+    "kg/kg",
+    "kg",
+    "kg/kg",
+    "°C",
+    "kg",
+    "kg/kg",
+    "°C",
+    "kg",
+    "°C",
+    "°C",
+)
 
 #: Input vector order (spec §1.2).
 INPUT_NAMES: tuple[str, ...] = (

@@ -60,7 +60,12 @@ P_ECR, P_ACR, P_AC, P_YCCR, P_YCAT, P_NY, P_G0, P_WRX0 = (
     _I["g_0"],
     _I["W_rx0_kg"],
 )
-P_TAULC, P_VRXSP, P_RHOB, P_DTSTRIP = _I["tau_lc_s"], _I["V_rx_sp_m3"], _I["rho_b"], _I["dT_strip_C"]
+P_TAULC, P_VRXSP, P_RHOB, P_DTSTRIP = (
+    _I["tau_lc_s"],
+    _I["V_rx_sp_m3"],
+    _I["rho_b"],
+    _I["dT_strip_C"],
+)
 P_A1, P_A2, P_HW1, P_HW2, P_KW1, P_KW2 = (
     _I["A_1_m2"],
     _I["A_2_m2"],
@@ -144,12 +149,7 @@ def _riser(T2: float, C2: float, W_rx: float, F_rc: float, u: np.ndarray, p: np.
     """Solve the riser energy balance for T_rx (°C); returns (T_rx, X, g)."""
     F_feed, T_fp = u[4], u[3]
     cp_c, cp_fe, dHv, dHcr = p[P_CP_C], p[P_CP_FE], p[P_DHV], p[P_DHCR]
-    k0 = (
-        p[P_ACR]
-        * (F_rc / F_feed)
-        * (W_rx / p[P_WRX0])
-        * math.exp(-p[P_AC] * 100.0 * C2)
-    )
+    k0 = p[P_ACR] * (F_rc / F_feed) * (W_rx / p[P_WRX0]) * math.exp(-p[P_AC] * 100.0 * C2)
     ER = p[P_ECR] / p[P_R]
     lo = -300.0
     hi = max(T2, T_fp) + 50.0
@@ -187,7 +187,7 @@ def _riser(T2: float, C2: float, W_rx: float, F_rc: float, u: np.ndarray, p: np.
 @_jit
 def _rhs_core(x: np.ndarray, u: np.ndarray, p: np.ndarray, dx: np.ndarray, aux: np.ndarray) -> None:
     """Write dx/dt (per second, state units) into ``dx`` and algebraic outputs into ``aux``."""
-    W_rx, C_sc, W1, C1, T1, W2, C2, T2, W_sp, Td1, Tdg = (
+    W_rx, C_sc, W1, C1, T1, W2, C2, T2, _W_sp, Td1, Tdg = (
         x[0],
         x[1],
         x[2],
@@ -233,12 +233,12 @@ def _rhs_core(x: np.ndarray, u: np.ndarray, p: np.ndarray, dx: np.ndarray, aux: 
     sig2 = p[P_KSIG] * math.exp(-p[P_ESIG] / R * (1.0 / T2K - 1.0 / p[P_TSIG]))
     nu1 = (1.0 - wH) / 12.011 * (sig1 + 0.5) / (sig1 + 1.0) + wH / (4.0 * 1.008)
     nu2 = (1.0 - wH) / 12.011 * (sig2 + 0.5) / (sig2 + 1.0) + wH / (4.0 * 1.008)
-    q1 = (1.0 - wH) * (
-        sig1 / (1.0 + sig1) * p[P_HCO2] + 1.0 / (1.0 + sig1) * p[P_HCO]
-    ) + wH * p[P_HH]
-    q2 = (1.0 - wH) * (
-        sig2 / (1.0 + sig2) * p[P_HCO2] + 1.0 / (1.0 + sig2) * p[P_HCO]
-    ) + wH * p[P_HH]
+    q1 = (1.0 - wH) * (sig1 / (1.0 + sig1) * p[P_HCO2] + 1.0 / (1.0 + sig1) * p[P_HCO]) + wH * p[
+        P_HH
+    ]
+    q2 = (1.0 - wH) * (sig2 / (1.0 + sig2) * p[P_HCO2] + 1.0 / (1.0 + sig2) * p[P_HCO]) + wH * p[
+        P_HH
+    ]
     kap1 = p[P_KCB] * math.exp(-p[P_ECB] / (R * T1K)) * p[P_P] * C1 * W1
     kap2 = p[P_KCB] * math.exp(-p[P_ECB] / (R * T2K)) * p[P_P] * C2 * W2
     y1 = 0.21 * n1 / (n1 + kap1 * nu1)
@@ -473,7 +473,9 @@ def simulate_kernel(
             Y[b, k, 6] = x[9]
             Y[b, k, 7] = x[10]
             for i in range(N_MEASUREMENTS):
-                OBS[b, k, i] = _noisy(Y[b, k, i], Z[b, k, i], noise_abs[i], noise_rel[i], noise_scale)
+                OBS[b, k, i] = _noisy(
+                    Y[b, k, i], Z[b, k, i], noise_abs[i], noise_rel[i], noise_scale
+                )
             for i in range(N_STATES):
                 Xs[b, k, i] = x[i]
             for i in range(N_AUX):
@@ -526,7 +528,9 @@ def measure(x: np.ndarray, u: np.ndarray, p: FCCParams) -> np.ndarray:
 def integrate_step(x: np.ndarray, u: np.ndarray, dt_s: float, p: FCCParams, substeps: int = 1):
     """Pure RK4 step: the state after ``dt_s`` seconds with inputs and parameters held."""
     x_next = np.array(x, dtype=np.float64)
-    step_kernel(x_next, np.asarray(u, float), _as_param_array(p), NO_FAULT, 1.0, dt_s / substeps, substeps)
+    step_kernel(
+        x_next, np.asarray(u, float), _as_param_array(p), NO_FAULT, 1.0, dt_s / substeps, substeps
+    )
     return x_next
 
 
@@ -536,7 +540,19 @@ NO_FAULT = np.array([-1, -1], dtype=np.int64)
 _SCALE = np.array([1e4, 1e-3, 1e4, 1e-3, 100.0, 1e4, 1e-3, 100.0, 1e4, 100.0, 100.0])
 # Spec §1.3 nominal values, the safest start for the root solver.
 _X_GUESS = np.array(
-    [40_000.0, 0.010312, 90_000.0, 0.003540, 685.05, 90_000.0, 0.001996, 719.39, 30_000.0, 697.21, 710.16]
+    [
+        40_000.0,
+        0.010312,
+        90_000.0,
+        0.003540,
+        685.05,
+        90_000.0,
+        0.001996,
+        719.39,
+        30_000.0,
+        697.21,
+        710.16,
+    ]
 )
 
 
@@ -557,7 +573,9 @@ def _steady_state_cached(p: FCCParams, u: tuple[float, ...], W_sp_kg: float) -> 
     x[8] = W_sp_kg
     res = np.abs(residual(sol.x)).max()
     if not sol.success and res > 1e-9:
-        raise RuntimeError(f"steady-state solve failed ({sol.message}); max scaled |dx/dt| = {res:.3g}")
+        raise RuntimeError(
+            f"steady-state solve failed ({sol.message}); max scaled |dx/dt| = {res:.3g}"
+        )
     return tuple(x.tolist())
 
 

@@ -57,8 +57,12 @@ def plot_scenarios(
             for ax in axes:
                 ax.axvline(onset * sample_time_s / 3600.0, ls="--", lw=0.8, color="k", alpha=0.5)
             axes[0].annotate(
-                f"{name} onset", (onset * sample_time_s / 3600.0, 1.0),
-                xycoords=("data", "axes fraction"), fontsize=7, rotation=90, va="top",
+                f"{name} onset",
+                (onset * sample_time_s / 3600.0, 1.0),
+                xycoords=("data", "axes fraction"),
+                fontsize=7,
+                rotation=90,
+                va="top",
             )
     for ax, c in zip(axes, channels, strict=True):
         ax.set_ylabel(f"{MEASUREMENTS[c].name} [{MEASUREMENTS[c].unit}]")

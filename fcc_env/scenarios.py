@@ -70,7 +70,9 @@ def parse_scenario(value: Any) -> Scenario:
     try:
         return Scenario(value)
     except ValueError:
-        raise ValueError(f"Unknown scenario {value!r}. Allowed: {list(SCENARIOS)} or 'random'") from None
+        raise ValueError(
+            f"Unknown scenario {value!r}. Allowed: {list(SCENARIOS)} or 'random'"
+        ) from None
 
 
 def parse_profile(value: Any) -> FaultProfile:
@@ -154,9 +156,7 @@ def resolve_fault(
             )
         ramp = int(ramp)
     elif ramp_samples not in (None, 0):
-        raise ValueError(
-            f"ramp_samples={ramp_samples!r} only applies to fault_profile='incipient'"
-        )
+        raise ValueError(f"ramp_samples={ramp_samples!r} only applies to fault_profile='incipient'")
     return FaultConfig(sc, onset, mag, profile, ramp)
 
 
@@ -190,7 +190,9 @@ class Excitation:
             allowed = set(cls.__dataclass_fields__)
             unknown = sorted(set(value) - allowed)
             if unknown:
-                raise ValueError(f"Unknown excitation option(s) {unknown}. Allowed: {sorted(allowed)}")
+                raise ValueError(
+                    f"Unknown excitation option(s) {unknown}. Allowed: {sorted(allowed)}"
+                )
             exc = cls(**value)
             exc.validate()
             return exc

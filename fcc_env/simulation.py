@@ -107,9 +107,7 @@ def _is_number(v: Any) -> bool:
 FAULT_OPTION_NAMES = ("scenario", "fault_time", "fault_magnitude", "fault_profile", "ramp_samples")
 
 
-def draw_fault(
-    rng: np.random.Generator, horizon: int, options: dict[str, Any]
-) -> FaultConfig:
+def draw_fault(rng: np.random.Generator, horizon: int, options: dict[str, Any]) -> FaultConfig:
     """Resolve fault options; ``scenario="random"`` draws scenario, onset and magnitude from ``rng``.
 
     Random draws: scenario uniform over nominal and f1–f4, onset uniform in the middle half of
@@ -155,7 +153,10 @@ def setup_episode(
 def add_noise(y_clean: np.ndarray, z: np.ndarray, noise_scale: float) -> np.ndarray:
     """float32 measurement = clean + noise_scale·std·z, for one sample (shape (8,))."""
     return noisy_kernel(
-        np.asarray(y_clean, np.float64), np.asarray(z, np.float64), NOISE_STD_ABS, NOISE_STD_REL,
+        np.asarray(y_clean, np.float64),
+        np.asarray(z, np.float64),
+        NOISE_STD_ABS,
+        NOISE_STD_REL,
         float(noise_scale),
     )
 
@@ -278,7 +279,10 @@ def simulate_episodes(
     del Z
     k = np.arange(T)
     active = np.stack(
-        [(k >= f.onset) if f.scenario is not Scenario.NOMINAL else np.zeros(T, bool) for f in faults]
+        [
+            (k >= f.onset) if f.scenario is not Scenario.NOMINAL else np.zeros(T, bool)
+            for f in faults
+        ]
     )
     bad = (
         ~np.isfinite(X).all(axis=2)

@@ -195,7 +195,10 @@ def test_vector_env():
         ({"scenario": "f9"}, r"Unknown scenario 'f9'. Allowed: \['nominal', 'f1'"),
         ({"scenario": "f1", "fault_time": -1}, r"fault_time=-1 is outside the episode"),
         ({"scenario": "f1", "fault_time": 1.5}, r"fault_time must be an integer"),
-        ({"scenario": "f2", "fault_magnitude": -0.1}, r"fault_magnitude=-0.1 is outside .*\[0, 0.9\]"),
+        (
+            {"scenario": "f2", "fault_magnitude": -0.1},
+            r"fault_magnitude=-0.1 is outside .*\[0, 0.9\]",
+        ),
         ({"scenario": "f2", "fault_magnitude": float("nan")}, r"fault_magnitude=nan"),
         ({"scenario": "f3", "fault_profile": "sudden"}, r"Unknown fault_profile 'sudden'"),
         ({"scenario": "f3", "fault_profile": "incipient", "ramp_samples": 0}, r"ramp_samples"),

@@ -1,0 +1,28 @@
+"""Simulate the healthy plant and each fault on one seed and plot them: ``python -m fcc_env.demo``."""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+import fcc_env
+from fcc_env.plotting import plot_scenarios
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m fcc_env.demo", description=__doc__)
+    parser.add_argument("--out", default="results/demo", help="output folder (results/demo)")
+    parser.add_argument("--seed", type=int, default=0, help="episode seed (0)")
+    args = parser.parse_args(argv)
+    episodes, onsets = {}, {}
+    for scenario in fcc_env.SCENARIOS:
+        b = fcc_env.simulate_episodes([args.seed], 4000, scenario=scenario)
+        episodes[scenario] = b.observations[0]
+        onsets[scenario] = b.fault_onsets[0]
+    path = plot_scenarios(episodes, onsets, 10.0, Path(args.out) / "scenarios.png")
+    print(f"wrote {path}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
