@@ -1,0 +1,66 @@
+"""Dataset export: content equals the batch simulation, sidecar roles, CLI errors."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+
+import fcc_env
+from fcc_env.generate import main, parse_seeds, read_dataset, write_dataset
+
+
+def test_write_and_read_dataset_round_trip(tmp_path):
+    path = write_dataset(
+        tmp_path / "f4.csv", scenario="f4", seeds=[3, 5], n_samples=120, fault_time=60
+    )
+    meta, cols = read_dataset(path)
+    assert meta["scenario"] == "f4" and meta["seeds"] == [3, 5]
+    assert meta["fault_onsets"] == [60, 60] and meta["model_version"] == fcc_env.MODEL_VERSION
+    assert meta["roles"]["measured"] == list(fcc_env.MEASUREMENT_NAMES)
+    assert meta["roles"]["commanded"] == ["cmd_u_F", "cmd_R_ar"]
+    assert "fault_active" in meta["roles"]["truth"]
+    batch = fcc_env.simulate_episodes([3, 5], 120, scenario="f4", fault_time=60)
+    for i, name in enumerate(fcc_env.MEASUREMENT_NAMES):
+        got = cols[name].reshape(2, 120)
+        np.testing.assert_allclose(got, batch.observations[:, :, i], rtol=1e-9)
+    np.testing.assert_array_equal(cols["fault_active"].reshape(2, 120), batch.fault_active)
+    np.testing.assert_allclose(cols["in_T_fp"].reshape(2, 120), batch.inputs[:, :, 3])
+    assert not list(tmp_path.glob("*.tmp"))
+
+
+def test_cli_writes_files(tmp_path, capsys):
+    out = tmp_path / "nominal.csv"
+    assert main(["--out", str(out), "--seeds", "0-1", "--samples", "30", "--states"]) == 0
+    meta = json.loads(out.with_suffix(".json").read_text())
+    assert "x_W_sp" in meta["columns"] and meta["n_samples"] == 30
+    assert "wrote" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--seeds", "a-b"], "bad seed list piece 'a-b'"),
+        (["--scenario", "f7"], "Unknown scenario 'f7'"),
+        (["--samples", "1"], "n_samples must be an integer >= 2"),
+        (["--fault-magnitude", "2", "--scenario", "f1"], "fault_magnitude=2.0 is outside"),
+    ],
+)
+def test_cli_bad_input(tmp_path, capsys, argv, message):
+    with pytest.raises(SystemExit) as e:
+        main(["--out", str(tmp_path / "x.csv"), *argv])
+    assert e.value.code == 2
+    assert message in capsys.readouterr().err
+
+
+def test_parse_seeds_and_read_errors(tmp_path):
+    assert parse_seeds("0-3,7") == [0, 1, 2, 3, 7]
+    with pytest.raises(ValueError, match="does not exist"):
+        read_dataset(tmp_path / "missing.csv")
+    (tmp_path / "a.csv").write_text("x\n1\n")
+    (tmp_path / "a.json").write_text('{"format": "other"}')
+    with pytest.raises(ValueError, match="not an FCC dataset sidecar"):
+        read_dataset(tmp_path / "a.csv")
+    with pytest.raises(ValueError, match=r"must end in \.csv"):
+        write_dataset(tmp_path / "a.parquet")
