@@ -8,15 +8,18 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from fcc_env import effects as fx
 from fcc_env.params import MEASUREMENT_NAMES, N_MEASUREMENTS, NOMINAL_INPUTS
-from fcc_env.physics import AUX_NAMES, aux_kernel, fault_multiplier, measure_kernel, step_kernel
+from fcc_env.physics import AUX_NAMES, aux_kernel, measure_kernel, step_kernel
 from fcc_env.scenarios import Scenario
 from fcc_env.simulation import (
     AFTERBURN_WARNING_C,
-    FAULT_OPTION_NAMES,
+    RESET_OPTION_NAMES,
     PlantConfig,
     add_noise,
+    apply_multipliers,
     draw_fault,
+    generic_sample,
     setup_episode,
     termination_reason,
 )
@@ -105,6 +108,8 @@ class FCCEnv(gym.Env):
     | rk4_substeps | 1 | RK4 steps per sample |
     | excitation | True | False = constant inputs; a dict overrides :class:`Excitation` |
     | noise_scale | 1.0 | multiplier on the noise stds; 0 = noise-free |
+    | plant_effects | () | undeclared plant effects (:mod:`fcc_env.effects`): library ids such as |
+    |  |  | ``"heat_loss:stage1"`` or objects with ``d_state``/``measure``; never shown in info |
     | horizon | 4000 | samples the scenario is laid out on: onsets must fall inside it and random |
     |  |  | onsets are drawn from its middle half. ``max_episode_steps`` (``horizon − 1``) truncates; |
     |  |  | the env cannot see that wrapper, so pass both when you change the length. |
@@ -137,6 +142,7 @@ class FCCEnv(gym.Env):
         excitation: Any = True,
         noise_scale: float = 1.0,
         horizon: int = DEFAULT_HORIZON,
+        plant_effects: Any = (),
         render_mode: str | None = None,
     ) -> None:
         if isinstance(horizon, bool) or not isinstance(horizon, int | np.integer) or horizon < 2:
@@ -156,6 +162,7 @@ class FCCEnv(gym.Env):
             "fault_profile": fault_profile,
             "ramp_samples": ramp_samples,
         }
+        self._plant_effects = fx.resolve(plant_effects)
         # Validate now so a bad make() fails at once, not at the first reset.
         if scenario != "random":
             draw_fault(np.random.default_rng(0), self.horizon, self._fault_kwargs)
@@ -177,28 +184,33 @@ class FCCEnv(gym.Env):
     ) -> tuple[np.ndarray, dict[str, Any]]:
         super().reset(seed=seed)
         options = {} if options is None else dict(options)
-        unknown = sorted(set(options) - set(FAULT_OPTION_NAMES))
+        unknown = sorted(set(options) - set(RESET_OPTION_NAMES))
         if unknown:
             raise ValueError(
-                f"Unknown reset option(s) {unknown}. Allowed: {list(FAULT_OPTION_NAMES)}"
+                f"Unknown reset option(s) {unknown}. Allowed: {list(RESET_OPTION_NAMES)}"
             )
+        effects = (
+            fx.resolve(options.pop("plant_effects"))
+            if "plant_effects" in options
+            else self._plant_effects
+        )
         fault_opts = {**self._fault_kwargs, **options}
-        horizon = self.horizon
-        setup = setup_episode(self.np_random, self.config, fault_opts, horizon)
+        setup = setup_episode(self.np_random, self.config, fault_opts, self.horizon, effects)
         self.fault = setup.fault
+        self._schedule = setup.schedule
+        self._pidx = setup.schedule.pidx
         self._program = setup.program
         self._noise_rng = setup.noise_rng
         self._u_prog = np.empty((0, len(NOMINAL_INPUTS)))
         self._z = np.empty((0, N_MEASUREMENTS))
+        self._pm = np.empty((0, self._pidx.shape[0]))
         self._k = 0
         self._x = self._x0.copy()
         self._action = np.zeros(2)
         self._saturated = False
         self._terminated_reason: str | None = None
         self._u = self._inputs(0)
-        self._y_clean = measure_kernel(
-            self._x, self._u, self._p_base, self._fault_idx(), self._mult(0)
-        )
+        self._y_clean = self._measure(0)
         self._obs = self._make_obs(0)
         self._history = [self._obs]
         return self._obs, self._get_info()
@@ -218,16 +230,19 @@ class FCCEnv(gym.Env):
         self._action = clipped * ACTION_SCALE
         k = self._k
         u = self._inputs(k)
-        x_next = self._x.copy()
-        step_kernel(
-            x_next,
-            u,
-            self._p_base,
-            self._fault_idx(),
-            self._mult(k),
-            self.config.sample_time_s / self.config.rk4_substeps,
-            self.config.rk4_substeps,
-        )
+        if self._schedule.generic:
+            p = apply_multipliers(self._p_base[None], self._pidx[None], self._mult(k)[None])
+            _, _, xn = generic_sample(
+                self._x[None], u[None], p, k, self._schedule, self.config.sample_time_s,
+                self.config.rk4_substeps,
+            )  # fmt: skip
+            x_next = xn[0]
+        else:
+            x_next = self._x.copy()
+            step_kernel(
+                x_next, u, self._p_base, self._pidx, self._mult(k),
+                self.config.sample_time_s / self.config.rk4_substeps, self.config.rk4_substeps,
+            )  # fmt: skip
         reason = termination_reason(x_next)
         self._k = k + 1
         if reason == "numerical_failure":
@@ -236,9 +251,7 @@ class FCCEnv(gym.Env):
             return self._obs, 0.0, True, False, self._get_info()
         self._x = x_next
         self._u = self._inputs(self._k)
-        self._y_clean = measure_kernel(
-            self._x, self._u, self._p_base, self._fault_idx(), self._mult(self._k)
-        )
+        self._y_clean = self._measure(self._k)
         self._obs = self._make_obs(self._k)
         if reason is None and not self.observation_space.contains(self._obs):
             reason = "measurement_out_of_range"
@@ -257,19 +270,32 @@ class FCCEnv(gym.Env):
         return trend_image(np.array(self._history[-500:]), self._k, self.config.sample_time_s)
 
     # ---- helpers -------------------------------------------------------------------------------
-    def _fault_idx(self) -> np.ndarray:
-        return self.fault.param_indices
-
-    def _mult(self, k: int) -> float:
-        f = self.fault
-        return fault_multiplier(k, f.onset, f.ramp, f.final_multiplier)
+    def _mult(self, k: int) -> np.ndarray:
+        self._ensure(k)
+        return self._pm[k]
 
     def _ensure(self, k: int) -> None:
         while self._u_prog.shape[0] <= k:
-            self._u_prog = np.concatenate([self._u_prog, self._program.take(_CHUNK)])
+            ks = np.arange(self._u_prog.shape[0], self._u_prog.shape[0] + _CHUNK)
+            chunk = self._schedule.inputs(ks, self._program.take(_CHUNK))
+            self._u_prog = np.concatenate([self._u_prog, chunk])
             self._z = np.concatenate(
                 [self._z, self._noise_rng.standard_normal((_CHUNK, N_MEASUREMENTS))]
             )
+            self._pm = np.concatenate([self._pm, self._schedule.multipliers(ks)])
+
+    def _measure(self, k: int) -> np.ndarray:
+        """Noise-free measurement of sample k (state, held input, plant effects)."""
+        if self._schedule.generic:
+            p = apply_multipliers(self._p_base[None], self._pidx[None], self._mult(k)[None])
+            y, _, _ = generic_sample(
+                self._x[None], self._u[None], p, k, self._schedule, self.config.sample_time_s,
+                self.config.rk4_substeps, advance=False,
+            )  # fmt: skip
+            y = y[0]
+        else:
+            y = measure_kernel(self._x, self._u, self._p_base, self._pidx, self._mult(k))
+        return self._schedule.measure(k, y) if self._schedule.measure_effects else y
 
     def _inputs(self, k: int) -> np.ndarray:
         self._ensure(k)
@@ -289,7 +315,7 @@ class FCCEnv(gym.Env):
         return add_noise(self._y_clean, self._z[k], self.config.noise_scale)
 
     def _get_info(self) -> dict[str, Any]:
-        aux = aux_kernel(self._x, self._u, self._p_base, self._fault_idx(), self._mult(self._k))
+        aux = aux_kernel(self._x, self._u, self._p_base, self._pidx, self._mult(self._k))
         return {
             "t": self._k,
             "time_s": self._k * self.config.sample_time_s,

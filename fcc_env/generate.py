@@ -23,6 +23,7 @@ from typing import Any
 
 import numpy as np
 
+from fcc_env import effects as fx
 from fcc_env.params import INPUT_NAMES, MEASUREMENT_NAMES, STATE_NAMES
 from fcc_env.scenarios import SCENARIOS
 from fcc_env.simulation import simulate_episodes
@@ -61,11 +62,14 @@ def write_dataset(
     seeds: Sequence[int] = (0,),
     n_samples: int = 4000,
     include_states: bool = False,
+    plant_effects: Sequence[Any] = (),
     **env_kwargs: Any,
 ) -> Path:
     """Simulate ``seeds`` and write ``path`` (``.csv``) plus ``path.with_suffix('.json')``.
 
-    ``env_kwargs`` are FCC-v0 options (``fault_time``, ``valve_beta``, ``noise_scale``...).
+    ``env_kwargs`` are FCC-v0 options (``fault_time``, ``valve_beta``, ``noise_scale``...);
+    ``plant_effects`` undeclared effects (:mod:`fcc_env.effects`): recorded in the sidecar under
+    ``truth_plant_effects`` for reproducibility, a field the modelling loop never reads.
     Both files are written to temporaries and renamed, so a crash never leaves a torn dataset.
     Returns the CSV path.
     """
@@ -74,7 +78,10 @@ def write_dataset(
     out = Path(path)
     if out.suffix != ".csv":
         raise ValueError(f"dataset path must end in .csv, got {str(out)!r}")
-    batch = simulate_episodes(list(seeds), n_samples, scenario=scenario, **env_kwargs)
+    effects = fx.resolve(plant_effects)
+    batch = simulate_episodes(
+        list(seeds), n_samples, scenario=scenario, plant_effects=effects, **env_kwargs
+    )
     B, T = batch.observations.shape[:2]
     cols: dict[str, np.ndarray] = {
         "episode": np.repeat(np.arange(B), T),
@@ -109,6 +116,10 @@ def write_dataset(
         "n_samples": T,
         "sample_time_s": batch.sample_time_s,
         "env_kwargs": {k: v for k, v in env_kwargs.items() if _jsonable(v)},
+        "truth_plant_effects": [
+            e.describe() if hasattr(e, "describe") else {"id": "custom", "repr": repr(e)}
+            for e in effects
+        ],
         "roles": {
             "index": ["episode", "seed", "k", "time_s"],
             "measured": list(MEASUREMENT_NAMES),
@@ -176,6 +187,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--noise-scale", type=float, default=1.0, help="0 = noise-free")
     parser.add_argument("--no-excitation", action="store_true", help="hold inputs at nominal")
     parser.add_argument("--states", action="store_true", help="also write the 11 states")
+    parser.add_argument(
+        "--plant-effect",
+        action="append",
+        default=[],
+        metavar="ID[,param=value...]",
+        help="undeclared plant effect (repeatable), e.g. heat_loss:stage1,extra_ua_kw_per_k=6; "
+        "ids: python -c 'import fcc_env.effects as e; print(list(e.available()))'",
+    )
     args = parser.parse_args(argv)
     try:
         path = write_dataset(
@@ -184,6 +203,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             seeds=parse_seeds(args.seeds),
             n_samples=args.samples,
             include_states=args.states,
+            plant_effects=[fx.parse(t) for t in args.plant_effect],
             fault_time=args.fault_time,
             fault_magnitude=args.fault_magnitude,
             fault_profile=args.fault_profile,

@@ -351,27 +351,13 @@ def _rk4_inplace(
 
 
 @_jit
-def fault_multiplier(k: int, onset: int, ramp_samples: int, final: float) -> float:
-    """Multiplier of a fault parameter over sample k: 1 before onset, ``final`` after the ramp.
-
-    An abrupt fault has ``ramp_samples == 0``; an incipient one moves linearly and reaches ``final``
-    at sample ``onset + ramp_samples - 1``.
-    """
-    if onset < 0 or k < onset:
-        return 1.0
-    if ramp_samples <= 0:
-        return final
-    frac = min(1.0, (k - onset + 1) / ramp_samples)
-    return 1.0 + (final - 1.0) * frac
-
-
-@_jit
-def _apply_fault(p_base: np.ndarray, p_out: np.ndarray, fault_idx: np.ndarray, mult: float):
+def _apply_mult(p_base: np.ndarray, p_out: np.ndarray, pidx: np.ndarray, mult: np.ndarray):
+    """p_out = p_base with p_out[pidx[j]] *= mult[j] (entries < 0 are unused slots)."""
     for j in range(p_base.shape[0]):
         p_out[j] = p_base[j]
-    for j in range(fault_idx.shape[0]):
-        if fault_idx[j] >= 0:
-            p_out[fault_idx[j]] = p_base[fault_idx[j]] * mult
+    for j in range(pidx.shape[0]):
+        if pidx[j] >= 0:
+            p_out[pidx[j]] = p_out[pidx[j]] * mult[j]
 
 
 @_jit
@@ -395,24 +381,24 @@ def step_kernel(
     x: np.ndarray,
     u: np.ndarray,
     p_base: np.ndarray,
-    fault_idx: np.ndarray,
-    mult: float,
+    pidx: np.ndarray,
+    mult: np.ndarray,
     h: float,
     substeps: int,
 ) -> None:
     """One sample of one episode, in place on ``x`` (the env's step)."""
     p = np.empty_like(p_base)
-    _apply_fault(p_base, p, fault_idx, mult)
+    _apply_mult(p_base, p, pidx, mult)
     work = np.empty((6, N_STATES))
     _rk4_inplace(x, u, p, h, substeps, work, False)
 
 
 @_jit
 def measure_kernel(
-    x: np.ndarray, u: np.ndarray, p_base: np.ndarray, fault_idx: np.ndarray, mult: float
+    x: np.ndarray, u: np.ndarray, p_base: np.ndarray, pidx: np.ndarray, mult: np.ndarray
 ) -> np.ndarray:
     p = np.empty_like(p_base)
-    _apply_fault(p_base, p, fault_idx, mult)
+    _apply_mult(p_base, p, pidx, mult)
     y = np.empty(N_MEASUREMENTS)
     _measure_core(x, u, p, y)
     return y
@@ -420,10 +406,10 @@ def measure_kernel(
 
 @_jit
 def aux_kernel(
-    x: np.ndarray, u: np.ndarray, p_base: np.ndarray, fault_idx: np.ndarray, mult: float
+    x: np.ndarray, u: np.ndarray, p_base: np.ndarray, pidx: np.ndarray, mult: np.ndarray
 ) -> np.ndarray:
     p = np.empty_like(p_base)
-    _apply_fault(p_base, p, fault_idx, mult)
+    _apply_mult(p_base, p, pidx, mult)
     dx = np.empty(N_STATES)
     aux = np.empty(N_AUX)
     _rhs_core(x, u, p, dx, aux)
@@ -431,14 +417,19 @@ def aux_kernel(
 
 
 @numba.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
+def rhs_batch_kernel(X: np.ndarray, U: np.ndarray, P: np.ndarray, DX: np.ndarray, AUX: np.ndarray):
+    """RHS of B episodes at once: X (B, 11), U (B, 6), P (B, n_params) -> DX, AUX."""
+    for b in numba.prange(X.shape[0]):
+        _rhs_core(X[b], U[b], P[b], DX[b], AUX[b])
+
+
+@numba.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
 def simulate_kernel(
     x0: np.ndarray,  # (B, N_STATES)
     U: np.ndarray,  # (B, T, N_INPUTS) inputs held over each sample
     p_base: np.ndarray,  # (B, N_PARAMS)
-    fault_idx: np.ndarray,  # (B, 2) int, parameter indices (-1 = none)
-    fault_onset: np.ndarray,  # (B,) int, -1 = never
-    fault_ramp: np.ndarray,  # (B,) int, 0 = abrupt
-    fault_final: np.ndarray,  # (B,) final multiplier
+    pidx: np.ndarray,  # (B, K) int, parameter indices scaled per sample (-1 = unused)
+    PM: np.ndarray,  # (B, T, K) multipliers of those parameters over each sample
     h: float,
     substeps: int,
     Z: np.ndarray,  # (B, T, N_MEASUREMENTS) standard-normal noise draws
@@ -449,8 +440,12 @@ def simulate_kernel(
     OBS: np.ndarray,  # (B, T, N_MEASUREMENTS) float32 out: noisy measurements
     Xs: np.ndarray,  # (B, T, N_STATES) out: states
     AUX: np.ndarray,  # (B, T, N_AUX) out
+    add_noise: bool,
 ) -> None:
-    """Simulate B episodes of T samples; same arithmetic as :func:`step_kernel` per episode."""
+    """Simulate B episodes of T samples; same arithmetic as :func:`step_kernel` per episode.
+
+    With ``add_noise=False`` OBS is left untouched (the caller transforms Y first).
+    """
     B, T = U.shape[0], U.shape[1]
     for b in numba.prange(B):
         x = x0[b].copy()
@@ -459,8 +454,7 @@ def simulate_kernel(
         aux = work[5]
         for k in range(T):
             u = U[b, k]
-            mult = fault_multiplier(k, fault_onset[b], fault_ramp[b], fault_final[b])
-            _apply_fault(p_base[b], p, fault_idx[b], mult)
+            _apply_mult(p_base[b], p, pidx[b], PM[b, k])
             # One RHS evaluation gives the first RK4 stage, the info quantities and T_rx (the
             # same riser solve the measurement would repeat).
             _rhs_core(x, u, p, work[0], aux)
@@ -472,16 +466,28 @@ def simulate_kernel(
             Y[b, k, 5] = x[7]
             Y[b, k, 6] = x[9]
             Y[b, k, 7] = x[10]
-            for i in range(N_MEASUREMENTS):
-                OBS[b, k, i] = _noisy(
-                    Y[b, k, i], Z[b, k, i], noise_abs[i], noise_rel[i], noise_scale
-                )
+            if add_noise:
+                for i in range(N_MEASUREMENTS):
+                    OBS[b, k, i] = _noisy(
+                        Y[b, k, i], Z[b, k, i], noise_abs[i], noise_rel[i], noise_scale
+                    )
             for i in range(N_STATES):
                 Xs[b, k, i] = x[i]
             for i in range(N_AUX):
                 AUX[b, k, i] = aux[i]
             if k + 1 < T:
                 _rk4_inplace(x, u, p, h, substeps, work, True)
+
+
+@numba.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
+def noisy_batch_kernel(Y, Z, noise_abs, noise_rel, noise_scale, OBS):
+    """OBS = noisy float32 Y, element for element as :func:`noisy_kernel`."""
+    for b in numba.prange(Y.shape[0]):
+        for k in range(Y.shape[1]):
+            for i in range(Y.shape[2]):
+                OBS[b, k, i] = _noisy(
+                    Y[b, k, i], Z[b, k, i], noise_abs[i], noise_rel[i], noise_scale
+                )
 
 
 # ---- Python-level pure functions ---------------------------------------------------------------

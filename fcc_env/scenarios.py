@@ -111,6 +111,20 @@ class FaultConfig:
     def ramp(self) -> int:
         return self.ramp_samples if self.profile is FaultProfile.INCIPIENT else 0
 
+    def multipliers(self, k: np.ndarray) -> np.ndarray:
+        """Multipliers of the two fault-parameter slots over samples ``k``: shape (n, 2).
+
+        1 before the onset; afterwards the final multiplier, reached linearly over
+        ``ramp_samples`` for an incipient fault (at sample ``onset + ramp_samples − 1``).
+        """
+        k = np.asarray(k)
+        m = np.ones(k.shape[0])
+        if self.scenario is not Scenario.NOMINAL:
+            after = k >= self.onset
+            frac = np.minimum(1.0, (k - self.onset + 1) / self.ramp) if self.ramp > 0 else 1.0
+            m = np.where(after, 1.0 + (self.final_multiplier - 1.0) * frac, 1.0)
+        return np.column_stack([m, m])
+
     def active(self, k: int) -> bool:
         return self.scenario is not Scenario.NOMINAL and 0 <= self.onset <= k
 

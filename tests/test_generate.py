@@ -32,8 +32,10 @@ def test_write_and_read_dataset_round_trip(tmp_path):
 
 def test_cli_writes_files(tmp_path, capsys):
     out = tmp_path / "nominal.csv"
-    assert main(["--out", str(out), "--seeds", "0-1", "--samples", "30", "--states"]) == 0
+    argv = ["--out", str(out), "--seeds", "0-1", "--samples", "30", "--states"]
+    assert main([*argv, "--plant-effect", "sensor_bias:T_rx,bias=2"]) == 0
     meta = json.loads(out.with_suffix(".json").read_text())
+    assert meta["truth_plant_effects"] == [{"id": "sensor_bias:T_rx", "params": {"bias": 2.0}}]
     assert "x_W_sp" in meta["columns"] and meta["n_samples"] == 30
     assert "wrote" in capsys.readouterr().out
 
@@ -45,6 +47,7 @@ def test_cli_writes_files(tmp_path, capsys):
         (["--scenario", "f7"], "Unknown scenario 'f7'"),
         (["--samples", "1"], "n_samples must be an integer >= 2"),
         (["--fault-magnitude", "2", "--scenario", "f1"], "fault_magnitude=2.0 is outside"),
+        (["--plant-effect", "heat_loss:riser"], "Unknown plant effect 'heat_loss:riser'"),
     ],
 )
 def test_cli_bad_input(tmp_path, capsys, argv, message):

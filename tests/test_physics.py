@@ -10,7 +10,7 @@ from scipy.integrate import solve_ivp
 
 import fcc_env
 from fcc_env.params import MEASUREMENT_NAMES, NOMINAL_INPUTS, PARAM_INDEX, STATE_NAMES, FCCParams
-from fcc_env.physics import measure, rhs, rhs_aux, simulate_kernel, steady_state
+from fcc_env.physics import measure, rhs, rhs_aux, steady_state
 
 REF = Path(__file__).parent / "data" / "fcc-reference"
 P = FCCParams()
@@ -105,17 +105,13 @@ FAULT_SETUP = {
 
 def _simulate(U, x0, fault, onset, substeps=1):
     idx, final = fault
-    T = U.shape[0]
-    Y = np.empty((1, T, 8))
-    obs = np.empty((1, T, 8), np.float32)
-    X = np.empty((1, T, 11))
-    A = np.empty((1, T, len(fcc_env.physics.AUX_NAMES)))
-    simulate_kernel(
-        x0[None].copy(), U[None], P.as_array()[None], np.array([idx]), np.array([onset]),
-        np.array([0]), np.array([final]), 10.0 / substeps, substeps,
-        np.zeros((1, T, 8)), np.zeros(8), np.zeros(8), 0.0, Y, obs, X, A,
-    )  # fmt: skip
-    return Y[0], X[0]
+    k = np.arange(U.shape[0])
+    mult = np.where(k >= onset, final, 1.0)
+    names = [fcc_env.params.PARAM_FIELDS[i] for i in idx if i >= 0]
+    sim = fcc_env.simulation.simulate_inputs(
+        U, x0=x0, param_multipliers={n: mult for n in names}, rk4_substeps=substeps
+    )
+    return sim.y_clean, sim.states
 
 
 @pytest.mark.parametrize("name", list(FAULT_SETUP))
