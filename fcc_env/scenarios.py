@@ -234,11 +234,13 @@ class Excitation:
 class ProgramGenerator:
     """Streams the operating program: inputs ``(n, 6)`` per sample, chunk by chunk.
 
-    Each excited channel draws from its own generator, so the program does not depend on how it is
-    chunked, and a seed gives the same program whatever the scenario.
+    Each excited channel draws from its own generator, in blocks of ``_BLOCK`` levels and hold
+    times (one numpy call each instead of two per segment), so the program does not depend on
+    how it is chunked, and a seed gives the same program whatever the scenario.
     """
 
     _CHANNELS = (3, 2, 1)  # T_fp, T_ar, R_ar columns of the input vector
+    _BLOCK = 64
 
     def __init__(self, excitation: Excitation | None, rngs: list[np.random.Generator]):
         self.excitation = excitation
@@ -246,6 +248,22 @@ class ProgramGenerator:
         self.k = 0
         self._level = NOMINAL_INPUTS[list(self._CHANNELS)].copy()
         self._left = np.zeros(3, dtype=np.int64)
+        self._draws: list[tuple[np.ndarray, np.ndarray]] = [(np.empty(0), np.empty(0))] * 3
+        self._next = [0, 0, 0]
+
+    def _segment(self, c: int) -> tuple[float, int]:
+        """Next (offset in [-1, 1), hold samples) of channel c."""
+        ex = self.excitation
+        assert ex is not None
+        if self._next[c] >= self._draws[c][0].shape[0]:
+            rng = self.rngs[c]
+            offsets = rng.uniform(-1.0, 1.0, size=self._BLOCK)
+            holds = rng.integers(ex.hold_min, ex.hold_max, size=self._BLOCK, endpoint=True)
+            self._draws[c] = (offsets, holds)
+            self._next[c] = 0
+        j = self._next[c]
+        self._next[c] += 1
+        return float(self._draws[c][0][j]), int(self._draws[c][1][j])
 
     def take(self, n: int) -> np.ndarray:
         out = np.empty((n, NOMINAL_INPUTS.shape[0]))
@@ -260,13 +278,13 @@ class ProgramGenerator:
             ex.R_ar_halfrange_rel * NOMINAL_INPUTS[1],
         )
         for c, col in enumerate(self._CHANNELS):
-            rng = self.rngs[c]
             centre = NOMINAL_INPUTS[col]
             i = max(0, min(n, ex.warmup_samples - self.k))  # warm-up samples stay at nominal
             while i < n:
                 if self._left[c] == 0:
-                    self._level[c] = centre + rng.uniform(-half[c], half[c])
-                    self._left[c] = rng.integers(ex.hold_min, ex.hold_max, endpoint=True)
+                    offset, hold = self._segment(c)
+                    self._level[c] = centre + half[c] * offset
+                    self._left[c] = hold
                 m = int(min(self._left[c], n - i))
                 out[i : i + m, col] = self._level[c]
                 self._left[c] -= m

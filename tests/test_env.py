@@ -238,3 +238,18 @@ def test_batch_bad_input():
         fcc_env.simulate_episodes([0], 10, scenario=["f1", "f2"])
     with pytest.raises(ValueError, match="Unknown scenario"):
         fcc_env.simulate_episodes([0], 10, scenario="f5")
+
+
+def test_operating_program_follows_spec_7_5():
+    b = fcc_env.simulate_episodes([0, 1, 2], 4000, noise_scale=0.0)
+    u = b.inputs
+    nominal = fcc_env.NOMINAL_INPUTS
+    np.testing.assert_array_equal(u[:, :100], np.broadcast_to(nominal, (3, 100, 6)))
+    assert np.all(u[:, :, 0] == nominal[0])  # the catalyst valve is held
+    assert np.abs(u[:, :, 3] - 230.0).max() <= 10.0 and np.abs(u[:, :, 2] - 200.0).max() <= 10.0
+    assert np.abs(u[:, :, 1] / 148.4 - 1).max() <= 0.05 + 1e-12
+    for col in (1, 2, 3):
+        for ep in u[:, 100:, col]:
+            changes = np.flatnonzero(np.diff(ep)) + 1
+            holds = np.diff(changes)
+            assert holds.min() >= 20 and holds.max() <= 200
