@@ -10,7 +10,10 @@ from diagnosers.registry import available, make, register
 
 # isort: split
 # Importing the model modules registers their diagnosers (after the registry exists).
-from diagnosers import baselines  # noqa: F401  (registers limits, pca, arx-band)
+from diagnosers import (
+    baselines,  # noqa: F401  (registers limits, pca, arx-band)
+    lrgf_mem,  # noqa: F401  (registers lrgf-mem-paper, lrgf-mem)
+)
 
 __all__ = [
     "Decision",

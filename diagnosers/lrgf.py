@@ -93,7 +93,9 @@ def reflection_from_denominator(a: np.ndarray) -> np.ndarray:
     for m in range(r, 0, -1):
         km = a[m - 1]
         if abs(km) >= 1.0:
-            raise ValueError(f"denominator {a} is not stable: reflection coefficient {km} at order {m}")
+            raise ValueError(
+                f"denominator {a} is not stable: reflection coefficient {km} at order {m}"
+            )
         k[m - 1] = km
         # a^(m-1)_i = (a^(m)_i - k_m a^(m)_{m-i}) / (1 - k_m^2), i = 1..m-1
         a = (a[: m - 1] - km * a[: m - 1][::-1]) / (1.0 - km * km)
@@ -123,7 +125,7 @@ def numerator_from_state_space(a: torch.Tensor, b: torch.Tensor, b0: torch.Tenso
     Returns:
         ``N = [n_0, ..., n_r]``, shape ``(v, r + 1)``.
     """
-    v, r = a.shape
+    r = a.shape[1]
     vec = torch.ones_like(a)  # A^{k-1} 1, starting with k = 1
     markov = []
     for _ in range(r):
@@ -235,6 +237,9 @@ def lrgf_activation(z: torch.Tensor, g1: torch.Tensor, g2: torch.Tensor) -> torc
     return torch.tanh(0.5 * g2 * (z - g1))
 
 
+_MAX_REFLECTION = 0.999
+
+
 def _inverse_softplus(y: float) -> float:
     return y + math.log(-math.expm1(-y))
 
@@ -286,9 +291,9 @@ class LRGF(nn.Module):
 
     Attributes:
         weight_in: ``W`` rows ``w_i``, shape ``(v, n)`` (eq. (1)).
-        reflection_raw: ``theta``, shape ``(v, r)``; reflection coefficients ``k = tanh(theta)``
-            give a polynomial with roots in the closed unit disk, which is then contracted,
-            ``a_j <- rho^j a_j``, so that all poles lie within radius ``rho``.
+        reflection_raw: ``theta``, shape ``(v, r)``; reflection coefficients
+            ``k = 0.999 tanh(theta)`` give a polynomial with roots in the open unit disk, which is
+            then contracted, ``a_j <- rho^j a_j``, so that all poles lie within radius ``rho``.
         b: feed-forward filter parameters ``b_i``, shape ``(v, r)`` (eq. (4), matrix ``B``).
         b0: ``b0_i``, shape ``(v,)``; ``D = diag(b0) W`` (eq. (8)).
         g1: activation bias, shape ``(v,)``.
@@ -341,7 +346,12 @@ class LRGF(nn.Module):
             raise ValueError(
                 f"initial_state={initial_state!r}; choose one of {[s.value for s in InitialState]}"
             ) from None
-        self.n_inputs, self.n_hidden, self.order, self.n_outputs = n_inputs, n_hidden, order, n_outputs
+        self.n_inputs, self.n_hidden, self.order, self.n_outputs = (
+            n_inputs,
+            n_hidden,
+            order,
+            n_outputs,
+        )
         self.output_bias = bool(output_bias)
         self.max_pole_radius = float(max_pole_radius)
         self.init_pole_range = (lo, hi)
@@ -378,7 +388,8 @@ class LRGF(nn.Module):
         for i in range(v):
             poles = rng.uniform(lo, hi, size=r)
             k = reflection_from_denominator(np.poly(poles / self.max_pole_radius)[1:])
-            theta[i] = np.arctanh(k)
+            # clustered real poles of high order can need |k| beyond the cap: clip (still stable)
+            theta[i] = np.arctanh(np.clip(k / _MAX_REFLECTION, -1 + 1e-9, 1 - 1e-9))
         b = rng.normal(size=(v, r))
         b0 = rng.normal(scale=0.5, size=v)
         a = self._denominator(torch.from_numpy(theta))
@@ -407,9 +418,11 @@ class LRGF(nn.Module):
         return F.softplus(self.g2_raw)
 
     def _denominator(self, theta: torch.Tensor) -> torch.Tensor:
-        # contracting the roots by rho gives an explicit margin: with k = tanh(theta) alone, poles
-        # approach the unit circle exponentially fast in r as the |k_j| saturate
-        a = denominator_from_reflection(torch.tanh(theta))
+        # Contracting the roots by rho gives an explicit margin: with k = tanh(theta) alone, poles
+        # approach the unit circle exponentially fast in r as the |k_j| saturate. Keeping |k| below
+        # 1 as well stops saturated parameters from producing exactly repeated roots, whose
+        # float64 rounding would move them by ~eps**(1/r) (past the margin for r >= 6).
+        a = denominator_from_reflection(_MAX_REFLECTION * torch.tanh(theta))
         powers = self.max_pole_radius ** torch.arange(1, self.order + 1, dtype=theta.dtype)
         return a * powers
 
@@ -485,7 +498,9 @@ class LRGF(nn.Module):
         ):
             t = torch.as_tensor(np.asarray(val, dtype=np.float64), dtype=buf.dtype)
             if t.shape != buf.shape:
-                raise ValueError(f"scaler entry must have shape {tuple(buf.shape)}, got {tuple(t.shape)}")
+                raise ValueError(
+                    f"scaler entry must have shape {tuple(buf.shape)}, got {tuple(t.shape)}"
+                )
             buf.copy_(t)
         if (self.input_scale <= 0).any() or (self.output_scale <= 0).any():
             raise ValueError("scaler scales must be positive")
@@ -561,7 +576,9 @@ class LRGFStepper:
             self.w = np64(model.weight_in)
             self.g1, self.g2 = np64(model.g1), np64(model.g2)
             self.c = np64(model.weight_out)
-            self.c0 = np64(model.bias_out) if model.bias_out is not None else np.zeros(model.n_outputs)
+            self.c0 = (
+                np64(model.bias_out) if model.bias_out is not None else np.zeros(model.n_outputs)
+            )
             self.in_mean, self.in_scale = np64(model.input_mean), np64(model.input_scale)
             self.out_mean, self.out_scale = np64(model.output_mean), np64(model.output_scale)
         self.initial_state = model.initial_state

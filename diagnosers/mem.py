@@ -133,8 +133,10 @@ class NNARXErrorModel(nn.Module):
         self.n_inputs, self.n_outputs, self.n_hidden = n_inputs, n_outputs, n_hidden
         self.input_delays, self.output_delays = input_delays, output_delays
         self.seed = int(seed)
-        self.hidden = nn.Linear(input_delays * n_inputs + output_delays * n_outputs, n_hidden)
-        self.out = nn.Linear(n_hidden, n_outputs)
+        # skip_init: nn.Linear's own initialisation would draw from the global torch RNG
+        n_reg = input_delays * n_inputs + output_delays * n_outputs
+        self.hidden = nn.utils.skip_init(nn.Linear, n_reg, n_hidden)
+        self.out = nn.utils.skip_init(nn.Linear, n_hidden, n_outputs)
         self.register_buffer("input_mean", torch.zeros(n_inputs))
         self.register_buffer("input_scale", torch.ones(n_inputs))
         self.register_buffer("output_mean", torch.zeros(n_outputs))
@@ -178,7 +180,9 @@ class NNARXErrorModel(nn.Module):
         w_u = self.hidden.weight[:, : nb * self.n_inputs]
         return lagged.flatten(2) @ w_u.T + self.hidden.bias
 
-    def run_normalized(self, drive: torch.Tensor, y_past: torch.Tensor | None = None) -> torch.Tensor:
+    def run_normalized(
+        self, drive: torch.Tensor, y_past: torch.Tensor | None = None
+    ) -> torch.Tensor:
         """Free-run the output recursion given the input drive (standardised units).
 
         Args:
@@ -210,6 +214,25 @@ class NNARXErrorModel(nn.Module):
             buf = torch.cat([y, buf[:, : (na - 1) * m]], dim=1)
         return torch.stack(outs, dim=1)
 
+    def one_step_normalized(self, drive: torch.Tensor, y_meas: torch.Tensor) -> torch.Tensor:
+        """One-step-ahead (series-parallel) prediction from *measured* past outputs.
+
+        For training warm-starts only: with measured residuals in the regressor a fault would leak
+        into the prediction, so detection never uses this. Past outputs before ``k = 0`` are 0.
+        Shape: ``drive`` ``(B, T, n_hidden)``, ``y_meas`` ``(B, T, m)`` -> ``(B, T, m)``.
+        """
+        na, t_len = self.output_delays, drive.shape[1]
+        pre = drive
+        if na:
+            y_pad = torch.cat([y_meas.new_zeros((y_meas.shape[0], na, self.n_outputs)), y_meas], 1)
+            lagged = torch.stack([y_pad[:, na - d : na - d + t_len] for d in range(1, na + 1)], 2)
+            pre = (
+                pre
+                + lagged.flatten(2) @ self.hidden.weight[:, self.input_delays * self.n_inputs :].T
+            )
+        y = self.out(torch.tanh(pre))
+        return torch.tanh(y) if self.output_activation is OutputActivation.TANH else y
+
     def simulate(self, u: torch.Tensor) -> torch.Tensor:
         """Simulate the MEM on physical inputs: ``(B, T, n) -> y_e (B, T, m)`` physical units."""
         if u.ndim != 3 or u.shape[-1] != self.n_inputs:
@@ -233,7 +256,9 @@ class NNARXErrorModel(nn.Module):
         return y[0] if squeeze else y
 
     @torch.no_grad()
-    def set_scaler(self, input_mean: Any, input_scale: Any, output_mean: Any, output_scale: Any) -> None:
+    def set_scaler(
+        self, input_mean: Any, input_scale: Any, output_mean: Any, output_scale: Any
+    ) -> None:
         """Set the standardisation buffers (physical = normalised * scale + mean)."""
         for buf, val in (
             (self.input_mean, input_mean),
@@ -243,7 +268,9 @@ class NNARXErrorModel(nn.Module):
         ):
             t = torch.as_tensor(np.asarray(val, dtype=np.float64), dtype=buf.dtype)
             if t.shape != buf.shape:
-                raise ValueError(f"scaler entry must have shape {tuple(buf.shape)}, got {tuple(t.shape)}")
+                raise ValueError(
+                    f"scaler entry must have shape {tuple(buf.shape)}, got {tuple(t.shape)}"
+                )
             buf.copy_(t)
         if (self.input_scale <= 0).any() or (self.output_scale <= 0).any():
             raise ValueError("scaler scales must be positive")

@@ -111,7 +111,9 @@ def _read_json(path: Path, what: str, remedy: str) -> dict[str, Any]:
     try:
         obj = json.loads(path.read_text())
     except (json.JSONDecodeError, UnicodeDecodeError) as e:
-        raise StoreError(f"{path} is not valid JSON ({e}): the {what} is corrupted; {remedy}") from e
+        raise StoreError(
+            f"{path} is not valid JSON ({e}): the {what} is corrupted; {remedy}"
+        ) from e
     if not isinstance(obj, dict):
         raise StoreError(f"{path} does not hold a JSON object: the {what} is corrupted; {remedy}")
     return obj

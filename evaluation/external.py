@@ -1,0 +1,377 @@
+"""External (measured or third-party) data as a sweep data source: a directory of CSV/Parquet files.
+
+Each file is one record (an episode). The user says which columns are the channels (split into
+``inputs`` and ``outputs``), which files are healthy training runs, and for each test file where
+its fault starts (``None`` for a healthy test run, which is scored for false alarms only).
+:class:`ExternalData` implements the harness's ``DataSource`` protocol, so
+``run_sweep(SweepConfig(diagnosers=..., data=ExternalData(...)), store)`` trains on the healthy
+files and scores the fault files exactly like simulated scenarios (one "seed", 0, per file).
+
+CSV files either have a header row (``column_names=None``) or are headerless with
+``column_names`` naming every column in order. Parquet files need ``pyarrow`` (not a dependency of
+this package); without it loading one raises an ``ImportError`` that says so.
+
+The third-party FCCU data set of ``shared/data/fccu-santander-mlpse`` (Santander et al. 2022
+simulator, MLforPSE CSVs) has a ready-made description, :func:`load_santander`; its onset
+convention is documented there.
+"""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import hashlib
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from diagnosers.base import Episode
+from evaluation.harness import LoadedEpisode
+from evaluation.store import check_name
+
+__all__ = [
+    "SANTANDER_ARX_PARAMS",
+    "SANTANDER_ONSET",
+    "ExternalData",
+    "ExternalFile",
+    "load_santander",
+    "read_table",
+]
+
+SUFFIXES: tuple[str, ...] = (".csv", ".parquet", ".pq")
+
+#: Fault onset (sample index, 1-minute samples) used for every fault file of the Santander data.
+#: The data's README says the onsets are not stated. Evidence from the data themselves, not from
+#: any diagnoser: in ``deltaP_increase_outputs.csv`` the noise-free channels ``P4`` and ``deltaP``
+#: are constant and change for the first time at row index 120 (time column 121 min, i.e. 2 h),
+#: and the 10-sample means of ``V6`` in ``CAB_valveLeak_outputs.csv`` start to rise right after
+#: sample 120. Generated monitoring data sets introduce all faults at one time, so 120 is taken for
+#: every fault file. For slow faults (fouling, drift) this makes detection times long but honest.
+SANTANDER_ONSET = 120
+
+#: ``arx-band`` hyperparameters for the Santander data (its defaults name FCC-v0 channels): the
+#: riser temperature from feed temperature, regenerator temperature and regenerated-catalyst flow,
+#: the analogue of the paper's relation (14) that the data's README suggests.
+SANTANDER_ARX_PARAMS: dict[str, Any] = {"output": "Tr", "inputs": ["T2", "Treg", "Frgc"]}
+
+_SANTANDER_TRAIN = "NOC_varyingFeedFlow_outputs.csv"
+_SANTANDER_HEALTHY_TEST = "NOC_stableFeedFlow_outputs.csv"
+_SANTANDER_FAULTS = (
+    "CAB_valveLeak_outputs.csv",
+    "deltaP_increase_outputs.csv",
+    "UAf_decrease_outputs.csv",
+    "condEff_decrease_outputs.csv",
+    "Fhn_sensorDrift_outputs.csv",
+)
+
+
+@dataclass(frozen=True)
+class ExternalFile:
+    """One file of an external data set.
+
+    Args:
+        path: file name relative to the data directory (or absolute).
+        onset: fault onset sample (0-based row index), ``None`` for a healthy record.
+        name: scenario name in results (default: the file stem); letters, digits, ``._+-``.
+    """
+
+    path: str
+    onset: int | None = None
+    name: str | None = None
+
+    @property
+    def key(self) -> str:
+        return self.name if self.name is not None else Path(self.path).stem
+
+
+def _is_parquet(path: Path) -> bool:
+    return path.suffix.lower() in (".parquet", ".pq")
+
+
+def read_table(
+    path: str | Path,
+    columns: Sequence[str],
+    *,
+    column_names: Sequence[str] | None = None,
+    delimiter: str = ",",
+) -> np.ndarray:
+    """Read ``columns`` of one CSV or Parquet file as a float array ``(n_rows, len(columns))``.
+
+    Args:
+        path: the file (``.csv``, ``.parquet`` or ``.pq``).
+        columns: the columns wanted, by name, in this order.
+        column_names: names of all columns of a headerless CSV, in order; ``None`` reads the
+            names from the CSV's first row (ignored for Parquet, which names its columns).
+        delimiter: CSV field separator.
+
+    Raises:
+        ValueError: unreadable file, unknown column (the message lists the available ones),
+            non-numeric or missing values.
+        ImportError: a Parquet file without ``pyarrow`` installed.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise ValueError(f"{path} does not exist or is not a file")
+    if _is_parquet(path):
+        try:
+            import pyarrow.parquet as pq
+        except ImportError as e:
+            raise ImportError(
+                f"reading {path} needs pyarrow (pip install pyarrow); or convert it to CSV"
+            ) from e
+        names = list(pq.read_schema(path).names)
+        _check_columns(path, columns, names)
+        table = pq.read_table(path, columns=list(columns))
+        data = np.column_stack([table.column(c).to_numpy().astype(np.float64) for c in columns])
+    else:
+        if path.suffix.lower() != ".csv":
+            raise ValueError(f"{path}: unsupported file type {path.suffix!r}. Allowed: {SUFFIXES}")
+        skip = 0
+        if column_names is None:
+            with path.open(newline="") as fh:
+                header = next(csv.reader(fh, delimiter=delimiter), None)
+            if header is None:
+                raise ValueError(f"{path} is empty; expected a header row and data")
+            names = [h.strip() for h in header]
+            skip = 1
+        else:
+            names = list(column_names)
+        _check_columns(path, columns, names)
+        idx = [names.index(c) for c in columns]
+        try:
+            data = np.loadtxt(path, delimiter=delimiter, skiprows=skip, usecols=idx, ndmin=2)
+        except ValueError as e:
+            raise ValueError(
+                f"{path}: could not read numeric data ({e}); check the delimiter, the header "
+                "(column_names=None expects one) and for text or empty fields"
+            ) from e
+        if data.shape[1] != len(columns):
+            raise ValueError(f"{path}: expected {len(columns)} columns, read {data.shape[1]}")
+    if data.shape[0] == 0:
+        raise ValueError(f"{path} has no data rows")
+    bad = ~np.isfinite(data)
+    if bad.any():
+        row, col = np.argwhere(bad)[0]
+        raise ValueError(
+            f"{path}: column {columns[col]!r} has a missing or non-finite value at data row "
+            f"{row} ({int(bad.sum())} in all); clean or drop those samples first"
+        )
+    return data
+
+
+def _check_columns(path: Path, wanted: Sequence[str], names: Sequence[str]) -> None:
+    missing = [c for c in wanted if c not in names]
+    if missing:
+        raise ValueError(f"{path}: unknown column(s) {missing}. Available: {list(names)}")
+
+
+def _file_digest(path: Path) -> str:
+    with path.open("rb") as fh:
+        return hashlib.file_digest(fh, "sha256").hexdigest()
+
+
+@dataclass(frozen=True, kw_only=True)
+class ExternalData:
+    """A directory of CSV/Parquet records as a sweep data source (see the module doc).
+
+    Args:
+        directory: the data directory.
+        inputs: channel (column) names that are inputs (exogenous or manipulated variables).
+        outputs: channel names that are measured outputs. The episode's channels are
+            ``inputs + outputs``, in this order; other columns are ignored.
+        train_files: healthy records to train on.
+        test_files: records to score; each with its fault onset (``None`` = healthy).
+        column_names: names of all columns, in order, for headerless CSVs; ``None`` = header row.
+        sample_time_s: sample period [s].
+        delimiter: CSV field separator.
+
+    Each test file is one cell per diagnoser, with scenario ``ExternalFile.key`` and seed 0. The
+    store hash includes every field and the SHA-256 of every file, so changed data are never
+    mixed with stored results.
+    """
+
+    directory: str
+    inputs: tuple[str, ...]
+    outputs: tuple[str, ...]
+    train_files: tuple[str, ...]
+    test_files: tuple[ExternalFile, ...]
+    column_names: tuple[str, ...] | None = None
+    sample_time_s: float = 1.0
+    delimiter: str = ","
+
+    @property
+    def channels(self) -> tuple[str, ...]:
+        return tuple(self.inputs) + tuple(self.outputs)
+
+    def _path(self, name: str) -> Path:
+        p = Path(name)
+        return p if p.is_absolute() else Path(self.directory) / p
+
+    def validate(self) -> None:
+        d = Path(self.directory)
+        if not d.is_dir():
+            raise ValueError(f"data directory {str(d)!r} does not exist or is not a directory")
+        for field_name in ("inputs", "outputs", "train_files"):
+            v = getattr(self, field_name)
+            if isinstance(v, str) or not isinstance(v, Sequence):
+                raise ValueError(f"{field_name}={v!r} must be a sequence of names, not {type(v)}")
+        if not self.outputs:
+            raise ValueError("outputs must name at least one column")
+        if len(set(self.channels)) != len(self.channels):
+            raise ValueError(
+                f"inputs {list(self.inputs)} and outputs {list(self.outputs)} must be distinct "
+                "column names"
+            )
+        if not self.train_files:
+            raise ValueError("train_files must name at least one healthy record")
+        if not self.test_files:
+            raise ValueError("test_files must name at least one record to score")
+        for tf in self.test_files:
+            if not isinstance(tf, ExternalFile):
+                raise ValueError(f"test_files must hold ExternalFile objects, got {tf!r}")
+            check_name("test file name", tf.key)
+            if tf.onset is not None and (
+                isinstance(tf.onset, bool) or not isinstance(tf.onset, int) or tf.onset < 0
+            ):
+                raise ValueError(f"{tf.path}: onset={tf.onset!r} must be an integer >= 0 or None")
+        keys = [tf.key for tf in self.test_files]
+        if len(set(keys)) != len(keys):
+            raise ValueError(f"test file names {keys} repeat; give ExternalFile(name=...)")
+        overlap = sorted(
+            {str(self._path(f)) for f in self.train_files}
+            & {str(self._path(tf.path)) for tf in self.test_files}
+        )
+        if overlap:
+            raise ValueError(
+                f"files {overlap} are both training and test records; a diagnoser must not be "
+                "scored on the data it was trained on"
+            )
+        for f in [*self.train_files, *(tf.path for tf in self.test_files)]:
+            p = self._path(f)
+            if not p.is_file():
+                raise ValueError(f"data file {str(p)!r} does not exist")
+            if p.suffix.lower() not in SUFFIXES:
+                raise ValueError(f"{p}: unsupported file type {p.suffix!r}. Allowed: {SUFFIXES}")
+        if not (
+            isinstance(self.sample_time_s, int | float)
+            and math.isfinite(self.sample_time_s)
+            and self.sample_time_s > 0
+        ):
+            raise ValueError(f"sample_time_s={self.sample_time_s!r} must be a positive number")
+
+    def store_key(self) -> dict[str, Any]:
+        key = dataclasses.asdict(self)
+        key["directory"] = str(Path(self.directory).resolve())
+        key["kind"] = "external"
+        key["sha256"] = {
+            f: _file_digest(self._path(f))
+            for f in [*self.train_files, *(tf.path for tf in self.test_files)]
+        }
+        return key
+
+    def cells(self) -> list[tuple[str, int]]:
+        return [(tf.key, 0) for tf in self.test_files]
+
+    def _load(self, file: str, onset: int | None, name: str) -> Episode:
+        path = self._path(file)
+        y = read_table(
+            path, self.channels, column_names=self.column_names, delimiter=self.delimiter
+        )
+        if onset is not None and onset >= y.shape[0]:
+            raise ValueError(
+                f"{path}: fault onset {onset} is beyond the record's {y.shape[0]} samples"
+            )
+        return Episode(
+            y=y,
+            channels=self.channels,
+            sample_time_s=float(self.sample_time_s),
+            fault_onset=onset,
+            scenario=name,
+            seed=0,
+        )
+
+    def train_episodes(self) -> list[Episode]:
+        return [self._load(f, None, Path(f).stem) for f in self.train_files]
+
+    def load_test(self, scenario: str, seed: int) -> LoadedEpisode:
+        for tf in self.test_files:
+            if tf.key == scenario:
+                ep = self._load(tf.path, tf.onset, tf.key)
+                return LoadedEpisode(
+                    episode=ep, fault_onset=tf.onset, n_samples_planned=ep.n_samples
+                )
+        raise ValueError(
+            f"Unknown test record {scenario!r}. Available: {[tf.key for tf in self.test_files]}"
+        )
+
+
+def _santander_columns(directory: Path) -> list[tuple[str, str]]:
+    """``(symbol, unit)`` of every CSV column, from the data set's ``columns.csv``."""
+    spec = directory / "columns.csv"
+    if not spec.is_file():
+        raise ValueError(
+            f"{directory} has no columns.csv, so it is not the Santander FCCU data set layout"
+        )
+    with spec.open(newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    try:
+        rows.sort(key=lambda r: int(r["col"]))
+        return [(r["symbol"].strip(), r["unit"].strip()) for r in rows]
+    except (KeyError, ValueError) as e:
+        raise ValueError(f"{spec}: expected columns col,symbol,unit,description ({e})") from e
+
+
+def load_santander(
+    directory: str | Path,
+    *,
+    onset: int = SANTANDER_ONSET,
+    outputs: Sequence[str] | None = None,
+) -> ExternalData:
+    """Describe the Santander et al. (2022) FCCU data set (MLforPSE CSVs) as :class:`ExternalData`.
+
+    Choices (all fixed here, none tuned on a diagnoser's result):
+
+    * **Training:** ``NOC_varyingFeedFlow`` (10080 healthy samples; the source notebooks' training
+      set). **Healthy test:** ``NOC_stableFeedFlow`` (scored for false alarms, ``r_fd``).
+      **Fault tests:** the five fault files, named by their stem without ``_outputs``.
+    * **Onset:** :data:`SANTANDER_ONSET` (sample 120) for every fault file; see its comment for
+      the evidence. Pass ``onset=`` to study another convention.
+    * **Channels:** all 46 variables of ``columns.csv`` except the time column. Inputs are the
+      fresh feed flow and temperatures set outside the unit (``F3``, ``Tatm``, ``T1``) and every
+      controller valve position (unit ``%``); all other variables are outputs (or only
+      ``outputs``, if given).
+    * **Sample time:** 60 s (1-minute sampling, per the data's README).
+
+    Args:
+        directory: the data directory (holding ``columns.csv`` and the CSVs).
+        onset: fault onset sample for every fault file.
+        outputs: restrict the outputs to these columns (default: all non-input variables).
+    """
+    d = Path(directory)
+    if not d.is_dir():
+        raise ValueError(f"data directory {str(d)!r} does not exist or is not a directory")
+    cols = _santander_columns(d)
+    names = tuple(sym for sym, _ in cols)
+    variables = [(sym, unit) for sym, unit in cols if sym != "time"]
+    inputs = tuple(sym for sym, unit in variables if unit == "%" or sym in ("F3", "Tatm", "T1"))
+    all_outputs = tuple(sym for sym, _ in variables if sym not in inputs)
+    if outputs is not None:
+        unknown = [o for o in outputs if o not in all_outputs]
+        if unknown:
+            raise ValueError(f"unknown output(s) {unknown}. Available: {list(all_outputs)}")
+        all_outputs = tuple(outputs)
+    tests = [ExternalFile(_SANTANDER_HEALTHY_TEST, None, "NOC_stableFeedFlow")]
+    tests += [ExternalFile(f, onset, f.removesuffix("_outputs.csv")) for f in _SANTANDER_FAULTS]
+    return ExternalData(
+        directory=str(d),
+        inputs=inputs,
+        outputs=all_outputs,
+        train_files=(_SANTANDER_TRAIN,),
+        test_files=tuple(tests),
+        column_names=names,
+        sample_time_s=60.0,
+    )

@@ -1,0 +1,572 @@
+"""Leaderboard CLI: ``python -m evaluation.leaderboard [--quick] [...]``.
+
+Runs a sweep (:func:`evaluation.harness.run_sweep`), then writes into ``--out``
+(default ``results/leaderboard``):
+
+* ``leaderboard.md`` - the Markdown table printed to stdout: one row per diagnoser plus the
+  paper's Table 2 as a reference row; columns ``r_fd`` on healthy episodes, then ``r_td`` and
+  ``t_dt`` for each fault, each mean ± standard deviation over test seeds, with the miss count.
+* ``leaderboard.csv`` - one row per diagnoser × scenario: ``diagnoser, scenario, n_seeds, r_fd,
+  r_fd_std, r_td, r_td_std, t_dt, t_dt_std, t_dt_s, t_dt_s_std, misses, n_detected,
+  n_terminated, data, package_version``. For a fault scenario ``r_fd`` is the false detection
+  rate *before the onset*; for a healthy one it covers the whole episode.
+* ``results.csv`` / ``results.json`` - the raw per-seed cells (JSON adds the sweep description).
+* ``figures/<scenario>/<diagnoser>.png`` - Fig. 3/4-style plots on the first test seed.
+* ``store/<hash>/`` - the resumable result store (re-running the same command resumes; a
+  sweep with other data options gets another hash, so ``--quick`` and the full sweep coexist).
+
+Units: ``t_dt`` in samples (``Ts`` = 10 s for FCC-v0; the CSV also has ``t_dt_s`` in seconds), as
+in the paper's Table 2. Mean ``t_dt`` is over detected faults only; ``misses`` counts the test
+episodes whose fault was never detected. Standard deviations use ``ddof=1`` (``–`` with one seed).
+
+Table formatting (:func:`markdown_table`, :func:`summary_rows`) is separate from computation
+(:func:`run`) and from the CLI (:func:`main`), the only place that prints.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import dataclasses
+import json
+import math
+import sys
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from evaluation.harness import (
+    BACKENDS,
+    BASELINES,
+    TRAIN_SEED_BASE,
+    CellResult,
+    CellSummary,
+    DiagnoserSpec,
+    SimulatedData,
+    SweepConfig,
+    SweepResults,
+    default_specs,
+    detect_episode,
+    run_sweep,
+)
+from evaluation.store import canonical_hash
+
+__all__ = [
+    "PAPER_TABLE2",
+    "LeaderboardOptions",
+    "build_parser",
+    "main",
+    "markdown_table",
+    "run",
+    "summary_rows",
+    "write_outputs",
+]
+
+#: Patan & Parisini's Table 2 (LRGF + model-error model): r_fd on healthy data, then per fault
+#: (r_td, t_dt [samples]). No dispersion is published, so the reference row has none.
+PAPER_TABLE2: dict[str, Any] = {
+    "label": "paper Table 2 (LRGF+MEM)",
+    "r_fd": 0.0881,
+    "faults": {
+        "f1": (0.6978, 250.0),
+        "f2": (0.7184, 370.0),
+        "f3": (0.6634, 80.0),
+        "f4": (0.5294, 55.0),
+    },
+}
+
+QUICK_SEEDS = 3
+QUICK_TRAIN_EPISODES = 3
+DEFAULT_SEEDS = 10
+DEFAULT_TRAIN_EPISODES = 5
+DEFAULT_OUT = Path("results/leaderboard")
+
+
+# ---- options -----------------------------------------------------------------------------------
+@dataclass(frozen=True, kw_only=True)
+class LeaderboardOptions:
+    """Resolved CLI options (what :func:`run` needs)."""
+
+    diagnosers: tuple[str, ...]
+    scenarios: tuple[str, ...]
+    seeds: int
+    train_episodes: int
+    out: Path
+    backend: str = "local"
+    workers: int | None = None
+    ray_address: str | None = None
+    n_samples: int = 4000
+    fault_time: int | None = None
+    external: Path | None = None
+    figures: bool = True
+    progress: bool = True
+
+
+def _package_version() -> str:
+    from fcc_env import MODEL_VERSION, __version__
+
+    return f"{__version__} ({MODEL_VERSION})"
+
+
+def build_config(opts: LeaderboardOptions) -> SweepConfig:
+    """The sweep the options describe (validated by :func:`run_sweep`)."""
+    if opts.external is not None:
+        from evaluation.external import SANTANDER_ARX_PARAMS, load_santander
+
+        data = load_santander(opts.external)
+        keep = set(opts.scenarios)
+        data = dataclasses.replace(
+            data, test_files=tuple(tf for tf in data.test_files if tf.key in keep)
+        )
+        specs = []
+        for name in opts.diagnosers:
+            # arx-band's default channels are FCC-v0's; use the Santander analogue.
+            params = SANTANDER_ARX_PARAMS if name == "arx-band" else {}
+            specs.append(DiagnoserSpec(name, dict(params)))
+        return SweepConfig(diagnosers=tuple(specs), data=data)
+    data = SimulatedData(
+        scenarios=opts.scenarios,
+        test_seeds=tuple(range(opts.seeds)),
+        train_seeds=tuple(range(TRAIN_SEED_BASE, TRAIN_SEED_BASE + opts.train_episodes)),
+        n_samples=opts.n_samples,
+        fault_time=opts.fault_time,
+    )
+    return SweepConfig(diagnosers=default_specs(opts.diagnosers), data=data)
+
+
+def store_dir_for(config: SweepConfig, out: Path) -> Path:
+    """``out/store/<first 12 hex of the data hash>``: one store per data set-up."""
+    return out / "store" / canonical_hash(config.data.store_key())[:12]
+
+
+# ---- computation -------------------------------------------------------------------------------
+def run(opts: LeaderboardOptions) -> SweepResults:
+    """Run (or resume) the sweep of ``opts``; no output files, no printing."""
+    config = build_config(opts)
+    config.validate()
+    return run_sweep(
+        config,
+        store_dir_for(config, opts.out),
+        backend=opts.backend,
+        n_workers=opts.workers,
+        ray_address=opts.ray_address,
+        progress=opts.progress,
+    )
+
+
+# ---- formatting (pure) -------------------------------------------------------------------------
+def _fmt(mean: float, std: float, digits: int) -> str:
+    if math.isnan(mean):
+        return "–"
+    s = f"{mean:.{digits}f}"
+    return s + (f" ± {std:.{digits}f}" if not math.isnan(std) else "")
+
+
+def _fmt_tdt(c: CellSummary) -> str:
+    core = _fmt(c.t_dt, c.t_dt_std, 0)
+    if c.misses:
+        core += f" ({c.misses}/{c.n_seeds} missed)"
+    return core
+
+
+def _score(rows: Sequence[CellSummary]) -> float:
+    """Primary ranking metric: mean r_td over faults minus mean r_fd over healthy scenarios."""
+    td = [c.r_td for c in rows if c.faulty and not math.isnan(c.r_td)]
+    fd = [c.r_fd for c in rows if not c.faulty and not math.isnan(c.r_fd)]
+    if not td and not fd:
+        return -math.inf
+    return (sum(td) / len(td) if td else 0.0) - (sum(fd) / len(fd) if fd else 0.0)
+
+
+def markdown_table(
+    summaries: Sequence[CellSummary],
+    *,
+    reference: dict[str, Any] | None = None,
+) -> str:
+    """The leaderboard as a Markdown table (pure function of the summaries).
+
+    Columns: for every healthy scenario ``r_fd``; for every fault scenario ``r_td`` and ``t_dt``
+    [samples]. Rows are sorted by mean ``r_td`` over faults minus mean ``r_fd`` over healthy
+    scenarios (higher is better). ``reference`` (e.g. :data:`PAPER_TABLE2`) adds a last row.
+    """
+    scenarios: list[tuple[str, bool]] = []
+    by_diag: dict[str, dict[str, CellSummary]] = {}
+    for c in summaries:
+        if (c.scenario, c.faulty) not in scenarios:
+            scenarios.append((c.scenario, c.faulty))
+        by_diag.setdefault(c.diagnoser, {})[c.scenario] = c
+    header = ["diagnoser"]
+    for sc, faulty in scenarios:
+        header += [f"{sc} r_td", f"{sc} t_dt"] if faulty else [f"r_fd ({sc})"]
+    lines = ["| " + " | ".join(header) + " |", "|" + "|".join(["---"] * len(header)) + "|"]
+    order = sorted(by_diag, key=lambda d: -_score(list(by_diag[d].values())))
+    for diag in order:
+        row = [diag]
+        for sc, faulty in scenarios:
+            c = by_diag[diag].get(sc)
+            if c is None:
+                row += ["", ""] if faulty else [""]
+            elif faulty:
+                row += [_fmt(c.r_td, c.r_td_std, 4), _fmt_tdt(c)]
+            else:
+                row.append(_fmt(c.r_fd, c.r_fd_std, 4))
+        lines.append("| " + " | ".join(row) + " |")
+    if reference is not None:
+        row = [reference["label"]]
+        for sc, faulty in scenarios:
+            ref = reference["faults"].get(sc)
+            if faulty:
+                row += [f"{ref[0]:.4f}", f"{ref[1]:.0f}"] if ref else ["", ""]
+            else:
+                row.append(f"{reference['r_fd']:.4f}" if sc == "nominal" else "")
+        lines.append("| " + " | ".join(row) + " |")
+    return "\n".join(lines) + "\n"
+
+
+_SUMMARY_COLUMNS = (
+    "diagnoser",
+    "scenario",
+    "n_seeds",
+    "r_fd",
+    "r_fd_std",
+    "r_td",
+    "r_td_std",
+    "t_dt",
+    "t_dt_std",
+    "t_dt_s",
+    "t_dt_s_std",
+    "misses",
+    "n_detected",
+    "n_terminated",
+)
+
+
+def summary_rows(summaries: Sequence[CellSummary], *, data: str, version: str) -> list[dict]:
+    """Rows of ``leaderboard.csv`` (NaN written as empty fields)."""
+    rows = []
+    for c in summaries:
+        d = c.to_json()
+        row = {
+            k: ("" if isinstance(d[k], float) and math.isnan(d[k]) else d[k])
+            for k in _SUMMARY_COLUMNS
+        }
+        row.update(data=data, package_version=version)
+        rows.append(row)
+    return rows
+
+
+def _data_label(config: SweepConfig) -> str:
+    if isinstance(config.data, SimulatedData):
+        import fcc_env
+
+        return f"{fcc_env.ENV_ID} ({fcc_env.MODEL_VERSION})"
+    return f"external:{Path(getattr(config.data, 'directory', '?')).name}"
+
+
+def header_text(results: SweepResults) -> str:
+    """What the table is about: data, seeds, units, ranking."""
+    cfg = results.config
+    data = cfg.data
+    lines = [f"# Fault-detection leaderboard: {_data_label(cfg)}", ""]
+    if isinstance(data, SimulatedData):
+        lines.append(
+            f"Test seeds {data.test_seeds[0]}..{data.test_seeds[-1]} ({len(data.test_seeds)} per "
+            f"scenario), training on {len(data.train_seeds)} healthy episodes (seeds "
+            f"{data.train_seeds[0]}..{data.train_seeds[-1]}), {data.n_samples} samples each."
+        )
+    else:
+        lines.append("External records: one test file per scenario (seed 0); see results.json.")
+    lines += [
+        "Cells: mean ± std over test seeds. r_fd: false detection rate on healthy episodes; "
+        "r_td: true detection rate after the onset; t_dt: detection time in samples, mean over "
+        "detected faults, with the number of missed faults.",
+        "Rows are sorted by mean r_td over faults minus r_fd on healthy episodes.",
+        "",
+    ]
+    return "\n".join(lines) + "\n"  # a blank line before the table, as Markdown needs
+
+
+# ---- outputs -----------------------------------------------------------------------------------
+def write_outputs(results: SweepResults, out: Path, *, figures: bool = True) -> list[Path]:
+    """Write the table, CSVs, raw results and figures of ``results`` into ``out``."""
+    out.mkdir(parents=True, exist_ok=True)
+    summaries = results.summary()
+    reference = PAPER_TABLE2 if isinstance(results.config.data, SimulatedData) else None
+    md = header_text(results) + markdown_table(summaries, reference=reference)
+    written = []
+    p = out / "leaderboard.md"
+    p.write_text(md)
+    written.append(p)
+    version = _package_version()
+    data_label = _data_label(results.config)
+    p = out / "leaderboard.csv"
+    rows = summary_rows(summaries, data=data_label, version=version)
+    with p.open("w", newline="") as fh:
+        w = csv.DictWriter(fh, fieldnames=[*_SUMMARY_COLUMNS, "data", "package_version"])
+        w.writeheader()
+        w.writerows(rows)
+    written.append(p)
+    records = [r.to_json() for r in results.records]
+    p = out / "results.csv"
+    with p.open("w", newline="") as fh:
+        fields = list(CellResult.__dataclass_fields__)
+        w = csv.DictWriter(fh, fieldnames=fields)
+        w.writeheader()
+        for r in records:
+            w.writerow({k: _csv_value(v) for k, v in r.items()})
+    written.append(p)
+    p = out / "results.json"
+    cfg = results.config
+    payload = {
+        "data": cfg.data.store_key(),
+        "diagnosers": [s.to_json() for s in cfg.diagnosers],
+        "cells": [list(c) for c in cfg.data.cells()],
+        "t_on": cfg.t_on,
+        "package_version": version,
+        "records": records,
+    }
+    p.write_text(json.dumps(_json_safe(payload), indent=1))
+    written.append(p)
+    if figures:
+        written += write_figures(results, out / "figures")
+    return written
+
+
+def _csv_value(v: Any) -> Any:
+    if v is None or (isinstance(v, float) and math.isnan(v)):
+        return ""
+    return v
+
+
+def _json_safe(obj: Any) -> Any:
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    if isinstance(obj, dict):
+        return {k: _json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_json_safe(v) for v in obj]
+    return obj
+
+
+def write_figures(results: SweepResults, directory: Path) -> list[Path]:
+    """One PNG per scenario × diagnoser on the scenario's first test seed."""
+    from evaluation.plots import detection_figure, save_png
+
+    cfg = results.config
+    first: dict[str, int] = {}
+    for sc, seed in cfg.data.cells():
+        first.setdefault(sc, seed)
+    paths = []
+    for sc, seed in first.items():
+        for spec in cfg.diagnosers:
+            loaded, det = detect_episode(cfg, results.store_dir, spec.key, sc, seed)
+            fig = detection_figure(
+                loaded.episode,
+                det,
+                title=f"{spec.key} on {sc}, seed {seed}",
+                fault_onset=loaded.fault_onset if loaded.episode.fault_onset is not None else None,
+            )
+            paths.append(save_png(fig, directory / sc / f"{spec.key}.png"))
+    return paths
+
+
+# ---- CLI ---------------------------------------------------------------------------------------
+def _csv_list(text: str) -> tuple[str, ...]:
+    items = tuple(t.strip() for t in text.split(",") if t.strip())
+    if not items:
+        raise argparse.ArgumentTypeError(f"expected a comma-separated list, got {text!r}")
+    return items
+
+
+def _positive_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"must be >= 1, got {v}")
+    return v
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="python -m evaluation.leaderboard",
+        description=(
+            "Train diagnosers on healthy FCC-v0 episodes (training seeds 1000.., never tested), "
+            "score them on every scenario over test seeds 0..N-1, and print a Markdown "
+            "leaderboard (r_fd on healthy episodes; r_td and t_dt per fault; mean ± std over "
+            "seeds; missed faults). Writes leaderboard.md/.csv, raw per-seed results and "
+            "figures to --out. Re-running the same command resumes from the result store."
+        ),
+    )
+    p.add_argument(
+        "--quick",
+        action="store_true",
+        help=f"fast check: the baselines ({', '.join(BASELINES)}), {QUICK_SEEDS} test seeds per "
+        f"scenario, {QUICK_TRAIN_EPISODES} training episodes (explicit flags still win)",
+    )
+    p.add_argument(
+        "--diagnosers",
+        type=_csv_list,
+        default=None,
+        metavar="A,B",
+        help="comma-separated registry names (default: every registered diagnoser; "
+        "--quick: the baselines)",
+    )
+    p.add_argument(
+        "--scenarios",
+        type=_csv_list,
+        default=None,
+        metavar="S,...",
+        help="comma-separated scenarios, from nominal,f1,f2,f3,f4 (default: all); with "
+        "--external, test-file names",
+    )
+    p.add_argument(
+        "--seeds",
+        type=_positive_int,
+        default=None,
+        metavar="N",
+        help=f"test seeds per scenario, 0..N-1 (default {DEFAULT_SEEDS}; --quick {QUICK_SEEDS})",
+    )
+    p.add_argument(
+        "--train-episodes",
+        type=_positive_int,
+        default=None,
+        metavar="N",
+        help=f"healthy training episodes, seeds {TRAIN_SEED_BASE}.. (default "
+        f"{DEFAULT_TRAIN_EPISODES}; --quick {QUICK_TRAIN_EPISODES})",
+    )
+    p.add_argument(
+        "--out",
+        type=Path,
+        default=DEFAULT_OUT,
+        metavar="DIR",
+        help=f"output directory (default {DEFAULT_OUT})",
+    )
+    p.add_argument(
+        "--backend",
+        choices=BACKENDS,
+        default="local",
+        help="local: process pool on this machine (default); ray: Ray tasks (needs the ray extra)",
+    )
+    p.add_argument(
+        "--ray-address",
+        default=None,
+        metavar="ADDR",
+        help="address of a running Ray cluster for --backend ray (default: start a local one)",
+    )
+    p.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        metavar="N",
+        help="worker processes (default: all cores; 0 runs in this process)",
+    )
+    p.add_argument(
+        "--n-samples",
+        type=_positive_int,
+        default=4000,
+        metavar="T",
+        help="samples per simulated episode (default 4000, the paper's horizon)",
+    )
+    p.add_argument(
+        "--fault-time",
+        type=int,
+        default=None,
+        metavar="K",
+        help="onset sample of every fault (default: the paper's onsets 1900/1900/2020/2000)",
+    )
+    p.add_argument(
+        "--external",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="score the Santander FCCU data set in DIR (layout of shared/data/"
+        "fccu-santander-mlpse) instead of simulated episodes; --seeds is ignored",
+    )
+    p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    return p
+
+
+def resolve_options(
+    args: argparse.Namespace, parser: argparse.ArgumentParser
+) -> LeaderboardOptions:
+    """Fill defaults (``--quick`` or full) and check names against the allowed sets."""
+    from diagnosers import available
+
+    avail = available()
+    if args.diagnosers is not None:
+        diags = args.diagnosers
+    elif args.quick:
+        diags = tuple(d for d in BASELINES if d in avail)
+    else:
+        diags = tuple(avail)
+    unknown = [d for d in diags if d not in avail]
+    if unknown:
+        parser.error(f"unknown diagnoser(s) {unknown}. Available: {avail}")
+    if args.external is not None:
+        from evaluation.external import load_santander
+
+        try:
+            allowed = [tf.key for tf in load_santander(args.external).test_files]
+        except ValueError as e:
+            parser.error(f"--external {args.external}: {e}")
+    else:
+        import fcc_env
+
+        allowed = list(fcc_env.SCENARIOS)
+    scenarios = args.scenarios if args.scenarios is not None else tuple(allowed)
+    bad = [s for s in scenarios if s not in allowed]
+    if bad:
+        parser.error(f"unknown scenario(s) {bad}. Allowed: {allowed}")
+    if len(set(scenarios)) != len(scenarios):
+        parser.error(f"--scenarios repeats a name: {list(scenarios)}")
+    if args.workers is not None and args.workers < 0:
+        parser.error(f"--workers must be >= 0, got {args.workers}")
+    if args.ray_address is not None and args.backend != "ray":
+        parser.error("--ray-address needs --backend ray")
+    seeds = args.seeds or (QUICK_SEEDS if args.quick else DEFAULT_SEEDS)
+    train = args.train_episodes or (QUICK_TRAIN_EPISODES if args.quick else DEFAULT_TRAIN_EPISODES)
+    return LeaderboardOptions(
+        diagnosers=diags,
+        scenarios=scenarios,
+        seeds=seeds,
+        train_episodes=train,
+        out=args.out,
+        backend=args.backend,
+        workers=args.workers,
+        ray_address=args.ray_address,
+        n_samples=args.n_samples,
+        fault_time=args.fault_time,
+        external=args.external,
+        figures=not args.no_figures,
+        progress=not args.no_progress,
+    )
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    opts = resolve_options(args, parser)
+    t0 = time.perf_counter()
+    try:
+        results = run(opts)
+    except ValueError as e:  # bad configuration: say what and exit like argparse does
+        parser.error(str(e))
+    written = write_outputs(results, opts.out, figures=opts.figures)
+    reference = PAPER_TABLE2 if isinstance(results.config.data, SimulatedData) else None
+    print(markdown_table(results.summary(), reference=reference), end="")
+    print(
+        f"{results.n_computed} cells computed, {results.n_reused} reused, "
+        f"{results.n_trained} diagnosers trained in {time.perf_counter() - t0:.1f} s; "
+        f"wrote {len(written)} files to {opts.out}",
+        file=sys.stderr,
+    )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
