@@ -26,6 +26,12 @@ Alarm logic (``alarm_filter``):
   set on held-out healthy episodes so that each relation spends at most
   ``false_alarm_target / n_relations`` of its healthy samples beyond h (the empirical quantile,
   times ``threshold_margin``). ``signal`` is that statistic, ``lower``/``upper`` are ∓h.
+* ``"ewma-t2"`` — the EWMA vector of all relations combined into Hotelling's T² with the
+  covariance of the EWMAs on the calibration episodes; alarm when T² exceeds h (the empirical
+  1 − ``false_alarm_target`` quantile on calibration, times ``threshold_margin``). The healthy
+  model errors of different relations are correlated (they share inputs and hidden states) while
+  a fault moves the relations in its own direction (f2 and f4: s1 down and s2 up), which T² sees
+  and per-relation limits do not. ``signal`` is T², ``upper`` is h.
 
 Two registered configurations:
 
@@ -33,9 +39,15 @@ Two registered configurations:
   hidden neurons with 2nd-order filters, NNARX 5 tanh hidden neurons with 15 input and 15 output
   delays, α = 0.01, ``v = "paper"``, no persistence.
 * ``lrgf-mem`` — our best: a bank of five relations (the paper's (14)–(18) with the inputs the
-  model's physics needs, see :data:`BANK_RELATIONS`), ``v = "residual"``, EWMA persistence.
-  Hyperparameters were chosen on healthy validation episodes and on faults with seeds (5000+) and
-  magnitudes (0.7× the paper's) that the benchmark's test sweep never uses.
+  model's physics needs, see :data:`BANK_RELATIONS`), ``v = "residual"``, error models kept only
+  where they help, EWMA (λ = 0.02) persistence combined by T². Hyperparameters (λ, the
+  false-alarm target 0.002 and margin 1.3, the alarm combination, the learning rate) were chosen on
+  healthy validation episodes and on faults with seeds 5000–5009 and magnitudes 0.7× the paper's,
+  which the benchmark's test sweep (seeds 0–N, training seeds 1000+) never uses.
+
+``mem_select="if_better"`` (``lrgf-mem``) keeps a relation's error model only when it lowers the
+RMS of the remaining error on the calibration episodes: an NNARX that does not generalise adds its
+own error to the band centre (seen on this plant for several relations).
 
 Training data split: the healthy episodes passed to ``fit`` are divided into a training part (the
 first ``n − max(1, n // 3)`` episodes) for the nominal and error models, and a calibration part
@@ -59,6 +71,7 @@ from diagnosers.registry import register
 from diagnosers.training import build_module, export_module, fit_lrgf, fit_mem
 
 PAPER_RELATIONS: list[list[Any]] = [["T_rx", ["T_rg2", "T_fp"]]]
+ALARM_FILTERS = ("none", "ewma", "ewma-t2")
 
 #: The bank of ``lrgf-mem``. Relative to the paper's (14)–(18): s2 gets T_fp (feed preheat heats
 #: the regenerator through the riser and stripper; without it the relation is poor, spec §7.7) and
@@ -97,8 +110,10 @@ class _LRGFMEMBase(Diagnoser):
         false_alarm_target: float = 0.005,
         threshold_margin: float = 1.2,
         method: str = "adam",
+        lr: float = 0.01,
         max_epochs: int = 1500,
         mem_max_epochs: int = 200,
+        mem_select: str = "always",
         seed: int = 0,
         progress: bool = False,
     ) -> None:
@@ -116,8 +131,10 @@ class _LRGFMEMBase(Diagnoser):
         self.false_alarm_target = false_alarm_target
         self.threshold_margin = threshold_margin
         self.method = method
+        self.lr = lr
         self.max_epochs = max_epochs
         self.mem_max_epochs = mem_max_epochs
+        self.mem_select = mem_select
         self.seed = seed
         self.progress = progress
 
@@ -166,8 +183,8 @@ class _LRGFMEMBase(Diagnoser):
             raise ValueError(
                 f"band_definition={self.band_definition!r}; allowed: 'paper', 'residual'"
             )
-        if self.alarm_filter not in ("none", "ewma"):
-            raise ValueError(f"alarm_filter={self.alarm_filter!r}; allowed: 'none', 'ewma'")
+        if self.alarm_filter not in ALARM_FILTERS:
+            raise ValueError(f"alarm_filter={self.alarm_filter!r}; allowed: {list(ALARM_FILTERS)}")
         if not 0 < self.ewma_lambda <= 1:
             raise ValueError(f"ewma_lambda={self.ewma_lambda!r} outside the allowed range (0, 1]")
         if not 0 < self.false_alarm_target < 0.5:
@@ -178,6 +195,10 @@ class _LRGFMEMBase(Diagnoser):
             raise ValueError(
                 f"threshold_margin={self.threshold_margin!r} outside the allowed range [0.5, 10]"
             )
+        if self.mem_select not in ("always", "if_better"):
+            raise ValueError(f"mem_select={self.mem_select!r}; allowed: 'always', 'if_better'")
+        if not (isinstance(self.lr, float | int) and 0 < self.lr <= 1):
+            raise ValueError(f"lr={self.lr!r} outside the allowed range (0, 1]")
         if self.method not in ("adam", "spsa"):
             raise ValueError(f"method={self.method!r}; allowed: 'adam', 'spsa'")
         if self.mem_output_activation not in ("linear", "tanh"):
@@ -258,21 +279,41 @@ class _LRGFMEMBase(Diagnoser):
         self.v_paper_ = np.array(v_paper)
         self.train_fit_loss_ = np.array([f.best_val_loss for f in fits])
         # held-out healthy calibration
+        self.use_mem_ = np.ones(len(relations), dtype=bool)
         rem = [self._remaining(y)[cal_from:] for y in cal]  # (T, k) each
+        if self.mem_select == "if_better":
+            # An error model that does not reduce the held-out error only adds its own: drop it.
+            self.use_mem_[:] = False
+            rem_off = np.concatenate([self._remaining(y)[cal_from:] for y in cal])
+            rms_on = np.sqrt(np.mean(np.concatenate(rem) ** 2, axis=0))
+            rms_off = np.sqrt(np.mean(rem_off**2, axis=0))
+            self.use_mem_ = rms_on < rms_off
+            rem = [self._remaining(y)[cal_from:] for y in cal]
         rem_all = np.concatenate(rem)
         self.v_residual_ = np.sqrt(np.mean(rem_all**2, axis=0))
         self.v_ = self.v_paper_ if self.band_definition == "paper" else self.v_residual_
         self.v_ = np.maximum(self.v_, 1e-9)
         self.t_alpha_ = t_alpha(self.alpha)
         stats = np.concatenate([self._ewma(r / self.v_residual_) for r in rem])
-        q = 1.0 - self.false_alarm_target / len(relations)
-        self.h_ = self.threshold_margin * np.quantile(np.abs(stats), q, axis=0)
+        if self.alarm_filter == "ewma-t2":
+            cov = np.atleast_2d(np.cov(stats.T))
+            self.s_inv_ = np.linalg.pinv(cov)
+            t2 = np.einsum("ti,ij,tj->t", stats, self.s_inv_, stats)
+            self.h_ = np.array(
+                [self.threshold_margin * np.quantile(t2, 1.0 - self.false_alarm_target)]
+            )
+        else:
+            self.s_inv_ = np.eye(len(relations))
+            q = 1.0 - self.false_alarm_target / len(relations)
+            self.h_ = self.threshold_margin * np.quantile(np.abs(stats), q, axis=0)
         self.signal_names_ = self._signal_names()
 
     def _signal_names(self) -> tuple[str, ...]:
         rel = self._relations()
         if self.alarm_filter == "ewma":
             return tuple(f"ewma[{o}]" for o, _ in rel)
+        if self.alarm_filter == "ewma-t2":
+            return ("T2[ewma]",)
         return tuple(o for o, _ in rel)
 
     def _centre(self, y: np.ndarray) -> np.ndarray:
@@ -280,7 +321,8 @@ class _LRGFMEMBase(Diagnoser):
         cols = []
         for j in range(len(self.lrgf_)):
             u = y[:, self.in_idx_[j]]
-            cols.append(self.lrgf_[j].predict(u)[:, 0] + self.mem_[j].predict(u)[:, 0])
+            y_m = self.lrgf_[j].predict(u)[:, 0]
+            cols.append(y_m + self.mem_[j].predict(u)[:, 0] if self.use_mem_[j] else y_m)
         return np.column_stack(cols)
 
     def _remaining(self, y: np.ndarray) -> np.ndarray:
@@ -305,6 +347,9 @@ class _LRGFMEMBase(Diagnoser):
         resid = y_out - centre
         if self.alarm_filter == "ewma":
             signal, lower, upper = z, -self.h_, self.h_
+        elif self.alarm_filter == "ewma-t2":
+            signal = np.array([z @ self.s_inv_ @ z])
+            lower, upper = np.array([-np.inf]), self.h_
         else:
             half = self.t_alpha_ * self.v_
             signal, lower, upper = y_out, centre - half, centre + half
@@ -315,7 +360,9 @@ class _LRGFMEMBase(Diagnoser):
         centre = np.empty(len(self.lrgf_))
         for j in range(len(self.lrgf_)):
             u = y[self.in_idx_[j]]
-            centre[j] = self._lrgf_steppers[j].step(u)[0] + self._mem_steppers[j].step(u)[0]
+            centre[j] = self._lrgf_steppers[j].step(u)[0]
+            if self.use_mem_[j]:
+                centre[j] += self._mem_steppers[j].step(u)[0]
         y_out = y[self.out_idx_]
         lam = self.ewma_lambda
         self._acc = lam * ((y_out - centre) / self.v_residual_) + (1.0 - lam) * self._acc
@@ -339,6 +386,8 @@ class _LRGFMEMBase(Diagnoser):
             "v_paper": self.v_paper_,
             "v_residual": self.v_residual_,
             "h": self.h_,
+            "use_mem": self.use_mem_.astype(np.int8),
+            "s_inv": self.s_inv_,
             "train_fit_loss": self.train_fit_loss_,
         }
 
@@ -350,6 +399,8 @@ class _LRGFMEMBase(Diagnoser):
             self.v_paper_ = state["v_paper"]
             self.v_residual_ = state["v_residual"]
             self.h_ = state["h"]
+            self.use_mem_ = state["use_mem"].astype(bool)
+            self.s_inv_ = state["s_inv"]
             self.train_fit_loss_ = state["train_fit_loss"]
         except KeyError as e:
             raise ValueError(f"saved state lacks array {e.args[0]!r}") from None
@@ -410,13 +461,15 @@ class LRGFMEM(_LRGFMEMBase):
         mem_output_activation: str = "linear",
         alpha: float = 0.01,
         band_definition: str = "residual",
-        alarm_filter: str = "ewma",
-        ewma_lambda: float = 0.05,
-        false_alarm_target: float = 0.005,
-        threshold_margin: float = 1.2,
+        alarm_filter: str = "ewma-t2",
+        ewma_lambda: float = 0.02,
+        false_alarm_target: float = 0.002,
+        threshold_margin: float = 1.3,
         method: str = "adam",
-        max_epochs: int = 1500,
+        lr: float = 0.03,
+        max_epochs: int = 2000,
         mem_max_epochs: int = 200,
+        mem_select: str = "if_better",
         seed: int = 0,
         progress: bool = False,
     ) -> None:
@@ -435,8 +488,10 @@ class LRGFMEM(_LRGFMEMBase):
             false_alarm_target=false_alarm_target,
             threshold_margin=threshold_margin,
             method=method,
+            lr=lr,
             max_epochs=max_epochs,
             mem_max_epochs=mem_max_epochs,
+            mem_select=mem_select,
             seed=seed,
             progress=progress,
         )
