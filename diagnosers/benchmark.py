@@ -1,0 +1,112 @@
+"""Speed and model quality of the neural detector: ``python -m diagnosers.benchmark``.
+
+Prints, measured on this machine:
+
+* the LRGF forward pass over a 4000-sample sequence (paper configuration);
+* training time of the paper configuration (T_rx from T_rg2, T_fp; 3 neurons, 2nd-order filters)
+  on 4000 samples, with Adam (backpropagation through time) and with the paper's SPSA, and the
+  held-out fit each reaches;
+* the nominal model's quality on held-out healthy episodes (free-run fit %, RMSE in °C) against
+  the ``arx-band`` baseline's linear ARX model;
+* streaming ``update`` throughput and whole-episode ``detect`` throughput of ``lrgf-mem-paper``.
+
+Figures, not assertions: tests check correctness, this script reports speed.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+import torch
+
+import diagnosers
+import fcc_env
+from diagnosers import Episode
+from diagnosers.baselines import fit_percent
+from diagnosers.training import fit_lrgf, paper_lrgf
+
+CH = list(fcc_env.MEASUREMENT_NAMES)
+U_IDX = [CH.index("T_rg2"), CH.index("T_fp")]
+Y_IDX = [CH.index("T_rx")]
+
+
+def _episodes(seeds: list[int], n: int = 4000) -> list[Episode]:
+    b = fcc_env.simulate_episodes(seeds, n)
+    return [
+        Episode(b.observations[i].astype(float), fcc_env.MEASUREMENT_NAMES, 10.0)
+        for i in range(len(seeds))
+    ]
+
+
+def _quality(predict, episodes: list[Episode]) -> tuple[float, float]:
+    fits, sq = [], []
+    for ep in episodes:
+        y = ep.y[:, Y_IDX[0]]
+        y_hat = predict(ep)
+        fits.append(fit_percent(y, y_hat))
+        sq.append(np.mean((y - y_hat) ** 2))
+    return float(np.mean(fits)), float(np.sqrt(np.mean(sq)))
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m diagnosers.benchmark", description=__doc__)
+    parser.add_argument("--epochs", type=int, default=1500, help="Adam epochs (1500)")
+    parser.add_argument("--spsa-iterations", type=int, default=3000, help="SPSA iterations (3000)")
+    args = parser.parse_args(argv)
+
+    train = _episodes([1000])
+    held_out = _episodes([6000, 6001, 6002])
+    u = train[0].y[:, U_IDX]
+    y = train[0].y[:, Y_IDX]
+
+    net = paper_lrgf(seed=0)
+    x = torch.as_tensor(u[None], dtype=torch.float32)
+    with torch.no_grad():
+        net(x)
+        t0 = time.perf_counter()
+        for _ in range(20):
+            net(x)
+    print(f"LRGF forward, 4000 samples (paper config): {(time.perf_counter() - t0) / 20 * 1e3:.2f} ms")
+
+    results = {}
+    for method, kw in (
+        ("adam", {"max_epochs": args.epochs, "patience": args.epochs}),
+        ("spsa", {"max_epochs": args.spsa_iterations, "patience": args.spsa_iterations}),
+    ):
+        net = paper_lrgf(seed=0, initial_state="steady").double()
+        t0 = time.perf_counter()
+        fit_lrgf(net, u, y, method=method, **kw)
+        elapsed = time.perf_counter() - t0
+        fit, rmse = _quality(lambda ep, net=net: net.predict(ep.y[:, U_IDX])[:, 0], held_out)
+        results[method] = (elapsed, fit, rmse)
+        print(
+            f"train paper config on 4000 samples, {method}: {elapsed:.1f} s; held-out free-run "
+            f"fit {fit:.1f} %, RMSE {rmse:.3f} °C"
+        )
+
+    arx = diagnosers.make("arx-band").fit(train)
+    fit, rmse = _quality(
+        lambda ep: arx.simulate(ep.y[:, U_IDX], ep.y[: arx.n_warmup_, Y_IDX[0]]), held_out
+    )
+    print(f"arx-band linear ARX (same data): held-out free-run fit {fit:.1f} %, RMSE {rmse:.3f} °C")
+
+    d = diagnosers.make("lrgf-mem-paper").fit(_episodes([1000, 1001, 1002]))
+    ep = held_out[0]
+    d.reset()
+    t0 = time.perf_counter()
+    for row in ep.y:
+        d.update(row)
+    rate = ep.n_samples / (time.perf_counter() - t0)
+    print(f"lrgf-mem-paper streaming update: {rate:,.0f} samples/s (goal >= 10,000)")
+    t0 = time.perf_counter()
+    for _ in range(3):
+        d.detect(ep)
+    rate = 3 * ep.n_samples / (time.perf_counter() - t0)
+    print(f"lrgf-mem-paper detect on a whole episode: {rate:,.0f} samples/s")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
