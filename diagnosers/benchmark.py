@@ -68,7 +68,9 @@ def main(argv: list[str] | None = None) -> int:
         t0 = time.perf_counter()
         for _ in range(20):
             net(x)
-    print(f"LRGF forward, 4000 samples (paper config): {(time.perf_counter() - t0) / 20 * 1e3:.2f} ms")
+    print(
+        f"LRGF forward, 4000 samples (paper config): {(time.perf_counter() - t0) / 20 * 1e3:.2f} ms"
+    )
 
     results = {}
     for method, kw in (

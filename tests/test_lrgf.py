@@ -331,5 +331,3 @@ def test_persistence_round_trip(tmp_path, dtype: torch.dtype) -> None:
     np.testing.assert_array_equal(net2.predict(u), net.predict(u))
     with pytest.raises(ValueError, match="unknown module kind"):
         build_module({"kind": "gru"}, loaded)
-
-
