@@ -1,0 +1,173 @@
+"""The modelling loop on the LRGF nominal model: which measured input does the network miss?
+
+:class:`LRGFModel` is a :class:`evaluation.discover.ModelAdapter`. ``prepare`` trains one LRGF
+network (simulation error, :func:`diagnosers.training.fit_lrgf`) per output channel on the
+training part of the record, from its declared inputs. Candidates are
+:class:`evaluation.discover.MissingInput`: another measured channel, delayed by ``d`` samples,
+missing from an output's model. A candidate enters as an additive path on the network's output,
+
+    y(k) = LRGF(declared inputs)(k) + Σ gain · (x(k − d) − mean_train(x)),
+
+the first-order (linear) expansion of the missing input's influence around the training
+operating point, fitted in closed form (least squares of the network's training residual on the
+centred, delayed channels) and scored by the loop on held-out data like every other candidate.
+Retraining the network with the accepted input is the natural next step for a user; the loop
+itself keeps the trained network fixed so that every candidate is compared on the same footing.
+
+Usage::
+
+    from evaluation.discover import discover
+    from evaluation.discover_lrgf import LRGFModel
+    report = discover(data, model=LRGFModel({"T_rx": ["T_fp"]}))
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+
+from diagnosers.lrgf import LRGF
+from diagnosers.training import fit_lrgf
+from evaluation.discover import (
+    Candidate,
+    FitResult,
+    MeasuredData,
+    MissingInput,
+    _ar1_inflation,
+)
+
+
+class LRGFModel:
+    """Per-output LRGF networks as the declared model; candidates are missing measured inputs."""
+
+    name = "lrgf"
+
+    def __init__(
+        self,
+        inputs: Mapping[str, Sequence[str]],
+        *,
+        n_hidden: int = 3,
+        order: int = 2,
+        max_epochs: int = 1000,
+        lr: float = 0.03,
+        seed: int = 0,
+        candidate_channels: Sequence[str] | None = None,
+        candidate_delays: Sequence[int] = (0, 1, 2, 3),
+    ):
+        if not inputs:
+            raise ValueError("LRGFModel needs at least one output channel with its inputs")
+        if not 1 <= max_epochs <= 100_000:
+            raise ValueError(f"max_epochs={max_epochs} outside the allowed range [1, 100000]")
+        self.inputs = {str(k): tuple(v) for k, v in inputs.items()}
+        self.output_channels = tuple(self.inputs)
+        self.n_hidden, self.order = int(n_hidden), int(order)
+        self.max_epochs, self.lr, self.seed = int(max_epochs), float(lr), int(seed)
+        self.candidate_channels = None if candidate_channels is None else tuple(candidate_channels)
+        self.candidate_delays = tuple(int(d) for d in candidate_delays)
+        self._cands: dict[str, MissingInput] = {}
+        self.networks_: dict[str, LRGF] = {}
+        self._y_m: dict[str, np.ndarray] = {}
+        self._n_train = 0
+
+    def prepare(self, data: MeasuredData, n_train: int) -> None:
+        need = set(self.output_channels) | {u for v in self.inputs.values() for u in v}
+        data.require(sorted(need), self.name)
+        self._n_train = int(n_train)
+        pool = self.candidate_channels or tuple(data.channels)
+        data.require(list(pool), self.name)
+        self._cands = {}
+        for j, (tgt, declared) in enumerate(self.inputs.items()):
+            u = data.stack(declared)  # (E, T, n)
+            y = np.asarray(data.channels[tgt], np.float64)[..., None]
+            net = LRGF(len(declared), self.n_hidden, self.order, 1, initial_state="steady")
+            net = net.double()
+            fit_lrgf(
+                net,
+                list(u[:, :n_train]),
+                list(y[:, :n_train]),
+                max_epochs=self.max_epochs,
+                lr=self.lr,
+                patience=self.max_epochs,
+                seed=self.seed + j,
+            )
+            net.eval()
+            self.networks_[tgt] = net
+            self._y_m[tgt] = net.predict(u)[..., 0]  # (E, T)
+            for src in pool:
+                if (
+                    src == tgt
+                    or src in declared
+                    or (src.startswith("cmd_") and src[4:] in declared)
+                ):
+                    continue
+                if np.ptp(data.channels[src]) == 0:
+                    continue
+                for d in self.candidate_delays:
+                    c = MissingInput(src, tgt, d)
+                    self._cands[c.id] = c
+
+    def candidates(self) -> dict[str, Candidate]:
+        return dict(self._cands)
+
+    def skipped_candidates(self) -> dict[str, str]:
+        return {}
+
+    def other_signals(self, data: MeasuredData) -> list[str]:
+        return sorted({u for v in self.inputs.values() for u in v})
+
+    def _extra(self, data: MeasuredData, m: MissingInput, n: int) -> np.ndarray:
+        """Centred, delayed source channel (E, n); the first value repeats for k < delay."""
+        x = np.asarray(data.channels[m.source], np.float64)
+        if m.delay:
+            x = np.concatenate([np.repeat(x[:, :1], m.delay, axis=1), x[:, : -m.delay]], axis=1)
+        return x[:, :n] - x[:, : self._n_train].mean()
+
+    def predict(
+        self, data: MeasuredData, effects: Sequence[Candidate], thetas: np.ndarray, n_samples: int
+    ) -> np.ndarray:
+        thetas = np.atleast_2d(np.asarray(thetas, np.float64))
+        n = int(n_samples)
+        out = np.empty((thetas.shape[0], data.n_episodes, n, len(self.output_channels)))
+        for j, tgt in enumerate(self.output_channels):
+            base = self._y_m[tgt][:, :n]
+            idx = [i for i, e in enumerate(effects) if getattr(e, "target", None) == tgt]
+            extra = [self._extra(data, effects[i], n) for i in idx]  # type: ignore[arg-type]
+            for b in range(thetas.shape[0]):
+                out[b, :, :, j] = base + sum(
+                    (thetas[b, i] * x for i, x in zip(idx, extra, strict=True)),
+                    start=np.zeros_like(base),
+                )
+        return out
+
+    def fit(
+        self,
+        data: MeasuredData,
+        effects: Sequence[Candidate],
+        theta0: np.ndarray,
+        free: np.ndarray,
+        n_train: int,
+        sqrt_w: np.ndarray,
+    ) -> FitResult:
+        """Closed-form least squares of each output's network residual on its extra inputs."""
+        theta = np.asarray(theta0, float).copy()
+        cov = np.zeros((theta.size, theta.size))
+        skip = max(self.candidate_delays, default=0)
+        for tgt in self.output_channels:
+            idx = [i for i, e in enumerate(effects) if getattr(e, "target", None) == tgt]
+            if not idx or not any(free[i] for i in idx):
+                continue
+            n = data.n_samples
+            r = np.asarray(data.channels[tgt], np.float64) - self._y_m[tgt]
+            Z = np.stack([self._extra(data, effects[i], n) for i in idx], axis=-1)  # type: ignore[arg-type]
+            Zf = Z[:, skip:n_train].reshape(-1, len(idx))
+            rf = r[:, skip:n_train].ravel()
+            coef, *_ = np.linalg.lstsq(Zf, rf, rcond=None)
+            res = rf - Zf @ coef
+            s2 = float(res @ res) / max(1, rf.size - len(idx))
+            C = s2 * np.linalg.pinv(Zf.T @ Zf) * _ar1_inflation(res[None, :, None])
+            for jj, i in enumerate(idx):
+                theta[i] = coef[jj]
+                for kk, i2 in enumerate(idx):
+                    cov[i, i2] = C[jj, kk]
+        return FitResult(theta, cov, n_evals=1, cost=float("nan"), converged=True)
