@@ -64,7 +64,7 @@ __all__ = [
     "write_outputs",
 ]
 
-#: Patan & Parisini's Table 2 (LRGF + model-error model): r_fd on healthy data, then per fault
+#: The seed paper's Table 2 (Patan et al., IFAC 2005; LRGF + model-error model): r_fd on healthy data, then per fault
 #: (r_td, t_dt [samples]). No dispersion is published, so the reference row has none.
 PAPER_TABLE2: dict[str, Any] = {
     "label": "paper Table 2 (LRGF+MEM)",
