@@ -209,3 +209,20 @@ def test_fault_signatures_match_spec(fault):
     )
     dilute = d[-200:, 6:].mean(axis=0)
     assert np.all(np.sign(dilute) == np.sign(SIGNATURES[fault][3:])), dilute
+
+
+@pytest.mark.parametrize(("valve_beta", "invisible"), [(0.0, True), (0.15, False), (0.3, False)])
+def test_valve_hydraulics_modes(valve_beta, invisible):
+    """Flow mode (β_sv = 0) hides f2 (spec §7.6: every final change < 0.6 °C); with slide-valve
+    hydraulics f2 moves the regenerator by about β_sv/0.3 × 2.7 °C."""
+    kw = dict(n_samples=3000, fault_time=500, noise_scale=0.0, valve_beta=valve_beta)
+    d = (
+        fcc_env.simulate_episodes([0], scenario="f2", **kw).y_clean[0]
+        - fcc_env.simulate_episodes([0], scenario="nominal", **kw).y_clean[0]
+    )
+    final = d[-200:, 3:].mean(axis=0)
+    if invisible:
+        assert np.abs(final).max() < 0.6
+    else:
+        assert np.abs(final).max() > 1.0
+        assert d[-200:, 5].mean() == pytest.approx(2.7 * valve_beta / 0.3, rel=0.5)
