@@ -66,7 +66,7 @@ import numpy as np
 import torch
 
 from diagnosers.base import Decision, Detection, Diagnoser, Episode
-from diagnosers.lrgf import LRGF, LRGFStepper
+from diagnosers.lrgf import LRGF, InitialState, LRGFStepper
 from diagnosers.mem import MEMStepper, NNARXErrorModel, t_alpha
 from diagnosers.registry import register
 from diagnosers.training import build_module, export_module, fit_lrgf, fit_mem
@@ -86,6 +86,58 @@ BANK_RELATIONS: list[list[Any]] = [
     ["T_d1", ["T_rg1", "R_ar"]],
     ["T_dg", ["T_d1", "T_rg2"]],
 ]
+
+
+class _BankStepper:
+    """All relations' LRGF networks stepped together in one set of numpy arrays.
+
+    Mathematically :class:`diagnosers.lrgf.LRGFStepper` per relation (same transposed direct form
+    II filters, same steady-state start), with the neurons of every relation stacked so that one
+    sample costs one pass of small matrix products instead of one pass per relation.
+    """
+
+    def __init__(self, nets: list[LRGF], in_idx: list[np.ndarray], n_channels: int) -> None:
+        steppers = [LRGFStepper(net) for net in nets]
+        v = [st.w.shape[0] for st in steppers]
+        self.w = np.zeros((sum(v), n_channels))
+        self.b = np.zeros(sum(v))
+        self.c = np.zeros((len(nets), sum(v)))
+        self.d = np.zeros(len(nets))
+        rows = np.cumsum([0, *v])
+        for j, st in enumerate(steppers):
+            sl = slice(rows[j], rows[j + 1])
+            self.w[sl][:, in_idx[j]] = st.w / st.in_scale
+            self.b[sl] = -st.w @ (st.in_mean / st.in_scale)
+            self.c[j, sl] = st.c[0] * st.out_scale[0]
+            self.d[j] = st.c0[0] * st.out_scale[0] + st.out_mean[0]
+        self.num = np.concatenate([st.num for st in steppers])
+        self.den = np.concatenate([st.den for st in steppers])
+        self.g1 = np.concatenate([st.g1 for st in steppers])
+        self.g2 = np.concatenate([st.g2 for st in steppers])
+        self.steady = [st.initial_state == InitialState.STEADY for st in steppers]
+        if len(set(self.steady)) != 1:
+            raise ValueError("all relations must share one initial-state convention")
+        self._zi: np.ndarray | None = None
+
+    def reset(self) -> None:
+        self._zi = None
+
+    def step(self, y: np.ndarray) -> np.ndarray:
+        """Nominal-model outputs y_m of every relation for one measurement vector."""
+        s = self.w @ y + self.b
+        if self._zi is None:
+            if self.steady[0]:
+                y_ss = self.num.sum(1) / (1.0 + self.den.sum(1)) * s
+                terms = self.num[:, 1:] * s[:, None] - self.den * y_ss[:, None]
+                self._zi = np.cumsum(terms[:, ::-1], axis=1)[:, ::-1].copy()
+            else:
+                self._zi = np.zeros_like(self.den)
+        zi = self._zi
+        z = self.num[:, 0] * s + zi[:, 0]
+        new = self.num[:, 1:] * s[:, None] - self.den * z[:, None]
+        new[:, :-1] += zi[:, 1:]
+        self._zi = new
+        return self.c @ np.tanh(0.5 * self.g2 * (z - self.g1)) + self.d
 
 
 class _LRGFMEMBase(Diagnoser):
@@ -220,6 +272,7 @@ class _LRGFMEMBase(Diagnoser):
         return [e.y for e in episodes[: n - n_cal]], [e.y for e in episodes[n - n_cal :]], 0
 
     def _fit(self, episodes: list[Episode]) -> None:
+        self._bank = None  # steppers are rebuilt from the new networks at the next reset
         relations = self._relations()
         idx = {c: i for i, c in enumerate(self.channels_)}
         for out, ins in relations:
@@ -340,8 +393,12 @@ class _LRGFMEMBase(Diagnoser):
 
     # ---- detection -----------------------------------------------------------------------------
     def _reset(self) -> None:
-        self._lrgf_steppers = [LRGFStepper(m) for m in self.lrgf_]
-        self._mem_steppers = [MEMStepper(m) for m in self.mem_]
+        if getattr(self, "_bank", None) is None:
+            self._bank = _BankStepper(self.lrgf_, self.in_idx_, len(self.channels_))
+            self._mem_steppers = [MEMStepper(m) for m in self.mem_]
+        self._bank.reset()
+        for st in self._mem_steppers:
+            st.reset()
         self._acc = np.zeros(len(self.lrgf_))
 
     def _decide(self, y_out: np.ndarray, centre: np.ndarray, z: np.ndarray) -> Decision:
@@ -358,12 +415,9 @@ class _LRGFMEMBase(Diagnoser):
         return Decision(alarm, signal, lower, upper, resid)
 
     def _update(self, y: np.ndarray) -> Decision:
-        centre = np.empty(len(self.lrgf_))
-        for j in range(len(self.lrgf_)):
-            u = y[self.in_idx_[j]]
-            centre[j] = self._lrgf_steppers[j].step(u)[0]
-            if self.use_mem_[j]:
-                centre[j] += self._mem_steppers[j].step(u)[0]
+        centre = self._bank.step(y)
+        for j in np.flatnonzero(self.use_mem_):
+            centre[j] += self._mem_steppers[j].step(y[self.in_idx_[j]])[0]
         y_out = y[self.out_idx_]
         lam = self.ewma_lambda
         self._acc = lam * ((y_out - centre) / self.v_residual_) + (1.0 - lam) * self._acc
@@ -437,6 +491,7 @@ class _LRGFMEMBase(Diagnoser):
                 module = build_module(cfg[part], sd)
                 module.eval()
                 store.append(module)
+        self._bank = None
 
 
 @register("lrgf-mem-paper")
