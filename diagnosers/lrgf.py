@@ -548,6 +548,28 @@ class LRGF(nn.Module):
 
 
 # ---- numpy streaming -----------------------------------------------------------------------------
+def filter_step(
+    num: np.ndarray, den: np.ndarray, zi: np.ndarray | None, s: np.ndarray, steady: bool
+) -> tuple[np.ndarray, np.ndarray]:
+    """One sample of every neuron filter in transposed direct form II (as ``lfilter``).
+
+    ``num`` (v, r+1), ``den`` (v, r) without the leading 1, ``s`` (v,) the filter inputs. ``zi``
+    None starts a sequence: at the steady state of ``s`` when ``steady``, else at rest.
+    Returns (filter outputs (v,), new state (v, r)).
+    """
+    if zi is None:
+        if steady:
+            y_ss = num.sum(1) / (1.0 + den.sum(1)) * s
+            terms = num[:, 1:] * s[:, None] - den * y_ss[:, None]
+            zi = np.cumsum(terms[:, ::-1], axis=1)[:, ::-1].copy()
+        else:
+            zi = np.zeros_like(den)
+    z = num[:, 0] * s + zi[:, 0]
+    new = num[:, 1:] * s[:, None] - den * z[:, None]
+    new[:, :-1] += zi[:, 1:]
+    return z, new
+
+
 class LRGFStepper:
     """Sample-by-sample evaluation of a trained :class:`LRGF` in numpy float64.
 
@@ -592,17 +614,8 @@ class LRGFStepper:
     def step(self, u: np.ndarray) -> np.ndarray:
         """Consume ``u(k)`` (physical, shape ``(n,)``) and return ``y(k)`` (physical, shape ``(m,)``)."""
         s = self.w @ ((np.asarray(u, dtype=np.float64) - self.in_mean) / self.in_scale)
-        if self._zi is None:
-            if self.initial_state is InitialState.STEADY:
-                y_ss = self.num.sum(1) / (1.0 + self.den.sum(1)) * s
-                terms = self.num[:, 1:] * s[:, None] - self.den * y_ss[:, None]
-                self._zi = np.cumsum(terms[:, ::-1], axis=1)[:, ::-1].copy()
-            else:
-                self._zi = np.zeros_like(self.den)
-        zi = self._zi
-        z = self.num[:, 0] * s + zi[:, 0]
-        new = self.num[:, 1:] * s[:, None] - self.den * z[:, None]
-        new[:, :-1] += zi[:, 1:]
-        self._zi = new
+        z, self._zi = filter_step(
+            self.num, self.den, self._zi, s, self.initial_state is InitialState.STEADY
+        )
         h = np.tanh(0.5 * self.g2 * (z - self.g1))
         return (self.c @ h + self.c0) * self.out_scale + self.out_mean

@@ -66,7 +66,7 @@ import numpy as np
 import torch
 
 from diagnosers.base import Decision, Detection, Diagnoser, Episode
-from diagnosers.lrgf import LRGF, InitialState, LRGFStepper
+from diagnosers.lrgf import LRGF, InitialState, LRGFStepper, filter_step
 from diagnosers.mem import MEMStepper, NNARXErrorModel, t_alpha
 from diagnosers.registry import register
 from diagnosers.training import build_module, export_module, fit_lrgf, fit_mem
@@ -124,19 +124,7 @@ class _BankStepper:
 
     def step(self, y: np.ndarray) -> np.ndarray:
         """Nominal-model outputs y_m of every relation for one measurement vector."""
-        s = self.w @ y + self.b
-        if self._zi is None:
-            if self.steady[0]:
-                y_ss = self.num.sum(1) / (1.0 + self.den.sum(1)) * s
-                terms = self.num[:, 1:] * s[:, None] - self.den * y_ss[:, None]
-                self._zi = np.cumsum(terms[:, ::-1], axis=1)[:, ::-1].copy()
-            else:
-                self._zi = np.zeros_like(self.den)
-        zi = self._zi
-        z = self.num[:, 0] * s + zi[:, 0]
-        new = self.num[:, 1:] * s[:, None] - self.den * z[:, None]
-        new[:, :-1] += zi[:, 1:]
-        self._zi = new
+        z, self._zi = filter_step(self.num, self.den, self._zi, self.w @ y + self.b, self.steady[0])
         return self.c @ np.tanh(0.5 * self.g2 * (z - self.g1)) + self.d
 
 

@@ -554,6 +554,26 @@ class MissingInput:
             object.__setattr__(self, "id", f"input:{self.source}->{self.target}@{self.delay}")
 
 
+def missing_input_candidates(
+    data: MeasuredData,
+    inputs: Mapping[str, Sequence[str]],
+    pool: Sequence[str],
+    delays: Sequence[int],
+) -> dict[str, MissingInput]:
+    """Every channel of ``pool`` at every delay, for every output, that the model does not have."""
+    cands: dict[str, MissingInput] = {}
+    for tgt, declared in inputs.items():
+        for src in pool:
+            if src == tgt or src in declared or (src.startswith("cmd_") and src[4:] in declared):
+                continue
+            if np.ptp(data.channels[src]) == 0:
+                continue  # a constant channel cannot be a missing input
+            for d in delays:
+                c = MissingInput(src, tgt, d)
+                cands[c.id] = c
+    return cands
+
+
 class ARXModel:
     """A linear ARX model per output channel, fitted on the training part, simulated in output error.
 
@@ -597,20 +617,7 @@ class ARXModel:
         self._n_train = int(n_train)
         pool = self.candidate_channels or tuple(data.channels)
         data.require(list(pool), self.name)
-        self._cands = {}
-        for tgt, declared in self.inputs.items():
-            for src in pool:
-                if (
-                    src == tgt
-                    or src in declared
-                    or (src.startswith("cmd_") and src[4:] in declared)
-                ):
-                    continue
-                if np.ptp(data.channels[src]) == 0:
-                    continue  # a constant channel cannot be a missing input
-                for d in self.candidate_delays:
-                    c = MissingInput(src, tgt, d)
-                    self._cands[c.id] = c
+        self._cands = missing_input_candidates(data, self.inputs, pool, self.candidate_delays)
 
     def candidates(self) -> dict[str, Candidate]:
         return dict(self._cands)

@@ -35,6 +35,7 @@ from evaluation.discover import (
     MeasuredData,
     MissingInput,
     _ar1_inflation,
+    missing_input_candidates,
 )
 
 
@@ -76,7 +77,6 @@ class LRGFModel:
         self._n_train = int(n_train)
         pool = self.candidate_channels or tuple(data.channels)
         data.require(list(pool), self.name)
-        self._cands = {}
         for j, (tgt, declared) in enumerate(self.inputs.items()):
             u = data.stack(declared)  # (E, T, n)
             y = np.asarray(data.channels[tgt], np.float64)[..., None]
@@ -94,18 +94,7 @@ class LRGFModel:
             net.eval()
             self.networks_[tgt] = net
             self._y_m[tgt] = net.predict(u)[..., 0]  # (E, T)
-            for src in pool:
-                if (
-                    src == tgt
-                    or src in declared
-                    or (src.startswith("cmd_") and src[4:] in declared)
-                ):
-                    continue
-                if np.ptp(data.channels[src]) == 0:
-                    continue
-                for d in self.candidate_delays:
-                    c = MissingInput(src, tgt, d)
-                    self._cands[c.id] = c
+        self._cands = missing_input_candidates(data, self.inputs, pool, self.candidate_delays)
 
     def candidates(self) -> dict[str, Candidate]:
         return dict(self._cands)
