@@ -208,7 +208,11 @@ def test_vector_env():
         ({"rk4_substeps": 0}, r"rk4_substeps=0 outside the allowed range"),
         ({"excitation": {"T_fp_halfrange": 3}}, r"Unknown excitation option"),
         ({"excitation": {"R_ar_halfrange_rel": 0.5}}, r"R_ar_halfrange_rel=0.5 outside"),
-        ({"render_mode": "ansi"}, r"render_mode='ansi' is not supported"),
+        pytest.param(
+            {"render_mode": "ansi"},
+            r"render_mode='ansi' is not supported",
+            marks=pytest.mark.filterwarnings("ignore:.*render_mode.*:UserWarning"),
+        ),
         ({"horizon": 1}, r"horizon must be an integer number of samples >= 2, got 1"),
         ({"scenario": "f1", "horizon": 1000}, r"fault_time=1900 is outside the episode"),
     ],
