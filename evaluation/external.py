@@ -36,6 +36,7 @@ from evaluation.store import check_name
 __all__ = [
     "SANTANDER_ARX_PARAMS",
     "SANTANDER_ONSET",
+    "SANTANDER_PARAMS",
     "ExternalData",
     "ExternalFile",
     "load_santander",
@@ -57,6 +58,14 @@ SANTANDER_ONSET = 120
 #: riser temperature from feed temperature, regenerator temperature and regenerated-catalyst flow,
 #: the analogue of the paper's relation (14) that the data's README suggests.
 SANTANDER_ARX_PARAMS: dict[str, Any] = {"output": "Tr", "inputs": ["T2", "Treg", "Frgc"]}
+
+#: Hyperparameters per diagnoser for the Santander data, wherever a default names FCC-v0
+#: channels: the same riser relation for the LRGF detectors.
+SANTANDER_PARAMS: dict[str, dict[str, Any]] = {
+    "arx-band": SANTANDER_ARX_PARAMS,
+    "lrgf-mem-paper": {"relations": [["Tr", ["T2", "Treg", "Frgc"]]]},
+    "lrgf-mem": {"relations": [["Tr", ["T2", "Treg", "Frgc"]]]},
+}
 
 _SANTANDER_TRAIN = "NOC_varyingFeedFlow_outputs.csv"
 _SANTANDER_HEALTHY_TEST = "NOC_stableFeedFlow_outputs.csv"

@@ -113,7 +113,7 @@ def _package_version() -> str:
 def build_config(opts: LeaderboardOptions) -> SweepConfig:
     """The sweep the options describe (validated by :func:`run_sweep`)."""
     if opts.external is not None:
-        from evaluation.external import SANTANDER_ARX_PARAMS, load_santander
+        from evaluation.external import SANTANDER_PARAMS, load_santander
 
         data = load_santander(opts.external)
         keep = set(opts.scenarios)
@@ -122,8 +122,8 @@ def build_config(opts: LeaderboardOptions) -> SweepConfig:
         )
         specs = []
         for name in opts.diagnosers:
-            # arx-band's default channels are FCC-v0's; use the Santander analogue.
-            params = SANTANDER_ARX_PARAMS if name == "arx-band" else {}
+            # defaults that name FCC-v0 channels get the Santander analogue
+            params = SANTANDER_PARAMS.get(name, {})
             specs.append(DiagnoserSpec(name, dict(params)))
         return SweepConfig(diagnosers=tuple(specs), data=data)
     data = SimulatedData(
