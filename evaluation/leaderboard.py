@@ -556,6 +556,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         results = run(opts)
     except ValueError as e:  # bad configuration: say what and exit like argparse does
         parser.error(str(e))
+    except RuntimeError as e:  # a diagnoser failed to train or score: finished cells are kept
+        parser.exit(1, f"{parser.prog}: {e}\nFinished cells are stored; re-run to resume.\n")
     written = write_outputs(results, opts.out, figures=opts.figures)
     reference = PAPER_TABLE2 if isinstance(results.config.data, SimulatedData) else None
     print(markdown_table(results.summary(), reference=reference), end="")

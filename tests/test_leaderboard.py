@@ -228,3 +228,17 @@ def test_cli_external_santander(tmp_path, capsys) -> None:
     with pytest.raises(SystemExit):
         main([*args[:4], "--scenarios", "f1"])
     assert "Allowed: ['NOC_stableFeedFlow'" in capsys.readouterr().err
+
+
+def test_training_failure_exits_cleanly(monkeypatch, capsys, tmp_path):
+    import evaluation.leaderboard as lb
+
+    def boom(opts):
+        raise RuntimeError("training failed: lrgf-mem: ValueError: bad relation")
+
+    monkeypatch.setattr(lb, "run", boom)
+    with pytest.raises(SystemExit) as e:
+        lb.main(["--quick", "--out", str(tmp_path)])
+    assert e.value.code == 1
+    err = capsys.readouterr().err
+    assert "training failed: lrgf-mem" in err and "re-run to resume" in err
