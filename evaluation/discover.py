@@ -574,7 +574,38 @@ def missing_input_candidates(
     return cands
 
 
-class ARXModel:
+class MissingInputAdapter:
+    """Shared part of the input-output adapters whose candidates are missing measured inputs.
+
+    Subclasses set ``name``, ``inputs`` ({output: declared inputs}), ``output_channels``,
+    ``candidate_channels`` and ``candidate_delays``, and call :meth:`_prepare_missing_inputs`.
+    """
+
+    name: str
+    inputs: dict[str, tuple[str, ...]]
+    output_channels: tuple[str, ...]
+    candidate_channels: tuple[str, ...] | None
+    candidate_delays: tuple[int, ...]
+
+    def _prepare_missing_inputs(self, data: MeasuredData, n_train: int) -> None:
+        need = set(self.output_channels) | {u for v in self.inputs.values() for u in v}
+        data.require(sorted(need), self.name)
+        self._n_train = int(n_train)
+        pool = self.candidate_channels or tuple(data.channels)
+        data.require(list(pool), self.name)
+        self._cands = missing_input_candidates(data, self.inputs, pool, self.candidate_delays)
+
+    def candidates(self) -> dict[str, Candidate]:
+        return dict(self._cands)
+
+    def skipped_candidates(self) -> dict[str, str]:
+        return {}
+
+    def other_signals(self, data: MeasuredData) -> list[str]:
+        return sorted({u for v in self.inputs.values() for u in v})
+
+
+class ARXModel(MissingInputAdapter):
     """A linear ARX model per output channel, fitted on the training part, simulated in output error.
 
     target(k) = Σ_{i=1..na} a_i target(k−i) + Σ_u Σ_{i=0..nb−1} b_{u,i} u(k−delay_u−i) + c
@@ -612,21 +643,7 @@ class ARXModel:
         self._cands: dict[str, MissingInput] = {}
 
     def prepare(self, data: MeasuredData, n_train: int) -> None:
-        need = set(self.output_channels) | {u for v in self.inputs.values() for u in v}
-        data.require(sorted(need), self.name)
-        self._n_train = int(n_train)
-        pool = self.candidate_channels or tuple(data.channels)
-        data.require(list(pool), self.name)
-        self._cands = missing_input_candidates(data, self.inputs, pool, self.candidate_delays)
-
-    def candidates(self) -> dict[str, Candidate]:
-        return dict(self._cands)
-
-    def skipped_candidates(self) -> dict[str, str]:
-        return {}
-
-    def other_signals(self, data: MeasuredData) -> list[str]:
-        return sorted({u for v in self.inputs.values() for u in v})
+        self._prepare_missing_inputs(data, n_train)
 
     # -- regression ------------------------------------------------------------------------------
     @staticmethod

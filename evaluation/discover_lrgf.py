@@ -34,12 +34,12 @@ from evaluation.discover import (
     FitResult,
     MeasuredData,
     MissingInput,
+    MissingInputAdapter,
     _ar1_inflation,
-    missing_input_candidates,
 )
 
 
-class LRGFModel:
+class LRGFModel(MissingInputAdapter):
     """Per-output LRGF networks as the declared model; candidates are missing measured inputs."""
 
     name = "lrgf"
@@ -72,11 +72,7 @@ class LRGFModel:
         self._n_train = 0
 
     def prepare(self, data: MeasuredData, n_train: int) -> None:
-        need = set(self.output_channels) | {u for v in self.inputs.values() for u in v}
-        data.require(sorted(need), self.name)
-        self._n_train = int(n_train)
-        pool = self.candidate_channels or tuple(data.channels)
-        data.require(list(pool), self.name)
+        self._prepare_missing_inputs(data, n_train)
         for j, (tgt, declared) in enumerate(self.inputs.items()):
             u = data.stack(declared)  # (E, T, n)
             y = np.asarray(data.channels[tgt], np.float64)[..., None]
@@ -94,16 +90,6 @@ class LRGFModel:
             net.eval()
             self.networks_[tgt] = net
             self._y_m[tgt] = net.predict(u)[..., 0]  # (E, T)
-        self._cands = missing_input_candidates(data, self.inputs, pool, self.candidate_delays)
-
-    def candidates(self) -> dict[str, Candidate]:
-        return dict(self._cands)
-
-    def skipped_candidates(self) -> dict[str, str]:
-        return {}
-
-    def other_signals(self, data: MeasuredData) -> list[str]:
-        return sorted({u for v in self.inputs.values() for u in v})
 
     def _extra(self, data: MeasuredData, m: MissingInput, n: int) -> np.ndarray:
         """Centred, delayed source channel (E, n); the first value repeats for k < delay."""
