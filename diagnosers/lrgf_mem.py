@@ -38,13 +38,15 @@ Two registered configurations:
 * ``lrgf-mem-paper`` — the paper's configuration (Sec. 5): relation T_rx = s1(T_rg2, T_fp), 3
   hidden neurons with 2nd-order filters, NNARX 5 tanh hidden neurons with 15 input and 15 output
   delays, α = 0.01, ``v = "paper"``, no persistence.
-* ``lrgf-mem`` — our best: a bank of five relations (the paper's (14)–(18) with the inputs the
+* ``lrgf-mem`` — our best: a bank of three relations (the paper's (14)–(16) with the inputs the
   model's physics needs, see :data:`BANK_RELATIONS`) of 5 neurons each (2nd-order filters, 3000
   Adam epochs at learning rate 0.03), ``v = "residual"``, error models kept only where they
-  help, EWMA (λ = 0.02) persistence combined by T². Hyperparameters (network size, epochs, λ, the
-  false-alarm target 0.002 and margin 1.3, the alarm combination, the learning rate) were chosen on
-  healthy validation episodes and on faults with seeds 5000–5009 and magnitudes 0.7× the paper's,
-  which the benchmark's test sweep (seeds 0–N, training seeds 1000+) never uses.
+  help, EWMA (λ = 0.05) persistence combined by T². Hyperparameters (network size, epochs, the
+  relations, λ, the false-alarm target 0.002 and margin 1.3, the alarm combination, the learning
+  rate) were chosen on healthy validation episodes (seeds 5000–5039) and on faults with seeds
+  5000–5009 and magnitudes 0.7× the paper's, which the benchmark's test sweep (seeds 0–N,
+  training seeds 1000+) never uses. The rule: the fastest f3 detection with a false detection
+  rate ≤ 0.01 on the 40 healthy validation seeds and r_td ≥ 0.9 on the other faults.
 
 ``mem_select="if_better"`` (``lrgf-mem``) keeps a relation's error model only when it lowers the
 RMS of the remaining error on the calibration episodes: an NNARX that does not generalise adds its
@@ -74,15 +76,20 @@ from diagnosers.training import build_module, export_module, fit_lrgf, fit_mem
 PAPER_RELATIONS: list[list[Any]] = [["T_rx", ["T_rg2", "T_fp"]]]
 ALARM_FILTERS = ("none", "ewma", "ewma-t2")
 
-#: The bank of ``lrgf-mem``. Relative to the paper's (14)–(18): s2 gets T_fp (feed preheat heats
-#: the regenerator through the riser and stripper; without it the relation is poor, spec §7.7) and
-#: drops its own output as an input (in simulation mode the network's recurrence plays that role);
-#: s3 is kept; s4 gets R_ar (the O2 slip drives the dilute-phase afterburn); s5 gets T_rg2 (the
-#: stage-2 gas and entrained catalyst enter the general dilute phase, spec §4).
+#: The bank of ``lrgf-mem``: the paper's (14)–(16) with the inputs the model's physics needs.
+#: s2 gets T_fp (feed preheat heats the regenerator through the riser and stripper; without it the
+#: relation is poor, spec §7.7) and drops its own output as an input (in simulation mode the
+#: network's recurrence plays that role); s1 and s3 are the paper's.
+#: :data:`DILUTE_RELATIONS` (s4 with R_ar for the O2 slip, s5 with T_rg2) are available but not in
+#: the default bank: their networks' held-out errors (0.66 and 0.57 °C) come from the afterburn
+#: nonlinearity, and on the validation episodes adding them raised the false detection rate
+#: (0.017 against 0.010 over 40 seeds) without detecting any fault sooner.
 BANK_RELATIONS: list[list[Any]] = [
     ["T_rx", ["T_rg2", "T_fp"]],
     ["T_rg1", ["T_ar", "R_ar", "T_fp"]],
     ["T_rg2", ["T_rg1", "T_ar", "R_ar"]],
+]
+DILUTE_RELATIONS: list[list[Any]] = [
     ["T_d1", ["T_rg1", "R_ar"]],
     ["T_dg", ["T_d1", "T_rg2"]],
 ]
@@ -506,7 +513,7 @@ class LRGFMEM(_LRGFMEMBase):
         alpha: float = 0.01,
         band_definition: str = "residual",
         alarm_filter: str = "ewma-t2",
-        ewma_lambda: float = 0.02,
+        ewma_lambda: float = 0.05,
         false_alarm_target: float = 0.002,
         threshold_margin: float = 1.3,
         method: str = "adam",
