@@ -378,9 +378,22 @@ class SweepConfig:
             raise ValueError(f"t_on={self.t_on!r} must be an integer >= 0")
 
     def model_hash(self, spec: DiagnoserSpec, data_hash: str) -> str:
-        """Hash of what a trained model depends on: the diagnoser and the data."""
+        """Hash of what a trained model depends on: the diagnoser and the data.
+
+        The hyperparameters are the *resolved* ones (defaults included) and the package version
+        is part of the hash, so a changed default or a new release never reuses stale models or
+        cells: the store then says so instead of mixing old and new results.
+        """
+        from fcc_env import MODEL_VERSION, __version__
+
         return canonical_hash(
-            {"v": HARNESS_VERSION, "data": data_hash, "name": spec.name, "params": spec.params}
+            {
+                "v": HARNESS_VERSION,
+                "package": f"{__version__} ({MODEL_VERSION})",
+                "data": data_hash,
+                "name": spec.name,
+                "params": spec.build().get_params(),
+            }
         )
 
     def cell_hash(self, spec: DiagnoserSpec, data_hash: str) -> str:

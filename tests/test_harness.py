@@ -362,3 +362,12 @@ def test_failing_cell_keeps_finished_cells(tmp_path, monkeypatch) -> None:
     assert done == 6  # nominal 0, 1 and f1 0, for both diagnosers
     res = run_sweep(CONFIG, tmp_path / "s", n_workers=0, progress=False)
     assert (res.n_reused, res.n_computed) == (6, 2)
+
+
+def test_model_hash_uses_resolved_hyperparameters():
+    """A changed default must never reuse stale models: the hash sees the resolved values."""
+    implicit = CONFIG.model_hash(DiagnoserSpec("limits", {}), "d")
+    explicit = CONFIG.model_hash(DiagnoserSpec("limits", {"alpha": 0.01}), "d")
+    other = CONFIG.model_hash(DiagnoserSpec("limits", {"alpha": 0.05}), "d")
+    assert implicit == explicit != other
+    assert CONFIG.model_hash(DiagnoserSpec("limits", {}), "e") != implicit
