@@ -245,6 +245,31 @@ def _inverse_softplus(y: float) -> float:
 
 
 # ---- the network -------------------------------------------------------------------------------
+@torch.no_grad()
+def set_scaler_buffers(
+    module: nn.Module, input_mean: Any, input_scale: Any, output_mean: Any, output_scale: Any
+) -> None:
+    """Copy a standardisation (physical = normalised · scale + mean) into ``module``'s buffers.
+
+    Shared by the LRGF and the model-error model; shapes must match, scales must be positive.
+    """
+    for name, val in (
+        ("input_mean", input_mean),
+        ("input_scale", input_scale),
+        ("output_mean", output_mean),
+        ("output_scale", output_scale),
+    ):
+        buf = getattr(module, name)
+        t = torch.as_tensor(np.asarray(val, dtype=np.float64), dtype=buf.dtype)
+        if t.shape != buf.shape:
+            raise ValueError(
+                f"scaler entry must have shape {tuple(buf.shape)}, got {tuple(t.shape)}"
+            )
+        buf.copy_(t)
+    if (module.input_scale <= 0).any() or (module.output_scale <= 0).any():
+        raise ValueError("scaler scales must be positive")
+
+
 class LRGF(nn.Module):
     r"""LRGF network of IIR-filter neurons, eqs. (1)-(8) of the paper, with an optional scaler.
 
@@ -490,20 +515,7 @@ class LRGF(nn.Module):
         output_scale: Sequence[float] | np.ndarray,
     ) -> None:
         """Set the standardisation buffers (physical = normalised * scale + mean)."""
-        for buf, val in (
-            (self.input_mean, input_mean),
-            (self.input_scale, input_scale),
-            (self.output_mean, output_mean),
-            (self.output_scale, output_scale),
-        ):
-            t = torch.as_tensor(np.asarray(val, dtype=np.float64), dtype=buf.dtype)
-            if t.shape != buf.shape:
-                raise ValueError(
-                    f"scaler entry must have shape {tuple(buf.shape)}, got {tuple(t.shape)}"
-                )
-            buf.copy_(t)
-        if (self.input_scale <= 0).any() or (self.output_scale <= 0).any():
-            raise ValueError("scaler scales must be positive")
+        set_scaler_buffers(self, input_mean, input_scale, output_mean, output_scale)
 
     def poles(self) -> np.ndarray:
         """Poles of every neuron filter, complex array of shape ``(v, r)``."""

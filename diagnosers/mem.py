@@ -29,6 +29,8 @@ import torch
 from scipy import stats
 from torch import nn
 
+from diagnosers.lrgf import set_scaler_buffers
+
 __all__ = [
     "BandScale",
     "MEMStepper",
@@ -260,20 +262,7 @@ class NNARXErrorModel(nn.Module):
         self, input_mean: Any, input_scale: Any, output_mean: Any, output_scale: Any
     ) -> None:
         """Set the standardisation buffers (physical = normalised * scale + mean)."""
-        for buf, val in (
-            (self.input_mean, input_mean),
-            (self.input_scale, input_scale),
-            (self.output_mean, output_mean),
-            (self.output_scale, output_scale),
-        ):
-            t = torch.as_tensor(np.asarray(val, dtype=np.float64), dtype=buf.dtype)
-            if t.shape != buf.shape:
-                raise ValueError(
-                    f"scaler entry must have shape {tuple(buf.shape)}, got {tuple(t.shape)}"
-                )
-            buf.copy_(t)
-        if (self.input_scale <= 0).any() or (self.output_scale <= 0).any():
-            raise ValueError("scaler scales must be positive")
+        set_scaler_buffers(self, input_mean, input_scale, output_mean, output_scale)
 
     # -- persistence -----------------------------------------------------------------------------
     def get_config(self) -> dict[str, Any]:
