@@ -21,6 +21,7 @@ from __future__ import annotations
 import csv
 import dataclasses
 import hashlib
+import json
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -383,4 +384,86 @@ def load_santander(
         test_files=tuple(tests),
         column_names=names,
         sample_time_s=60.0,
+    )
+
+
+MANIFEST_NAME = "dataset.json"
+_MANIFEST_KEYS = {
+    "inputs",
+    "outputs",
+    "train_files",
+    "test_files",
+    "column_names",
+    "sample_time_s",
+    "delimiter",
+    "diagnoser_params",
+}
+
+
+def load_manifest(directory: str | Path) -> tuple[ExternalData, dict[str, dict[str, Any]]]:
+    """Describe a user's directory by its ``dataset.json``: the data and per-diagnoser params.
+
+    The manifest is JSON (never executed) with the fields of :class:`ExternalData`::
+
+        {"inputs": ["T2", "Frgc"], "outputs": ["Tr"], "train_files": ["healthy.csv"],
+         "test_files": [{"path": "leak.csv", "onset": 120, "name": "leak"},
+                        {"path": "normal.csv", "onset": null}],
+         "sample_time_s": 60, "column_names": null, "delimiter": ",",
+         "diagnoser_params": {"arx-band": {"output": "Tr", "inputs": ["T2", "Frgc"]}}}
+
+    ``diagnoser_params`` (optional) gives hyperparameters for diagnosers whose defaults name
+    FCC-v0 channels. Returns ``(data, diagnoser_params)``.
+    """
+    path = Path(directory) / MANIFEST_NAME
+    try:
+        spec = json.loads(path.read_text())
+    except OSError as e:
+        raise ValueError(f"cannot read {path}: {e}") from e
+    except json.JSONDecodeError as e:
+        raise ValueError(f"{path} is not valid JSON: {e}") from e
+    if not isinstance(spec, dict):
+        raise ValueError(f"{path} must hold a JSON object, got {type(spec).__name__}")
+    unknown = sorted(set(spec) - _MANIFEST_KEYS)
+    if unknown:
+        raise ValueError(f"{path}: unknown field(s) {unknown}. Allowed: {sorted(_MANIFEST_KEYS)}")
+    missing = sorted({"inputs", "outputs", "train_files", "test_files"} - set(spec))
+    if missing:
+        raise ValueError(f"{path}: missing field(s) {missing}")
+    try:
+        tests = tuple(
+            ExternalFile(str(t["path"]), t.get("onset"), t.get("name")) for t in spec["test_files"]
+        )
+    except (TypeError, KeyError) as e:
+        raise ValueError(
+            f"{path}: test_files must be a list of {{'path', 'onset', 'name'}} objects ({e})"
+        ) from e
+    data = ExternalData(
+        directory=str(Path(directory)),
+        inputs=tuple(spec["inputs"]),
+        outputs=tuple(spec["outputs"]),
+        train_files=tuple(spec["train_files"]),
+        test_files=tests,
+        column_names=tuple(spec["column_names"]) if spec.get("column_names") else None,
+        sample_time_s=float(spec.get("sample_time_s", 1.0)),
+        delimiter=str(spec.get("delimiter", ",")),
+    )
+    data.validate()
+    params = spec.get("diagnoser_params") or {}
+    if not isinstance(params, dict):
+        raise ValueError(f"{path}: diagnoser_params must map diagnoser names to objects")
+    return data, params
+
+
+def load_external(directory: str | Path) -> tuple[ExternalData, dict[str, dict[str, Any]]]:
+    """A directory with a ``dataset.json`` manifest, or the Santander data set's layout."""
+    d = Path(directory)
+    if not d.is_dir():
+        raise ValueError(f"data directory {str(d)!r} does not exist or is not a directory")
+    if (d / MANIFEST_NAME).is_file():
+        return load_manifest(d)
+    if (d / "columns.csv").is_file() and (d / _SANTANDER_TRAIN).is_file():
+        return load_santander(d), SANTANDER_PARAMS
+    raise ValueError(
+        f"{str(d)!r} has neither a {MANIFEST_NAME} manifest (see evaluation.external."
+        "load_manifest) nor the Santander data set's columns.csv and CSV files"
     )

@@ -113,9 +113,9 @@ def _package_version() -> str:
 def build_config(opts: LeaderboardOptions) -> SweepConfig:
     """The sweep the options describe (validated by :func:`run_sweep`)."""
     if opts.external is not None:
-        from evaluation.external import SANTANDER_PARAMS, load_santander
+        from evaluation.external import load_external
 
-        data = load_santander(opts.external)
+        data, ext_params = load_external(opts.external)
         keep = set(opts.scenarios)
         data = dataclasses.replace(
             data, test_files=tuple(tf for tf in data.test_files if tf.key in keep)
@@ -123,7 +123,7 @@ def build_config(opts: LeaderboardOptions) -> SweepConfig:
         specs = []
         for name in opts.diagnosers:
             # defaults that name FCC-v0 channels get the Santander analogue
-            params = SANTANDER_PARAMS.get(name, {})
+            params = ext_params.get(name, {})
             specs.append(DiagnoserSpec(name, dict(params)))
         return SweepConfig(diagnosers=tuple(specs), data=data)
     data = SimulatedData(
@@ -483,8 +483,9 @@ def build_parser() -> argparse.ArgumentParser:
         type=Path,
         default=None,
         metavar="DIR",
-        help="score the Santander FCCU data set in DIR (layout of shared/data/"
-        "fccu-santander-mlpse) instead of simulated episodes; --seeds is ignored",
+        help="score recorded data in DIR instead of simulated episodes: a directory with a "
+        "dataset.json manifest (see evaluation.external.load_manifest) or the Santander FCCU "
+        "data set (layout of shared/data/fccu-santander-mlpse); --seeds is ignored",
     )
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
@@ -508,10 +509,10 @@ def resolve_options(
     if unknown:
         parser.error(f"unknown diagnoser(s) {unknown}. Available: {avail}")
     if args.external is not None:
-        from evaluation.external import load_santander
+        from evaluation.external import load_external
 
         try:
-            allowed = [tf.key for tf in load_santander(args.external).test_files]
+            allowed = [tf.key for tf in load_external(args.external)[0].test_files]
         except ValueError as e:
             parser.error(f"--external {args.external}: {e}")
     else:

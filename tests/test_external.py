@@ -203,3 +203,59 @@ def test_santander_loader_errors(tmp_path) -> None:
         load_santander(tmp_path / "nope")
     with pytest.raises(ValueError, match=r"no columns\.csv"):
         load_santander(tmp_path)
+
+
+def test_manifest_directory_end_to_end(tmp_path):
+    """A user's own directory, described by dataset.json, through the leaderboard CLI."""
+    import json
+
+    from evaluation.external import load_external
+    from evaluation.leaderboard import main
+
+    rng = np.random.default_rng(3)
+    header = "u,y1,y2"
+    for name, step in (("healthy.csv", None), ("normal.csv", None), ("fault.csv", 200)):
+        np.savetxt(tmp_path / name, _record(rng, 400, step), delimiter=",", header=header,
+                   comments="")  # fmt: skip
+    manifest = {
+        "inputs": ["u"],
+        "outputs": ["y1", "y2"],
+        "train_files": ["healthy.csv"],
+        "test_files": [{"path": "normal.csv", "onset": None}, {"path": "fault.csv", "onset": 200}],
+        "sample_time_s": 1.0,
+        "diagnoser_params": {"arx-band": {"output": "y1", "inputs": ["u"]}},
+    }
+    (tmp_path / "dataset.json").write_text(json.dumps(manifest))
+    data, params = load_external(tmp_path)
+    assert data.channels == ("u", "y1", "y2") and params["arx-band"]["output"] == "y1"
+    out = tmp_path / "out"
+    assert main(["--external", str(tmp_path), "--diagnosers", "limits,arx-band", "--out",
+                 str(out), "--no-figures", "--no-progress"]) == 0  # fmt: skip
+    rows = (out / "leaderboard.csv").read_text().splitlines()
+    assert any(r.startswith("arx-band,fault") for r in rows)
+
+
+@pytest.mark.parametrize(
+    ("content", "match"),
+    [
+        ("{", "is not valid JSON"),
+        ('{"inputs": []}', r"missing field\(s\)"),
+        (
+            '{"inputs": [], "outputs": [], "train_files": [], "test_files": [], "x": 1}',
+            "unknown field",
+        ),
+    ],
+)
+def test_bad_manifest(tmp_path, content, match):
+    from evaluation.external import load_external
+
+    (tmp_path / "dataset.json").write_text(content)
+    with pytest.raises(ValueError, match=match):
+        load_external(tmp_path)
+
+
+def test_directory_without_manifest(tmp_path):
+    from evaluation.external import load_external
+
+    with pytest.raises(ValueError, match=r"neither a dataset\.json manifest"):
+        load_external(tmp_path)
