@@ -150,6 +150,29 @@ def _episodes(x: ArrayLike, n_channels: int, name: str) -> list[np.ndarray]:
     return eps
 
 
+def _training_pairs(
+    u: ArrayLike,
+    y: ArrayLike,
+    u_val: ArrayLike | None,
+    y_val: ArrayLike | None,
+    n_in: int,
+    n_out: int,
+    y_name: str,
+) -> tuple[list[np.ndarray], list[np.ndarray], list[np.ndarray] | None, list[np.ndarray] | None]:
+    """Training (and optional validation) episodes as checked (input, output) lists."""
+    us = _episodes(u, n_in, "u")
+    ys = _episodes(y, n_out, y_name)
+    _check_pairs(us, ys, f"u/{y_name}")
+    if u_val is None and y_val is None:
+        return us, ys, None, None
+    if u_val is None or y_val is None:
+        raise ValueError(f"give both u_val and {y_name}_val, or neither")
+    uvs = _episodes(u_val, n_in, "u_val")
+    yvs = _episodes(y_val, n_out, f"{y_name}_val")
+    _check_pairs(uvs, yvs, f"u_val/{y_name}_val")
+    return us, ys, uvs, yvs
+
+
 def _check_pairs(us: list[np.ndarray], ys: list[np.ndarray], names: str) -> None:
     if len(us) != len(ys):
         raise ValueError(f"{names}: {len(us)} input episodes but {len(ys)} output episodes")
@@ -290,16 +313,8 @@ def fit_lrgf(
     except ValueError:
         raise ValueError(f"method={method!r}; choose one of {[m.value for m in Method]}") from None
     _validate_common(max_epochs, patience, val_fraction, washout)
-    us = _episodes(u, model.n_inputs, "u")
-    ys = _episodes(y, model.n_outputs, "y")
-    _check_pairs(us, ys, "u/y")
-    has_val = u_val is not None or y_val is not None
-    if has_val:
-        if u_val is None or y_val is None:
-            raise ValueError("give both u_val and y_val, or neither")
-        uvs = _episodes(u_val, model.n_inputs, "u_val")
-        yvs = _episodes(y_val, model.n_outputs, "y_val")
-        _check_pairs(uvs, yvs, "u_val/y_val")
+    us, ys, uvs, yvs = _training_pairs(u, y, u_val, y_val, model.n_inputs, model.n_outputs, "y")
+    has_val = uvs is not None
     split = _split_fn(val_fraction, washout, has_val)
     if standardize:
         heads = [split(e.shape[0])[0] for e in us]
@@ -526,16 +541,8 @@ def fit_mem(
         or pretrain_epochs < 0
     ):
         raise ValueError(f"pretrain_epochs={pretrain_epochs!r} must be a non-negative integer")
-    us = _episodes(u, mem.n_inputs, "u")
-    rs = _episodes(r, mem.n_outputs, "r")
-    _check_pairs(us, rs, "u/r")
-    has_val = u_val is not None or r_val is not None
-    if has_val:
-        if u_val is None or r_val is None:
-            raise ValueError("give both u_val and r_val, or neither")
-        uvs = _episodes(u_val, mem.n_inputs, "u_val")
-        rvs = _episodes(r_val, mem.n_outputs, "r_val")
-        _check_pairs(uvs, rvs, "u_val/r_val")
+    us, rs, uvs, rvs = _training_pairs(u, r, u_val, r_val, mem.n_inputs, mem.n_outputs, "r")
+    has_val = uvs is not None
     split = _split_fn(val_fraction, 0, has_val)
     if standardize:
         heads = [split(e.shape[0])[0] for e in us]
