@@ -577,15 +577,29 @@ def missing_input_candidates(
 class MissingInputAdapter:
     """Shared part of the input-output adapters whose candidates are missing measured inputs.
 
-    Subclasses set ``name``, ``inputs`` ({output: declared inputs}), ``output_channels``,
-    ``candidate_channels`` and ``candidate_delays``, and call :meth:`_prepare_missing_inputs`.
+    Subclasses set ``name``, call ``super().__init__`` with the declared inputs
+    ({output: inputs}) and the candidate channels and delays, and call
+    :meth:`_prepare_missing_inputs` in ``prepare``.
     """
 
     name: str
-    inputs: dict[str, tuple[str, ...]]
-    output_channels: tuple[str, ...]
-    candidate_channels: tuple[str, ...] | None
-    candidate_delays: tuple[int, ...]
+
+    def __init__(
+        self,
+        inputs: Mapping[str, Sequence[str]],
+        candidate_channels: Sequence[str] | None,
+        candidate_delays: Sequence[int],
+    ):
+        if not inputs:
+            raise ValueError(
+                f"{type(self).__name__} needs at least one output channel with its inputs"
+            )
+        self.inputs = {str(k): tuple(v) for k, v in inputs.items()}
+        self.output_channels = tuple(self.inputs)
+        self.candidate_channels = None if candidate_channels is None else tuple(candidate_channels)
+        self.candidate_delays = tuple(int(d) for d in candidate_delays)
+        self._n_train = 0
+        self._cands: dict[str, MissingInput] = {}
 
     def _prepare_missing_inputs(self, data: MeasuredData, n_train: int) -> None:
         need = set(self.output_channels) | {u for v in self.inputs.values() for u in v}
@@ -630,17 +644,10 @@ class ARXModel(MissingInputAdapter):
         candidate_channels: Sequence[str] | None = None,
         candidate_delays: Sequence[int] = (0, 1, 2, 3),
     ):
-        if not inputs:
-            raise ValueError("ARXModel needs at least one output channel with its inputs")
+        super().__init__(inputs, candidate_channels, candidate_delays)
         if not (1 <= na <= 10 and 1 <= nb <= 10):
             raise ValueError(f"na={na}, nb={nb} outside the allowed range [1, 10]")
-        self.inputs = {str(k): tuple(v) for k, v in inputs.items()}
-        self.output_channels = tuple(self.inputs)
         self.na, self.nb = int(na), int(nb)
-        self.candidate_channels = None if candidate_channels is None else tuple(candidate_channels)
-        self.candidate_delays = tuple(int(d) for d in candidate_delays)
-        self._n_train = 0
-        self._cands: dict[str, MissingInput] = {}
 
     def prepare(self, data: MeasuredData, n_train: int) -> None:
         self._prepare_missing_inputs(data, n_train)

@@ -56,20 +56,13 @@ class LRGFModel(MissingInputAdapter):
         candidate_channels: Sequence[str] | None = None,
         candidate_delays: Sequence[int] = (0, 1, 2, 3),
     ):
-        if not inputs:
-            raise ValueError("LRGFModel needs at least one output channel with its inputs")
+        super().__init__(inputs, candidate_channels, candidate_delays)
         if not 1 <= max_epochs <= 100_000:
             raise ValueError(f"max_epochs={max_epochs} outside the allowed range [1, 100000]")
-        self.inputs = {str(k): tuple(v) for k, v in inputs.items()}
-        self.output_channels = tuple(self.inputs)
         self.n_hidden, self.order = int(n_hidden), int(order)
         self.max_epochs, self.lr, self.seed = int(max_epochs), float(lr), int(seed)
-        self.candidate_channels = None if candidate_channels is None else tuple(candidate_channels)
-        self.candidate_delays = tuple(int(d) for d in candidate_delays)
-        self._cands: dict[str, MissingInput] = {}
         self.networks_: dict[str, LRGF] = {}
         self._y_m: dict[str, np.ndarray] = {}
-        self._n_train = 0
 
     def prepare(self, data: MeasuredData, n_train: int) -> None:
         self._prepare_missing_inputs(data, n_train)
