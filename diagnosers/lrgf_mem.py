@@ -66,15 +66,19 @@ from typing import Any
 
 import numpy as np
 import torch
+from scipy.stats import chi2, norm
 
 from diagnosers.base import Decision, Detection, Diagnoser, Episode
-from diagnosers.lrgf import LRGF, InitialState, LRGFStepper, filter_step
+from diagnosers.lrgf import LRGF, InitialState, LRGFStepper, NeuronFilters
 from diagnosers.mem import MEMStepper, NNARXErrorModel, t_alpha
 from diagnosers.registry import register
 from diagnosers.training import build_module, export_module, fit_lrgf, fit_mem
 
 PAPER_RELATIONS: list[list[Any]] = [["T_rx", ["T_rg2", "T_fp"]]]
 ALARM_FILTERS = ("none", "ewma", "ewma-t2")
+LIMIT_METHODS = ("empirical", "chi2-tail")
+#: calibration quantile at which ``limit_method="chi2-tail"`` measures the tail inflation
+TAIL_FIT_QUANTILE = 0.99
 
 #: The bank of ``lrgf-mem``: the paper's (14)–(16) with the inputs the model's physics needs.
 #: s2 gets T_fp (feed preheat heats the regenerator through the riser and stripper; without it the
@@ -117,21 +121,25 @@ class _BankStepper:
             self.b[sl] = -st.w @ (st.in_mean / st.in_scale)
             self.c[j, sl] = st.c[0] * st.out_scale[0]
             self.d[j] = st.c0[0] * st.out_scale[0] + st.out_mean[0]
-        self.num = np.concatenate([st.num for st in steppers])
-        self.den = np.concatenate([st.den for st in steppers])
         self.g1 = np.concatenate([st.g1 for st in steppers])
         self.g2 = np.concatenate([st.g2 for st in steppers])
-        self.steady = [st.initial_state == InitialState.STEADY for st in steppers]
-        if len(set(self.steady)) != 1:
+        starts = {(net.initial_state, net.steady_window) for net in nets}
+        if len(starts) != 1:
             raise ValueError("all relations must share one initial-state convention")
-        self._zi: np.ndarray | None = None
+        ((initial_state, window),) = starts
+        self.filters = NeuronFilters(
+            np.concatenate([st.num for st in steppers]),
+            np.concatenate([st.den for st in steppers]),
+            initial_state is InitialState.STEADY,
+            window,
+        )
 
     def reset(self) -> None:
-        self._zi = None
+        self.filters.reset()
 
     def step(self, y: np.ndarray) -> np.ndarray:
         """Nominal-model outputs y_m of every relation for one measurement vector."""
-        z, self._zi = filter_step(self.num, self.den, self._zi, self.w @ y + self.b, self.steady[0])
+        z = self.filters.step(self.w @ y + self.b)
         return self.c @ np.tanh(0.5 * self.g2 * (z - self.g1)) + self.d
 
 
@@ -147,6 +155,7 @@ class _LRGFMEMBase(Diagnoser):
         relations: list[list[Any]] | None = None,
         n_hidden: int = 3,
         order: int = 2,
+        steady_window: int = 50,
         mem_hidden: int = 5,
         mem_input_delays: int = 15,
         mem_output_delays: int = 15,
@@ -157,6 +166,7 @@ class _LRGFMEMBase(Diagnoser):
         ewma_lambda: float = 0.05,
         false_alarm_target: float = 0.005,
         threshold_margin: float = 1.2,
+        limit_method: str = "empirical",
         method: str = "adam",
         lr: float = 0.01,
         max_epochs: int = 3000,
@@ -168,6 +178,7 @@ class _LRGFMEMBase(Diagnoser):
         self.relations = relations
         self.n_hidden = n_hidden
         self.order = order
+        self.steady_window = steady_window
         self.mem_hidden = mem_hidden
         self.mem_input_delays = mem_input_delays
         self.mem_output_delays = mem_output_delays
@@ -178,6 +189,7 @@ class _LRGFMEMBase(Diagnoser):
         self.ewma_lambda = ewma_lambda
         self.false_alarm_target = false_alarm_target
         self.threshold_margin = threshold_margin
+        self.limit_method = limit_method
         self.method = method
         self.lr = lr
         self.max_epochs = max_epochs
@@ -218,6 +230,7 @@ class _LRGFMEMBase(Diagnoser):
         for name, lo, hi in (
             ("n_hidden", 1, 64),
             ("order", 1, 8),
+            ("steady_window", 1, 100_000),
             ("mem_hidden", 1, 256),
             ("mem_input_delays", 1, 100),
             ("mem_output_delays", 1, 100),
@@ -243,6 +256,8 @@ class _LRGFMEMBase(Diagnoser):
             raise ValueError(
                 f"threshold_margin={self.threshold_margin!r} outside the allowed range [0.5, 10]"
             )
+        if self.limit_method not in LIMIT_METHODS:
+            raise ValueError(f"limit_method={self.limit_method!r}; allowed: {list(LIMIT_METHODS)}")
         if self.mem_select not in ("always", "if_better"):
             raise ValueError(f"mem_select={self.mem_select!r}; allowed: 'always', 'if_better'")
         if not (isinstance(self.lr, float | int) and 0 < self.lr <= 1):
@@ -286,14 +301,22 @@ class _LRGFMEMBase(Diagnoser):
             seed = self.seed + 101 * j
             u_tr = [y[:, self.in_idx_[j]] for y in train]
             y_tr = [y[:, [self.out_idx_[j]]] for y in train]
-            net = LRGF(len(ins), self.n_hidden, self.order, 1, initial_state="steady", seed=seed)
-            net = net.double()
+            net = LRGF(
+                len(ins),
+                self.n_hidden,
+                self.order,
+                1,
+                initial_state="steady",
+                steady_window=self.steady_window,
+                seed=seed,
+            ).double()
             fits.append(
                 fit_lrgf(
                     net,
                     u_tr,
                     y_tr,
                     method=self.method,
+                    lr=self.lr,
                     max_epochs=self.max_epochs,
                     patience=max(50, self.max_epochs // 5),
                     seed=seed,
@@ -348,14 +371,38 @@ class _LRGFMEMBase(Diagnoser):
             cov = np.atleast_2d(np.cov(stats.T))
             self.s_inv_ = np.linalg.pinv(cov)
             t2 = np.einsum("ti,ij,tj->t", stats, self.s_inv_, stats)
-            self.h_ = np.array(
-                [self.threshold_margin * np.quantile(t2, 1.0 - self.false_alarm_target)]
-            )
+            self.h_ = np.array([self._limit(t2[:, None], len(relations))[0]])
         else:
             self.s_inv_ = np.eye(len(relations))
-            q = 1.0 - self.false_alarm_target / len(relations)
-            self.h_ = self.threshold_margin * np.quantile(np.abs(stats), q, axis=0)
+            self.h_ = self._limit(np.abs(stats), 0)
         self.signal_names_ = self._signal_names()
+
+    def _limit(self, stat: np.ndarray, dof: int) -> np.ndarray:
+        """Alarm limit per column of the healthy calibration statistic ``stat`` (T, c).
+
+        ``dof = 0``: columns are |EWMA| of one relation each (per-column target
+        ``false_alarm_target / c``); ``dof = k``: one column of Hotelling's T² over k relations.
+        ``"empirical"``: the calibration quantile at 1 − target. ``"chi2-tail"``: the reference
+        distribution's quantile at 1 − target (χ²_k for T²; for |EWMA| the normal with the
+        column's calibration std), scaled by the calibration's tail inflation
+        ``max(1, q_emp(0.99) / q_ref(0.99))``. Why: the calibration holds a few strongly
+        autocorrelated episodes, so its empirical 0.998 quantile rests on a few dozen dependent
+        samples and is dominated by single excursions (on this plant it varied by 1.5–3× between
+        calibration sets), while the 0.99 quantile is stable and the reference tail extrapolates
+        it. Both are multiplied by ``threshold_margin``.
+        """
+        target = self.false_alarm_target / (stat.shape[1] if dof == 0 else 1)
+        if self.limit_method == "empirical":
+            return self.threshold_margin * np.quantile(stat, 1.0 - target, axis=0)
+        if dof == 0:
+            sd = np.sqrt(np.mean(stat**2, axis=0))
+            ref_fit = sd * norm.ppf(0.5 + TAIL_FIT_QUANTILE / 2)
+            ref_target = sd * norm.ppf(1.0 - target / 2)
+        else:
+            ref_fit = np.full(stat.shape[1], chi2.ppf(TAIL_FIT_QUANTILE, dof))
+            ref_target = np.full(stat.shape[1], chi2.ppf(1.0 - target, dof))
+        inflation = np.maximum(1.0, np.quantile(stat, TAIL_FIT_QUANTILE, axis=0) / ref_fit)
+        return self.threshold_margin * inflation * ref_target
 
     def _signal_names(self) -> tuple[str, ...]:
         rel = self._relations()
@@ -506,6 +553,7 @@ class LRGFMEM(_LRGFMEMBase):
         relations: list[list[Any]] | None = None,
         n_hidden: int = 5,
         order: int = 2,
+        steady_window: int = 50,
         mem_hidden: int = 5,
         mem_input_delays: int = 15,
         mem_output_delays: int = 15,
@@ -516,6 +564,7 @@ class LRGFMEM(_LRGFMEMBase):
         ewma_lambda: float = 0.05,
         false_alarm_target: float = 0.002,
         threshold_margin: float = 1.3,
+        limit_method: str = "chi2-tail",
         method: str = "adam",
         lr: float = 0.03,
         max_epochs: int = 3000,
@@ -528,6 +577,7 @@ class LRGFMEM(_LRGFMEMBase):
             relations=relations,
             n_hidden=n_hidden,
             order=order,
+            steady_window=steady_window,
             mem_hidden=mem_hidden,
             mem_input_delays=mem_input_delays,
             mem_output_delays=mem_output_delays,
@@ -538,6 +588,7 @@ class LRGFMEM(_LRGFMEMBase):
             ewma_lambda=ewma_lambda,
             false_alarm_target=false_alarm_target,
             threshold_margin=threshold_margin,
+            limit_method=limit_method,
             method=method,
             lr=lr,
             max_epochs=max_epochs,

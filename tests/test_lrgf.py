@@ -11,7 +11,6 @@ from torch.func import functional_call
 
 from diagnosers.lrgf import (
     LRGF,
-    InitialState,
     LRGFStepper,
     denominator_from_reflection,
     iir_filter,
@@ -206,9 +205,21 @@ def test_bad_arguments_raise() -> None:
         fit_lrgf(LRGF(1, 1, 1), np.zeros((50, 1)), np.zeros((50, 1)), method="lbfgs")
 
 
-@pytest.mark.parametrize("initial_state", list(InitialState))
-def test_stepper_equals_batch(initial_state: InitialState) -> None:
-    net = LRGF(2, 3, 3, 2, initial_state=initial_state, output_bias=True, seed=5).double()
+@pytest.mark.parametrize(
+    ("initial_state", "steady_window"),
+    [("zero", 1), ("steady", 1), ("steady", 7), ("steady", 300), ("steady", 1000)],
+)
+def test_stepper_equals_batch(initial_state: str, steady_window: int) -> None:
+    net = LRGF(
+        2,
+        3,
+        3,
+        2,
+        initial_state=initial_state,
+        steady_window=steady_window,
+        output_bias=True,
+        seed=5,
+    ).double()
     with torch.no_grad():
         net.set_scaler([1.0, 2.0], [0.5, 3.0], [10.0, -1.0], [2.0, 0.1])
         net.bias_out.fill_(0.2)
@@ -227,6 +238,34 @@ def test_steady_initial_state_has_no_transient() -> None:
     y_zero = LRGF(2, 3, 2, 1, seed=2).double().predict(np.tile([0.7, -1.3], (200, 1)))
     assert np.ptp(y_zero) > 1e-3  # the zero state does show a start-up transient
     np.testing.assert_allclose(y_zero[-1], y[-1], atol=1e-6)
+
+
+def test_steady_window_starts_from_the_running_mean() -> None:
+    rng = np.random.default_rng(7)
+    u = np.tile([0.7, -1.3], (300, 1)) + rng.normal(scale=0.2, size=(300, 2))
+    net = LRGF(2, 3, 2, 1, initial_state="steady", steady_window=40, seed=2).double()
+    y = net.predict(u)
+    # during the window: the steady response to the mean of the inputs so far
+    for k in (0, 9, 39):
+        level = np.tile(u[: k + 1].mean(0), (5, 1))
+        np.testing.assert_allclose(y[k], net.predict(level)[0], rtol=0, atol=1e-12)
+    # after it: the ordinary filter started at steady state for the window mean
+    head = np.tile(u[:40].mean(0), (40, 1))
+    ref = (
+        LRGF(2, 3, 2, 1, initial_state="steady", seed=2).double().predict(np.vstack([head, u[40:]]))
+    )
+    np.testing.assert_allclose(y[40:], ref[40:], rtol=0, atol=1e-12)
+    with pytest.raises(ValueError, match="steady_window=0 must be a positive integer"):
+        LRGF(2, 3, 2, 1, steady_window=0)
+
+
+def test_steady_window_survives_export() -> None:
+    net = LRGF(2, 3, 2, 1, initial_state="steady", steady_window=25, seed=2).double()
+    config, state = export_module(net)
+    assert config["steady_window"] == 25
+    assert build_module(config, state).steady_window == 25
+    del config["steady_window"]  # files written before the option start from the first sample
+    assert build_module(config, state).steady_window == 1
 
 
 # ---- training ----------------------------------------------------------------------------------

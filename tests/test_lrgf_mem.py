@@ -75,6 +75,38 @@ def test_ewma_t2_statistic_matches_definition():
     assert np.all(det.upper == d.h_[0]) and d.signal_names_ == ("T2[ewma]",)
 
 
+def test_alarm_limits_follow_their_definition():
+    from scipy.stats import chi2, norm
+
+    from diagnosers.lrgf_mem import TAIL_FIT_QUANTILE
+
+    d = diagnosers.make("lrgf-mem", threshold_margin=1.1, false_alarm_target=0.002)
+    rng = np.random.default_rng(0)
+    t2 = chi2.rvs(3, size=(20000, 1), random_state=rng) * 1.5  # a tail heavier than chi2_3
+    h = d._limit(t2, 3)[0]
+    inflation = np.quantile(t2, TAIL_FIT_QUANTILE) / chi2.ppf(TAIL_FIT_QUANTILE, 3)
+    assert inflation == pytest.approx(1.5, rel=0.05)
+    assert h == pytest.approx(1.1 * inflation * chi2.ppf(0.998, 3))
+    light = chi2.rvs(3, size=(20000, 1), random_state=rng) * 0.5  # lighter: no deflation
+    assert d._limit(light, 3)[0] == pytest.approx(1.1 * chi2.ppf(0.998, 3))
+    z = np.abs(rng.normal(scale=[1.0, 3.0], size=(20000, 2)))  # per-relation |EWMA|, target / 2
+    np.testing.assert_allclose(
+        d._limit(z, 0), 1.1 * np.array([1.0, 3.0]) * norm.ppf(1 - 0.0005), rtol=0.05
+    )
+    d.limit_method = "empirical"
+    assert d._limit(t2, 3)[0] == pytest.approx(1.1 * np.quantile(t2, 0.998))
+
+
+def test_learning_rate_reaches_the_trainer():
+    fits = {
+        lr: diagnosers.make("lrgf-mem-paper", lr=lr, max_epochs=20, mem_max_epochs=2)
+        .fit(_episodes([1000, 1001], n=400))
+        .train_fit_loss_[0]
+        for lr in (0.001, 0.05)
+    }
+    assert fits[0.001] != fits[0.05]
+
+
 @pytest.mark.parametrize(
     ("kwargs", "match"),
     [
@@ -85,6 +117,8 @@ def test_ewma_t2_statistic_matches_definition():
         ({"relations": [["T_rx"]]}, r"each relation must be \[output, \[inputs...\]\]"),
         ({"relations": [["T_xx", ["T_fp"]]]}, r"relation channel 'T_xx' is not in"),
         ({"method": "lbfgs"}, r"method='lbfgs'; allowed"),
+        ({"limit_method": "gev"}, r"limit_method='gev'; allowed"),
+        ({"steady_window": 0}, r"steady_window=0 outside the allowed range \[1, 100000\]"),
     ],
 )
 def test_bad_hyperparameters(kwargs, match):
