@@ -77,6 +77,8 @@ from diagnosers.training import build_module, export_module, fit_lrgf, fit_mem
 PAPER_RELATIONS: list[list[Any]] = [["T_rx", ["T_rg2", "T_fp"]]]
 ALARM_FILTERS = ("none", "ewma", "ewma-t2")
 LIMIT_METHODS = ("empirical", "chi2-tail")
+#: fewest healthy calibration samples (after the warm-up) that ``fit`` accepts
+MIN_CALIBRATION_SAMPLES = 50
 #: calibration quantile at which ``limit_method="chi2-tail"`` measures the tail inflation
 TAIL_FIT_QUANTILE = 0.99
 
@@ -155,7 +157,7 @@ class _LRGFMEMBase(Diagnoser):
         relations: list[list[Any]] | None = None,
         n_hidden: int = 3,
         order: int = 2,
-        steady_window: int = 50,
+        steady_window: int = 100,
         mem_hidden: int = 5,
         mem_input_delays: int = 15,
         mem_output_delays: int = 15,
@@ -352,6 +354,15 @@ class _LRGFMEMBase(Diagnoser):
         self.train_fit_loss_ = np.array([f.best_val_loss for f in fits])
         # held-out healthy calibration
         self.use_mem_ = np.ones(len(relations), dtype=bool)
+        # the warm-up samples are not calibrated on: the detector is silent there
+        cal_from = max(cal_from, self.steady_window)
+        n_cal = sum(max(0, y.shape[0] - cal_from) for y in cal)
+        if n_cal < MIN_CALIBRATION_SAMPLES:
+            raise ValueError(
+                f"{n_cal} calibration samples after the warm-up (steady_window="
+                f"{self.steady_window}); at least {MIN_CALIBRATION_SAMPLES} are needed: pass longer "
+                "or more episodes, or a smaller steady_window"
+            )
         rem = [self._remaining(y)[cal_from:] for y in cal]  # (T, k) each
         if self.mem_select == "if_better":
             # An error model that does not reduce the held-out error only adds its own: drop it.
@@ -442,8 +453,9 @@ class _LRGFMEMBase(Diagnoser):
         for st in self._mem_steppers:
             st.reset()
         self._acc = np.zeros(len(self.lrgf_))
+        self._k = 0
 
-    def _decide(self, y_out: np.ndarray, centre: np.ndarray, z: np.ndarray) -> Decision:
+    def _decide(self, y_out: np.ndarray, centre: np.ndarray, z: np.ndarray, warm: bool) -> Decision:
         resid = y_out - centre
         if self.alarm_filter == "ewma":
             signal, lower, upper = z, -self.h_, self.h_
@@ -453,7 +465,7 @@ class _LRGFMEMBase(Diagnoser):
         else:
             half = self.t_alpha_ * self.v_
             signal, lower, upper = y_out, centre - half, centre + half
-        alarm = bool(np.any((signal < lower) | (signal > upper)))
+        alarm = not warm and bool(np.any((signal < lower) | (signal > upper)))
         return Decision(alarm, signal, lower, upper, resid)
 
     def _update(self, y: np.ndarray) -> Decision:
@@ -461,16 +473,22 @@ class _LRGFMEMBase(Diagnoser):
         for j in np.flatnonzero(self.use_mem_):
             centre[j] += self._mem_steppers[j].step(y[self.in_idx_[j]])[0]
         y_out = y[self.out_idx_]
-        lam = self.ewma_lambda
-        self._acc = lam * ((y_out - centre) / self.v_residual_) + (1.0 - lam) * self._acc
-        return self._decide(y_out, centre, self._acc)
+        warm = self._k < self.steady_window
+        self._k += 1
+        if not warm:
+            lam = self.ewma_lambda
+            self._acc = lam * ((y_out - centre) / self.v_residual_) + (1.0 - lam) * self._acc
+        return self._decide(y_out, centre, self._acc, warm)
 
     def _detect(self, y: np.ndarray) -> Detection:
         centre = self._centre(y)
         y_out = y[:, self.out_idx_]
-        z = self._ewma((y_out - centre) / self.v_residual_)
+        e = (y_out - centre) / self.v_residual_
+        e[: self.steady_window] = 0.0  # the EWMA starts after the warm-up
+        z = self._ewma(e)
+        w = self.steady_window
         return Detection.from_decisions(
-            [self._decide(y_out[k], centre[k], z[k]) for k in range(y.shape[0])],
+            [self._decide(y_out[k], centre[k], z[k], k < w) for k in range(y.shape[0])],
             self.signal_names_,
         )
 
@@ -553,7 +571,7 @@ class LRGFMEM(_LRGFMEMBase):
         relations: list[list[Any]] | None = None,
         n_hidden: int = 5,
         order: int = 2,
-        steady_window: int = 50,
+        steady_window: int = 100,
         mem_hidden: int = 5,
         mem_input_delays: int = 15,
         mem_output_delays: int = 15,
@@ -561,9 +579,9 @@ class LRGFMEM(_LRGFMEMBase):
         alpha: float = 0.01,
         band_definition: str = "residual",
         alarm_filter: str = "ewma-t2",
-        ewma_lambda: float = 0.05,
+        ewma_lambda: float = 0.3,
         false_alarm_target: float = 0.002,
-        threshold_margin: float = 1.3,
+        threshold_margin: float = 1.0,
         limit_method: str = "chi2-tail",
         method: str = "adam",
         lr: float = 0.03,

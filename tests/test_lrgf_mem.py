@@ -68,11 +68,27 @@ def test_ewma_t2_statistic_matches_definition():
     e = det.residual / d.v_residual_
     z = np.zeros(2)
     t2 = []
-    for row in e:
-        z = d.ewma_lambda * row + (1 - d.ewma_lambda) * z
+    for k, row in enumerate(e):
+        if k >= d.steady_window:  # silent warm-up: the EWMA starts after it
+            z = d.ewma_lambda * row + (1 - d.ewma_lambda) * z
         t2.append(z @ d.s_inv_ @ z)
     np.testing.assert_allclose(det.signal[:, 0], t2, rtol=1e-9, atol=1e-12)
     assert np.all(det.upper == d.h_[0]) and d.signal_names_ == ("T2[ewma]",)
+    assert not det.alarm[: d.steady_window].any()
+
+
+def test_warm_up_is_silent_and_too_short_data_is_refused():
+    d = diagnosers.make("lrgf-mem-paper", steady_window=150, **FAST).fit(_episodes([1000, 1001]))
+    ep = _episodes([7004], scenario="f1", fault_time=20)[0]  # a fault inside the warm-up
+    det = d.detect(ep)
+    assert not det.alarm[:150].any() and det.alarm[150:250].mean() > 0.9
+    d.reset()
+    streamed = [d.update(row).alarm for row in ep.y[:200]]
+    np.testing.assert_array_equal(streamed, det.alarm[:200])
+    with pytest.raises(
+        ValueError, match=r"calibration samples after the warm-up \(steady_window=150\)"
+    ):
+        diagnosers.make("lrgf-mem-paper", steady_window=150, **FAST).fit(_episodes([1000], n=160))
 
 
 def test_alarm_limits_follow_their_definition():
