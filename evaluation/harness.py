@@ -207,6 +207,9 @@ class SimulatedData:
             (f1, f2: 1900; f3: 2020; f4: 2000). Must be below ``n_samples``.
         fault_magnitude, fault_profile, ramp_samples, excitation, noise_scale, sample_time_s:
             passed to :func:`fcc_env.simulate_episodes` (its defaults are the paper's set-up).
+        fault_magnitude_scale: multiplies the magnitude of every fault f1–f4 (``fault_magnitude``
+            or each fault's own default): 0.7 gives the smaller faults of the validation protocol
+            (:mod:`evaluation.leaderboard` ``--validation``), on which hyperparameters may be chosen.
     """
 
     scenarios: tuple[str, ...] = ("nominal", "f1", "f2", "f3", "f4")
@@ -220,6 +223,7 @@ class SimulatedData:
     excitation: bool = True
     noise_scale: float = 1.0
     sample_time_s: float = 10.0
+    fault_magnitude_scale: float = 1.0
 
     def validate(self) -> None:
         import fcc_env
@@ -248,10 +252,15 @@ class SimulatedData:
             raise ValueError(f"n_samples={n!r} must be an integer >= 2")
         if not isinstance(self.excitation, bool):
             raise ValueError(f"excitation={self.excitation!r} must be True or False")
-        for name in ("noise_scale", "sample_time_s"):
+        for name in ("noise_scale", "sample_time_s", "fault_magnitude_scale"):
             v = getattr(self, name)
             if isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v):
                 raise ValueError(f"{name}={v!r} must be a finite number")
+        if not 0 < self.fault_magnitude_scale <= 10:
+            raise ValueError(
+                f"fault_magnitude_scale={self.fault_magnitude_scale!r} outside the allowed range "
+                "(0, 10]"
+            )
         if self.noise_scale < 0 or self.sample_time_s <= 0:
             raise ValueError(
                 f"noise_scale={self.noise_scale!r} must be >= 0 and "
@@ -262,7 +271,7 @@ class SimulatedData:
                 resolve_fault(
                     sc,
                     self.fault_time,
-                    self.fault_magnitude,
+                    self._magnitude(sc),
                     self.fault_profile,
                     self.ramp_samples,
                     horizon=int(n),
@@ -281,6 +290,8 @@ class SimulatedData:
         # a sweep extended with more seeds or scenarios reuses the stored cells.
         del key["scenarios"], key["test_seeds"]
         key["train_seeds"] = list(self.train_seeds)
+        if self.fault_magnitude_scale == 1.0:  # keeps the keys of stores written before the option
+            del key["fault_magnitude_scale"]
         key["kind"] = "simulated"
         key["model_version"] = fcc_env.MODEL_VERSION
         return key
@@ -296,13 +307,25 @@ class SimulatedData:
             int(self.n_samples),
             scenario=scenario,
             fault_time=self.fault_time,
-            fault_magnitude=self.fault_magnitude,
+            fault_magnitude=self._magnitude(scenario),
             fault_profile=self.fault_profile,
             ramp_samples=self.ramp_samples,
             excitation=self.excitation,
             noise_scale=self.noise_scale,
             sample_time_s=self.sample_time_s,
         )
+
+    def _magnitude(self, scenario: str) -> float | None:
+        """The fault magnitude passed to the simulator for ``scenario`` (scale applied)."""
+        from fcc_env.scenarios import FAULTS, Scenario
+
+        sc = Scenario(scenario)
+        if self.fault_magnitude_scale == 1.0 or sc not in FAULTS:
+            return self.fault_magnitude
+        base = (
+            FAULTS[sc].default_magnitude if self.fault_magnitude is None else self.fault_magnitude
+        )
+        return base * self.fault_magnitude_scale
 
     def _loaded(self, res: Any, b: int) -> LoadedEpisode:
         import fcc_env

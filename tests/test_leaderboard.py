@@ -155,6 +155,7 @@ def test_cli_end_to_end_and_resume(tmp_path, capsys) -> None:
         (["--ray-address", "auto"], "needs --backend ray"),
         (["--external", "/no/such/dir"], "does not exist"),
         (["--n-samples", "600", "--scenarios", "f1"], "fault_time"),
+        (["--validation", "--quick"], "--validation cannot be combined"),
     ],
 )
 def test_cli_bad_input(tmp_path, capsys, args: list[str], match: str) -> None:
@@ -165,9 +166,43 @@ def test_cli_bad_input(tmp_path, capsys, args: list[str], match: str) -> None:
     assert not (tmp_path / "o").exists()
 
 
+def test_validation_protocol_uses_its_own_seeds_and_smaller_faults(tmp_path, capsys) -> None:
+    out = tmp_path / "val"
+    argv = ["--validation", "--diagnosers", "limits", "--scenarios", "nominal,f3", "--seeds", "2"]
+    assert main([*argv, "--train-episodes", "2", "--out", str(out), "--no-progress"]) == 0
+    printed = capsys.readouterr().out
+    assert "paper Table 2" not in printed  # the paper's row is for the paper's magnitudes
+    raw = json.loads((out / "results.json").read_text())
+    assert raw["data"]["fault_magnitude_scale"] == 0.7
+    assert {r["seed"] for r in raw["records"]} == {5000, 5001}
+    assert "0.7x the paper's" in (out / "leaderboard.md").read_text()
+
+
+def test_fault_magnitude_scale_scales_every_fault() -> None:
+    from evaluation.harness import SimulatedData
+
+    data = SimulatedData(fault_magnitude_scale=0.7)
+    assert data._magnitude("f2") == pytest.approx(0.105)
+    assert data._magnitude("f4") == pytest.approx(0.035)
+    assert data._magnitude("nominal") is None
+    assert SimulatedData(fault_magnitude=0.2, fault_magnitude_scale=0.5)._magnitude("f1") == 0.1
+    # the default leaves the store key (and so earlier stores) as before the option existed
+    assert "fault_magnitude_scale" not in SimulatedData().store_key()
+    with pytest.raises(ValueError, match=r"fault_magnitude_scale=0 outside the allowed range"):
+        SimulatedData(fault_magnitude_scale=0).validate()
+
+
 def test_help_documents_flags() -> None:
     text = build_parser().format_help()
-    for flag in ("--quick", "--diagnosers", "--scenarios", "--seeds", "--out", "--backend"):
+    for flag in (
+        "--quick",
+        "--validation",
+        "--diagnosers",
+        "--scenarios",
+        "--seeds",
+        "--out",
+        "--backend",
+    ):
         assert flag in text
 
 
