@@ -226,6 +226,17 @@ class Diagnoser(ABC):
         self._reset()
         return det
 
+    def band_view(self, episode: Episode) -> Detection | None:
+        """The measured outputs with the bands the diagnoser's models put around them, if any.
+
+        For figures in the style of the paper's: a diagnoser whose :meth:`detect` reports a
+        combined statistic (T² over several relations) can also show each model's band around its
+        measured output. ``None`` (the default) when there is no such view, or when
+        :meth:`detect` already is it.
+        """
+        self._check_fitted()
+        return None
+
     # ---- persistence ---------------------------------------------------------------------------
     def save(self, path: str | os.PathLike) -> Path:
         """Write the fitted diagnoser to directory ``path``: ``config.json`` + ``state.npz``.

@@ -486,7 +486,9 @@ class _LRGFMEMBase(Diagnoser):
         else:
             half = self.t_alpha_ * self.v_
             signal, lower, upper = y_out, centre - half, centre + half
-        alarm = not warm and bool(np.any((signal < lower) | (signal > upper)))
+        if warm:  # no limit while the models settle (alarm stays "outside the limits")
+            lower, upper = np.full_like(signal, -np.inf), np.full_like(signal, np.inf)
+        alarm = bool(np.any((signal < lower) | (signal > upper)))
         return Decision(alarm, signal, lower, upper, resid)
 
     def _update(self, y: np.ndarray) -> Decision:
@@ -512,6 +514,30 @@ class _LRGFMEMBase(Diagnoser):
             [self._decide(y_out[k], centre[k], z[k], k < w) for k in range(y.shape[0])],
             self.signal_names_,
         )
+
+    def band_view(self, episode: Episode) -> Detection | None:
+        """Each relation's measured output with its band y_m + y_e ± t_α·v (eqs 10–11).
+
+        With ``alarm_filter="none"`` that is what :meth:`detect` reports already (``None``).
+        Otherwise the same models seen the paper's way: ``alarm`` marks samples where an output
+        leaves its band (after the warm-up); the detector's own alarms come from :meth:`detect`.
+        """
+        self._check_fitted()
+        if self.alarm_filter == "none":
+            return None
+        if episode.channels != self.channels_:
+            raise ValueError(
+                f"episode channels {episode.channels} differ from the training channels "
+                f"{self.channels_}"
+            )
+        y_out = episode.y[:, self.out_idx_]
+        centre = self._centre(episode.y)
+        half = self.t_alpha_ * self.v_
+        lower, upper = centre - half, centre + half
+        lower[: self.steady_window], upper[: self.steady_window] = -np.inf, np.inf  # warm-up
+        alarm = np.any((y_out < lower) | (y_out > upper), axis=1)
+        names = tuple(f"{o} [°C]" for o, _ in self._relations())
+        return Detection(alarm, y_out, lower, upper, y_out - centre, names)
 
     # ---- persistence ---------------------------------------------------------------------------
     def _get_state(self) -> dict[str, np.ndarray]:

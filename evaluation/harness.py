@@ -73,6 +73,7 @@ __all__ = [
     "SweepResults",
     "default_specs",
     "detect_episode",
+    "load_cell",
     "ray_runtime_env",
     "run_sweep",
     "score_episode",
@@ -1043,6 +1044,14 @@ def detect_episode(
     For figures and inspection after :func:`run_sweep` (which stores only scores): the model is
     loaded from the store and the episode regenerated, so the arrays match the stored cell.
     """
+    loaded, diag = load_cell(config, store_dir, label, scenario, seed)
+    return loaded, diag.detect(loaded.episode)
+
+
+def load_cell(
+    config: SweepConfig, store_dir: str | os.PathLike, label: str, scenario: str, seed: int
+) -> tuple[LoadedEpisode, Diagnoser]:
+    """The episode of one cell and the trained diagnoser ``label`` loaded from the store."""
     store = ResultStore.open(store_dir, config.data.store_key())
     specs = {s.key: s for s in config.diagnosers}
     if label not in specs:
@@ -1050,5 +1059,4 @@ def detect_episode(
     if not store.has_model(label, config.model_hash(specs[label], store.data_hash)):
         raise ValueError(f"{label!r} has no trained model in {store.root}; run run_sweep first")
     diag = Diagnoser.load(store.model_dir(label))
-    loaded = config.data.load_test(scenario, seed)
-    return loaded, diag.detect(loaded.episode)
+    return config.data.load_test(scenario, seed), diag

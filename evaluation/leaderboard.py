@@ -48,7 +48,7 @@ from evaluation.harness import (
     SweepConfig,
     SweepResults,
     default_specs,
-    detect_episode,
+    load_cell,
     run_sweep,
 )
 from evaluation.store import canonical_hash
@@ -373,7 +373,11 @@ def _json_safe(obj: Any) -> Any:
 
 
 def write_figures(results: SweepResults, directory: Path) -> list[Path]:
-    """One PNG per scenario × diagnoser on the scenario's first test seed."""
+    """One PNG per scenario × diagnoser on the scenario's first test seed.
+
+    Diagnosers with a :meth:`~diagnosers.base.Diagnoser.band_view` (``lrgf-mem``: one band per
+    relation around its measured output) get a second one, ``<label>-bands.png``.
+    """
     from evaluation.plots import detection_figure, save_png
 
     cfg = results.config
@@ -383,14 +387,24 @@ def write_figures(results: SweepResults, directory: Path) -> list[Path]:
     paths = []
     for sc, seed in first.items():
         for spec in cfg.diagnosers:
-            loaded, det = detect_episode(cfg, results.store_dir, spec.key, sc, seed)
+            loaded, diag = load_cell(cfg, results.store_dir, spec.key, sc, seed)
+            onset = loaded.fault_onset if loaded.episode.fault_onset is not None else None
             fig = detection_figure(
                 loaded.episode,
-                det,
+                diag.detect(loaded.episode),
                 title=f"{spec.key} on {sc}, seed {seed}",
-                fault_onset=loaded.fault_onset if loaded.episode.fault_onset is not None else None,
+                fault_onset=onset,
             )
             paths.append(save_png(fig, directory / sc / f"{spec.key}.png"))
+            bands = diag.band_view(loaded.episode)
+            if bands is not None:
+                fig = detection_figure(
+                    loaded.episode,
+                    bands,
+                    title=f"{spec.key} on {sc}, seed {seed}: model bands (alarms: band exits)",
+                    fault_onset=onset,
+                )
+                paths.append(save_png(fig, directory / sc / f"{spec.key}-bands.png"))
     return paths
 
 

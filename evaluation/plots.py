@@ -79,8 +79,18 @@ def detection_figure(
         s, lo, hi = det.signal[:, j], det.lower[:, j], det.upper[:, j]
         ax.plot(t, s, color="tab:blue", linewidth=0.7, label="signal")
         lo_ok, hi_ok = np.isfinite(lo), np.isfinite(hi)
-        if lo_ok.all() and hi_ok.all():
-            ax.fill_between(t, lo, hi, color="tab:green", alpha=0.25, linewidth=0, label="band")
+        if np.array_equal(lo_ok, hi_ok) and lo_ok.mean() > 0.5:
+            # a two-sided band (absent where the diagnoser sets no limit, e.g. its warm-up)
+            ax.fill_between(
+                t,
+                np.where(lo_ok, lo, 0.0),
+                np.where(hi_ok, hi, 0.0),
+                where=lo_ok,
+                color="tab:green",
+                alpha=0.25,
+                linewidth=0,
+                label="band",
+            )
         else:
             if hi_ok.any():
                 ax.plot(t, np.where(hi_ok, hi, np.nan), color="k", linewidth=1.0, label="limit")

@@ -98,6 +98,11 @@ def test_detection_shapes_and_types(
     assert np.all(det.lower <= det.upper)
     outside = np.any((det.signal < det.lower) | (det.signal > det.upper), axis=1)
     np.testing.assert_array_equal(det.alarm, outside)
+    bands = d.band_view(test_episode)  # optional paper-style view, same conventions
+    if bands is not None:
+        assert bands.alarm.shape == (n,) and bands.signal.shape == bands.lower.shape
+        outside = np.any((bands.signal < bands.lower) | (bands.signal > bands.upper), axis=1)
+        np.testing.assert_array_equal(bands.alarm, outside)
 
 
 @pytest.mark.parametrize("name", NAMES)

@@ -42,13 +42,21 @@ def test_residual_band_covers_healthy_held_out_data(residual_band):
     inside = []
     for ep in _episodes([7000, 7001]):
         det = d.detect(ep)
-        inside.append(~det.alarm)
+        w = d.steady_window  # no band during the warm-up
+        assert np.all(np.isinf(det.lower[:w])) and not det.alarm[:w].any()
+        inside.append(~det.alarm[w:])
         # the band is y_m + y_e ± t_α v around the centre the residual is measured from
-        half = (det.upper - det.lower) / 2
+        half = (det.upper[w:] - det.lower[w:]) / 2
         np.testing.assert_allclose(half, t_alpha(0.01) * d.v_residual_[0])
-        np.testing.assert_allclose(det.signal - (det.upper + det.lower) / 2, det.residual)
+        np.testing.assert_allclose(
+            det.signal[w:] - (det.upper[w:] + det.lower[w:]) / 2, det.residual[w:]
+        )
     coverage = np.concatenate(inside).mean()
     assert 0.97 <= coverage <= 1.0, coverage
+
+
+def test_band_view_is_the_detection_itself_for_the_paper_rule(residual_band):
+    assert residual_band.band_view(_episodes([7005], n=300)[0]) is None
 
 
 def test_band_detects_a_large_fault(residual_band):
@@ -68,13 +76,26 @@ def test_ewma_t2_statistic_matches_definition():
     e = det.residual / d.v_residual_
     z = np.zeros(2)
     t2 = []
+    w = d.steady_window
     for k, row in enumerate(e):
-        if k >= d.steady_window:  # silent warm-up: the EWMA starts after it
+        if k >= w:  # silent warm-up: the EWMA starts after it
             z = d.ewma_lambda * row + (1 - d.ewma_lambda) * z
         t2.append(z @ d.s_inv_ @ z)
     np.testing.assert_allclose(det.signal[:, 0], t2, rtol=1e-9, atol=1e-12)
-    assert np.all(det.upper == d.h_[0]) and d.signal_names_ == ("T2[ewma]",)
-    assert not det.alarm[: d.steady_window].any()
+    assert np.all(det.upper[w:] == d.h_[0]) and np.all(np.isinf(det.upper[:w]))
+    assert d.signal_names_ == ("T2[ewma]",)
+    assert not det.alarm[:w].any()
+    # the paper-style view of the same models: each output with y_m + y_e ± t_α v around it
+    bands = d.band_view(ep)
+    np.testing.assert_allclose(bands.signal, ep.y[:, d.out_idx_])
+    np.testing.assert_allclose(
+        bands.signal[w:] - bands.residual[w:], (bands.lower[w:] + bands.upper[w:]) / 2
+    )
+    np.testing.assert_allclose(
+        bands.upper[w:] - bands.lower[w:], np.tile(2 * t_alpha(0.01) * d.v_, (600 - w, 1))
+    )
+    np.testing.assert_allclose(bands.residual, det.residual, atol=1e-9)
+    assert bands.signal_names == ("T_rx [°C]", "T_rg2 [°C]")
 
 
 def test_warm_up_is_silent_and_too_short_data_is_refused():

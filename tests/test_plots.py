@@ -31,6 +31,10 @@ def test_band_figure_layout_and_png(tmp_path) -> None:
     assert len(axes) == 3  # two signal panels and the alarm panel
     assert [ax.get_ylabel() for ax in axes[:2]] == ["s1", "s2"]
     assert axes[0].get_yscale() == "linear"
+    assert axes[0].collections[0].get_label() == "band"
+    det.lower[:40], det.upper[:40] = -np.inf, np.inf  # no limit during a warm-up: still a band
+    warm = detection_figure(_episode(n), det).get_axes()[0]
+    assert warm.collections[0].get_label() == "band"
     path = save_png(fig, tmp_path / "sub" / "f.png")
     assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
