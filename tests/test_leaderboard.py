@@ -156,6 +156,7 @@ def test_cli_end_to_end_and_resume(tmp_path, capsys) -> None:
         (["--external", "/no/such/dir"], "does not exist"),
         (["--n-samples", "600", "--scenarios", "f1"], "fault_time"),
         (["--validation", "--quick"], "--validation cannot be combined"),
+        (["--ramp-samples", "100"], "--ramp-samples needs --fault-profile incipient"),
     ],
 )
 def test_cli_bad_input(tmp_path, capsys, args: list[str], match: str) -> None:
@@ -176,6 +177,17 @@ def test_validation_protocol_uses_its_own_seeds_and_smaller_faults(tmp_path, cap
     assert raw["data"]["fault_magnitude_scale"] == 0.7
     assert {r["seed"] for r in raw["records"]} == {5000, 5001}
     assert "0.7x the paper's" in (out / "leaderboard.md").read_text()
+
+
+def test_incipient_faults_from_the_cli(tmp_path, capsys) -> None:
+    out = tmp_path / "inc"
+    argv = ["--diagnosers", "limits", "--scenarios", "f1", "--seeds", "1", "--train-episodes", "1"]
+    argv += ["--fault-profile", "incipient", "--ramp-samples", "360", "--no-progress"]
+    assert main([*argv, "--out", str(out), "--no-figures"]) == 0
+    assert "paper Table 2" not in capsys.readouterr().out
+    raw = json.loads((out / "results.json").read_text())
+    assert (raw["data"]["fault_profile"], raw["data"]["ramp_samples"]) == ("incipient", 360)
+    assert "ramps to its full change over 360 samples" in (out / "leaderboard.md").read_text()
 
 
 def test_fault_magnitude_scale_scales_every_fault() -> None:
