@@ -213,14 +213,18 @@ class Diagnoser(ABC):
             raise ValueError(f"measurement contains NaN or inf: {y}")
         return self._update(y)
 
-    def detect(self, episode: Episode) -> Detection:
-        """Score a whole episode; equal to ``reset()`` then ``update`` on every sample."""
+    def _check_episode(self, episode: Episode) -> None:
+        """Fitted, and ``episode`` has the training channels in the training order."""
         self._check_fitted()
         if episode.channels != self.channels_:
             raise ValueError(
                 f"episode channels {episode.channels} differ from the training channels "
                 f"{self.channels_}"
             )
+
+    def detect(self, episode: Episode) -> Detection:
+        """Score a whole episode; equal to ``reset()`` then ``update`` on every sample."""
+        self._check_episode(episode)
         self._reset()
         det = self._detect(episode.y)
         self._reset()
@@ -234,7 +238,7 @@ class Diagnoser(ABC):
         measured output. ``None`` (the default) when there is no such view, or when
         :meth:`detect` already is it.
         """
-        self._check_fitted()
+        self._check_episode(episode)
         return None
 
     # ---- persistence ---------------------------------------------------------------------------

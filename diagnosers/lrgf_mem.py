@@ -507,10 +507,10 @@ class _LRGFMEMBase(Diagnoser):
     def _detect(self, y: np.ndarray) -> Detection:
         centre = self._centre(y)
         y_out = y[:, self.out_idx_]
-        e = (y_out - centre) / self.v_residual_
-        e[: self.steady_window] = 0.0  # the EWMA starts after the warm-up
-        z = self._ewma(e)
         w = self.steady_window
+        e = (y_out - centre) / self.v_residual_
+        e[:w] = 0.0  # the EWMA starts after the warm-up
+        z = self._ewma(e)
         return Detection.from_decisions(
             [self._decide(y_out[k], centre[k], z[k], k < w) for k in range(y.shape[0])],
             self.signal_names_,
@@ -523,14 +523,9 @@ class _LRGFMEMBase(Diagnoser):
         Otherwise the same models seen the paper's way: ``alarm`` marks samples where an output
         leaves its band (after the warm-up); the detector's own alarms come from :meth:`detect`.
         """
-        self._check_fitted()
+        self._check_episode(episode)
         if self.alarm_filter == "none":
             return None
-        if episode.channels != self.channels_:
-            raise ValueError(
-                f"episode channels {episode.channels} differ from the training channels "
-                f"{self.channels_}"
-            )
         y_out = episode.y[:, self.out_idx_]
         centre = self._centre(episode.y)
         half = self.t_alpha_ * self.v_
