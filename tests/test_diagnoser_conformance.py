@@ -217,6 +217,8 @@ def test_rejects_mismatched_channels(
     )
     with pytest.raises(ValueError, match="differ from the training channels"):
         d.detect(swapped)
+    with pytest.raises(ValueError, match="differ from the training channels"):
+        d.band_view(swapped)
     with pytest.raises(ValueError, match="measurement must have shape"):
         d.update(test_episode.y[0, :3])
     d.reset()
