@@ -496,10 +496,8 @@ class LRGF(nn.Module):
             # by linearity: steady response to the constant s(0) plus the zero-state response to
             # the deviation s - s(0); the static gain is H(1) = sum(num) / (1 + sum(den))
             dc = (num.sum(-1) / (1.0 + den.sum(-1))).to(s.dtype)
+            # w = 1 is the first-sample start: its zero input at k = 0 leaves the state at rest
             w = min(self.steady_window, s.shape[1])
-            if w <= 1:
-                s0 = s[:, :1, :]
-                return iir_filter(s - s0, num, den) + dc * s0
             count = torch.arange(1, w + 1, dtype=s.dtype, device=s.device)[None, :, None]
             s_bar = torch.cumsum(s[:, :w, :], dim=1) / count
             s0 = s_bar[:, -1:, :]
