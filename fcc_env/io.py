@@ -1,0 +1,147 @@
+"""File helpers shared by every package: one atomic writer, one JSON scrubber.
+
+Every file the project writes (datasets, saved diagnosers, result-store cells, reports) goes
+through :func:`atomic_write`: the bytes go to a temporary file in the target's folder, are
+flushed to disk and renamed over the target, so a process killed at any instant leaves either the
+old file or the complete new one, never a torn one. The temporary file gets the permissions a
+plain ``open`` would give (``0o666`` less the umask), not the ``0o600`` of
+:func:`tempfile.mkstemp`.
+
+>>> import tempfile, pathlib, json
+>>> d = pathlib.Path(tempfile.mkdtemp())
+>>> atomic_write_json(d / "x.json", {"a": float("nan"), "b": [1.5]})
+PosixPath(...x.json')
+>>> json.loads((d / "x.json").read_text())
+{'a': None, 'b': [1.5]}
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+import tempfile
+from collections.abc import Callable, Iterator, Mapping
+from contextlib import contextmanager
+from pathlib import Path
+from typing import IO, Any
+
+import numpy as np
+
+__all__ = [
+    "TMP_SUFFIX",
+    "atomic_open",
+    "atomic_write",
+    "atomic_write_json",
+    "json_default",
+    "json_safe",
+    "remove_stale_tmp",
+]
+
+#: Suffix of the temporary files of :func:`atomic_open` (a kill leaves them behind; see
+#: :func:`remove_stale_tmp`).
+TMP_SUFFIX = ".tmp"
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+@contextmanager
+def atomic_open(path: str | os.PathLike, mode: str = "w") -> Iterator[IO[Any]]:
+    """Open a temporary file beside ``path``; on a clean exit it replaces ``path`` atomically.
+
+    On an exception the temporary file is removed and ``path`` is left as it was.
+
+    Args:
+        path: the file to write (its folder is created if missing).
+        mode: ``"w"`` (text) or ``"wb"`` (bytes).
+    """
+    if mode not in ("w", "wb"):
+        raise ValueError(f"mode={mode!r} is outside the allowed set: one of ['w', 'wb']")
+    target = Path(path)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    fh = tempfile.NamedTemporaryFile(
+        mode, dir=target.parent, prefix=f".{target.name}.", suffix=TMP_SUFFIX, delete=False
+    )
+    try:
+        with fh:
+            yield fh
+            fh.flush()
+            os.fsync(fh.fileno())
+        os.chmod(fh.name, 0o666 & ~_umask())
+        os.replace(fh.name, target)
+    except BaseException:
+        Path(fh.name).unlink(missing_ok=True)
+        raise
+
+
+def atomic_write(path: str | os.PathLike, data: str | bytes) -> Path:
+    """Write ``data`` (text or bytes) to ``path`` atomically; returns the path."""
+    with atomic_open(path, "wb" if isinstance(data, bytes) else "w") as fh:
+        fh.write(data)
+    return Path(path)
+
+
+def json_safe(obj: Any) -> Any:
+    """``obj`` with every non-finite float replaced by ``None`` (strict JSON has no NaN).
+
+    Mappings and sequences are walked; numpy scalars become Python numbers.
+    """
+    if isinstance(obj, np.generic):
+        obj = obj.item()
+    if isinstance(obj, float) and not math.isfinite(obj):
+        return None
+    if isinstance(obj, Mapping):
+        return {k: json_safe(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [json_safe(v) for v in obj]
+    return obj
+
+
+def json_default(o: Any) -> Any:
+    """``json.dumps(default=...)`` hook: numpy scalars and arrays as Python values, paths as text."""
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, os.PathLike):
+        return os.fspath(o)
+    raise TypeError(f"Object of type {type(o).__name__} is not JSON serializable")
+
+
+def atomic_write_json(
+    path: str | os.PathLike,
+    obj: Any,
+    *,
+    indent: int | None = 2,
+    sort_keys: bool = False,
+    default: Callable[[Any], Any] | None = json_default,
+) -> Path:
+    """Write ``obj`` as strict JSON (NaN and inf as ``null``) to ``path`` atomically."""
+    text = json.dumps(
+        json_safe(obj), indent=indent, sort_keys=sort_keys, allow_nan=False, default=default
+    )
+    return atomic_write(path, text)
+
+
+def remove_stale_tmp(directory: str | os.PathLike, *, min_age_s: float = 0.0) -> list[Path]:
+    """Delete temporary files that a killed writer left in ``directory`` (recursively).
+
+    Only files named like :func:`atomic_open`'s (``.<name>.<random>.tmp``) and last modified
+    at least ``min_age_s`` seconds ago are touched (a positive age spares the files of a writer
+    still running beside this one). Returns the removed paths.
+    """
+    import time
+
+    root = Path(directory)
+    removed = []
+    now = time.time()
+    if root.is_dir():
+        for p in root.rglob(f".*{TMP_SUFFIX}"):
+            if p.is_file() and now - p.stat().st_mtime >= min_age_s:
+                p.unlink(missing_ok=True)
+                removed.append(p)
+    return removed
