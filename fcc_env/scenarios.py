@@ -19,6 +19,7 @@ the paper's (density and holdup up, weir and ratio constants down).
 
 from __future__ import annotations
 
+import dataclasses
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
@@ -28,6 +29,7 @@ from typing import Any
 import numpy as np
 
 from fcc_env.params import NOMINAL_INPUTS, PARAM_INDEX
+from fcc_env.validation import Integer, Options, Real, check
 
 
 class Scenario(StrEnum):
@@ -62,8 +64,16 @@ FAULTS: dict[Scenario, FaultDefinition] = {
 }
 
 SCENARIOS: tuple[str, ...] = tuple(s.value for s in Scenario)
+#: The scenario name that draws scenario, onset and magnitude per episode.
+RANDOM_SCENARIO = "random"
 #: Upper bound on fault magnitudes: beyond it the plant leaves the hot state (f2 at 100 % stops flow).
 MAX_FAULT_MAGNITUDE = 0.9
+#: Samples an incipient fault takes to reach its magnitude when ``ramp_samples`` is not given.
+DEFAULT_RAMP_SAMPLES = 500
+#: Episode length of the paper (4000 samples of 10 s); the env's and the harness's default.
+DEFAULT_N_SAMPLES = 4000
+#: Allowed ``magnitude_scale`` of :class:`FaultSpec` (a multiplier on the paper's magnitudes).
+MAGNITUDE_SCALE_RANGE = Real(0.0, 10.0, closed="right")
 
 
 def parse_scenario(value: Any) -> Scenario:
@@ -163,7 +173,7 @@ def resolve_fault(
         )
     ramp = 0
     if profile is FaultProfile.INCIPIENT:
-        ramp = 500 if ramp_samples is None else ramp_samples
+        ramp = DEFAULT_RAMP_SAMPLES if ramp_samples is None else ramp_samples
         if isinstance(ramp, bool) or not isinstance(ramp, int | np.integer) or ramp < 1:
             raise ValueError(
                 f"ramp_samples must be an integer >= 1 for an incipient fault, got {ramp!r}"
@@ -172,6 +182,143 @@ def resolve_fault(
     elif ramp_samples not in (None, 0):
         raise ValueError(f"ramp_samples={ramp_samples!r} only applies to fault_profile='incipient'")
     return FaultConfig(sc, onset, mag, profile, ramp)
+
+
+#: ``(make/reset option name, FaultSpec field)``: the env's historical keyword names.
+FAULT_OPTION_FIELDS: tuple[tuple[str, str], ...] = (
+    ("scenario", "scenario"),
+    ("fault_time", "onset"),
+    ("fault_magnitude", "magnitude"),
+    ("fault_profile", "profile"),
+    ("ramp_samples", "ramp_samples"),
+)
+
+
+@dataclass(frozen=True, kw_only=True)
+class FaultSpec:
+    """The fault an episode is asked for, before the horizon and any random draw resolve it.
+
+    This is the one typed scenario that the env (``make`` kwargs and ``reset`` options),
+    :func:`fcc_env.simulate_episodes`, the harness's data source, the leaderboard and the
+    ``generate`` CLI pass around; :meth:`resolve` turns it into the :class:`FaultConfig` of one
+    episode. ``None`` means the fault's own default (the table above, the paper's set-up).
+
+    Attributes:
+        scenario: ``"nominal"``, ``"f1"``–``"f4"`` or ``"random"`` (scenario uniform over all
+            five, onset uniform in the middle half of the horizon, magnitude uniform in
+            [0.5, 1.5] × the paper's; explicit ``onset``/``magnitude`` override the draws).
+        onset: sample at which the fault starts (default: the fault's paper onset).
+        magnitude: relative size of the change, ≥ 0 (default: the fault's paper magnitude).
+        profile: ``"abrupt"`` (a step) or ``"incipient"`` (a linear ramp).
+        ramp_samples: samples an incipient fault takes to reach its magnitude
+            (default :data:`DEFAULT_RAMP_SAMPLES`); only with ``profile="incipient"``.
+        magnitude_scale: multiplies the magnitude (given or default) of any fault, e.g. 0.7 for
+            the validation protocol's smaller faults.
+
+    >>> FaultSpec(scenario="f1").resolve(horizon=4000).magnitude
+    0.1
+    >>> FaultSpec(scenario="f3", magnitude_scale=0.5).resolve(horizon=4000).magnitude
+    0.05
+    """
+
+    scenario: str = Scenario.NOMINAL.value
+    onset: int | None = None
+    magnitude: float | None = None
+    profile: FaultProfile = FaultProfile.ABRUPT
+    ramp_samples: int | None = None
+    magnitude_scale: float = 1.0
+
+    def __post_init__(self) -> None:
+        sc = check("scenario", self.scenario, Options([*SCENARIOS, RANDOM_SCENARIO]))
+        set_ = object.__setattr__
+        set_(self, "scenario", str(sc))
+        set_(self, "onset", check("fault_time", self.onset, Integer(0), None))
+        set_(
+            self,
+            "magnitude",
+            check("fault_magnitude", self.magnitude, Real(0.0, MAX_FAULT_MAGNITUDE), None),
+        )
+        set_(self, "profile", check("fault_profile", self.profile, Options(FaultProfile)))
+        set_(self, "ramp_samples", check("ramp_samples", self.ramp_samples, Integer(1), None))
+        if self.ramp_samples is not None and self.profile is not FaultProfile.INCIPIENT:
+            raise ValueError(
+                f"ramp_samples={self.ramp_samples!r} only applies to fault_profile='incipient'"
+            )
+        set_(
+            self,
+            "magnitude_scale",
+            check("magnitude_scale", self.magnitude_scale, MAGNITUDE_SCALE_RANGE),
+        )
+
+    @classmethod
+    def from_options(cls, options: Mapping[str, Any]) -> FaultSpec:
+        """Build from env-style options (``scenario``, ``fault_time``, ``fault_magnitude``,
+        ``fault_profile``, ``ramp_samples``); missing or ``None`` options take the defaults."""
+        kwargs = {
+            field: options[opt]
+            for opt, field in FAULT_OPTION_FIELDS
+            if options.get(opt) is not None
+        }
+        return cls(**kwargs)
+
+    def to_options(self) -> dict[str, Any]:
+        """The inverse of :meth:`from_options` (JSON-serialisable; ``magnitude_scale`` applied
+        to the magnitude only by :meth:`resolve`, so it is not an option)."""
+        return {
+            opt: (str(v) if isinstance(v, StrEnum) else v)
+            for opt, field in FAULT_OPTION_FIELDS
+            for v in [getattr(self, field)]
+        }
+
+    def replace(self, **changes: Any) -> FaultSpec:
+        return dataclasses.replace(self, **changes)
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "scenario": self.scenario,
+            "onset": self.onset,
+            "magnitude": self.magnitude,
+            "profile": self.profile.value,
+            "ramp_samples": self.ramp_samples,
+            "magnitude_scale": self.magnitude_scale,
+        }
+
+    def magnitude_for(self, scenario: Scenario, magnitude: float | None = None) -> float | None:
+        """The magnitude passed on for ``scenario`` (``magnitude`` or this spec's, ``None`` for
+        the fault's default) with ``magnitude_scale`` applied."""
+        magnitude = self.magnitude if magnitude is None else magnitude
+        if self.magnitude_scale == 1.0 or scenario not in FAULTS:
+            return magnitude
+        base = FAULTS[scenario].default_magnitude if magnitude is None else magnitude
+        return base * self.magnitude_scale
+
+    def resolve(self, horizon: int, rng: np.random.Generator | None = None) -> FaultConfig:
+        """The fault of one episode of ``horizon`` samples; ``rng`` draws a random scenario.
+
+        The random draws always consume the same numbers of ``rng``, so the rest of the episode
+        does not depend on them. Errors name the value and the allowed range.
+        """
+        sc_name, onset, magnitude = self.scenario, self.onset, self.magnitude
+        if sc_name == RANDOM_SCENARIO:
+            if rng is None:
+                raise ValueError("scenario='random' needs a random generator to draw from")
+            sc = list(Scenario)[int(rng.integers(len(Scenario)))]
+            drawn_onset = int(rng.integers(horizon // 4, max(horizon // 4 + 1, 3 * horizon // 4)))
+            scale = float(rng.uniform(0.5, 1.5))
+            sc_name = sc.value
+            if sc is not Scenario.NOMINAL:
+                onset = drawn_onset if onset is None else onset
+                if magnitude is None:
+                    magnitude = FAULTS[sc].default_magnitude * scale
+        sc = Scenario(sc_name)
+        return resolve_fault(
+            sc,
+            onset,
+            self.magnitude_for(sc, magnitude),
+            self.profile,
+            self.ramp_samples,
+            horizon=horizon,
+        )
 
 
 # ---- operating program (spec §7.5) -------------------------------------------------------------
