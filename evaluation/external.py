@@ -31,7 +31,7 @@ from typing import Any
 import numpy as np
 
 from diagnosers.base import Episode
-from evaluation.harness import LoadedEpisode
+from evaluation.sources import DataDescription, LoadedEpisode
 from evaluation.store import check_name
 
 __all__ = [
@@ -282,6 +282,12 @@ class ExternalData:
             for f in [*self.train_files, *(tf.path for tf in self.test_files)]
         }
         return key
+
+    def describe(self) -> DataDescription:
+        return DataDescription(
+            label=f"external:{Path(self.directory).name}",
+            lines=("External records: one test file per scenario (seed 0); see results.json.",),
+        )
 
     def cells(self) -> list[tuple[str, int]]:
         return [(tf.key, 0) for tf in self.test_files]

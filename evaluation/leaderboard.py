@@ -271,50 +271,18 @@ def summary_rows(summaries: Sequence[CellSummary], *, data: str, version: str) -
 
 
 def _data_label(config: SweepConfig) -> str:
-    if isinstance(config.data, SimulatedData):
-        import fcc_env
-
-        return f"{fcc_env.ENV_ID} ({fcc_env.MODEL_VERSION})"
-    return f"external:{Path(getattr(config.data, 'directory', '?')).name}"
+    return config.data.describe().label
 
 
 def _reference(config: SweepConfig) -> dict[str, Any] | None:
-    """The paper's row, shown only beside the paper's set-up (simulated, paper magnitudes)."""
-    data = config.data
-    if (
-        isinstance(data, SimulatedData)
-        and data.fault_magnitude_scale == 1.0
-        and data.fault_profile == "abrupt"
-    ):
-        return PAPER_TABLE2
-    return None
+    """The paper's row, shown only beside the paper's own set-up."""
+    return PAPER_TABLE2 if config.data.describe().paper_setup else None
 
 
 def header_text(results: SweepResults) -> str:
     """What the table is about: data, seeds, units, ranking."""
-    cfg = results.config
-    data = cfg.data
-    lines = [f"# Fault-detection leaderboard: {_data_label(cfg)}", ""]
-    if isinstance(data, SimulatedData):
-        lines.append(
-            f"Test seeds {data.test_seeds[0]}..{data.test_seeds[-1]} ({len(data.test_seeds)} per "
-            f"scenario), training on {len(data.train_seeds)} healthy episodes (seeds "
-            f"{data.train_seeds[0]}..{data.train_seeds[-1]}), {data.n_samples} samples each."
-        )
-        if data.fault_profile != "abrupt":
-            ramp = 500 if data.ramp_samples is None else data.ramp_samples
-            lines.append(
-                f"Incipient faults: each parameter ramps to its full change over {ramp} samples "
-                "from the onset; t_dt counts from the onset. The paper's row (abrupt faults) does "
-                "not apply."
-            )
-        if data.fault_magnitude_scale != 1.0:
-            lines.append(
-                f"Fault magnitudes {data.fault_magnitude_scale:g}x the paper's (validation "
-                "protocol): the paper's row does not apply."
-            )
-    else:
-        lines.append("External records: one test file per scenario (seed 0); see results.json.")
+    description = results.config.data.describe()
+    lines = [f"# Fault-detection leaderboard: {description.label}", "", *description.lines]
     lines += [
         "Cells: mean ± std over test seeds. r_fd: false detection rate on healthy episodes; "
         "r_td: true detection rate after the onset; t_dt: detection time in samples, mean over "

@@ -5,6 +5,7 @@ Layout of a store directory (everything is plain JSON or a :meth:`Diagnoser.save
     <root>/sweep.json                                 manifest: format tag, version, data hash
     <root>/models/<label>/                            trained diagnoser (Diagnoser.save) + spec.json
     <root>/cells/<label>/<scenario>/seed-<seed>.json  one finished cell
+    <root>/detections/<label>/<scenario>/seed-<seed>.npz  the whole detection of a figure cell
 
 Why it is built like this:
 
@@ -24,14 +25,18 @@ from __future__ import annotations
 
 import hashlib
 import json
-import math
 import os
 import re
 import shutil
 import tempfile
+import zipfile
 from collections.abc import Iterator, Mapping
 from pathlib import Path
 from typing import Any
+
+import numpy as np
+
+from fcc_env.io import atomic_open, atomic_write_json
 
 __all__ = [
     "CELL_FORMAT",
@@ -84,27 +89,8 @@ def canonical_hash(obj: Any) -> str:
     return hashlib.sha256(text.encode()).hexdigest()
 
 
-def _nan_to_none(obj: Any) -> Any:
-    """Replace non-finite floats by ``None``: strict JSON has no NaN."""
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    if isinstance(obj, Mapping):
-        return {k: _nan_to_none(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_nan_to_none(v) for v in obj]
-    return obj
-
-
 def _atomic_write_json(path: Path, obj: Any) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    text = json.dumps(_nan_to_none(obj), indent=1, sort_keys=True, allow_nan=False)
-    with tempfile.NamedTemporaryFile(
-        "w", dir=path.parent, prefix=f".{path.name}.", suffix=".tmp", delete=False
-    ) as fh:
-        fh.write(text)
-        fh.flush()
-        os.fsync(fh.fileno())
-    os.replace(fh.name, path)
+    atomic_write_json(path, obj, indent=1, sort_keys=True, default=None)
 
 
 def _read_json(path: Path, what: str, remedy: str) -> dict[str, Any]:
@@ -240,6 +226,41 @@ class ResultStore:
     def iter_cell_files(self) -> Iterator[Path]:
         """Every cell file present, sorted (including cells of other labels or seeds)."""
         yield from sorted((self.root / "cells").glob("*/*/seed-*.json"))
+
+    # ---- detections of figure cells ----------------------------------------------------------
+    def detection_path(self, label: str, scenario: str, seed: int) -> Path:
+        check_name("diagnoser label", label)
+        check_name("scenario", scenario)
+        return self.root / "detections" / label / scenario / f"seed-{int(seed)}.npz"
+
+    def read_detection(
+        self, label: str, scenario: str, seed: int, cell_hash: str
+    ) -> dict[str, np.ndarray] | None:
+        """The stored arrays of a figure cell, or ``None`` when absent or of other settings
+        (then the cell's detection is simply computed again; figures are never stale)."""
+        path = self.detection_path(label, scenario, seed)
+        if not path.is_file():
+            return None
+        try:
+            with np.load(path, allow_pickle=False) as z:
+                arrays = {k: z[k] for k in z.files}
+        except (OSError, ValueError, zipfile.BadZipFile) as e:
+            raise StoreError(
+                f"{path} is not a readable detection file ({type(e).__name__}: {e}); delete it "
+                "to recompute this figure cell"
+            ) from e
+        if str(arrays.pop("cell_hash", "")) != cell_hash:
+            return None
+        return arrays
+
+    def write_detection(
+        self, label: str, scenario: str, seed: int, cell_hash: str, arrays: Mapping[str, Any]
+    ) -> Path:
+        """Write a figure cell's arrays atomically (numeric and text arrays, no pickles)."""
+        path = self.detection_path(label, scenario, seed)
+        with atomic_open(path, "wb") as fh:
+            np.savez_compressed(fh, cell_hash=np.array(cell_hash), **dict(arrays))
+        return path
 
     # ---- models ------------------------------------------------------------------------------
     def model_dir(self, label: str) -> Path:

@@ -39,6 +39,7 @@ __all__ = [
     "Constraint",
     "Integer",
     "IntegerSequence",
+    "OptionSequence",
     "Options",
     "Real",
     "check",
@@ -203,6 +204,28 @@ class IntegerSequence(Constraint):
             dup = sorted({v for v in out if out.count(v) > 1})
             raise invalid(name, value, self.describe(), f"{dup} repeat")
         return tuple(out)
+
+
+class OptionSequence(Constraint):
+    """A non-empty sequence (not a string) of distinct values from a fixed set; returns a tuple."""
+
+    def __init__(self, values: Iterable[Any], *, why: str | None = None) -> None:
+        self.values = tuple(values)
+        self.why = why
+
+    def describe(self) -> str:
+        return f"a non-empty sequence of distinct values from {list(self.values)}"
+
+    def coerce(self, name: str, value: Any) -> tuple[Any, ...]:
+        if isinstance(value, str | bytes) or not isinstance(value, Sequence) or not value:
+            raise invalid(name, value, self.describe(), self.why)
+        for v in value:
+            if v not in self.values:
+                raise invalid(name, value, self.describe(), f"{v!r} is not")
+        if len(set(value)) != len(value):
+            dup = sorted({v for v in value if list(value).count(v) > 1})
+            raise invalid(name, value, self.describe(), f"{dup} repeat")
+        return tuple(value)
 
 
 def check(name: str, value: Any, *constraints: Constraint | None) -> Any:

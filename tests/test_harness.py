@@ -345,16 +345,16 @@ def test_failing_diagnoser_names_the_cell(tmp_path) -> None:
 
 
 def test_failing_cell_keeps_finished_cells(tmp_path, monkeypatch) -> None:
-    import evaluation.harness as h
+    import evaluation.sweep as sweep_module
 
-    real = h.score_episode
+    real = sweep_module.detect_and_score
 
     def flaky(diag, loaded, **kw):
         if loaded.episode.scenario == "f1" and loaded.episode.seed == 1:
             raise FloatingPointError("boom")
         return real(diag, loaded, **kw)
 
-    monkeypatch.setattr(h, "score_episode", flaky)
+    monkeypatch.setattr(sweep_module, "detect_and_score", flaky)
     with pytest.raises(RuntimeError, match=r"limits on f1, seed 1: FloatingPointError: boom"):
         run_sweep(CONFIG, tmp_path / "s", n_workers=0, progress=False)
     monkeypatch.undo()

@@ -174,7 +174,7 @@ def test_validation_protocol_uses_its_own_seeds_and_smaller_faults(tmp_path, cap
     printed = capsys.readouterr().out
     assert "paper Table 2" not in printed  # the paper's row is for the paper's magnitudes
     raw = json.loads((out / "results.json").read_text())
-    assert raw["data"]["fault_magnitude_scale"] == 0.7
+    assert raw["data"]["fault"]["magnitude_scale"] == 0.7
     assert {r["seed"] for r in raw["records"]} == {5000, 5001}
     assert "0.7x the paper's" in (out / "leaderboard.md").read_text()
 
@@ -186,7 +186,10 @@ def test_incipient_faults_from_the_cli(tmp_path, capsys) -> None:
     assert main([*argv, "--out", str(out), "--no-figures"]) == 0
     assert "paper Table 2" not in capsys.readouterr().out
     raw = json.loads((out / "results.json").read_text())
-    assert (raw["data"]["fault_profile"], raw["data"]["ramp_samples"]) == ("incipient", 360)
+    assert (raw["data"]["fault"]["profile"], raw["data"]["fault"]["ramp_samples"]) == (
+        "incipient",
+        360,
+    )
     assert "ramps to its full change over 360 samples" in (out / "leaderboard.md").read_text()
 
 
@@ -199,8 +202,8 @@ def test_fault_magnitude_scale_scales_every_fault() -> None:
     assert data._magnitude("nominal") is None
     assert SimulatedData(fault_magnitude=0.2, fault_magnitude_scale=0.5)._magnitude("f1") == 0.1
     # the default leaves the store key (and so earlier stores) as before the option existed
-    assert "fault_magnitude_scale" not in SimulatedData().store_key()
-    with pytest.raises(ValueError, match=r"fault_magnitude_scale=0 outside the allowed range"):
+    assert SimulatedData().store_key()["fault"]["magnitude_scale"] == 1.0
+    with pytest.raises(ValueError, match=r"fault_magnitude_scale=0 is outside the allowed range: a number in \(0, 10\]"):
         SimulatedData(fault_magnitude_scale=0).validate()
 
 

@@ -1,0 +1,296 @@
+"""Data sources of a sweep: where training and test episodes come from.
+
+A data source implements :class:`DataSource` (it travels to worker processes, so it must be
+picklable). :class:`SimulatedData` simulates ``FCC-v0`` episodes with
+:func:`fcc_env.simulate_episodes`: training uses healthy (``nominal``) episodes of
+``train_seeds``; testing uses ``scenarios`` × ``test_seeds``. The two seed sets must be disjoint
+(checked): by default test seeds are ``0..N-1`` and training seeds ``1000..``, so a diagnoser
+never sees a test episode's excitation or noise. :class:`evaluation.external.ExternalData` reads
+a directory of CSV/Parquet records.
+
+An episode that the simulator terminated early (the envelope was left, e.g. the afterburn
+ignited) keeps its samples before ``terminated_at`` only; :class:`LoadedEpisode` carries the
+planned onset, the termination sample and its reason to the records.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+
+from diagnosers.base import Episode
+from fcc_env.scenarios import (
+    DEFAULT_N_SAMPLES,
+    DEFAULT_RAMP_SAMPLES,
+    N_SAMPLES_RANGE,
+    NOISE_SCALE_RANGE,
+    SAMPLE_TIME_RANGE,
+    FaultProfile,
+    FaultSpec,
+    Scenario,
+)
+from fcc_env.validation import Boolean, IntegerSequence, OptionSequence, check
+
+#: Default first training seed: far from the test seeds 0..N-1 of any realistic sweep.
+TRAIN_SEED_BASE = 1000
+#: Seeds of a sweep: distinct non-negative integers.
+SEEDS = IntegerSequence(0, 2**63 - 1)
+
+
+@dataclass(frozen=True)
+class LoadedEpisode:
+    """A test episode ready for scoring, with what the harness records about it.
+
+    Attributes:
+        episode: the usable samples (cut at ``terminated_at``); its ``fault_onset`` is ``None``
+            when no faulty sample remains.
+        fault_onset: the scenario's onset sample as planned (``None`` for a healthy episode).
+        n_samples_planned: samples the episode was meant to have.
+        terminated_at: first sample outside the plant envelope, ``None`` if it ran to the end.
+        termination_reason: why it terminated, ``None`` if it did not.
+    """
+
+    episode: Episode
+    fault_onset: int | None
+    n_samples_planned: int
+    terminated_at: int | None = None
+    termination_reason: str | None = None
+
+
+@runtime_checkable
+class DataSource(Protocol):
+    """What :func:`run_sweep` needs from a data source (picklable: it travels to workers)."""
+
+    def validate(self) -> None:
+        """Raise ``ValueError`` naming a bad option and the allowed values."""
+
+    def store_key(self) -> dict[str, Any]:
+        """JSON description of everything that defines training and test data, except which
+        test cells are run (hashed into the store manifest)."""
+
+    def cells(self) -> list[tuple[str, int]]:
+        """The test episodes as ``(scenario, seed)`` pairs, in presentation order."""
+
+    def train_episodes(self) -> list[Episode]:
+        """Healthy training episodes."""
+
+    def load_test(self, scenario: str, seed: int) -> LoadedEpisode:
+        """One test episode."""
+
+    def describe(self) -> DataDescription:
+        """What the data are, for table headers (see :class:`DataDescription`)."""
+
+
+@dataclass(frozen=True)
+class DataDescription:
+    """What a data source says about itself for tables and headers (no branching on its type).
+
+    Attributes:
+        label: short name of the data (the env id and model version, or ``external:<dir>``).
+        lines: sentences for the table header (seeds, set-up, what differs from the paper).
+        paper_setup: the paper's own set-up (abrupt faults at the paper's sizes and onsets),
+            beside which the paper's Table 2 is a fair reference row.
+    """
+
+    label: str
+    lines: tuple[str, ...]
+    paper_setup: bool = False
+
+
+@dataclass(frozen=True, kw_only=True)
+class SimulatedData:
+    """``FCC-v0`` episodes simulated on demand (deterministic in the seed and options).
+
+    Args:
+        scenarios: test scenarios, a subset of ``fcc_env.SCENARIOS``.
+        test_seeds: seeds of the test episodes (the same seeds for every scenario, so the
+            scenarios share excitation programs: a paired design).
+        train_seeds: seeds of the healthy training episodes; disjoint from ``test_seeds``.
+        n_samples: samples per episode (4000 = the paper's horizon).
+        fault: the fault of the test episodes, a :class:`fcc_env.scenarios.FaultSpec` whose
+            ``scenario`` is replaced by each test scenario (default: the paper's onsets and
+            magnitudes, abrupt). ``magnitude_scale=0.7`` gives the smaller faults of the
+            validation protocol (:mod:`evaluation.leaderboard` ``--validation``).
+        excitation, noise_scale, sample_time_s: the plant's operation, passed to
+            :func:`fcc_env.simulate_episodes` for training and test episodes alike.
+        fault_time, fault_magnitude, fault_profile, ramp_samples, fault_magnitude_scale: the
+            fields of ``fault`` under their former names (kept for one release; give either
+            these or ``fault``).
+    """
+
+    scenarios: tuple[str, ...] = ("nominal", "f1", "f2", "f3", "f4")
+    test_seeds: tuple[int, ...] = tuple(range(10))
+    train_seeds: tuple[int, ...] = tuple(range(TRAIN_SEED_BASE, TRAIN_SEED_BASE + 5))
+    n_samples: int = DEFAULT_N_SAMPLES
+    fault: FaultSpec | None = None
+    excitation: bool = True
+    noise_scale: float = 1.0
+    sample_time_s: float = 10.0
+    fault_time: int | None = None
+    fault_magnitude: float | None = None
+    fault_profile: str = "abrupt"
+    ramp_samples: int | None = None
+    fault_magnitude_scale: float = 1.0
+
+    @property
+    def fault_spec(self) -> FaultSpec:
+        """The test episodes' :class:`FaultSpec` (from ``fault`` or the former field names)."""
+        legacy = {
+            "onset": self.fault_time,
+            "magnitude": self.fault_magnitude,
+            "profile": self.fault_profile,
+            "ramp_samples": self.ramp_samples,
+            "magnitude_scale": self.fault_magnitude_scale,
+        }
+        if self.fault is None:
+            try:
+                return FaultSpec(**legacy)
+            except ValueError as e:  # name the field as the caller wrote it
+                msg = str(e).replace("magnitude_scale=", "fault_magnitude_scale=", 1)
+                raise ValueError(msg) from None
+        default = FaultSpec()
+        changed = [k for k, v in legacy.items() if v != getattr(default, k)]
+        if changed:
+            raise ValueError(
+                f"SimulatedData got fault={self.fault!r} and the former fault fields "
+                f"{changed}; give the fault once, as a FaultSpec"
+            )
+        return self.fault
+
+    def validate(self) -> None:
+        import fcc_env
+
+        check("scenarios", self.scenarios, OptionSequence(fcc_env.SCENARIOS))
+        test = check("test_seeds", self.test_seeds, SEEDS)
+        train = check("train_seeds", self.train_seeds, SEEDS)
+        common = sorted(set(test) & set(train))
+        if common:
+            raise ValueError(
+                f"train_seeds and test_seeds must be disjoint (a diagnoser must not be tested on "
+                f"the episodes it was trained on); both hold {common}"
+            )
+        n = check("n_samples", self.n_samples, N_SAMPLES_RANGE)
+        check("excitation", self.excitation, Boolean())
+        check("noise_scale", self.noise_scale, NOISE_SCALE_RANGE)
+        check("sample_time_s", self.sample_time_s, SAMPLE_TIME_RANGE)
+        spec = self.fault_spec
+        for sc in self.scenarios:
+            try:
+                spec.replace(scenario=sc).resolve(horizon=n)
+            except ValueError as e:
+                raise ValueError(
+                    f"scenario {sc!r} with n_samples={n}: {e}; with short episodes pass "
+                    "fault_time=<sample below n_samples>"
+                ) from e
+
+    def store_key(self) -> dict[str, Any]:
+        import fcc_env
+
+        # Which test cells run does not change any single cell's result: leave them out so that
+        # a sweep extended with more seeds or scenarios reuses the stored cells.
+        fault = self.fault_spec.to_json()
+        del fault["scenario"]
+        return {
+            "kind": "simulated",
+            "model_version": fcc_env.MODEL_VERSION,
+            "n_samples": self.n_samples,
+            "train_seeds": list(self.train_seeds),
+            "fault": fault,
+            "excitation": self.excitation,
+            "noise_scale": self.noise_scale,
+            "sample_time_s": self.sample_time_s,
+        }
+
+    def describe(self) -> DataDescription:
+        import fcc_env
+
+        spec = self.fault_spec
+        lines = [
+            f"Test seeds {self.test_seeds[0]}..{self.test_seeds[-1]} ({len(self.test_seeds)} per "
+            f"scenario), training on {len(self.train_seeds)} healthy episodes (seeds "
+            f"{self.train_seeds[0]}..{self.train_seeds[-1]}), {self.n_samples} samples each."
+        ]
+        if spec.profile is not FaultProfile.ABRUPT:
+            ramp = DEFAULT_RAMP_SAMPLES if spec.ramp_samples is None else spec.ramp_samples
+            lines.append(
+                f"Incipient faults: each parameter ramps to its full change over {ramp} samples "
+                "from the onset; t_dt counts from the onset. The paper's row (abrupt faults) does "
+                "not apply."
+            )
+        if spec.magnitude_scale != 1.0:
+            lines.append(
+                f"Fault magnitudes {spec.magnitude_scale:g}x the paper's (validation "
+                "protocol): the paper's row does not apply."
+            )
+        paper = (
+            spec.magnitude_scale == 1.0
+            and spec.profile is FaultProfile.ABRUPT
+            and spec.magnitude is None
+            and self.noise_scale == 1.0
+        )
+        return DataDescription(
+            label=f"{fcc_env.ENV_ID} ({fcc_env.MODEL_VERSION})",
+            lines=tuple(lines),
+            paper_setup=paper,
+        )
+
+    def cells(self) -> list[tuple[str, int]]:
+        return [(sc, int(s)) for sc in self.scenarios for s in self.test_seeds]
+
+    def _simulate(self, seeds: Sequence[int], scenario: str) -> Any:
+        import fcc_env
+
+        spec = self.fault_spec
+        return fcc_env.simulate_episodes(
+            list(seeds),
+            int(self.n_samples),
+            scenario=scenario,
+            fault_time=spec.onset,
+            fault_magnitude=self._magnitude(scenario),
+            fault_profile=spec.profile.value,
+            ramp_samples=spec.ramp_samples,
+            excitation=self.excitation,
+            noise_scale=self.noise_scale,
+            sample_time_s=self.sample_time_s,
+        )
+
+    def _magnitude(self, scenario: str) -> float | None:
+        """The fault magnitude passed to the simulator for ``scenario`` (scale applied)."""
+        return self.fault_spec.magnitude_for(Scenario(scenario))
+
+    def _loaded(self, res: Any, b: int) -> LoadedEpisode:
+        import fcc_env
+
+        term = int(res.terminated_at[b])
+        n_used = term if term >= 0 else int(self.n_samples)
+        onset = res.fault_onsets[b]
+        onset = None if onset is None else int(onset)
+        episode = Episode(
+            y=np.asarray(res.observations[b, :n_used], dtype=np.float64),
+            channels=tuple(fcc_env.MEASUREMENT_NAMES),
+            sample_time_s=float(res.sample_time_s),
+            fault_onset=onset if onset is not None and onset < n_used else None,
+            scenario=str(res.scenarios[b]),
+            seed=int(res.seeds[b]),
+            y_clean=np.asarray(res.y_clean[b, :n_used]),
+        )
+        return LoadedEpisode(
+            episode=episode,
+            fault_onset=onset,
+            n_samples_planned=int(self.n_samples),
+            terminated_at=term if term >= 0 else None,
+            termination_reason=res.termination_reasons[b] if term >= 0 else None,
+        )
+
+    def train_episodes(self) -> list[Episode]:
+        res = self._simulate(self.train_seeds, "nominal")
+        # A training episode that left the envelope keeps its samples before termination; one
+        # with fewer than 2 samples has nothing to learn from and is dropped.
+        eps = [self._loaded(res, b).episode for b in range(len(self.train_seeds))]
+        return [ep for ep in eps if ep.n_samples >= 2]
+
+    def load_test(self, scenario: str, seed: int) -> LoadedEpisode:
+        return self._loaded(self._simulate([seed], scenario), 0)
