@@ -101,6 +101,7 @@ from diagnosers.lrgf import LRGF, InitialState, LRGFStepper, NeuronFilters, lrgf
 from diagnosers.mem import BandScale, MEMStepper, NNARXErrorModel, OutputActivation, band, t_alpha
 from diagnosers.registry import register
 from diagnosers.training import Method, build_module, export_module, fit_lrgf, fit_mem
+from fcc_env.io import atomic_open, atomic_write
 from fcc_env.validation import Boolean, Integer, Options, Real, check_params
 
 __all__ = [
@@ -567,8 +568,9 @@ class _LRGFMEMBase(Diagnoser):
             configs.append({"lrgf": c1, "mem": c2})
             tensors.update({f"{j}.lrgf.{k}": v for k, v in s1.items()})
             tensors.update({f"{j}.mem.{k}": v for k, v in s2.items()})
-        (directory / "models.json").write_text(json.dumps(configs, indent=2))
-        torch.save(tensors, directory / "weights.pt")
+        atomic_write(directory / "models.json", json.dumps(configs, indent=2))
+        with atomic_open(directory / "weights.pt", "wb") as fh:
+            torch.save(tensors, fh)
 
     def _load_extra(self, directory: Path) -> None:
         try:
