@@ -6,7 +6,7 @@ True
 """
 
 from diagnosers.base import Decision, Detection, Diagnoser, Episode, NotFittedError
-from diagnosers.registry import available, make, register
+from diagnosers.registry import available, diagnoser_class, make, register
 
 # isort: split
 # Importing the model modules registers their diagnosers (after the registry exists).
@@ -22,6 +22,7 @@ __all__ = [
     "Episode",
     "NotFittedError",
     "available",
+    "diagnoser_class",
     "make",
     "register",
 ]

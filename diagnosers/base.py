@@ -14,7 +14,6 @@ from __future__ import annotations
 import inspect
 import json
 import os
-import tempfile
 from abc import ABC, abstractmethod
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -23,14 +22,10 @@ from typing import Any, ClassVar, Self
 
 import numpy as np
 
+from fcc_env.io import atomic_open, atomic_write
+
 SAVE_FORMAT = "fcc-diagnoser"
 SAVE_FORMAT_VERSION = 1
-
-
-def _atomic_write_text(path: Path, text: str) -> None:
-    with tempfile.NamedTemporaryFile("w", dir=path.parent, suffix=".tmp", delete=False) as fh:
-        fh.write(text)
-    os.replace(fh.name, path)
 
 
 class NotFittedError(RuntimeError):
@@ -163,6 +158,20 @@ class Diagnoser(ABC):
             p.name for p in sig.parameters.values() if p.name != "self" and p.kind is p.KEYWORD_ONLY
         ]
 
+    @classmethod
+    def fast_params(cls) -> dict[str, Any]:
+        """Small, fast hyperparameters for smoke runs, quick sweeps and tests (``{}``: defaults).
+
+        A subclass whose defaults train for long (neural models) returns overrides that keep
+        the model's structure but cut its cost, e.g. fewer epochs.
+        """
+        return {}
+
+    @classmethod
+    def _test_params(cls) -> dict[str, Any]:
+        """Deprecated alias of :meth:`fast_params`, kept for one release."""
+        return cls.fast_params()
+
     def get_params(self) -> dict[str, Any]:
         """Hyperparameters as passed to ``__init__`` (JSON-serialisable by convention)."""
         return {k: getattr(self, k) for k in self._param_names()}
@@ -261,11 +270,11 @@ class Diagnoser(ABC):
             "sample_time_s": self.sample_time_s_,
         }
         state = {k: np.asarray(v) for k, v in self._get_state().items()}
-        with tempfile.NamedTemporaryFile(dir=out, suffix=".npz.tmp", delete=False) as fh:
+        with atomic_open(out / "state.npz", "wb") as fh:
             np.savez(fh, **state)
-        os.replace(fh.name, out / "state.npz")
         self._save_extra(out)
-        _atomic_write_text(out / "config.json", json.dumps(config, indent=2))
+        # config.json last: its presence marks a complete save
+        atomic_write(out / "config.json", json.dumps(config, indent=2))
         return out
 
     @classmethod

@@ -11,15 +11,17 @@ All three learn from healthy episodes only and decide with a confidence level ``
 
 from __future__ import annotations
 
-import numbers
 from collections.abc import Sequence
 
 import numpy as np
 from scipy import signal as sps
 from scipy import stats
 
+from diagnosers.alarm import two_sided_normal_quantile
 from diagnosers.base import Decision, Detection, Diagnoser, Episode
+from diagnosers.mem import band
 from diagnosers.registry import register
+from fcc_env.validation import Integer, Real, check, check_params, invalid
 
 __all__ = [
     "ARXBand",
@@ -33,9 +35,12 @@ __all__ = [
 
 
 # ---- shared helpers ----------------------------------------------------------------------------
-def two_sided_quantile(alpha: float) -> float:
-    """``t_α``: standard normal quantile with ``alpha`` split over both tails, ``Φ⁻¹(1 - α/2)``."""
-    return float(stats.norm.ppf(1.0 - alpha / 2.0))
+#: ``t_α``: standard normal quantile with ``alpha`` split over both tails, ``Φ⁻¹(1 - α/2)``
+#: (the one implementation is :func:`diagnosers.alarm.two_sided_normal_quantile`).
+two_sided_quantile = two_sided_normal_quantile
+
+#: significance level of every baseline
+ALPHA = Real(0, 1, closed="neither")
 
 
 def fit_percent(y: np.ndarray, y_hat: np.ndarray) -> float:
@@ -53,21 +58,6 @@ def fit_percent(y: np.ndarray, y_hat: np.ndarray) -> float:
     return float(100.0 * (1.0 - np.linalg.norm(y - y_hat) / spread))
 
 
-def _check_alpha(alpha: object) -> None:
-    if (
-        isinstance(alpha, bool)
-        or not isinstance(alpha, numbers.Real)
-        or not (0.0 < float(alpha) < 1.0)
-    ):
-        raise ValueError(f"alpha={alpha!r} must be a number in the open interval (0, 1)")
-
-
-def _check_int_param(name: str, value: object, low: int, high: int) -> None:
-    is_int = isinstance(value, numbers.Integral) and not isinstance(value, bool)
-    if not is_int or not low <= value <= high:
-        raise ValueError(f"{name}={value!r} must be an integer in [{low}, {high}]")
-
-
 def _check_names(name: str, value: object, *, allow_none: bool) -> None:
     if value is None and allow_none:
         return
@@ -79,9 +69,7 @@ def _check_names(name: str, value: object, *, allow_none: bool) -> None:
         or len(set(value)) != len(value)
     ):
         allowed = "None or " if allow_none else ""
-        raise ValueError(
-            f"{name}={value!r} must be {allowed}a non-empty list of distinct channel names"
-        )
+        raise invalid(name, value, f"{allowed}a non-empty list of distinct channel names")
 
 
 def _channel_indices(
@@ -127,7 +115,7 @@ class LimitChecker(Diagnoser):
         self.channels = channels
 
     def _validate_params(self) -> None:
-        _check_alpha(self.alpha)
+        check("alpha", self.alpha, ALPHA)
         _check_names("channels", self.channels, allow_none=True)
 
     def _fit(self, episodes: list[Episode]) -> None:
@@ -140,9 +128,7 @@ class LimitChecker(Diagnoser):
         self._finish()
 
     def _finish(self) -> None:
-        half = two_sided_quantile(self.alpha) * self.std_
-        self.lower_ = self.mean_ - half
-        self.upper_ = self.mean_ + half
+        self.lower_, self.upper_ = band(self.mean_, 0.0, self.std_, self.alpha)
         self.signal_names_ = tuple(self.channels_[i] for i in self.channel_idx_)
 
     def _get_state(self) -> dict[str, np.ndarray]:
@@ -252,13 +238,15 @@ class PCADetector(Diagnoser):
         self.channels = channels
 
     def _validate_params(self) -> None:
-        _check_alpha(self.alpha)
-        v = self.variance_explained
-        if isinstance(v, bool) or not isinstance(v, numbers.Real) or not 0.0 < float(v) <= 1.0:
-            raise ValueError(f"variance_explained={v!r} must be a number in (0, 1]")
-        if self.n_components is not None:
-            # The upper bound depends on the data (m - 1); it is checked again in _fit.
-            _check_int_param("n_components", self.n_components, 1, 10_000)
+        check_params(
+            self.get_params(),
+            {
+                "alpha": ALPHA,
+                "variance_explained": Real(0, 1, closed="right"),
+                # The upper bound depends on the data (m - 1); it is checked again in _fit.
+                "n_components": (Integer(1, 10_000), None),
+            },
+        )
         _check_names("channels", self.channels, allow_none=True)
 
     def _fit(self, episodes: list[Episode]) -> None:
@@ -284,9 +272,11 @@ class PCADetector(Diagnoser):
         else:
             k = int(self.n_components)
             if k > m - 1:
-                raise ValueError(
-                    f"n_components={k} must be in [1, {m - 1}] for {m} monitored channels "
-                    "(one dimension at least is needed for SPE)"
+                raise invalid(
+                    "n_components",
+                    k,
+                    Integer(1, m - 1).describe(),
+                    f"{m} monitored channels; one dimension at least is needed for SPE",
                 )
         # Fix the sign of each loading vector so that repeated fits give identical state.
         comps = vt[:k].T
@@ -414,16 +404,16 @@ class ARXBand(Diagnoser):
 
     def _validate_params(self) -> None:
         if not isinstance(self.output, str):
-            raise ValueError(f"output={self.output!r} must be a channel name (str)")
+            raise invalid("output", self.output, "a channel name (str)")
         _check_names("inputs", self.inputs, allow_none=False)
         if self.output in self.inputs:
             raise ValueError(
                 f"output={self.output!r} must not also be one of inputs={self.inputs!r}"
             )
-        _check_int_param("na", self.na, 0, 50)
-        _check_int_param("nb", self.nb, 1, 200)
-        _check_int_param("nk", self.nk, 0, 100)
-        _check_alpha(self.alpha)
+        check_params(
+            self.get_params(),
+            {"na": Integer(0, 50), "nb": Integer(1, 200), "nk": Integer(0, 100), "alpha": ALPHA},
+        )
 
     # -- model ---------------------------------------------------------------------------------
     @property
@@ -483,7 +473,9 @@ class ARXBand(Diagnoser):
 
     def _finish(self) -> None:
         self.signal_names_ = (self.channels_[int(self.output_idx_[0])],)
-        self.half_width_ = two_sided_quantile(self.alpha) * self.sigma_
+        # the band half-width t_α·σ, from mem.band's one formula
+        _, upper = band(0.0, 0.0, self.sigma_, self.alpha)
+        self.half_width_ = float(upper)
 
     def _split(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         return y[:, self.output_idx_[0]], y[:, self.input_idx_]

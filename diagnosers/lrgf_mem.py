@@ -82,26 +82,86 @@ first 70 % and calibrated on the remaining 30 % (simulated over the whole episod
 from __future__ import annotations
 
 import json
+from enum import StrEnum
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 import torch
-from scipy.stats import chi2, norm
 
+from diagnosers.alarm import (
+    EWMA,
+    TAIL_FIT_QUANTILE,
+    HotellingT2,
+    LimitMethod,
+    calibrate_limit,
+)
 from diagnosers.base import Decision, Detection, Diagnoser, Episode
-from diagnosers.lrgf import LRGF, InitialState, LRGFStepper, NeuronFilters
-from diagnosers.mem import MEMStepper, NNARXErrorModel, t_alpha
+from diagnosers.lrgf import LRGF, InitialState, LRGFStepper, NeuronFilters, lrgf_activation
+from diagnosers.mem import BandScale, MEMStepper, NNARXErrorModel, OutputActivation, band, t_alpha
 from diagnosers.registry import register
-from diagnosers.training import build_module, export_module, fit_lrgf, fit_mem
+from diagnosers.training import Method, build_module, export_module, fit_lrgf, fit_mem
+from fcc_env.io import atomic_open, atomic_write
+from fcc_env.validation import Boolean, Integer, Options, Real, check_params
+
+__all__ = [
+    "BANK_RELATIONS",
+    "DILUTE_RELATIONS",
+    "LRGFMEM",
+    "MIN_CALIBRATION_SAMPLES",
+    "PAPER_RELATIONS",
+    "TAIL_FIT_QUANTILE",
+    "AlarmFilter",
+    "LRGFMEMPaper",
+    "MemSelect",
+]
+
+
+class AlarmFilter(StrEnum):
+    """Alarm logic after the band (see the module docstring)."""
+
+    NONE = "none"
+    EWMA = "ewma"
+    EWMA_T2 = "ewma-t2"
+
+
+class MemSelect(StrEnum):
+    """Which relations keep their error model: all, or those where it lowers the held-out error."""
+
+    ALWAYS = "always"
+    IF_BETTER = "if_better"
+
 
 PAPER_RELATIONS: list[list[Any]] = [["T_rx", ["T_rg2", "T_fp"]]]
-ALARM_FILTERS = ("none", "ewma", "ewma-t2")
-LIMIT_METHODS = ("empirical", "chi2-tail")
+ALARM_FILTERS = tuple(f.value for f in AlarmFilter)
+LIMIT_METHODS = tuple(m.value for m in LimitMethod)
 #: fewest healthy calibration samples (after the warm-up) that ``fit`` accepts
 MIN_CALIBRATION_SAMPLES = 50
-#: calibration quantile at which ``limit_method="chi2-tail"`` measures the tail inflation
-TAIL_FIT_QUANTILE = 0.99
+
+#: declarative hyperparameter constraints of :class:`_LRGFMEMBase`, checked in ``fit``
+PARAMETER_CONSTRAINTS: dict[str, Any] = {
+    "n_hidden": Integer(1, 64),
+    "order": Integer(1, 8),
+    "steady_window": Integer(1, 100_000),
+    "mem_hidden": Integer(1, 256),
+    "mem_input_delays": Integer(1, 100),
+    "mem_output_delays": Integer(1, 100),
+    "mem_output_activation": Options(OutputActivation),
+    "alpha": Real(0, 0.5, closed="neither"),
+    "band_definition": Options(BandScale),
+    "alarm_filter": Options(AlarmFilter),
+    "ewma_lambda": Real(0, 1, closed="right"),
+    "false_alarm_target": Real(0, 0.5, closed="neither"),
+    "threshold_margin": Real(0.5, 10),
+    "limit_method": Options(LimitMethod),
+    "method": Options(Method),
+    "lr": Real(0, 1, closed="right"),
+    "max_epochs": Integer(1, 100_000),
+    "mem_max_epochs": Integer(1, 100_000),
+    "mem_select": Options(MemSelect),
+    "seed": Integer(0),
+    "progress": Boolean(),
+}
 
 #: The bank of ``lrgf-mem``: the paper's (14)–(16) with the inputs the model's physics needs.
 #: s2 gets T_fp (feed preheat heats the regenerator through the riser and stripper; without it the
@@ -164,7 +224,7 @@ class _BankStepper:
     def step(self, y: np.ndarray) -> np.ndarray:
         """Nominal-model outputs y_m of every relation for one measurement vector."""
         z = self.filters.step(self.w @ y + self.b)
-        return self.c @ np.tanh(0.5 * self.g2 * (z - self.g1)) + self.d
+        return self.c @ lrgf_activation(z, self.g1, self.g2) + self.d
 
 
 class _LRGFMEMBase(Diagnoser):
@@ -223,8 +283,8 @@ class _LRGFMEMBase(Diagnoser):
         self.progress = progress
 
     @classmethod
-    def _test_params(cls) -> dict[str, Any]:
-        """Small, fast settings for the conformance tests."""
+    def fast_params(cls) -> dict[str, Any]:
+        """Small, fast settings for smoke runs, quick sweeps and tests."""
         return {
             "max_epochs": 30,
             "mem_max_epochs": 5,
@@ -246,52 +306,7 @@ class _LRGFMEMBase(Diagnoser):
         return out
 
     def _validate_params(self) -> None:
-        def check_int(name: str, lo: int, hi: int) -> None:
-            v = getattr(self, name)
-            if isinstance(v, bool) or not isinstance(v, int) or not lo <= v <= hi:
-                raise ValueError(f"{name}={v!r} outside the allowed range [{lo}, {hi}] (integer)")
-
-        for name, lo, hi in (
-            ("n_hidden", 1, 64),
-            ("order", 1, 8),
-            ("steady_window", 1, 100_000),
-            ("mem_hidden", 1, 256),
-            ("mem_input_delays", 1, 100),
-            ("mem_output_delays", 1, 100),
-            ("max_epochs", 1, 100_000),
-            ("mem_max_epochs", 1, 100_000),
-        ):
-            check_int(name, lo, hi)
-        if not (isinstance(self.alpha, float | int) and 0 < self.alpha < 0.5):
-            raise ValueError(f"alpha={self.alpha!r} outside the allowed range (0, 0.5)")
-        if self.band_definition not in ("paper", "residual"):
-            raise ValueError(
-                f"band_definition={self.band_definition!r}; allowed: 'paper', 'residual'"
-            )
-        if self.alarm_filter not in ALARM_FILTERS:
-            raise ValueError(f"alarm_filter={self.alarm_filter!r}; allowed: {list(ALARM_FILTERS)}")
-        if not 0 < self.ewma_lambda <= 1:
-            raise ValueError(f"ewma_lambda={self.ewma_lambda!r} outside the allowed range (0, 1]")
-        if not 0 < self.false_alarm_target < 0.5:
-            raise ValueError(
-                f"false_alarm_target={self.false_alarm_target!r} outside the allowed range (0, 0.5)"
-            )
-        if not 0.5 <= self.threshold_margin <= 10:
-            raise ValueError(
-                f"threshold_margin={self.threshold_margin!r} outside the allowed range [0.5, 10]"
-            )
-        if self.limit_method not in LIMIT_METHODS:
-            raise ValueError(f"limit_method={self.limit_method!r}; allowed: {list(LIMIT_METHODS)}")
-        if self.mem_select not in ("always", "if_better"):
-            raise ValueError(f"mem_select={self.mem_select!r}; allowed: 'always', 'if_better'")
-        if not (isinstance(self.lr, float | int) and 0 < self.lr <= 1):
-            raise ValueError(f"lr={self.lr!r} outside the allowed range (0, 1]")
-        if self.method not in ("adam", "spsa"):
-            raise ValueError(f"method={self.method!r}; allowed: 'adam', 'spsa'")
-        if self.mem_output_activation not in ("linear", "tanh"):
-            raise ValueError(
-                f"mem_output_activation={self.mem_output_activation!r}; allowed: 'linear', 'tanh'"
-            )
+        check_params(self.get_params(), PARAMETER_CONSTRAINTS)
         self._relations()
 
     # ---- fitting -------------------------------------------------------------------------------
@@ -386,7 +401,7 @@ class _LRGFMEMBase(Diagnoser):
                 "or more episodes, or a smaller steady_window"
             )
         rem = [self._remaining(y)[cal_from:] for y in cal]  # (T, k) each
-        if self.mem_select == "if_better":
+        if self.mem_select == MemSelect.IF_BETTER:
             # An error model that does not reduce the held-out error only adds its own: drop it.
             self.use_mem_[:] = False
             rem_off = np.concatenate([self._remaining(y)[cal_from:] for y in cal])
@@ -396,52 +411,44 @@ class _LRGFMEMBase(Diagnoser):
             rem = [self._remaining(y)[cal_from:] for y in cal]
         rem_all = np.concatenate(rem)
         self.v_residual_ = np.sqrt(np.mean(rem_all**2, axis=0))
-        self.v_ = self.v_paper_ if self.band_definition == "paper" else self.v_residual_
-        self.v_ = np.maximum(self.v_, 1e-9)
-        self.t_alpha_ = t_alpha(self.alpha)
-        stats = np.concatenate([self._ewma(r / self.v_residual_) for r in rem])
-        if self.alarm_filter == "ewma-t2":
-            cov = np.atleast_2d(np.cov(stats.T))
-            self.s_inv_ = np.linalg.pinv(cov)
-            t2 = np.einsum("ti,ij,tj->t", stats, self.s_inv_, stats)
-            self.h_ = np.array([self._limit(t2[:, None], len(relations))[0]])
+        ewma = EWMA(self.ewma_lambda)
+        stats = np.concatenate([ewma.filter(r / self.v_residual_) for r in rem])
+        if AlarmFilter(self.alarm_filter) is AlarmFilter.EWMA_T2:
+            # The EWMA of a healthy normalised error is zero-mean by construction: T² about 0.
+            t2 = HotellingT2(centered=False).fit(stats)
+            self.s_inv_ = t2.precision_
+            self.h_ = np.array([self._limit(t2.score(stats)[:, None], len(relations))[0]])
         else:
             self.s_inv_ = np.eye(len(relations))
             self.h_ = self._limit(np.abs(stats), 0)
+        self._finish()
+
+    def _finish(self) -> None:
+        """Derived state shared by ``_fit`` and ``_set_state``."""
+        self.v_ = self.v_paper_ if self.band_definition == BandScale.PAPER else self.v_residual_
+        self.v_ = np.maximum(self.v_, 1e-9)
+        self.t_alpha_ = t_alpha(self.alpha)
+        self.t2_ = HotellingT2(centered=False)
+        self.t2_.set_state({"mean": np.zeros(len(self.s_inv_)), "precision": self.s_inv_})
         self.signal_names_ = self._signal_names()
 
     def _limit(self, stat: np.ndarray, dof: int) -> np.ndarray:
         """Alarm limit per column of the healthy calibration statistic ``stat`` (T, c).
 
-        ``dof = 0``: columns are |EWMA| of one relation each (per-column target
-        ``false_alarm_target / c``); ``dof = k``: one column of Hotelling's T² over k relations.
-        ``"empirical"``: the calibration quantile at 1 − target. ``"chi2-tail"``: the reference
-        distribution's quantile at 1 − target (χ²_k for T²; for |EWMA| the normal with the
-        column's calibration std), scaled by the calibration's tail inflation
-        ``max(1, q_emp(0.99) / q_ref(0.99))``. Why: the calibration holds a few strongly
-        autocorrelated episodes, so its empirical 0.998 quantile rests on a few dozen dependent
-        samples and is dominated by single excursions (on this plant it varied by 1.5–3× between
-        calibration sets), while the 0.99 quantile is stable and the reference tail extrapolates
-        it. Both are multiplied by ``threshold_margin``.
+        ``dof = 0``: columns are |EWMA| of one relation each, with the target split over them
+        (``false_alarm_target / c`` each); ``dof = k``: one column of Hotelling's T² over k
+        relations. The method and its reasons: :func:`diagnosers.alarm.calibrate_limit`.
         """
         target = self.false_alarm_target / (stat.shape[1] if dof == 0 else 1)
-        if self.limit_method == "empirical":
-            return self.threshold_margin * np.quantile(stat, 1.0 - target, axis=0)
-        if dof == 0:
-            sd = np.sqrt(np.mean(stat**2, axis=0))
-            ref_fit = sd * norm.ppf(0.5 + TAIL_FIT_QUANTILE / 2)
-            ref_target = sd * norm.ppf(1.0 - target / 2)
-        else:
-            ref_fit = np.full(stat.shape[1], chi2.ppf(TAIL_FIT_QUANTILE, dof))
-            ref_target = np.full(stat.shape[1], chi2.ppf(1.0 - target, dof))
-        inflation = np.maximum(1.0, np.quantile(stat, TAIL_FIT_QUANTILE, axis=0) / ref_fit)
-        return self.threshold_margin * inflation * ref_target
+        return calibrate_limit(
+            stat, target, method=self.limit_method, dof=dof, margin=self.threshold_margin
+        )
 
     def _signal_names(self) -> tuple[str, ...]:
         rel = self._relations()
-        if self.alarm_filter == "ewma":
+        if self.alarm_filter == AlarmFilter.EWMA:
             return tuple(f"ewma[{o}]" for o, _ in rel)
-        if self.alarm_filter == "ewma-t2":
+        if self.alarm_filter == AlarmFilter.EWMA_T2:
             return ("T2[ewma]",)
         return tuple(o for o, _ in rel)
 
@@ -457,15 +464,6 @@ class _LRGFMEMBase(Diagnoser):
     def _remaining(self, y: np.ndarray) -> np.ndarray:
         return y[:, self.out_idx_] - self._centre(y)
 
-    def _ewma(self, e: np.ndarray) -> np.ndarray:
-        lam = self.ewma_lambda
-        z = np.empty_like(e)
-        acc = np.zeros(e.shape[1])
-        for k in range(e.shape[0]):
-            acc = lam * e[k] + (1.0 - lam) * acc
-            z[k] = acc
-        return z
-
     # ---- detection -----------------------------------------------------------------------------
     def _reset(self) -> None:
         if getattr(self, "_bank", None) is None:
@@ -474,19 +472,19 @@ class _LRGFMEMBase(Diagnoser):
         self._bank.reset()
         for st in self._mem_steppers:
             st.reset()
-        self._acc = np.zeros(len(self.lrgf_))
+        self._ewma = EWMA(self.ewma_lambda)
         self._k = 0
 
     def _decide(self, y_out: np.ndarray, centre: np.ndarray, z: np.ndarray, warm: bool) -> Decision:
         resid = y_out - centre
-        if self.alarm_filter == "ewma":
+        if self.alarm_filter == AlarmFilter.EWMA:
             signal, lower, upper = z, -self.h_, self.h_
-        elif self.alarm_filter == "ewma-t2":
-            signal = np.array([z @ self.s_inv_ @ z])
+        elif self.alarm_filter == AlarmFilter.EWMA_T2:
+            signal = np.array([self.t2_.score(z)])
             lower, upper = np.array([-np.inf]), self.h_
         else:
-            half = self.t_alpha_ * self.v_
-            signal, lower, upper = y_out, centre - half, centre + half
+            signal = y_out
+            lower, upper = band(centre, 0.0, self.v_, self.alpha)
         if warm:  # no limit while the models settle (alarm stays "outside the limits")
             lower, upper = np.full_like(signal, -np.inf), np.full_like(signal, np.inf)
         alarm = bool(np.any((signal < lower) | (signal > upper)))
@@ -499,10 +497,9 @@ class _LRGFMEMBase(Diagnoser):
         y_out = y[self.out_idx_]
         warm = self._k < self.steady_window
         self._k += 1
-        if not warm:
-            lam = self.ewma_lambda
-            self._acc = lam * ((y_out - centre) / self.v_residual_) + (1.0 - lam) * self._acc
-        return self._decide(y_out, centre, self._acc, warm)
+        # the EWMA starts after the warm-up: it sees zeros there, as in _detect
+        e = np.zeros(len(centre)) if warm else (y_out - centre) / self.v_residual_
+        return self._decide(y_out, centre, self._ewma.update(e), warm)
 
     def _detect(self, y: np.ndarray) -> Detection:
         centre = self._centre(y)
@@ -510,7 +507,7 @@ class _LRGFMEMBase(Diagnoser):
         w = self.steady_window
         e = (y_out - centre) / self.v_residual_
         e[:w] = 0.0  # the EWMA starts after the warm-up
-        z = self._ewma(e)
+        z = EWMA(self.ewma_lambda).filter(e)
         return Detection.from_decisions(
             [self._decide(y_out[k], centre[k], z[k], k < w) for k in range(y.shape[0])],
             self.signal_names_,
@@ -524,12 +521,11 @@ class _LRGFMEMBase(Diagnoser):
         leaves its band (after the warm-up); the detector's own alarms come from :meth:`detect`.
         """
         self._check_episode(episode)
-        if self.alarm_filter == "none":
+        if self.alarm_filter == AlarmFilter.NONE:
             return None
         y_out = episode.y[:, self.out_idx_]
         centre = self._centre(episode.y)
-        half = self.t_alpha_ * self.v_
-        lower, upper = centre - half, centre + half
+        lower, upper = band(centre, 0.0, self.v_, self.alpha)
         lower[: self.steady_window], upper[: self.steady_window] = -np.inf, np.inf  # warm-up
         alarm = np.any((y_out < lower) | (y_out > upper), axis=1)
         names = tuple(f"{o} [°C]" for o, _ in self._relations())
@@ -562,10 +558,7 @@ class _LRGFMEMBase(Diagnoser):
             self.train_fit_loss_ = state["train_fit_loss"]
         except KeyError as e:
             raise ValueError(f"saved state lacks array {e.args[0]!r}") from None
-        self.v_ = self.v_paper_ if self.band_definition == "paper" else self.v_residual_
-        self.v_ = np.maximum(self.v_, 1e-9)
-        self.t_alpha_ = t_alpha(self.alpha)
-        self.signal_names_ = self._signal_names()
+        self._finish()
 
     def _save_extra(self, directory: Path) -> None:
         configs, tensors = [], {}
@@ -575,8 +568,9 @@ class _LRGFMEMBase(Diagnoser):
             configs.append({"lrgf": c1, "mem": c2})
             tensors.update({f"{j}.lrgf.{k}": v for k, v in s1.items()})
             tensors.update({f"{j}.mem.{k}": v for k, v in s2.items()})
-        (directory / "models.json").write_text(json.dumps(configs, indent=2))
-        torch.save(tensors, directory / "weights.pt")
+        atomic_write(directory / "models.json", json.dumps(configs, indent=2))
+        with atomic_open(directory / "weights.pt", "wb") as fh:
+            torch.save(tensors, fh)
 
     def _load_extra(self, directory: Path) -> None:
         try:

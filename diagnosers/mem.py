@@ -26,9 +26,9 @@ from typing import Any
 
 import numpy as np
 import torch
-from scipy import stats
 from torch import nn
 
+from diagnosers.alarm import two_sided_normal_quantile
 from diagnosers.lrgf import set_scaler_buffers
 
 __all__ = [
@@ -358,11 +358,9 @@ class MEMStepper:
 
 
 # ---- bands (10)-(11) ---------------------------------------------------------------------------
-def t_alpha(alpha: float) -> float:
-    """Two-sided standard normal quantile ``t_α = Φ^{-1}(1 - α/2)`` (α = 0.01 -> 2.5758)."""
-    if not 0.0 < alpha < 1.0:
-        raise ValueError(f"alpha={alpha!r} must lie in (0, 1)")
-    return float(stats.norm.ppf(1.0 - alpha / 2.0))
+#: Two-sided standard normal quantile ``t_α = Φ^{-1}(1 - α/2)`` (α = 0.01 -> 2.5758); the paper's
+#: name for :func:`diagnosers.alarm.two_sided_normal_quantile`.
+t_alpha = two_sided_normal_quantile
 
 
 def band(

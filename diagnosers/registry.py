@@ -1,4 +1,8 @@
-"""Registry of diagnosers: ``make(name, **hyperparameters)`` and ``available()``."""
+"""Registry of diagnosers: ``make(name, **hyperparameters)``, ``available()``, ``diagnoser_class``.
+
+>>> diagnoser_class("limits").fast_params()
+{}
+"""
 
 from __future__ import annotations
 
@@ -28,12 +32,17 @@ def available() -> list[str]:
     return sorted(_REGISTRY)
 
 
-def make(name: str, **hyperparameters: Any) -> Diagnoser:
-    """Build the diagnoser registered as ``name`` with the given hyperparameters."""
+def diagnoser_class(name: str) -> type[Diagnoser]:
+    """The class registered as ``name`` (e.g. to read its :meth:`Diagnoser.fast_params`)."""
     try:
-        cls = _REGISTRY[name]
+        return _REGISTRY[name]
     except KeyError:
         raise ValueError(f"Unknown diagnoser {name!r}. Available: {available()}") from None
+
+
+def make(name: str, **hyperparameters: Any) -> Diagnoser:
+    """Build the diagnoser registered as ``name`` with the given hyperparameters."""
+    cls = diagnoser_class(name)
     allowed = cls._param_names()
     unknown = sorted(set(hyperparameters) - set(allowed))
     if unknown:

@@ -34,6 +34,7 @@ from tqdm.auto import tqdm
 
 from diagnosers.lrgf import LRGF
 from diagnosers.mem import NNARXErrorModel
+from fcc_env.validation import Integer, Real, check_params
 
 __all__ = [
     "FitResult",
@@ -244,15 +245,16 @@ def _split_fn(
     return split
 
 
-def _validate_common(max_epochs: int, patience: int, val_fraction: float, washout: int) -> None:
-    if isinstance(max_epochs, bool) or not isinstance(max_epochs, int) or max_epochs < 1:
-        raise ValueError(f"max_epochs={max_epochs!r} must be a positive integer")
-    if isinstance(patience, bool) or not isinstance(patience, int) or patience < 1:
-        raise ValueError(f"patience={patience!r} must be a positive integer")
-    if not 0.0 <= val_fraction < 1.0:
-        raise ValueError(f"val_fraction={val_fraction!r} must lie in [0, 1)")
-    if isinstance(washout, bool) or not isinstance(washout, int) or washout < 0:
-        raise ValueError(f"washout={washout!r} must be a non-negative integer")
+#: constraints shared by :func:`fit_lrgf` and :func:`fit_mem`
+TRAINING_CONSTRAINTS: dict[str, Any] = {
+    "max_epochs": Integer(1),
+    "patience": Integer(1),
+    "val_fraction": Real(0, 1, closed="left"),
+    "washout": Integer(0),
+    "window": Integer(2),
+    "val_every": Integer(1),
+    "pretrain_epochs": Integer(0),
+}
 
 
 def _snapshot(module: nn.Module) -> dict[str, torch.Tensor]:
@@ -312,7 +314,11 @@ def fit_lrgf(
         method = Method(method)
     except ValueError:
         raise ValueError(f"method={method!r}; choose one of {[m.value for m in Method]}") from None
-    _validate_common(max_epochs, patience, val_fraction, washout)
+    check_params(
+        {"max_epochs": max_epochs, "patience": patience, "val_fraction": val_fraction,
+         "washout": washout},
+        TRAINING_CONSTRAINTS,
+    )  # fmt: skip
     us, ys, uvs, yvs = _training_pairs(u, y, u_val, y_val, model.n_inputs, model.n_outputs, "y")
     has_val = uvs is not None
     split = _split_fn(val_fraction, washout, has_val)
@@ -530,17 +536,11 @@ def fit_mem(
     Returns:
         the training record; ``mem`` holds the best parameters found.
     """
-    _validate_common(max_epochs, patience, val_fraction, 0)
-    if isinstance(window, bool) or not isinstance(window, int) or window < 2:
-        raise ValueError(f"window={window!r} must be an integer >= 2")
-    if isinstance(val_every, bool) or not isinstance(val_every, int) or val_every < 1:
-        raise ValueError(f"val_every={val_every!r} must be a positive integer")
-    if (
-        isinstance(pretrain_epochs, bool)
-        or not isinstance(pretrain_epochs, int)
-        or pretrain_epochs < 0
-    ):
-        raise ValueError(f"pretrain_epochs={pretrain_epochs!r} must be a non-negative integer")
+    check_params(
+        {"max_epochs": max_epochs, "patience": patience, "val_fraction": val_fraction,
+         "window": window, "val_every": val_every, "pretrain_epochs": pretrain_epochs},
+        TRAINING_CONSTRAINTS,
+    )  # fmt: skip
     us, rs, uvs, rvs = _training_pairs(u, r, u_val, r_val, mem.n_inputs, mem.n_outputs, "r")
     has_val = uvs is not None
     split = _split_fn(val_fraction, 0, has_val)

@@ -1,8 +1,7 @@
 """Every registered diagnoser goes through the same contract checks (see diagnosers/base.py).
 
-A diagnoser class may define a classmethod ``_test_params()`` returning small, fast
-hyperparameters for these tests (e.g. few epochs for a neural model); without it the defaults
-are used.
+Each diagnoser class's ``fast_params()`` classmethod gives small, fast hyperparameters for these
+tests (e.g. few epochs for a neural model); the base class returns ``{}`` (the defaults).
 """
 
 from __future__ import annotations
@@ -21,9 +20,20 @@ NAMES = diagnosers.available()
 
 
 def _params(name: str) -> dict:
-    cls = type(make(name))
-    hook = getattr(cls, "_test_params", None)
-    return dict(hook()) if hook is not None else {}
+    return dict(diagnosers.diagnoser_class(name).fast_params())
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_fast_params_are_public_and_aliased(name: str) -> None:
+    cls = diagnosers.diagnoser_class(name)
+    assert cls is type(make(name))
+    assert cls._test_params() == cls.fast_params()  # alias kept for one release
+    assert set(cls.fast_params()) <= set(cls._param_names())
+
+
+def test_diagnoser_class_unknown_name() -> None:
+    with pytest.raises(ValueError, match=r"Unknown diagnoser 'nope'\. Available: \[.*'limits'"):
+        diagnosers.diagnoser_class("nope")
 
 
 def _build(name: str) -> Diagnoser:

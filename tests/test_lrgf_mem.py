@@ -147,15 +147,38 @@ def test_learning_rate_reaches_the_trainer():
 @pytest.mark.parametrize(
     ("kwargs", "match"),
     [
-        ({"alpha": 0.7}, r"alpha=0.7 outside the allowed range \(0, 0.5\)"),
-        ({"n_hidden": 0}, r"n_hidden=0 outside the allowed range \[1, 64\]"),
-        ({"band_definition": "wide"}, r"band_definition='wide'; allowed"),
-        ({"alarm_filter": "cusum"}, r"alarm_filter='cusum'; allowed"),
+        ({"alpha": 0.7}, r"alpha=0.7 is outside the allowed range: a number in \(0, 0.5\)"),
+        ({"n_hidden": 0}, r"n_hidden=0 is outside the allowed range: an integer in \[1, 64\]"),
+        (
+            {"band_definition": "wide"},
+            r"band_definition='wide' is outside the allowed range: one of \['paper', 'residual'\]",
+        ),
+        (
+            {"alarm_filter": "cusum"},
+            r"alarm_filter='cusum' is outside the allowed range: one of \['none', 'ewma', 'ewma-t2'\]",
+        ),
         ({"relations": [["T_rx"]]}, r"each relation must be \[output, \[inputs...\]\]"),
         ({"relations": [["T_xx", ["T_fp"]]]}, r"relation channel 'T_xx' is not in"),
-        ({"method": "lbfgs"}, r"method='lbfgs'; allowed"),
-        ({"limit_method": "gev"}, r"limit_method='gev'; allowed"),
-        ({"steady_window": 0}, r"steady_window=0 outside the allowed range \[1, 100000\]"),
+        (
+            {"method": "lbfgs"},
+            r"method='lbfgs' is outside the allowed range: one of \['adam', 'spsa'\]",
+        ),
+        (
+            {"limit_method": "gev"},
+            r"limit_method='gev' is outside the allowed range: one of \['empirical', 'chi2-tail'\]",
+        ),
+        (
+            {"steady_window": 0},
+            r"steady_window=0 is outside the allowed range: an integer in \[1, 100000\]",
+        ),
+        ({"seed": "a"}, r"seed='a' is outside the allowed range: an integer in \[0, inf\)"),
+        ({"seed": -1}, r"seed=-1 is outside the allowed range: an integer in \[0, inf\)"),
+        ({"lr": "0.1"}, r"lr='0.1' is outside the allowed range: a number in \(0, 1\]"),
+        (
+            {"ewma_lambda": None},
+            r"ewma_lambda=None is outside the allowed range: a number in \(0, 1\]",
+        ),
+        ({"progress": 1}, r"progress=1 is outside the allowed range: True or False"),
     ],
 )
 def test_bad_hyperparameters(kwargs, match):
