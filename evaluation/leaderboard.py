@@ -28,11 +28,10 @@ from __future__ import annotations
 import argparse
 import csv
 import dataclasses
-import json
 import math
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -48,10 +47,11 @@ from evaluation.harness import (
     SweepConfig,
     SweepResults,
     default_specs,
-    load_cell,
     run_sweep,
 )
-from evaluation.store import canonical_hash
+from evaluation.records import unpack_detection
+from evaluation.store import ResultStore, canonical_hash
+from fcc_env.io import atomic_open, atomic_write, atomic_write_json
 
 __all__ = [
     "PAPER_TABLE2",
@@ -166,6 +166,7 @@ def run(opts: LeaderboardOptions) -> SweepResults:
         n_workers=opts.workers,
         ray_address=opts.ray_address,
         progress=opts.progress,
+        figure_cells=figure_cells(config) if opts.figures else (),
     )
 
 
@@ -301,28 +302,20 @@ def write_outputs(results: SweepResults, out: Path, *, figures: bool = True) -> 
     reference = _reference(results.config)
     md = header_text(results) + markdown_table(summaries, reference=reference)
     written = []
-    p = out / "leaderboard.md"
-    p.write_text(md)
-    written.append(p)
+    written.append(atomic_write(out / "leaderboard.md", md))
     version = _package_version()
     data_label = _data_label(results.config)
-    p = out / "leaderboard.csv"
     rows = summary_rows(summaries, data=data_label, version=version)
-    with p.open("w", newline="") as fh:
-        w = csv.DictWriter(fh, fieldnames=[*_SUMMARY_COLUMNS, "data", "package_version"])
-        w.writeheader()
-        w.writerows(rows)
-    written.append(p)
+    fields = [*_SUMMARY_COLUMNS, "data", "package_version"]
+    written.append(_write_csv(out / "leaderboard.csv", fields, rows))
     records = [r.to_json() for r in results.records]
-    p = out / "results.csv"
-    with p.open("w", newline="") as fh:
-        fields = list(CellResult.__dataclass_fields__)
-        w = csv.DictWriter(fh, fieldnames=fields)
-        w.writeheader()
-        for r in records:
-            w.writerow({k: _csv_value(v) for k, v in r.items()})
-    written.append(p)
-    p = out / "results.json"
+    written.append(
+        _write_csv(
+            out / "results.csv",
+            list(CellResult.__dataclass_fields__),
+            [{k: _csv_value(v) for k, v in r.items()} for r in records],
+        )
+    )
     cfg = results.config
     payload = {
         "data": cfg.data.store_key(),
@@ -332,8 +325,7 @@ def write_outputs(results: SweepResults, out: Path, *, figures: bool = True) -> 
         "package_version": version,
         "records": records,
     }
-    p.write_text(json.dumps(_json_safe(payload), indent=1))
-    written.append(p)
+    written.append(atomic_write_json(out / "results.json", payload, indent=1))
     if figures:
         written += write_figures(results, out / "figures")
     return written
@@ -345,44 +337,50 @@ def _csv_value(v: Any) -> Any:
     return v
 
 
-def _json_safe(obj: Any) -> Any:
-    if isinstance(obj, float) and not math.isfinite(obj):
-        return None
-    if isinstance(obj, dict):
-        return {k: _json_safe(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_json_safe(v) for v in obj]
-    return obj
+def _write_csv(path: Path, fields: Sequence[str], rows: Sequence[Mapping[str, Any]]) -> Path:
+    """A CSV table written atomically (a killed run never leaves half a table)."""
+    with atomic_open(path, "w") as fh:
+        w = csv.DictWriter(fh, fieldnames=list(fields), lineterminator="\r\n")
+        w.writeheader()
+        w.writerows(rows)
+    return path
+
+
+def figure_cells(config: SweepConfig) -> list[tuple[str, int]]:
+    """The cells drawn as figures: each scenario's first test seed."""
+    first: dict[str, int] = {}
+    for sc, seed in config.data.cells():
+        first.setdefault(sc, seed)
+    return list(first.items())
 
 
 def write_figures(results: SweepResults, directory: Path) -> list[Path]:
     """One PNG per scenario × diagnoser on the scenario's first test seed.
 
     Diagnosers with a :meth:`~diagnosers.base.Diagnoser.band_view` (``lrgf-mem``: one band per
-    relation around its measured output) get a second one, ``<label>-bands.png``.
+    relation around its measured output) get a second one, ``<label>-bands.png``. The arrays come
+    from the scoring pass (``run_sweep(figure_cells=...)`` keeps them in the store); a cell whose
+    arrays are missing (a sweep run without figures) is skipped.
     """
     from evaluation.plots import detection_figure, save_png
 
     cfg = results.config
-    first: dict[str, int] = {}
-    for sc, seed in cfg.data.cells():
-        first.setdefault(sc, seed)
+    store = ResultStore.open(results.store_dir, cfg.data.store_key())
     paths = []
-    for sc, seed in first.items():
+    for sc, seed in figure_cells(cfg):
         for spec in cfg.diagnosers:
-            loaded, diag = load_cell(cfg, results.store_dir, spec.key, sc, seed)
-            onset = loaded.fault_onset if loaded.episode.fault_onset is not None else None
+            arrays = store.read_detection(spec.key, sc, seed, cfg.cell_hash(spec, store.data_hash))
+            if arrays is None:
+                continue
+            episode, onset, detection, bands = unpack_detection(arrays)
+            onset = onset if episode.fault_onset is not None else None
             fig = detection_figure(
-                loaded.episode,
-                diag.detect(loaded.episode),
-                title=f"{spec.key} on {sc}, seed {seed}",
-                fault_onset=onset,
+                episode, detection, title=f"{spec.key} on {sc}, seed {seed}", fault_onset=onset
             )
             paths.append(save_png(fig, directory / sc / f"{spec.key}.png"))
-            bands = diag.band_view(loaded.episode)
             if bands is not None:
                 fig = detection_figure(
-                    loaded.episode,
+                    episode,
                     bands,
                     title=f"{spec.key} on {sc}, seed {seed}: model bands (alarms: band exits)",
                     fault_onset=onset,

@@ -35,7 +35,7 @@ from pathlib import Path
 from typing import Any
 
 from diagnosers.base import Detection, Diagnoser
-from diagnosers.registry import available, make
+from diagnosers.registry import available, diagnoser_class, make
 from evaluation.backends import BACKENDS, Backend, limit_threads, make_backend
 from evaluation.records import (
     CellResult,
@@ -86,22 +86,13 @@ def default_specs(
 
     Args:
         names: registry names (all of :func:`diagnosers.available` when ``None``).
-        test: use each class's ``_test_params()`` classmethod where it has one (small, fast
-            hyperparameters meant for tests), else the defaults.
+        test: use each class's :meth:`~diagnosers.base.Diagnoser.fast_params` (small, fast
+            hyperparameters for smoke runs and tests) instead of the defaults.
     """
-    from diagnosers.registry import _REGISTRY  # the class is needed for _test_params
-
     names = available() if names is None else list(names)
-    specs = []
-    for n in names:
-        if n not in _REGISTRY:
-            raise ValueError(f"Unknown diagnoser {n!r}. Available: {available()}")
-        params: dict[str, Any] = {}
-        hook = getattr(_REGISTRY[n], "_test_params", None)
-        if test and callable(hook):
-            params = dict(hook())
-        specs.append(DiagnoserSpec(n, params))
-    return tuple(specs)
+    return tuple(
+        DiagnoserSpec(n, dict(diagnoser_class(n).fast_params()) if test else {}) for n in names
+    )
 
 
 @dataclass(frozen=True, kw_only=True)

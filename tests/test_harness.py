@@ -168,7 +168,10 @@ def test_detect_episode_matches_stored_cell(serial) -> None:
         ({"data": dataclasses.replace(DATA, scenarios=("f9",))}, "Unknown scenario 'f9'"),
         ({"data": dataclasses.replace(DATA, train_seeds=(1, 100))}, "disjoint"),
         ({"data": dataclasses.replace(DATA, test_seeds=())}, "non-empty"),
-        ({"data": dataclasses.replace(DATA, test_seeds=(-1,))}, "integers >= 0"),
+        (
+            {"data": dataclasses.replace(DATA, test_seeds=(-1,))},
+            r"test_seeds=\(-1,\) is outside the allowed range: .*integers in \[0, inf\)",
+        ),
         ({"data": dataclasses.replace(DATA, fault_time=None)}, "fault_time"),
         ({"data": dataclasses.replace(DATA, n_samples=1)}, "n_samples"),
         ({"t_on": -1}, "t_on"),
@@ -194,7 +197,7 @@ def test_default_specs_use_test_params(monkeypatch) -> None:
     from diagnosers.baselines import LimitChecker
 
     monkeypatch.setattr(
-        LimitChecker, "_test_params", classmethod(lambda cls: {"alpha": 0.05}), raising=False
+        LimitChecker, "fast_params", classmethod(lambda cls: {"alpha": 0.05}), raising=False
     )
     (spec,) = default_specs(["limits"], test=True)
     assert spec.params == {"alpha": 0.05} and spec.key == "limits"

@@ -203,7 +203,10 @@ def test_fault_magnitude_scale_scales_every_fault() -> None:
     assert SimulatedData(fault_magnitude=0.2, fault_magnitude_scale=0.5)._magnitude("f1") == 0.1
     # the default leaves the store key (and so earlier stores) as before the option existed
     assert SimulatedData().store_key()["fault"]["magnitude_scale"] == 1.0
-    with pytest.raises(ValueError, match=r"fault_magnitude_scale=0 is outside the allowed range: a number in \(0, 10\]"):
+    with pytest.raises(
+        ValueError,
+        match=r"fault_magnitude_scale=0 is outside the allowed range: a number in \(0, 10\]",
+    ):
         SimulatedData(fault_magnitude_scale=0).validate()
 
 
