@@ -12,7 +12,7 @@ Pure functions, no I/O, never the global random state. Every interval is over th
 
 >>> ci = bootstrap_ci([0.0, 0.25, 0.5, 0.75], method="percentile", n_resamples=999, rng=0)
 >>> ci.estimate, ci.n, ci.low <= ci.estimate <= ci.high
-(0.15, 4, True)
+(0.375, 4, True)
 >>> rank_with_ties(
 ...     [Interval(1.0, 0.9, 1.1, 20), Interval(1.05, 1.0, 1.2, 20), Interval(3.0, 2.9, 3.1, 20)],
 ...     lower_is_better=True,
