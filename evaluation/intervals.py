@@ -195,7 +195,7 @@ def _one_diagnoser(records: Sequence[_Record]) -> None:
     labels = sorted({r.diagnoser for r in records})
     if len(labels) > 1:
         raise invalid(
-            "records", f"<cells of {labels}>", "cells of one diagnoser", "group them first"
+            "diagnosers of records", labels, "a single diagnoser", "group cells by diagnoser first"
         )
 
 
@@ -317,7 +317,7 @@ def limit_ratio_ci(
     t = _finite_values("t_dt", t_dt)
     o = _finite_values("oracle_t_dt", oracle_t_dt)
     if t.shape != o.shape:
-        raise invalid("oracle_t_dt", f"<{o.size} values>", f"{t.size} values, one per seed of t_dt")
+        raise invalid("len(oracle_t_dt)", o.size, f"{t.size}, one per seed of t_dt")
     if (t < 0).any() or (o < 0).any():
         raise invalid("t_dt", t_dt, "detection times >= 0 or NaN")
     both = ~np.isnan(t) & ~np.isnan(o)
