@@ -374,7 +374,7 @@ class Track:
 
     @property
     def validation_seeds(self) -> range:
-        n = max(self.n_validation, self.n_validation * len(self.faults) * self.draw_fault)
+        n = self.n_validation * (len(self.faults) if self.draw_fault else 1)
         return range(self.validation_seed_start, self.validation_seed_start + n)
 
     def _check_seed_ranges(self) -> None:
