@@ -68,6 +68,7 @@ __all__ = [
     "Uniform",
     "parse_tracks",
     "stable_hash",
+    "tracks_markdown",
 ]
 
 #: First test seed: healthy and faulty test episodes use seeds 0, 1, ... (paired design).
@@ -605,3 +606,17 @@ def parse_tracks(text: str) -> tuple[Track, ...]:
             raise invalid("tracks", text, "'all' alone or a list of track names")
         out.setdefault(name, TRACKS[name])
     return tuple(out.values())
+
+
+def tracks_markdown(tracks: tuple[Track, ...] | None = None) -> str:
+    """A Markdown table of tracks (name, episodes, description) for the README's "Tracks" section.
+
+    >>> print(tracks_markdown((TRACKS["paper"],)).splitlines()[2][:37])
+    | `paper` | 50 healthy, 80 faulty | T
+    """
+    tracks = tuple(TRACKS.values()) if tracks is None else tracks
+    lines = ["| track | test episodes | what it tests |", "|---|---|---|"]
+    for t in tracks:
+        episodes = f"{t.n_healthy} healthy, {t.n_faulty_total} faulty"
+        lines.append(f"| `{t.name}` | {episodes} | {t.description} |")
+    return "\n".join(lines)

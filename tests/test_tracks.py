@@ -22,6 +22,7 @@ from evaluation.tracks import (
     Uniform,
     parse_tracks,
     stable_hash,
+    tracks_markdown,
 )
 from fcc_env.scenarios import FAULTS, FaultProfile, FaultSpec, Scenario
 
@@ -299,3 +300,9 @@ def test_to_json_is_json_and_changes_with_the_track() -> None:
         "low": pytest.approx(0.045),
         "high": pytest.approx(0.195),
     }
+
+
+def test_tracks_markdown_lists_every_track() -> None:
+    text = tracks_markdown()
+    for t in TRACKS.values():
+        assert f"| `{t.name}` |" in text and t.description in text
