@@ -165,7 +165,10 @@ def test_detect_episode_matches_stored_cell(serial) -> None:
         ({"diagnosers": (DiagnoserSpec("limits"), DiagnoserSpec("limits"))}, "unique"),
         ({"diagnosers": (DiagnoserSpec("limits", label="a/b"),)}, "path component"),
         ({"diagnosers": ()}, "at least one diagnoser"),
-        ({"data": dataclasses.replace(DATA, scenarios=("f9",))}, "Unknown scenario 'f9'"),
+        (
+            {"data": dataclasses.replace(DATA, scenarios=("f9",))},
+            r"scenarios=\('f9',\) is outside the allowed range: .*'nominal', 'f1'.*\('f9' is not\)",
+        ),
         ({"data": dataclasses.replace(DATA, train_seeds=(1, 100))}, "disjoint"),
         ({"data": dataclasses.replace(DATA, test_seeds=())}, "non-empty"),
         (
