@@ -22,6 +22,7 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 
 from diagnosers.base import Episode
+from evaluation.tracks import Track
 from fcc_env.scenarios import (
     DEFAULT_N_SAMPLES,
     DEFAULT_RAMP_SAMPLES,
@@ -32,7 +33,7 @@ from fcc_env.scenarios import (
     FaultSpec,
     Scenario,
 )
-from fcc_env.validation import Boolean, IntegerSequence, OptionSequence, check
+from fcc_env.validation import Boolean, IntegerSequence, OptionSequence, check, invalid
 
 #: Default first training seed: far from the test seeds 0..N-1 of any realistic sweep.
 TRAIN_SEED_BASE = 1000
@@ -240,18 +241,11 @@ class SimulatedData:
     def cells(self) -> list[tuple[str, int]]:
         return [(sc, int(s)) for sc in self.scenarios for s in self.test_seeds]
 
-    def _simulate(self, seeds: Sequence[int], scenario: str) -> Any:
-        import fcc_env
-
-        spec = self.fault_spec
-        return fcc_env.simulate_episodes(
-            list(seeds),
-            int(self.n_samples),
-            scenario=scenario,
-            fault_time=spec.onset,
-            fault_magnitude=self._magnitude(scenario),
-            fault_profile=spec.profile.value,
-            ramp_samples=spec.ramp_samples,
+    def _simulate(self, seeds: Sequence[int], scenario: str) -> list[LoadedEpisode]:
+        return simulate_loaded(
+            seeds,
+            self.n_samples,
+            self.fault_spec.replace(scenario=scenario),
             excitation=self.excitation,
             noise_scale=self.noise_scale,
             sample_time_s=self.sample_time_s,
@@ -261,11 +255,45 @@ class SimulatedData:
         """The fault magnitude passed to the simulator for ``scenario`` (scale applied)."""
         return self.fault_spec.magnitude_for(Scenario(scenario))
 
-    def _loaded(self, res: Any, b: int) -> LoadedEpisode:
-        import fcc_env
+    def train_episodes(self) -> list[Episode]:
+        # A training episode that left the envelope keeps its samples before termination; one
+        # with fewer than 2 samples has nothing to learn from and is dropped.
+        loaded = self._simulate(self.train_seeds, "nominal")
+        return [le.episode for le in loaded if le.episode.n_samples >= 2]
 
+    def load_test(self, scenario: str, seed: int) -> LoadedEpisode:
+        return self._simulate([seed], scenario)[0]
+
+
+def simulate_loaded(
+    seeds: Sequence[int],
+    n_samples: int,
+    spec: FaultSpec,
+    *,
+    excitation: bool = True,
+    noise_scale: float = 1.0,
+    sample_time_s: float = 10.0,
+) -> list[LoadedEpisode]:
+    """Simulate ``seeds`` with the fault ``spec`` and cut each at its termination sample."""
+    import fcc_env
+
+    sc = Scenario(spec.scenario)
+    res = fcc_env.simulate_episodes(
+        list(seeds),
+        int(n_samples),
+        scenario=spec.scenario,
+        fault_time=spec.onset,
+        fault_magnitude=spec.magnitude_for(sc),
+        fault_profile=spec.profile.value,
+        ramp_samples=spec.ramp_samples,
+        excitation=excitation,
+        noise_scale=noise_scale,
+        sample_time_s=sample_time_s,
+    )
+    out = []
+    for b in range(len(res.seeds)):
         term = int(res.terminated_at[b])
-        n_used = term if term >= 0 else int(self.n_samples)
+        n_used = term if term >= 0 else int(n_samples)
         onset = res.fault_onsets[b]
         onset = None if onset is None else int(onset)
         episode = Episode(
@@ -277,20 +305,75 @@ class SimulatedData:
             seed=int(res.seeds[b]),
             y_clean=np.asarray(res.y_clean[b, :n_used]),
         )
-        return LoadedEpisode(
-            episode=episode,
-            fault_onset=onset,
-            n_samples_planned=int(self.n_samples),
-            terminated_at=term if term >= 0 else None,
-            termination_reason=res.termination_reasons[b] if term >= 0 else None,
+        out.append(
+            LoadedEpisode(
+                episode=episode,
+                fault_onset=onset,
+                n_samples_planned=int(n_samples),
+                terminated_at=term if term >= 0 else None,
+                termination_reason=res.termination_reasons[b] if term >= 0 else None,
+            )
+        )
+    return out
+
+
+@dataclass(frozen=True, kw_only=True)
+class TrackData:
+    """The episodes of a benchmark track (:mod:`evaluation.tracks`) as a sweep's data source.
+
+    Training: ``track.n_train`` healthy episodes from the track's training seeds, with the
+    track's noise scale. Test: :meth:`Track.test_cells`, each with its own
+    :meth:`Track.fault_spec` (every field explicit, drawn from the seed). The store key is the
+    track's definition without its test counts, so a sweep extended with more test episodes
+    reuses the stored cells and models.
+    """
+
+    track: Track
+
+    def validate(self) -> None:
+        if not isinstance(self.track, Track):
+            raise invalid("track", self.track, "an evaluation.tracks.Track")
+
+    def store_key(self) -> dict[str, Any]:
+        import fcc_env
+
+        key = self.track.to_json()
+        del key["n_healthy"], key["n_faulty"], key["description"]
+        return {"kind": "track", "model_version": fcc_env.MODEL_VERSION, "track": key}
+
+    def cells(self) -> list[tuple[str, int]]:
+        return self.track.test_cells()
+
+    def _simulate(self, seeds: Sequence[int], spec: FaultSpec) -> list[LoadedEpisode]:
+        return simulate_loaded(
+            seeds, self.track.n_samples, spec, noise_scale=self.track.noise_scale
         )
 
     def train_episodes(self) -> list[Episode]:
-        res = self._simulate(self.train_seeds, "nominal")
-        # A training episode that left the envelope keeps its samples before termination; one
-        # with fewer than 2 samples has nothing to learn from and is dropped.
-        eps = [self._loaded(res, b).episode for b in range(len(self.train_seeds))]
-        return [ep for ep in eps if ep.n_samples >= 2]
+        loaded = self._simulate(list(self.track.train_seeds), FaultSpec())
+        return [le.episode for le in loaded if le.episode.n_samples >= 2]
 
     def load_test(self, scenario: str, seed: int) -> LoadedEpisode:
-        return self._loaded(self._simulate([seed], scenario), 0)
+        return self._simulate([seed], self.track.fault_spec(scenario, seed))[0]
+
+    def reference(self, seed: int) -> np.ndarray:
+        """The healthy plant's noise-free measurements of ``seed`` (same inputs, same plant):
+        what the physical-limit row compares with (no diagnoser may read it)."""
+        ep = self._simulate([seed], FaultSpec())[0].episode
+        assert ep.y_clean is not None
+        return ep.y_clean
+
+    def describe(self) -> DataDescription:
+        import fcc_env
+
+        t = self.track
+        return DataDescription(
+            label=f"{fcc_env.ENV_ID} ({fcc_env.MODEL_VERSION}), track {t.name}",
+            lines=(
+                t.description,
+                f"{t.n_healthy} healthy and {t.n_faulty_total} faulty test episodes (seeds from "
+                f"{t.test_seed_start}), training on {t.n_train} healthy episodes (seeds from "
+                f"{t.train_seed_start}), {t.n_samples} samples each.",
+            ),
+            paper_setup=t.name == "paper",
+        )

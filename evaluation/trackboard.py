@@ -1,0 +1,337 @@
+"""Benchmark v2: the leaderboard per track, with the physical-limit row and 95 % intervals.
+
+``python -m evaluation.leaderboard --track paper,small`` (or ``--track all``) runs, for each
+track of :mod:`evaluation.tracks`, a sweep of the chosen diagnosers over the track's test cells
+(:class:`evaluation.sources.TrackData`), scores the physical-limit observer
+(:mod:`evaluation.oracle`) on the same cells, and writes into ``<out>/<track>/``:
+
+* ``leaderboard.md`` / ``.csv`` / ``.json`` — one row per diagnoser plus the ``oracle`` row:
+  r_fd with its 95 % bootstrap interval over healthy episodes, the share of healthy episodes
+  with any alarm and the worst one; per fault r_td and t_dt with intervals, the ratio
+  ``(t_dt + 1) / (oracle t_dt + 1)`` with its paired interval, misses and early terminations;
+  ranks per fault on r_td that mark ties when intervals overlap;
+* ``results.csv`` / ``results.json`` — every per-seed record (the oracle's too);
+* ``figures/`` — as the classic leaderboard.
+
+and ``<out>/summary.md`` / ``.csv`` / ``.json``: diagnosers × tracks (r_fd with interval, mean
+r_td over faults, mean t_dt / oracle ratio) and the wall time per track.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from evaluation.intervals import (
+    Interval,
+    bootstrap_ci,
+    limit_ratio_ci,
+    rank_with_ties,
+    share_with_alarm,
+    worst,
+)
+from evaluation.oracle import ORACLE_LABEL, oracle_records
+from evaluation.records import CellResult
+from evaluation.sources import TrackData
+from evaluation.store import canonical_hash
+from evaluation.sweep import SweepConfig, default_specs, run_sweep
+from evaluation.tracks import Track
+from fcc_env.io import atomic_open, atomic_write, atomic_write_json
+
+__all__ = ["TrackRow", "TrackRun", "run_track", "track_rows", "track_table", "write_track"]
+
+
+@dataclass(frozen=True)
+class FaultCell:
+    """One diagnoser on one fault of a track, over the track's faulty seeds."""
+
+    r_td: Interval
+    t_dt: Interval
+    ratio: Interval
+    misses: int
+    terminated: int
+    n: int
+    rank: str = ""
+
+
+@dataclass(frozen=True)
+class TrackRow:
+    """One row of a track table (a diagnoser, or the physical limit)."""
+
+    label: str
+    r_fd: Interval
+    alarmed_share: float
+    worst_r_fd: float
+    worst_seed: int
+    faults: dict[str, FaultCell]
+
+    def mean_r_td(self) -> float:
+        v = [c.r_td.estimate for c in self.faults.values()]
+        return float(np.nanmean(v)) if v else math.nan
+
+    def mean_ratio(self) -> float:
+        v = [c.ratio.estimate for c in self.faults.values() if math.isfinite(c.ratio.estimate)]
+        return float(np.mean(v)) if v else math.nan
+
+    def to_json(self) -> dict[str, Any]:
+        return {
+            "label": self.label,
+            "r_fd": self.r_fd.to_json(),
+            "alarmed_share": self.alarmed_share,
+            "worst_r_fd": self.worst_r_fd,
+            "worst_seed": self.worst_seed,
+            "faults": {
+                f: {
+                    "r_td": c.r_td.to_json(),
+                    "t_dt": c.t_dt.to_json(),
+                    "t_dt_over_oracle": c.ratio.to_json(),
+                    "misses": c.misses,
+                    "terminated": c.terminated,
+                    "n": c.n,
+                    "rank_r_td": c.rank,
+                }
+                for f, c in self.faults.items()
+            },
+        }
+
+
+@dataclass(frozen=True)
+class TrackRun:
+    track: Track
+    records: tuple[CellResult, ...]
+    rows: tuple[TrackRow, ...]
+    wall_s: float
+    n_computed: int
+    n_reused: int
+
+
+def _by(records: Sequence[CellResult], label: str, scenario: str) -> list[CellResult]:
+    return [r for r in records if r.diagnoser == label and r.scenario == scenario]
+
+
+def track_rows(
+    records: Sequence[CellResult], labels: Sequence[str], faults: Sequence[str]
+) -> list[TrackRow]:
+    """The rows of a track table from per-seed records (pure; intervals seeded, reproducible)."""
+    rows = []
+    for label in [*labels, ORACLE_LABEL]:
+        healthy = _by(records, label, "nominal")
+        w = worst(healthy)
+        cells = {}
+        for f in faults:
+            recs = [r for r in _by(records, label, f) if r.n_fault_samples > 0]
+            orc = {r.seed: r for r in _by(records, ORACLE_LABEL, f) if r.n_fault_samples > 0}
+            pairs = [(r.t_dt, orc[r.seed].t_dt) for r in recs if r.seed in orc]
+            cells[f] = FaultCell(
+                r_td=bootstrap_ci([r.r_td for r in recs]),
+                t_dt=bootstrap_ci([r.t_dt for r in recs]),
+                ratio=limit_ratio_ci([p[0] for p in pairs], [p[1] for p in pairs]),
+                misses=sum(r.missed for r in recs),
+                terminated=sum(r.terminated_at is not None for r in _by(records, label, f)),
+                n=len(recs),
+            )
+        rows.append(
+            TrackRow(
+                label=label,
+                r_fd=bootstrap_ci([r.r_fd for r in healthy]),
+                alarmed_share=share_with_alarm(healthy),
+                worst_r_fd=w.r_fd,
+                worst_seed=w.seed,
+                faults=cells,
+            )
+        )
+    for f in faults:
+        ranks = rank_with_ties([row.faults[f].r_td for row in rows], lower_is_better=False)
+        for row, rank in zip(rows, ranks, strict=True):
+            row.faults[f] = FaultCell(**{**row.faults[f].__dict__, "rank": rank})
+    return rows
+
+
+def _ci(iv: Interval, digits: int) -> str:
+    if not math.isfinite(iv.estimate):
+        return "–"
+    return f"{iv.estimate:.{digits}f} [{iv.low:.{digits}f}, {iv.high:.{digits}f}]"
+
+
+def track_table(run: TrackRun) -> str:
+    """Markdown table of a track (header sentences, legend, rows)."""
+    faults = run.track.faults
+    head = ["diagnoser", "r_fd [95 % CI]", "healthy eps. alarmed", "worst r_fd (seed)"]
+    for f in faults:
+        head += [f"{f} r_td (rank)", f"{f} t_dt", f"{f} t_dt/oracle", f"{f} missed/ended"]
+    lines = [
+        f"## Track `{run.track.name}`",
+        "",
+        run.track.description,
+        "",
+        "r_fd: share of a healthy episode in alarm; r_td: share of the post-onset samples in "
+        "alarm; t_dt: samples from onset to the first alarm (mean over detected faults); "
+        "t_dt/oracle: (t_dt + 1) / (oracle t_dt + 1) over seeds both detected. Brackets: 95 % "
+        "BCa bootstrap intervals over seeds; ranks on r_td, '=' marks overlapping intervals.",
+        "",
+        "| " + " | ".join(head) + " |",
+        "|" + "---|" * len(head),
+    ]
+    for row in run.rows:
+        cells = [
+            row.label,
+            _ci(row.r_fd, 4),
+            f"{row.alarmed_share:.2f}",
+            f"{row.worst_r_fd:.4f} ({row.worst_seed})",
+        ]
+        for f in faults:
+            c = row.faults[f]
+            cells += [
+                f"{_ci(c.r_td, 3)} ({c.rank})",
+                _ci(c.t_dt, 0),
+                _ci(c.ratio, 2),
+                f"{c.misses}/{c.terminated}",
+            ]
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def run_track(
+    track: Track,
+    diagnosers: Sequence[str],
+    out: Path,
+    *,
+    backend: str = "local",
+    workers: int | None = None,
+    ray_address: str | None = None,
+    progress: bool = True,
+    figures: bool = True,
+) -> TrackRun:
+    """Sweep ``diagnosers`` over ``track`` and add the physical-limit row (resumable)."""
+    from evaluation.leaderboard import figure_cells, write_figures
+
+    t0 = time.perf_counter()
+    data = TrackData(track=track)
+    config = SweepConfig(diagnosers=default_specs(diagnosers), data=data)
+    config.validate()
+    store = out / "store" / canonical_hash(data.store_key())[:12]
+    results = run_sweep(
+        config,
+        store,
+        backend=backend,
+        n_workers=workers,
+        ray_address=ray_address,
+        progress=progress,
+        figure_cells=figure_cells(config) if figures else (),
+    )
+    records = (*results.records, *oracle_records(data))
+    rows = track_rows(records, [s.key for s in config.diagnosers], track.faults)
+    if figures:
+        write_figures(results, out / "figures")
+    return TrackRun(
+        track=track,
+        records=records,
+        rows=tuple(rows),
+        wall_s=time.perf_counter() - t0,
+        n_computed=results.n_computed,
+        n_reused=results.n_reused,
+    )
+
+
+def _flat(row: TrackRow, track: str) -> dict[str, Any]:
+    d: dict[str, Any] = {
+        "track": track,
+        "diagnoser": row.label,
+        "r_fd": row.r_fd.estimate,
+        "r_fd_low": row.r_fd.low,
+        "r_fd_high": row.r_fd.high,
+        "healthy_alarmed_share": row.alarmed_share,
+        "worst_r_fd": row.worst_r_fd,
+        "worst_seed": row.worst_seed,
+    }
+    for f, c in row.faults.items():
+        for name, iv in (("r_td", c.r_td), ("t_dt", c.t_dt), ("t_dt_over_oracle", c.ratio)):
+            d[f"{f}_{name}"], d[f"{f}_{name}_low"], d[f"{f}_{name}_high"] = (
+                iv.estimate,
+                iv.low,
+                iv.high,
+            )
+        d[f"{f}_misses"], d[f"{f}_terminated"], d[f"{f}_rank"] = c.misses, c.terminated, c.rank
+    return d
+
+
+def _write_csv(path: Path, rows: Sequence[dict[str, Any]]) -> Path:
+    import csv
+
+    fields: list[str] = []
+    for r in rows:
+        fields += [k for k in r if k not in fields]
+    with atomic_open(path, "w") as fh:
+        w = csv.DictWriter(fh, fieldnames=fields)
+        w.writeheader()
+        for r in rows:
+            w.writerow(
+                {k: ("" if isinstance(v, float) and math.isnan(v) else v) for k, v in r.items()}
+            )
+    return path
+
+
+def write_track(run: TrackRun, out: Path) -> list[Path]:
+    """The track's table (Markdown, CSV, JSON) and its per-seed records."""
+    name = run.track.name
+    paths = [
+        atomic_write(out / "leaderboard.md", track_table(run)),
+        _write_csv(out / "leaderboard.csv", [_flat(r, name) for r in run.rows]),
+        atomic_write_json(
+            out / "leaderboard.json",
+            {"track": run.track.to_json(), "rows": [r.to_json() for r in run.rows]},
+            indent=1,
+        ),
+        _write_csv(out / "results.csv", [r.to_json() for r in run.records]),
+        atomic_write_json(
+            out / "results.json", {"records": [r.to_json() for r in run.records]}, indent=1
+        ),
+    ]
+    return paths
+
+
+def summary_table(runs: Sequence[TrackRun]) -> tuple[str, list[dict[str, Any]]]:
+    """Diagnosers × tracks: r_fd with interval, mean r_td, mean t_dt / oracle; wall times."""
+    rows = []
+    for run in runs:
+        for row in run.rows:
+            rows.append(
+                {
+                    "track": run.track.name,
+                    "diagnoser": row.label,
+                    "r_fd": row.r_fd.estimate,
+                    "r_fd_low": row.r_fd.low,
+                    "r_fd_high": row.r_fd.high,
+                    "mean_r_td": row.mean_r_td(),
+                    "mean_t_dt_over_oracle": row.mean_ratio(),
+                    "track_wall_s": run.wall_s,
+                }
+            )
+    lines = [
+        "# Benchmark v2 summary",
+        "",
+        "| track | diagnoser | r_fd [95 % CI] | mean r_td | mean t_dt/oracle | track wall time |",
+        "|---|---|---|---|---|---|",
+    ]
+    for r in rows:
+        lines.append(
+            f"| {r['track']} | {r['diagnoser']} | {r['r_fd']:.4f} [{r['r_fd_low']:.4f}, "
+            f"{r['r_fd_high']:.4f}] | {r['mean_r_td']:.3f} | {r['mean_t_dt_over_oracle']:.2f} "
+            f"| {r['track_wall_s']:.0f} s |"
+        )
+    return "\n".join(lines) + "\n", rows
+
+
+def write_summary(runs: Sequence[TrackRun], out: Path) -> list[Path]:
+    text, rows = summary_table(runs)
+    return [
+        atomic_write(out / "summary.md", text),
+        _write_csv(out / "summary.csv", rows),
+        atomic_write_json(out / "summary.json", {"rows": rows}, indent=1),
+    ]
