@@ -64,7 +64,7 @@ def test_library_lists_every_kind_with_targets():
             lambda: effects.make("sensor_bias:T_rx", offset=1),
             r"Unknown parameter\(s\) \['offset'\]",
         ),
-        (lambda: effects.make("sensor_lag:T_rx", tau_s=0), r"tau_s=0 outside the allowed range"),
+        (lambda: effects.make("sensor_lag:T_rx", tau_s=0), r"tau_s=0 is outside the allowed range: a number in \[1, 1800\] s"),
         (lambda: effects.parse("sensor_bias:T_fp,bias"), r"use name=value"),
         (lambda: effects.resolve([object()]), r"neither a library id"),
     ],

@@ -43,9 +43,9 @@ def test_cli_writes_files(tmp_path, capsys):
 @pytest.mark.parametrize(
     ("argv", "message"),
     [
-        (["--seeds", "a-b"], "bad seed list piece 'a-b'"),
-        (["--scenario", "f7"], "Unknown scenario 'f7'"),
-        (["--samples", "1"], "n_samples must be an integer >= 2"),
+        (["--seeds", "a-b"], "seeds='a-b' is outside the allowed range: integers and ranges like '0-9,20' (bad piece 'a-b')"),
+        (["--scenario", "f7"], "scenario='f7' is outside the allowed range: one of ['nominal'"),
+        (["--samples", "1"], "n_samples=1 is outside the allowed range: an integer in [2, inf)"),
         (["--fault-magnitude", "2", "--scenario", "f1"], "fault_magnitude=2.0 is outside"),
         (["--plant-effect", "heat_loss:riser"], "Unknown plant effect 'heat_loss:riser'"),
     ],
@@ -65,5 +65,5 @@ def test_parse_seeds_and_read_errors(tmp_path):
     (tmp_path / "a.json").write_text('{"format": "other"}')
     with pytest.raises(ValueError, match="not an FCC dataset sidecar"):
         read_dataset(tmp_path / "a.csv")
-    with pytest.raises(ValueError, match=r"must end in \.csv"):
+    with pytest.raises(ValueError, match=r"a\.parquet' is outside the allowed range: a file name ending in \.csv"):
         write_dataset(tmp_path / "a.parquet")
