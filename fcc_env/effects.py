@@ -328,4 +328,3 @@ def reset_all(effects: Iterable[Any]) -> None:
     for e in effects:
         if callable(getattr(e, "reset", None)):
             e.reset()
-
