@@ -102,11 +102,14 @@ class FCCEnv(gym.Env):
     ## Arguments
     | kwarg / reset option | default | meaning |
     |---|---|---|
+    | fault | None | a :class:`fcc_env.FaultSpec` (the typed form of the five options below; |
+    |  |  | given with them, they must agree). As a reset option it replaces the make fault |
     | scenario | "nominal" | nominal, f1–f4 or random |
     | fault_time | paper's | onset sample (int, inside the horizon) |
     | fault_magnitude | paper's | relative change ≥ 0 (direction fixed by the fault) |
     | fault_profile | "abrupt" | or "incipient" |
-    | ramp_samples | 500 | incipient ramp length (samples) |
+    | ramp_samples | 500 | incipient ramp length (samples, ``DEFAULT_RAMP_SAMPLES``) |
+    | plant | None | a :class:`fcc_env.PlantConfig` instead of the five options below (not both) |
     | valve_beta | 0.3 | slide-valve head share; 0 = flow mode, 0.15 = harder |
     | sample_time_s | 10.0 | sample period (s) |
     | rk4_substeps | 1 | RK4 steps per sample |

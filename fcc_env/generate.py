@@ -31,18 +31,15 @@ from fcc_env.simulation import (
     DEFAULT_VALVE_BETA,
     FAULT_OPTION_NAMES,
     PLANT_OPTION_NAMES,
+    SEEDS_RANGE,
     PlantConfig,
     plant_from_request,
     simulate_episodes,
 )
-from fcc_env.validation import IntegerSequence, check, invalid
+from fcc_env.validation import check, invalid
 
 DATASET_FORMAT = "fcc-dataset"
 DATASET_FORMAT_VERSION = 1
-
-
-#: Allowed seed lists (the CLI's ``--seeds``): non-negative integers, repeats allowed.
-SEEDS_RANGE = IntegerSequence(0, unique=False, why="seeds are non-negative integers")
 
 
 def parse_seeds(text: str) -> list[int]:

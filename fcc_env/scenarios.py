@@ -389,7 +389,9 @@ class Excitation:
             exc = cls(**value)
             exc.validate()
             return exc
-        raise ValueError(f"excitation must be True, False or a mapping of options, got {value!r}")
+        raise invalid(
+            "excitation", value, "True, False, None, an Excitation or a mapping of its fields"
+        )
 
     def validate(self) -> None:
         check_params({name: getattr(self, name) for name in EXCITATION_RANGES}, EXCITATION_RANGES)

@@ -47,7 +47,7 @@ from fcc_env.scenarios import (
     Scenario,
     episode_generators,
 )
-from fcc_env.validation import Integer, Real, check, invalid
+from fcc_env.validation import Integer, IntegerSequence, Real, check, invalid
 
 #: Noise std per channel: absolute (°C) and relative to the value (R_ar, 0.5 %), spec §1.1.
 NOISE_STD_ABS = np.array([0.0 if m.noise_relative else m.noise_std for m in MEASUREMENTS])
@@ -72,6 +72,9 @@ RK4_SUBSTEPS_RANGE = Integer(1, 100)
 NOISE_SCALE_RANGE = Real(0.0, 100.0, why="a multiplier on the spec's noise stds; 0 = noise off")
 #: Allowed episode length (samples, counting the reset observation): the env's ``horizon``.
 N_SAMPLES_RANGE = Integer(2, why="an episode has an initial and at least one later sample")
+
+#: Allowed episode seeds: at least one, non-negative (Gymnasium's seeding), repeats allowed.
+SEEDS_RANGE = IntegerSequence(0, unique=False, why="one episode per seed")
 
 #: The slide-valve head share of the declared plant (``valve_beta``'s default).
 DEFAULT_VALVE_BETA: float = FCCParams().beta_sv
@@ -432,9 +435,7 @@ def simulate_episodes(
     effect that has ``d_state`` the integration runs in numpy over the episode axis instead
     (slower, same numbers as the env).
     """
-    seeds = [int(s) for s in seeds]
-    if not seeds:
-        raise ValueError("seeds must name at least one episode")
+    seeds = list(check("seeds", seeds, SEEDS_RANGE))
     n_samples = check("n_samples", n_samples, N_SAMPLES_RANGE)
     per_seed = scenario is not None and not isinstance(scenario, str)
     base = FaultSpec.from_request(
@@ -556,8 +557,8 @@ def simulate_inputs(
     params: FCCParams | None = None,
     param_multipliers: dict[str, np.ndarray] | None = None,
     x0: np.ndarray | None = None,
-    sample_time_s: float = 10.0,
-    rk4_substeps: int = 1,
+    sample_time_s: float | None = None,
+    rk4_substeps: int | None = None,
 ) -> InputSimulation:
     """Run the declared model on an input record (simulation, never one-step prediction).
 
@@ -567,7 +568,7 @@ def simulate_inputs(
         params: model parameters (default: the declared ones).
         param_multipliers: per-sample multipliers of parameter fields, arrays (T,) or (B, T).
         x0: initial state (default: the steady state of ``params`` at the first input).
-        sample_time_s, rk4_substeps: as for the env.
+        sample_time_s, rk4_substeps: as for the env (``None``: :class:`PlantConfig`'s default).
     """
     U = np.asarray(inputs, dtype=np.float64)
     single = U.ndim == 2
@@ -580,6 +581,12 @@ def simulate_inputs(
     if not np.isfinite(U).all():
         raise ValueError("inputs contain NaN or inf")
     B, T = U.shape[:2]
+    sample_time_s = check(
+        "sample_time_s", _or_default(sample_time_s, "sample_time_s"), SAMPLE_TIME_RANGE
+    )
+    rk4_substeps = check(
+        "rk4_substeps", _or_default(rk4_substeps, "rk4_substeps"), RK4_SUBSTEPS_RANGE
+    )
     p = params or FCCParams()
     mults = param_multipliers or {}
     unknown = sorted(set(mults) - set(PARAM_INDEX))

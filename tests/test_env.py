@@ -270,6 +270,10 @@ def test_bad_reset_options_and_actions():
 
 
 def test_batch_bad_input():
+    with pytest.raises(ValueError, match=r"seeds=\[\] is outside the allowed range: a non-empty"):
+        fcc_env.simulate_episodes([], 10)
+    with pytest.raises(ValueError, match=r"seeds=\[-3\] is outside the allowed range"):
+        fcc_env.simulate_episodes([-3], 10)
     with pytest.raises(
         ValueError, match=r"n_samples=1 is outside the allowed range: an integer in \[2, inf\)"
     ):
