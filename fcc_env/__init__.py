@@ -21,12 +21,20 @@ from fcc_env.params import (
     Measurement,
 )
 from fcc_env.physics import integrate_step, measure, rhs, steady_state
-from fcc_env.scenarios import FAULTS, SCENARIOS, Excitation
-from fcc_env.simulation import BatchResult, simulate_episodes
+from fcc_env.scenarios import (
+    DEFAULT_N_SAMPLES,
+    FAULTS,
+    SCENARIOS,
+    Excitation,
+    FaultProfile,
+    FaultSpec,
+    Scenario,
+)
+from fcc_env.simulation import BatchResult, PlantConfig, simulate_episodes
 
 ENV_ID = "FCC-v0"
 #: 3999 steps = 4000 samples including the reset observation (the paper's horizon).
-MAX_EPISODE_STEPS = 3999
+MAX_EPISODE_STEPS = DEFAULT_N_SAMPLES - 1
 
 if ENV_ID not in registry:
     register(id=ENV_ID, entry_point="fcc_env.env:FCCEnv", max_episode_steps=MAX_EPISODE_STEPS)
@@ -36,6 +44,7 @@ __version__ = "0.1.0"
 MODEL_VERSION = "fcc-model-2026.1"
 
 __all__ = [
+    "DEFAULT_N_SAMPLES",
     "ENV_ID",
     "FAULTS",
     "INPUT_NAMES",
@@ -49,7 +58,11 @@ __all__ = [
     "BatchResult",
     "Excitation",
     "FCCParams",
+    "FaultProfile",
+    "FaultSpec",
     "Measurement",
+    "PlantConfig",
+    "Scenario",
     "integrate_step",
     "measure",
     "rhs",

@@ -37,7 +37,9 @@ def bench_single_env(n_steps: int = 20_000) -> tuple[float, float]:
     return rate, time.perf_counter() - t0
 
 
-def bench_batch(n_episodes: int, n_samples: int = 4000, repeats: int = 2) -> float:
+def bench_batch(
+    n_episodes: int, n_samples: int = fcc_env.DEFAULT_N_SAMPLES, repeats: int = 2
+) -> float:
     fcc_env.simulate_episodes([0, 1], 50)  # warm-up
     best = np.inf
     for r in range(repeats):
@@ -55,7 +57,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     rate, episode_s = bench_single_env(args.steps)
     print(f"single env via gymnasium.make: {rate:,.0f} steps/s (goal >= 5,000)")
-    print(f"one 4000-sample episode:        {episode_s:.3f} s (goal <= 1 s)")
+    print(f"one {fcc_env.DEFAULT_N_SAMPLES}-sample episode:        {episode_s:.3f} s (goal <= 1 s)")
     batch_rate = bench_batch(args.episodes)
     print(
         f"batch of {args.episodes} episodes:        {batch_rate:,.0f} samples/s (goal >= 500,000)"

@@ -16,7 +16,7 @@ def main(argv: list[str] | None = None) -> int:
     args = parser.parse_args(argv)
     episodes, onsets = {}, {}
     for scenario in fcc_env.SCENARIOS:
-        b = fcc_env.simulate_episodes([args.seed], 4000, scenario=scenario)
+        b = fcc_env.simulate_episodes([args.seed], scenario=scenario)
         episodes[scenario] = b.observations[0]
         onsets[scenario] = b.fault_onsets[0]
     path = plot_scenarios(episodes, onsets, 10.0, Path(args.out) / "scenarios.png")

@@ -26,13 +26,14 @@ change the process act through the model's own parameters or inputs (``param_mul
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 
 from fcc_env.params import INPUT_NAMES, MEASUREMENT_NAMES
+from fcc_env.validation import Real, check
 
 SECONDS_PER_DAY = 86_400.0
 SECONDS_PER_HOUR = 3_600.0
@@ -129,8 +130,9 @@ class LibraryEffect:
         return out
 
     @property
-    def acts_on_measurements(self) -> bool:
-        return self.kind in ("sensor_bias", "sensor_drift", "sensor_lag")
+    def hooks(self) -> frozenset[str]:
+        """The hooks this effect really uses (the others are no-ops for its kind)."""
+        return _KIND_HOOKS.get(self.kind, frozenset())
 
 
 def _kinds() -> dict[str, tuple[list[str | None], list[ParamSpec], str]]:
@@ -241,23 +243,17 @@ def make(effect_id: str, **params: float) -> LibraryEffect:
         raise ValueError(
             f"Unknown parameter(s) {unknown} for effect {effect_id!r}. Allowed: {sorted(spec)}"
         )
-    values = {}
-    for name, s in spec.items():
-        v = params.get(name, s["default"])
-        if (
-            isinstance(v, bool)
-            or not isinstance(v, int | float | np.number)
-            or not math.isfinite(v)
-        ):
-            raise ValueError(f"{effect_id} parameter {name}={v!r} must be a finite number")
-        lo, hi = s["range"]
-        if not lo <= v <= hi:
-            raise ValueError(
-                f"{effect_id} parameter {name}={v!r} outside the allowed range [{lo}, {hi}] "
-                f"{s['unit']}"
-            )
-        values[name] = float(v)
+    values = {
+        name: check(name, params.get(name, s["default"]), param_range(s, effect_id))
+        for name, s in spec.items()
+    }
     return LibraryEffect(effect_id, values)
+
+
+def param_range(spec: Mapping[str, Any], effect_id: str) -> Real:
+    """The constraint of one effect parameter, from its entry in :func:`available`."""
+    lo, hi = spec["range"]
+    return Real(lo, hi, unit=spec["unit"], why=f"parameter of {effect_id}")
 
 
 def parse(text: str) -> LibraryEffect:
@@ -302,7 +298,29 @@ def resolve(effects: Iterable[Any] | None) -> list[Any]:
 _HOOKS = ("d_state", "measure", "param_multipliers", "transform_inputs")
 
 
+#: The one hook each library effect kind acts through (how the simulator files it).
+_KIND_HOOKS: dict[str, frozenset[str]] = {
+    "heat_loss": frozenset({"param_multipliers"}),
+    "afterburn": frozenset({"param_multipliers"}),
+    "air_split": frozenset({"param_multipliers"}),
+    "catalyst_deactivation": frozenset({"param_multipliers"}),
+    "feed_coking_drift": frozenset({"transform_inputs"}),
+    "sensor_bias": frozenset({"measure"}),
+    "sensor_drift": frozenset({"measure"}),
+    "sensor_lag": frozenset({"measure"}),
+}
+
+
 def has_hook(effect: Any, name: str) -> bool:
+    """Whether ``effect`` acts through hook ``name``.
+
+    An effect that declares ``hooks`` (a library effect: one class serves every kind, so it has
+    every method) acts through those only, so e.g. a heat loss does not take the slower
+    measurement path; any other object acts through the hooks it has.
+    """
+    hooks = getattr(effect, "hooks", None)
+    if hooks is not None:
+        return name in hooks
     return callable(getattr(effect, name, None))
 
 
@@ -310,6 +328,3 @@ def reset_all(effects: Iterable[Any]) -> None:
     for e in effects:
         if callable(getattr(e, "reset", None)):
             e.reset()
-
-
-MeasureFn = Callable[[float, np.ndarray], np.ndarray]

@@ -11,18 +11,21 @@ from gymnasium import spaces
 from fcc_env import effects as fx
 from fcc_env.params import MEASUREMENT_NAMES, N_MEASUREMENTS, NOMINAL_INPUTS
 from fcc_env.physics import AUX_NAMES, aux_kernel, measure_kernel, step_kernel
-from fcc_env.scenarios import Scenario
+from fcc_env.scenarios import DEFAULT_N_SAMPLES, RANDOM_SCENARIO, FaultSpec, Scenario
 from fcc_env.simulation import (
     AFTERBURN_WARNING_C,
+    FAULT_OPTION_NAMES,
+    N_SAMPLES_RANGE,
     RESET_OPTION_NAMES,
     PlantConfig,
     add_noise,
     apply_multipliers,
-    draw_fault,
     generic_sample,
+    plant_from_request,
     setup_episode,
     termination_reason,
 )
+from fcc_env.validation import check, invalid
 
 #: Actuator limits on the applied inputs (program + action), as fractions of nominal.
 U_F_LIMITS_REL = (0.5, 1.5)
@@ -34,7 +37,8 @@ OBS_LOW = np.array([0.0] + [-100.0] * 7, dtype=np.float32)
 OBS_HIGH = np.array([500.0] + [1500.0] * 7, dtype=np.float32)
 
 _CHUNK = 512  # samples of program and noise drawn at a time
-DEFAULT_HORIZON = 4000
+#: Kept importable for one release: the default horizon is :data:`fcc_env.scenarios.DEFAULT_N_SAMPLES`.
+DEFAULT_HORIZON = DEFAULT_N_SAMPLES
 
 
 class FCCEnv(gym.Env):
@@ -98,11 +102,14 @@ class FCCEnv(gym.Env):
     ## Arguments
     | kwarg / reset option | default | meaning |
     |---|---|---|
+    | fault | None | a :class:`fcc_env.FaultSpec` (the typed form of the five options below; |
+    |  |  | given with them, they must agree). As a reset option it replaces the make fault |
     | scenario | "nominal" | nominal, f1–f4 or random |
     | fault_time | paper's | onset sample (int, inside the horizon) |
     | fault_magnitude | paper's | relative change ≥ 0 (direction fixed by the fault) |
     | fault_profile | "abrupt" | or "incipient" |
-    | ramp_samples | 500 | incipient ramp length (samples) |
+    | ramp_samples | 500 | incipient ramp length (samples, ``DEFAULT_RAMP_SAMPLES``) |
+    | plant | None | a :class:`fcc_env.PlantConfig` instead of the five options below (not both) |
     | valve_beta | 0.3 | slide-valve head share; 0 = flow mode, 0.15 = harder |
     | sample_time_s | 10.0 | sample period (s) |
     | rk4_substeps | 1 | RK4 steps per sample |
@@ -131,41 +138,48 @@ class FCCEnv(gym.Env):
     def __init__(
         self,
         *,
-        scenario: str = "nominal",
+        fault: FaultSpec | None = None,
+        plant: PlantConfig | None = None,
+        scenario: str | None = None,
         fault_time: int | None = None,
         fault_magnitude: float | None = None,
-        fault_profile: str = "abrupt",
+        fault_profile: str | None = None,
         ramp_samples: int | None = None,
-        valve_beta: float = 0.3,
-        sample_time_s: float = 10.0,
-        rk4_substeps: int = 1,
-        excitation: Any = True,
-        noise_scale: float = 1.0,
-        horizon: int = DEFAULT_HORIZON,
+        valve_beta: float | None = None,
+        sample_time_s: float | None = None,
+        rk4_substeps: int | None = None,
+        excitation: Any = None,
+        noise_scale: float | None = None,
+        horizon: int = DEFAULT_N_SAMPLES,
         plant_effects: Any = (),
         render_mode: str | None = None,
     ) -> None:
-        if isinstance(horizon, bool) or not isinstance(horizon, int | np.integer) or horizon < 2:
-            raise ValueError(f"horizon must be an integer number of samples >= 2, got {horizon!r}")
-        self.horizon = int(horizon)
-        self.config = PlantConfig.build(
-            valve_beta=valve_beta,
-            sample_time_s=sample_time_s,
-            rk4_substeps=rk4_substeps,
-            excitation=excitation,
-            noise_scale=noise_scale,
+        self.horizon = check("horizon", horizon, N_SAMPLES_RANGE)
+        self.config = plant_from_request(
+            plant,
+            {
+                "valve_beta": valve_beta,
+                "sample_time_s": sample_time_s,
+                "rk4_substeps": rk4_substeps,
+                "excitation": excitation,
+                "noise_scale": noise_scale,
+            },
         )
-        self._fault_kwargs = {
-            "scenario": scenario,
-            "fault_time": fault_time,
-            "fault_magnitude": fault_magnitude,
-            "fault_profile": fault_profile,
-            "ramp_samples": ramp_samples,
-        }
+        #: The fault every episode asks for unless ``reset(options=...)`` overrides it.
+        self.fault_spec = FaultSpec.from_request(
+            fault,
+            {
+                "scenario": scenario,
+                "fault_time": fault_time,
+                "fault_magnitude": fault_magnitude,
+                "fault_profile": fault_profile,
+                "ramp_samples": ramp_samples,
+            },
+        )
         self._plant_effects = fx.resolve(plant_effects)
         # Validate now so a bad make() fails at once, not at the first reset.
-        if scenario != "random":
-            draw_fault(np.random.default_rng(0), self.horizon, self._fault_kwargs)
+        if self.fault_spec.scenario != RANDOM_SCENARIO:
+            self.fault_spec.resolve(self.horizon)
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(
                 f"render_mode={render_mode!r} is not supported. Allowed: "
@@ -194,8 +208,13 @@ class FCCEnv(gym.Env):
             if "plant_effects" in options
             else self._plant_effects
         )
-        fault_opts = {**self._fault_kwargs, **options}
-        setup = setup_episode(self.np_random, self.config, fault_opts, self.horizon, effects)
+        fault_opts = {k: options[k] for k in FAULT_OPTION_NAMES if k in options}
+        if options.get("fault") is not None:
+            # a whole spec replaces the make() fault; old keys given with it must agree
+            spec = FaultSpec.from_request(options["fault"], fault_opts)
+        else:
+            spec = self.fault_spec.with_options(fault_opts)
+        setup = setup_episode(self.np_random, self.config, spec, self.horizon, effects)
         self.fault = setup.fault
         self._schedule = setup.schedule
         self._pidx = setup.schedule.pidx
@@ -220,11 +239,11 @@ class FCCEnv(gym.Env):
             raise gym.error.ResetNeeded("call reset() before step()")
         a = np.asarray(action, dtype=np.float64)
         if a.shape != (2,):
-            raise ValueError(
-                f"action must have shape (2,) [Δu_F, ΔR_ar] in [-1, 1], got shape {a.shape}"
+            raise invalid(
+                "action", action, "shape (2,): [Δu_F, ΔR_ar] in [-1, 1]", f"shape {a.shape}"
             )
         if not np.isfinite(a).all():
-            raise ValueError(f"action must be finite (allowed range [-1, 1]), got {a.tolist()}")
+            raise invalid("action", a.tolist(), "finite values in [-1, 1] (larger are clipped)")
         clipped = np.clip(a, -1.0, 1.0)
         self._saturated = bool((clipped != a).any())
         self._action = clipped * ACTION_SCALE

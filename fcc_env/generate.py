@@ -14,9 +14,9 @@ Diagnosers and the modelling loop read ``measured`` and ``commanded`` only.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import os
-import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
@@ -24,9 +24,19 @@ from typing import Any
 import numpy as np
 
 from fcc_env import effects as fx
-from fcc_env.params import INPUT_NAMES, MEASUREMENT_NAMES, STATE_NAMES
-from fcc_env.scenarios import SCENARIOS
-from fcc_env.simulation import simulate_episodes
+from fcc_env.io import atomic_open, atomic_write_json
+from fcc_env.params import INPUT_NAMES, MEASUREMENT_NAMES, STATE_NAMES, FCCParams
+from fcc_env.scenarios import DEFAULT_N_SAMPLES, SCENARIOS, FaultSpec
+from fcc_env.simulation import (
+    DEFAULT_VALVE_BETA,
+    FAULT_OPTION_NAMES,
+    PLANT_OPTION_NAMES,
+    SEEDS_RANGE,
+    PlantConfig,
+    plant_from_request,
+    simulate_episodes,
+)
+from fcc_env.validation import check, invalid
 
 DATASET_FORMAT = "fcc-dataset"
 DATASET_FORMAT_VERSION = 1
@@ -47,40 +57,63 @@ def parse_seeds(text: str) -> list[int]:
             else:
                 seeds.append(int(part))
         except ValueError:
-            raise ValueError(
-                f"bad seed list piece {part!r} in {text!r}: use integers and ranges like '0-9,20'"
+            raise invalid(
+                "seeds", text, "integers and ranges like '0-9,20'", f"bad piece {part!r}"
             ) from None
-    if any(s < 0 for s in seeds):
-        raise ValueError(f"seeds must be non-negative integers, got {text!r}")
-    return seeds
+    return list(check("seeds", seeds, SEEDS_RANGE))
+
+
+def plant_json(plant: PlantConfig) -> dict[str, Any]:
+    """The sidecar record of a plant (the env keyword names; ``params`` only if not declared)."""
+    declared = FCCParams().replace(beta_sv=plant.valve_beta)
+    ex = plant.excitation
+    return {
+        "valve_beta": plant.valve_beta,
+        "sample_time_s": plant.sample_time_s,
+        "rk4_substeps": plant.rk4_substeps,
+        "excitation": False if ex is None else dataclasses.asdict(ex),
+        "noise_scale": plant.noise_scale,
+        "params": None if plant.params == declared else dataclasses.asdict(plant.params),
+    }
 
 
 def write_dataset(
     path: str | os.PathLike,
     *,
-    scenario: str = "nominal",
+    fault: FaultSpec | None = None,
+    plant: PlantConfig | None = None,
     seeds: Sequence[int] = (0,),
-    n_samples: int = 4000,
+    n_samples: int = DEFAULT_N_SAMPLES,
     include_states: bool = False,
     plant_effects: Sequence[Any] = (),
+    scenario: str | None = None,
     **env_kwargs: Any,
 ) -> Path:
     """Simulate ``seeds`` and write ``path`` (``.csv``) plus ``path.with_suffix('.json')``.
 
-    ``env_kwargs`` are FCC-v0 options (``fault_time``, ``valve_beta``, ``noise_scale``...);
-    ``plant_effects`` undeclared effects (:mod:`fcc_env.effects`): recorded in the sidecar under
-    ``truth_plant_effects`` for reproducibility, a field the modelling loop never reads.
-    Both files are written to temporaries and renamed, so a crash never leaves a torn dataset.
-    Returns the CSV path.
+    ``fault`` and ``plant`` as for :func:`fcc_env.simulate_episodes`, or (as before) the env's
+    keywords ``scenario`` and ``env_kwargs`` (``fault_time``, ``valve_beta``, ``noise_scale``...);
+    the sidecar records the resolved ``fault`` and ``plant``. ``plant_effects`` are undeclared
+    effects (:mod:`fcc_env.effects`): recorded under ``truth_plant_effects`` for reproducibility,
+    a field the modelling loop never reads. Both files are written atomically
+    (:mod:`fcc_env.io`), so a crash never leaves a torn file. Returns the CSV path.
     """
     from fcc_env import MODEL_VERSION
 
     out = Path(path)
     if out.suffix != ".csv":
-        raise ValueError(f"dataset path must end in .csv, got {str(out)!r}")
+        raise invalid("path", str(out), "a file name ending in .csv")
+    fault_kw = {k: env_kwargs.pop(k) for k in FAULT_OPTION_NAMES if k in env_kwargs}
+    spec = FaultSpec.from_request(fault, {**fault_kw, "scenario": scenario})
+    unknown = sorted(set(env_kwargs) - set(PLANT_OPTION_NAMES))
+    if unknown:
+        raise ValueError(
+            f"Unknown option(s) {unknown}. Allowed: {[*FAULT_OPTION_NAMES, *PLANT_OPTION_NAMES]}"
+        )
+    config = plant_from_request(plant, env_kwargs)
     effects = fx.resolve(plant_effects)
     batch = simulate_episodes(
-        list(seeds), n_samples, scenario=scenario, plant_effects=effects, **env_kwargs
+        list(seeds), n_samples, fault=spec, plant=config, plant_effects=effects
     )
     B, T = batch.observations.shape[:2]
     cols: dict[str, np.ndarray] = {
@@ -107,15 +140,17 @@ def write_dataset(
         "format_version": DATASET_FORMAT_VERSION,
         "model_version": MODEL_VERSION,
         "env_id": "FCC-v0",
-        "scenario": scenario,
+        "scenario": spec.scenario,
+        "fault": spec.to_json(),
+        "plant": plant_json(config),
         "seeds": list(batch.seeds),
         "scenarios": list(batch.scenarios),
         "fault_onsets": list(batch.fault_onsets),
         "fault_magnitudes": list(batch.fault_magnitudes),
-        "terminated_at": batch.terminated_at.tolist(),
+        # None (JSON null) for an episode that stayed inside the envelope
+        "terminated_at": [int(t) if t >= 0 else None for t in batch.terminated_at],
         "n_samples": T,
         "sample_time_s": batch.sample_time_s,
-        "env_kwargs": {k: v for k, v in env_kwargs.items() if _jsonable(v)},
         "truth_plant_effects": [
             e.describe() if hasattr(e, "describe") else {"id": "custom", "repr": repr(e)}
             for e in effects
@@ -132,22 +167,11 @@ def write_dataset(
     data = np.column_stack([cols[n] for n in names])
     fmt = ["%d", "%d", "%d", "%.1f"] + ["%.10g"] * (len(names) - 4)
     fmt[names.index("fault_active")] = "%d"
-    with tempfile.NamedTemporaryFile("w", dir=out.parent, suffix=".csv.tmp", delete=False) as fh:
+    # CSV first, sidecar last: a sidecar never describes a CSV that is not there
+    with atomic_open(out, "w") as fh:
         np.savetxt(fh, data, delimiter=",", header=",".join(names), comments="", fmt=fmt)
-    sidecar = out.with_suffix(".json")
-    with tempfile.NamedTemporaryFile("w", dir=out.parent, suffix=".json.tmp", delete=False) as fj:
-        json.dump(meta, fj, indent=2)
-    os.replace(fh.name, out)
-    os.replace(fj.name, sidecar)
+    atomic_write_json(out.with_suffix(".json"), meta)
     return out
-
-
-def _jsonable(v: Any) -> bool:
-    try:
-        json.dumps(v)
-    except TypeError:
-        return False
-    return True
 
 
 def read_dataset(path: str | os.PathLike) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
@@ -178,13 +202,20 @@ def main(argv: Sequence[str] | None = None) -> int:
         "--scenario", default="nominal", help=f"one of {list(SCENARIOS)} or 'random'"
     )
     parser.add_argument("--seeds", default="0", help="seeds, e.g. '0-9,20' (default 0)")
-    parser.add_argument("--samples", type=int, default=4000, help="samples per episode (4000)")
+    parser.add_argument(
+        "--samples",
+        type=int,
+        default=DEFAULT_N_SAMPLES,
+        help=f"samples per episode ({DEFAULT_N_SAMPLES})",
+    )
     parser.add_argument("--fault-time", type=int, default=None, help="onset sample")
     parser.add_argument("--fault-magnitude", type=float, default=None, help="relative size")
-    parser.add_argument("--fault-profile", default="abrupt", help="abrupt or incipient")
+    parser.add_argument("--fault-profile", default=None, help="abrupt (default) or incipient")
     parser.add_argument("--ramp-samples", type=int, default=None, help="incipient ramp length")
-    parser.add_argument("--valve-beta", type=float, default=0.3, help="0 = flow mode, 0.3")
-    parser.add_argument("--noise-scale", type=float, default=1.0, help="0 = noise-free")
+    parser.add_argument(
+        "--valve-beta", type=float, default=None, help=f"0 = flow mode ({DEFAULT_VALVE_BETA})"
+    )
+    parser.add_argument("--noise-scale", type=float, default=None, help="0 = noise-free (1)")
     parser.add_argument("--no-excitation", action="store_true", help="hold inputs at nominal")
     parser.add_argument("--states", action="store_true", help="also write the 11 states")
     parser.add_argument(
@@ -197,20 +228,28 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     args = parser.parse_args(argv)
     try:
+        fault = FaultSpec.from_options(
+            {
+                "scenario": args.scenario,
+                "fault_time": args.fault_time,
+                "fault_magnitude": args.fault_magnitude,
+                "fault_profile": args.fault_profile,
+                "ramp_samples": args.ramp_samples,
+            }
+        )
+        plant = PlantConfig.build(
+            valve_beta=args.valve_beta,
+            noise_scale=args.noise_scale,
+            excitation=not args.no_excitation,
+        )
         path = write_dataset(
             args.out,
-            scenario=args.scenario,
+            fault=fault,
+            plant=plant,
             seeds=parse_seeds(args.seeds),
             n_samples=args.samples,
             include_states=args.states,
             plant_effects=[fx.parse(t) for t in args.plant_effect],
-            fault_time=args.fault_time,
-            fault_magnitude=args.fault_magnitude,
-            fault_profile=args.fault_profile,
-            ramp_samples=args.ramp_samples,
-            valve_beta=args.valve_beta,
-            noise_scale=args.noise_scale,
-            excitation=not args.no_excitation,
         )
     except ValueError as e:
         parser.error(str(e))

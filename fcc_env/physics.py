@@ -311,10 +311,12 @@ def _rhs_core(x: np.ndarray, u: np.ndarray, p: np.ndarray, dx: np.ndarray, aux: 
 
 
 @_jit
-def _measure_core(x: np.ndarray, u: np.ndarray, p: np.ndarray, y: np.ndarray) -> None:
-    """Noise-free Table 1 measurements at state x with input u held over the next sample."""
-    F_rc = _catalyst_flow(x, u, p)
-    T_rx, _, _ = _riser(x[7], x[6], x[0], F_rc, u, p)
+def measurements_into(x: np.ndarray, u: np.ndarray, T_rx: float, y: np.ndarray) -> None:
+    """The Table 1 measurement map, the one definition every path uses.
+
+    ``y = [R_ar, T_ar, T_fp, T_rx, T_rg1, T_rg2, T_d1, T_dg]`` from state ``x``, the input ``u``
+    held over the next sample and the riser outlet temperature ``T_rx`` (``aux[0]`` of the RHS).
+    """
     y[0] = u[1]
     y[1] = u[2]
     y[2] = u[3]
@@ -323,6 +325,21 @@ def _measure_core(x: np.ndarray, u: np.ndarray, p: np.ndarray, y: np.ndarray) ->
     y[5] = x[7]
     y[6] = x[9]
     y[7] = x[10]
+
+
+@_jit
+def measure_batch_kernel(X: np.ndarray, U: np.ndarray, AUX: np.ndarray, Y: np.ndarray) -> None:
+    """Y[b] = the measurements of X[b], U[b] with T_rx = AUX[b, 0]; shapes (B, ·)."""
+    for b in range(X.shape[0]):
+        measurements_into(X[b], U[b], AUX[b, 0], Y[b])
+
+
+@_jit
+def _measure_core(x: np.ndarray, u: np.ndarray, p: np.ndarray, y: np.ndarray) -> None:
+    """Noise-free Table 1 measurements at state x with input u held over the next sample."""
+    F_rc = _catalyst_flow(x, u, p)
+    T_rx, _, _ = _riser(x[7], x[6], x[0], F_rc, u, p)
+    measurements_into(x, u, T_rx, y)
 
 
 @_jit
@@ -458,14 +475,7 @@ def simulate_kernel(
             # One RHS evaluation gives the first RK4 stage, the info quantities and T_rx (the
             # same riser solve the measurement would repeat).
             _rhs_core(x, u, p, work[0], aux)
-            Y[b, k, 0] = u[1]
-            Y[b, k, 1] = u[2]
-            Y[b, k, 2] = u[3]
-            Y[b, k, 3] = aux[0]
-            Y[b, k, 4] = x[4]
-            Y[b, k, 5] = x[7]
-            Y[b, k, 6] = x[9]
-            Y[b, k, 7] = x[10]
+            measurements_into(x, u, aux[0], Y[b, k])
             if add_noise:
                 for i in range(N_MEASUREMENTS):
                     OBS[b, k, i] = _noisy(

@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from fcc_env.params import NOMINAL_INPUTS, PARAM_INDEX
-from fcc_env.validation import Integer, Options, Real, check
+from fcc_env.validation import Constraint, Integer, Options, Real, check, check_params, invalid
 
 
 class Scenario(StrEnum):
@@ -84,21 +84,28 @@ SAMPLE_TIME_RANGE = Real(
 MAGNITUDE_SCALE_RANGE = Real(0.0, 10.0, closed="right")
 
 
+#: Allowed ``fault_magnitude`` (the size of the relative change).
+FAULT_MAGNITUDE_RANGE = Real(
+    0.0, MAX_FAULT_MAGNITUDE, why="a relative change; its sign is fixed by the fault"
+)
+#: Allowed ``ramp_samples`` of an incipient fault.
+RAMP_SAMPLES_RANGE = Integer(1, why="samples an incipient fault takes to reach its magnitude")
+#: Allowed scenario names (``"random"`` draws one per episode).
+SCENARIO_OPTIONS = Options([*SCENARIOS, RANDOM_SCENARIO])
+
+
+def fault_time_range(horizon: int | None) -> Integer:
+    """Allowed ``fault_time`` for an episode of ``horizon`` samples (``None``: unbounded)."""
+    high = math.inf if horizon is None else horizon
+    return Integer(0, high, closed="left", why="a sample index inside the episode")
+
+
 def parse_scenario(value: Any) -> Scenario:
-    try:
-        return Scenario(value)
-    except ValueError:
-        raise ValueError(
-            f"Unknown scenario {value!r}. Allowed: {list(SCENARIOS)} or 'random'"
-        ) from None
+    return Scenario(check("scenario", value, Options(Scenario)))
 
 
 def parse_profile(value: Any) -> FaultProfile:
-    try:
-        return FaultProfile(value)
-    except ValueError:
-        allowed = [p.value for p in FaultProfile]
-        raise ValueError(f"Unknown fault_profile {value!r}. Allowed: {allowed}") from None
+    return check("fault_profile", value, Options(FaultProfile))
 
 
 @dataclass(frozen=True)
@@ -162,31 +169,13 @@ def resolve_fault(
         return FaultConfig(Scenario.NOMINAL)
     definition = FAULTS[sc]
     onset = definition.default_onset if fault_time is None else fault_time
-    if isinstance(onset, bool) or not isinstance(onset, int | np.integer):
-        raise ValueError(f"fault_time must be an integer sample index, got {onset!r}")
-    onset = int(onset)
-    upper = horizon if horizon is not None else math.inf
-    if not 0 <= onset < upper:
-        raise ValueError(
-            f"fault_time={onset} is outside the episode: allowed 0 <= fault_time < {upper}"
-        )
+    onset = check("fault_time", onset, fault_time_range(horizon))
     mag = definition.default_magnitude if fault_magnitude is None else fault_magnitude
-    if isinstance(mag, bool) or not isinstance(mag, int | float | np.number):
-        raise ValueError(f"fault_magnitude must be a number, got {mag!r}")
-    mag = float(mag)
-    if not (math.isfinite(mag) and 0.0 <= mag <= MAX_FAULT_MAGNITUDE):
-        raise ValueError(
-            f"fault_magnitude={mag!r} is outside the allowed range [0, {MAX_FAULT_MAGNITUDE}] "
-            "(a relative change; its sign is fixed by the fault)"
-        )
+    mag = check("fault_magnitude", mag, FAULT_MAGNITUDE_RANGE)
     ramp = 0
     if profile is FaultProfile.INCIPIENT:
         ramp = DEFAULT_RAMP_SAMPLES if ramp_samples is None else ramp_samples
-        if isinstance(ramp, bool) or not isinstance(ramp, int | np.integer) or ramp < 1:
-            raise ValueError(
-                f"ramp_samples must be an integer >= 1 for an incipient fault, got {ramp!r}"
-            )
-        ramp = int(ramp)
+        ramp = check("ramp_samples", ramp, RAMP_SAMPLES_RANGE)
     elif ramp_samples not in (None, 0):
         raise ValueError(f"ramp_samples={ramp_samples!r} only applies to fault_profile='incipient'")
     return FaultConfig(sc, onset, mag, profile, ramp)
@@ -237,17 +226,19 @@ class FaultSpec:
     magnitude_scale: float = 1.0
 
     def __post_init__(self) -> None:
-        sc = check("scenario", self.scenario, Options([*SCENARIOS, RANDOM_SCENARIO]))
+        sc = check("scenario", self.scenario, SCENARIO_OPTIONS)
         set_ = object.__setattr__
         set_(self, "scenario", str(sc))
-        set_(self, "onset", check("fault_time", self.onset, Integer(0), None))
+        set_(self, "onset", check("fault_time", self.onset, fault_time_range(None), None))
         set_(
             self,
             "magnitude",
-            check("fault_magnitude", self.magnitude, Real(0.0, MAX_FAULT_MAGNITUDE), None),
+            check("fault_magnitude", self.magnitude, FAULT_MAGNITUDE_RANGE, None),
         )
         set_(self, "profile", check("fault_profile", self.profile, Options(FaultProfile)))
-        set_(self, "ramp_samples", check("ramp_samples", self.ramp_samples, Integer(1), None))
+        set_(
+            self, "ramp_samples", check("ramp_samples", self.ramp_samples, RAMP_SAMPLES_RANGE, None)
+        )
         if self.ramp_samples is not None and self.profile is not FaultProfile.INCIPIENT:
             raise ValueError(
                 f"ramp_samples={self.ramp_samples!r} only applies to fault_profile='incipient'"
@@ -268,6 +259,47 @@ class FaultSpec:
             if options.get(opt) is not None
         }
         return cls(**kwargs)
+
+    @classmethod
+    def from_request(
+        cls, fault: FaultSpec | None = None, options: Mapping[str, Any] | None = None
+    ) -> FaultSpec:
+        """The spec asked for by ``fault=`` and/or the env-style option names in ``options``.
+
+        Options that are ``None`` are not given. With both, every given option must agree with
+        ``fault`` (a clash raises, so a stale keyword never silently loses or wins).
+        """
+        given = {k: v for k, v in (options or {}).items() if v is not None}
+        unknown = sorted(set(given) - {opt for opt, _ in FAULT_OPTION_FIELDS})
+        if unknown:
+            allowed = [opt for opt, _ in FAULT_OPTION_FIELDS]
+            raise ValueError(f"Unknown fault option(s) {unknown}. Allowed: {allowed}")
+        if fault is None:
+            return cls.from_options(given)
+        if not isinstance(fault, FaultSpec):
+            raise invalid("fault", fault, "a FaultSpec or None")
+        current = fault.to_options()
+        clash = {k: v for k, v in given.items() if current[k] != v}
+        if clash:
+            raise ValueError(
+                f"fault={fault!r} conflicts with {clash}: pass the fault either as "
+                "fault=FaultSpec(...) or as the keywords "
+                f"{[opt for opt, _ in FAULT_OPTION_FIELDS]}, not both"
+            )
+        return fault
+
+    def with_options(self, options: Mapping[str, Any]) -> FaultSpec:
+        """This spec with env-style options overriding it (``None`` restores a field's default),
+        as ``reset(options=...)`` overrides the ``make`` kwargs."""
+        fields = dict(FAULT_OPTION_FIELDS)
+        unknown = sorted(set(options) - set(fields))
+        if unknown:
+            raise ValueError(f"Unknown fault option(s) {unknown}. Allowed: {list(fields)}")
+        defaults = {f.name: f.default for f in dataclasses.fields(self)}
+        changes = {
+            fields[opt]: defaults[fields[opt]] if v is None else v for opt, v in options.items()
+        }
+        return self.replace(**changes) if changes else self
 
     def to_options(self) -> dict[str, Any]:
         """The inverse of :meth:`from_options` (JSON-serialisable; ``magnitude_scale`` applied
@@ -365,25 +397,29 @@ class Excitation:
             exc = cls(**value)
             exc.validate()
             return exc
-        raise ValueError(f"excitation must be True, False or a mapping of options, got {value!r}")
+        raise invalid(
+            "excitation", value, "True, False, None, an Excitation or a mapping of its fields"
+        )
 
     def validate(self) -> None:
-        for name in ("T_fp_halfrange_C", "T_ar_halfrange_C"):
-            v = getattr(self, name)
-            if not (math.isfinite(v) and 0 <= v <= 50):
-                raise ValueError(f"excitation {name}={v!r} outside the allowed range [0, 50] °C")
-        if not (math.isfinite(self.R_ar_halfrange_rel) and 0 <= self.R_ar_halfrange_rel <= 0.07):
-            raise ValueError(
-                f"excitation R_ar_halfrange_rel={self.R_ar_halfrange_rel!r} outside [0, 0.07] "
-                "(larger air moves leave the hot-state envelope, spec §4)"
+        check_params({name: getattr(self, name) for name in EXCITATION_RANGES}, EXCITATION_RANGES)
+        if self.hold_max < self.hold_min:
+            raise invalid(
+                "hold_max", self.hold_max, f"an integer >= hold_min={self.hold_min}", "hold range"
             )
-        if not (1 <= self.hold_min <= self.hold_max):
-            raise ValueError(
-                f"excitation hold range [{self.hold_min}, {self.hold_max}] must satisfy "
-                "1 <= hold_min <= hold_max"
-            )
-        if self.warmup_samples < 0:
-            raise ValueError(f"excitation warmup_samples={self.warmup_samples} must be >= 0")
+
+
+#: Allowed values of the :class:`Excitation` fields.
+EXCITATION_RANGES: dict[str, Constraint] = {
+    "T_fp_halfrange_C": Real(0.0, 50.0, unit="°C"),
+    "T_ar_halfrange_C": Real(0.0, 50.0, unit="°C"),
+    "R_ar_halfrange_rel": Real(
+        0.0, 0.07, why="larger air moves leave the hot-state envelope, spec §4"
+    ),
+    "hold_min": Integer(1),
+    "hold_max": Integer(1),
+    "warmup_samples": Integer(0),
+}
 
 
 class ProgramGenerator:

@@ -7,11 +7,13 @@ with the same seed and options sample for sample (zero actions).
 
 from __future__ import annotations
 
+import dataclasses
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
+import numba
 import numpy as np
 from gymnasium.utils import seeding
 
@@ -28,6 +30,7 @@ from fcc_env.params import (
 from fcc_env.physics import (
     AUX_NAMES,
     N_AUX,
+    measure_batch_kernel,
     noisy_batch_kernel,
     noisy_kernel,
     rhs_batch_kernel,
@@ -35,14 +38,16 @@ from fcc_env.physics import (
     steady_state,
 )
 from fcc_env.scenarios import (
-    FAULTS,
+    DEFAULT_N_SAMPLES,
+    FAULT_OPTION_FIELDS,
     Excitation,
     FaultConfig,
+    FaultSpec,
     ProgramGenerator,
     Scenario,
     episode_generators,
-    resolve_fault,
 )
+from fcc_env.validation import Integer, IntegerSequence, Real, check, invalid
 
 #: Noise std per channel: absolute (°C) and relative to the value (R_ar, 0.5 %), spec §1.1.
 NOISE_STD_ABS = np.array([0.0 if m.noise_relative else m.noise_std for m in MEASUREMENTS])
@@ -55,9 +60,33 @@ AFTERBURN_WARNING_C = 40.0  # spec §2.8 flag: reported in info, the episode goe
 MAX_AFTERBURN_C = 80.0  # the d1 afterburn has ignited (T_d1 ≈ 790 °C): the episode ends
 
 
+#: Allowed slide-valve head share ``valve_beta`` (``FCCParams.beta_sv``).
+VALVE_BETA_RANGE = Real(0.0, 1.0, why="0 = flow mode, 0.15 = harder benchmark, 0.3 = default")
+#: Allowed sample period.
+SAMPLE_TIME_RANGE = Real(
+    0.5, 60.0, unit="s", why="RK4 stability and accuracy were verified for the spec's 10 s"
+)
+#: Allowed RK4 steps per sample.
+RK4_SUBSTEPS_RANGE = Integer(1, 100)
+#: Allowed multiplier on the spec's noise stds.
+NOISE_SCALE_RANGE = Real(0.0, 100.0, why="a multiplier on the spec's noise stds; 0 = noise off")
+#: Allowed episode length (samples, counting the reset observation): the env's ``horizon``.
+N_SAMPLES_RANGE = Integer(2, why="an episode has an initial and at least one later sample")
+
+#: Allowed episode seeds: at least one, non-negative (Gymnasium's seeding), repeats allowed.
+SEEDS_RANGE = IntegerSequence(0, unique=False, why="one episode per seed")
+
+#: The slide-valve head share of the declared plant (``valve_beta``'s default).
+DEFAULT_VALVE_BETA: float = FCCParams().beta_sv
+
+
 @dataclass(frozen=True)
 class PlantConfig:
-    """Everything that defines the plant and its operation, validated once (env kwargs)."""
+    """Everything that defines the plant and its operation, validated once (env kwargs).
+
+    The field defaults are the paper's set-up and the one place they are written; :meth:`build`
+    takes the env's keyword names (``None`` = the default).
+    """
 
     params: FCCParams = field(default_factory=FCCParams)
     sample_time_s: float = 10.0
@@ -69,81 +98,81 @@ class PlantConfig:
     def build(
         cls,
         *,
-        valve_beta: Any = 0.3,
-        sample_time_s: Any = 10.0,
-        rk4_substeps: Any = 1,
-        excitation: Any = True,
-        noise_scale: Any = 1.0,
+        valve_beta: Any = None,
+        sample_time_s: Any = None,
+        rk4_substeps: Any = None,
+        excitation: Any = None,
+        noise_scale: Any = None,
         params: FCCParams | None = None,
     ) -> PlantConfig:
-        if not _is_number(valve_beta) or not 0.0 <= float(valve_beta) <= 1.0:
-            raise ValueError(
-                f"valve_beta={valve_beta!r} outside the allowed range [0, 1] "
-                "(0 = flow mode, 0.15 = harder benchmark, 0.3 = default)"
-            )
-        if not _is_number(sample_time_s) or not 0.5 <= float(sample_time_s) <= 60.0:
-            raise ValueError(
-                f"sample_time_s={sample_time_s!r} outside the allowed range [0.5, 60] s "
-                "(RK4 stability and accuracy were verified for the spec's 10 s)"
-            )
-        if isinstance(rk4_substeps, bool) or not isinstance(rk4_substeps, int | np.integer):
-            raise ValueError(f"rk4_substeps must be an integer in [1, 100], got {rk4_substeps!r}")
-        if not 1 <= rk4_substeps <= 100:
-            raise ValueError(f"rk4_substeps={rk4_substeps} outside the allowed range [1, 100]")
-        if not _is_number(noise_scale) or not 0.0 <= float(noise_scale) <= 100.0:
-            raise ValueError(
-                f"noise_scale={noise_scale!r} outside the allowed range [0, 100] "
-                "(a multiplier on the spec's noise stds; 0 = noise off)"
-            )
+        """Validate env-style plant options; ``valve_beta`` overrides ``params.beta_sv``
+        (default :data:`DEFAULT_VALVE_BETA`, also when ``params`` are given)."""
         if params is not None and not isinstance(params, FCCParams):
-            raise ValueError(f"params must be an FCCParams instance, got {type(params).__name__}")
-        p = (params or FCCParams()).replace(beta_sv=float(valve_beta))
+            raise invalid("params", params, "an FCCParams instance or None")
+        valve_beta = DEFAULT_VALVE_BETA if valve_beta is None else valve_beta
+        p = (params or FCCParams()).replace(
+            beta_sv=check("valve_beta", valve_beta, VALVE_BETA_RANGE)
+        )
         return cls(
             params=p,
-            sample_time_s=float(sample_time_s),
-            rk4_substeps=int(rk4_substeps),
+            sample_time_s=check(
+                "sample_time_s", _or_default(sample_time_s, "sample_time_s"), SAMPLE_TIME_RANGE
+            ),
+            rk4_substeps=check(
+                "rk4_substeps", _or_default(rk4_substeps, "rk4_substeps"), RK4_SUBSTEPS_RANGE
+            ),
             excitation=Excitation.from_option(excitation),
-            noise_scale=float(noise_scale),
+            noise_scale=check(
+                "noise_scale", _or_default(noise_scale, "noise_scale"), NOISE_SCALE_RANGE
+            ),
         )
+
+    @property
+    def valve_beta(self) -> float:
+        return self.params.beta_sv
 
     def initial_state(self) -> np.ndarray:
         return steady_state(self.params, NOMINAL_INPUTS)
 
 
-def _is_number(v: Any) -> bool:
-    return isinstance(v, int | float | np.number) and not isinstance(v, bool) and math.isfinite(v)
+_PLANT_DEFAULTS = {f.name: f.default for f in dataclasses.fields(PlantConfig)}
+#: The env / :func:`simulate_episodes` keyword names that :meth:`PlantConfig.build` takes.
+PLANT_OPTION_NAMES = (
+    "valve_beta",
+    "sample_time_s",
+    "rk4_substeps",
+    "excitation",
+    "noise_scale",
+    "params",
+)
 
 
-FAULT_OPTION_NAMES = ("scenario", "fault_time", "fault_magnitude", "fault_profile", "ramp_samples")
-RESET_OPTION_NAMES = (*FAULT_OPTION_NAMES, "plant_effects")
+def _or_default(value: Any, name: str) -> Any:
+    return _PLANT_DEFAULTS[name] if value is None else value
+
+
+def plant_from_request(plant: PlantConfig | None, options: Mapping[str, Any]) -> PlantConfig:
+    """``plant=`` or the old plant keywords (``None`` = not given); both at once raise."""
+    given = sorted(k for k, v in options.items() if v is not None)
+    if plant is None:
+        return PlantConfig.build(**options)
+    if not isinstance(plant, PlantConfig):
+        raise invalid("plant", plant, "a PlantConfig or None")
+    if given:
+        raise ValueError(
+            f"plant={plant!r} and the plant keyword(s) {given} were both given: pass the plant "
+            "either as plant=PlantConfig.build(...) or as keywords, not both"
+        )
+    return plant
+
+
+FAULT_OPTION_NAMES = tuple(opt for opt, _ in FAULT_OPTION_FIELDS)
+RESET_OPTION_NAMES = ("fault", *FAULT_OPTION_NAMES, "plant_effects")
 
 
 def draw_fault(rng: np.random.Generator, horizon: int, options: dict[str, Any]) -> FaultConfig:
-    """Resolve fault options; ``scenario="random"`` draws scenario, onset and magnitude from ``rng``.
-
-    Random draws: scenario uniform over nominal and f1–f4, onset uniform in the middle half of
-    the horizon, magnitude uniform in [0.5, 1.5] × the paper's. Explicit options override draws.
-    The draws always consume the same numbers, so the rest of the episode does not depend on them.
-    """
-    opts = dict(options)
-    if opts.get("scenario") == "random":
-        sc = list(Scenario)[int(rng.integers(len(Scenario)))]
-        onset = int(rng.integers(horizon // 4, max(horizon // 4 + 1, 3 * horizon // 4)))
-        scale = float(rng.uniform(0.5, 1.5))
-        opts["scenario"] = sc.value
-        if sc is not Scenario.NOMINAL:
-            if opts.get("fault_time") is None:
-                opts["fault_time"] = onset
-            if opts.get("fault_magnitude") is None:
-                opts["fault_magnitude"] = FAULTS[sc].default_magnitude * scale
-    return resolve_fault(
-        opts.get("scenario", "nominal"),
-        opts.get("fault_time"),
-        opts.get("fault_magnitude"),
-        opts.get("fault_profile", "abrupt"),
-        opts.get("ramp_samples"),
-        horizon=horizon,
-    )
+    """Resolve env-style fault options (kept for one release: use :meth:`FaultSpec.resolve`)."""
+    return FaultSpec.from_request(None, options).resolve(horizon, rng)
 
 
 class PlantSchedule:
@@ -229,6 +258,13 @@ def generic_sample(
     """One sample of B episodes with ``d_state`` effects: RK4 in numpy over the compiled RHS.
 
     Returns (measurement, aux, next state) at sample k; x, u: (B, ·), p: (B, n_params).
+
+    Why a numpy twin of the compiled RK4 (``physics.step_kernel``): a user effect's ``d_state`` is
+    arbitrary Python, which compiled code cannot call, so the stages are combined here around one
+    compiled RHS call per stage (:func:`fcc_env.physics.rhs_batch_kernel`). Everything else is
+    shared: the RHS, the measurement map (:func:`fcc_env.physics.measure_batch_kernel`) and the
+    stage arithmetic, written in the same order as the compiled loop so that both give the same
+    numbers (``tests/test_effects.py`` checks env = batch on this path).
     """
     B = x.shape[0]
     h = sample_time_s / substeps
@@ -241,7 +277,8 @@ def generic_sample(
         return dx + schedule.d_state(t, xx, u), aux
 
     k1, aux = f(t0, x)
-    y = np.column_stack([u[:, 1], u[:, 2], u[:, 3], aux[:, 0], x[:, 4], x[:, 7], x[:, 9], x[:, 10]])
+    y = np.empty((B, N_MEASUREMENTS))
+    measure_batch_kernel(np.ascontiguousarray(x), u, aux, y)
     if not advance:
         return y, aux, x
     xn = x.copy()
@@ -267,17 +304,18 @@ class EpisodeSetup:
 def setup_episode(
     rng: np.random.Generator,
     config: PlantConfig,
-    fault_options: dict[str, Any],
+    fault: FaultSpec,
     horizon: int,
     plant_effects: list[Any] | None = None,
 ) -> EpisodeSetup:
+    """Set up one episode from its seeded generator (the env's and batch simulation's order)."""
     gens = episode_generators(rng)
-    fault = draw_fault(gens["fault"], horizon, fault_options)
+    resolved = fault.resolve(horizon, gens["fault"])
     effects = plant_effects or []
     fx.reset_all(effects)
-    schedule = PlantSchedule(fault, effects, config.params, config.sample_time_s)
+    schedule = PlantSchedule(resolved, effects, config.params, config.sample_time_s)
     return EpisodeSetup(
-        fault, ProgramGenerator(config.excitation, gens["program"]), gens["noise"], schedule
+        resolved, ProgramGenerator(config.excitation, gens["program"]), gens["noise"], schedule
     )
 
 
@@ -292,17 +330,47 @@ def add_noise(y_clean: np.ndarray, z: np.ndarray, noise_scale: float) -> np.ndar
     )
 
 
+#: Envelope codes of :func:`envelope_code`: ``TERMINATION_REASONS[code]`` (0 = inside).
+TERMINATION_REASONS: tuple[str | None, ...] = (
+    None,
+    "numerical_failure",
+    "well_empty",
+    "extinguished",
+    "afterburn",
+)
+
+
+@numba.njit(cache=True, nogil=True)
+def envelope_code(x: np.ndarray) -> int:
+    """The one envelope check (spec §2.8): index into :data:`TERMINATION_REASONS` of state ``x``.
+
+    The first reason in that order wins (a non-finite state is a numerical failure whatever else).
+    """
+    for i in range(x.shape[0]):
+        if not math.isfinite(x[i]):
+            return 1
+    if x[8] < MIN_WELL_INVENTORY_KG:
+        return 2
+    if x[4] < MIN_T_RG1_C:
+        return 3
+    if x[9] - x[4] > MAX_AFTERBURN_C:
+        return 4
+    return 0
+
+
+@numba.njit(cache=True, nogil=True)
+def envelope_codes(X: np.ndarray) -> np.ndarray:
+    """:func:`envelope_code` of every sample of states ``X`` (B, T, 11): codes (B, T) int8."""
+    out = np.zeros((X.shape[0], X.shape[1]), dtype=np.int8)
+    for b in range(X.shape[0]):
+        for k in range(X.shape[1]):
+            out[b, k] = envelope_code(X[b, k])
+    return out
+
+
 def termination_reason(x: np.ndarray) -> str | None:
     """Why the plant left its physical envelope at state ``x`` (spec §2.8), or None."""
-    if not np.isfinite(x).all():
-        return "numerical_failure"
-    if x[8] < MIN_WELL_INVENTORY_KG:
-        return "well_empty"
-    if x[4] < MIN_T_RG1_C:
-        return "extinguished"
-    if x[9] - x[4] > MAX_AFTERBURN_C:
-        return "afterburn"
-    return None
+    return TERMINATION_REASONS[envelope_code(np.asarray(x, dtype=np.float64))]
 
 
 @dataclass(frozen=True)
@@ -331,44 +399,71 @@ class BatchResult:
 
 def simulate_episodes(
     seeds: Sequence[int],
-    n_samples: int = 4000,
+    n_samples: int = DEFAULT_N_SAMPLES,
     *,
-    scenario: str | Sequence[str] = "nominal",
+    fault: FaultSpec | None = None,
+    plant: PlantConfig | None = None,
+    plant_effects: Any = (),
+    scenario: str | Sequence[str] | None = None,
     fault_time: int | None = None,
     fault_magnitude: float | None = None,
-    fault_profile: str = "abrupt",
+    fault_profile: str | None = None,
     ramp_samples: int | None = None,
-    valve_beta: float = 0.3,
-    sample_time_s: float = 10.0,
-    rk4_substeps: int = 1,
-    excitation: Any = True,
-    noise_scale: float = 1.0,
-    plant_effects: Any = (),
+    valve_beta: float | None = None,
+    sample_time_s: float | None = None,
+    rk4_substeps: int | None = None,
+    excitation: Any = None,
+    noise_scale: float | None = None,
     params: FCCParams | None = None,
 ) -> BatchResult:
     """Simulate many seeded episodes at once, identical to ``FCC-v0`` with zero actions.
 
-    ``scenario`` may be one name for all episodes or one per seed. Episodes run in parallel
-    threads of the compiled kernel (numba ``prange``); with a user effect that has ``d_state``
-    the integration runs in numpy over the episode axis instead (slower, same numbers as the env).
-    ``plant_effects`` as for the env (:mod:`fcc_env.effects`); one effect object serves the
-    whole batch, with a leading episode axis on its arrays.
+    Args:
+        seeds: one episode per seed.
+        n_samples: samples per episode (:data:`N_SAMPLES_RANGE`), the env's ``horizon``.
+        fault: the fault asked for (default: nominal). The env's keywords ``scenario``,
+            ``fault_time``, ``fault_magnitude``, ``fault_profile``, ``ramp_samples`` still work;
+            given together with ``fault`` they must agree with it. ``scenario`` may also be one
+            name per seed: then it replaces the spec's scenario, whose other fields apply to each.
+        plant: the plant (default: the paper's); or the env's keywords ``valve_beta``,
+            ``sample_time_s``, ``rk4_substeps``, ``excitation``, ``noise_scale``, ``params``
+            (``None`` = not given), never both.
+        plant_effects: as for the env (:mod:`fcc_env.effects`); one effect object serves the
+            whole batch, with a leading episode axis on its arrays.
+
+    Episodes run in parallel threads of the compiled kernel (numba ``prange``); with a user
+    effect that has ``d_state`` the integration runs in numpy over the episode axis instead
+    (slower, same numbers as the env).
     """
-    seeds = [int(s) for s in seeds]
-    if not seeds:
-        raise ValueError("seeds must name at least one episode")
-    if isinstance(n_samples, bool) or not isinstance(n_samples, int | np.integer) or n_samples < 2:
-        raise ValueError(f"n_samples must be an integer >= 2, got {n_samples!r}")
-    scenarios = [scenario] * len(seeds) if isinstance(scenario, str) else list(scenario)
-    if len(scenarios) != len(seeds):
-        raise ValueError(f"got {len(scenarios)} scenarios for {len(seeds)} seeds")
-    config = PlantConfig.build(
-        valve_beta=valve_beta,
-        sample_time_s=sample_time_s,
-        rk4_substeps=rk4_substeps,
-        excitation=excitation,
-        noise_scale=noise_scale,
-        params=params,
+    seeds = list(check("seeds", seeds, SEEDS_RANGE))
+    n_samples = check("n_samples", n_samples, N_SAMPLES_RANGE)
+    per_seed = scenario is not None and not isinstance(scenario, str)
+    base = FaultSpec.from_request(
+        fault,
+        {
+            "scenario": None if per_seed else scenario,
+            "fault_time": fault_time,
+            "fault_magnitude": fault_magnitude,
+            "fault_profile": fault_profile,
+            "ramp_samples": ramp_samples,
+        },
+    )
+    if per_seed:
+        specs = [base.replace(scenario=sc) for sc in scenario]
+        if len(specs) != len(seeds):
+            raise ValueError(f"got {len(specs)} scenarios for {len(seeds)} seeds")
+    else:
+        specs = [base] * len(seeds)
+    config = plant_from_request(
+        plant,
+        {
+            "valve_beta": valve_beta,
+            "sample_time_s": sample_time_s,
+            "rk4_substeps": rk4_substeps,
+            "excitation": excitation,
+            "noise_scale": noise_scale,
+            "params": params,
+        },
     )
     effects = fx.resolve(plant_effects)
     B, T = len(seeds), int(n_samples)
@@ -378,16 +473,9 @@ def simulate_episodes(
     faults: list[FaultConfig] = []
     pidx_rows, pm_rows = [], []
     schedule = None
-    for b, (seed, sc) in enumerate(zip(seeds, scenarios, strict=True)):
+    for b, (seed, spec) in enumerate(zip(seeds, specs, strict=True)):
         rng, _ = seeding.np_random(seed)
-        opts = {
-            "scenario": sc,
-            "fault_time": fault_time,
-            "fault_magnitude": fault_magnitude,
-            "fault_profile": fault_profile,
-            "ramp_samples": ramp_samples,
-        }
-        setup = setup_episode(rng, config, opts, T, effects)
+        setup = setup_episode(rng, config, spec, T, effects)
         schedule = setup.schedule
         U[b] = schedule.inputs(k, setup.program.take(T))
         Z[b] = setup.noise_rng.standard_normal((T, N_MEASUREMENTS))
@@ -431,15 +519,11 @@ def simulate_episodes(
             for f in faults
         ]
     )
-    bad = (
-        ~np.isfinite(X).all(axis=2)
-        | (X[:, :, 8] < MIN_WELL_INVENTORY_KG)
-        | (X[:, :, 4] < MIN_T_RG1_C)
-        | (X[:, :, 9] - X[:, :, 4] > MAX_AFTERBURN_C)
-    )
+    codes = envelope_codes(X)
+    bad = codes != 0
     term_at = np.where(bad.any(axis=1), np.argmax(bad, axis=1), -1)
     reasons = tuple(
-        termination_reason(X[b, term_at[b]]) if term_at[b] >= 0 else None for b in range(B)
+        TERMINATION_REASONS[codes[b, t]] if t >= 0 else None for b, t in enumerate(term_at)
     )
     return BatchResult(
         observations=obs,
@@ -473,8 +557,8 @@ def simulate_inputs(
     params: FCCParams | None = None,
     param_multipliers: dict[str, np.ndarray] | None = None,
     x0: np.ndarray | None = None,
-    sample_time_s: float = 10.0,
-    rk4_substeps: int = 1,
+    sample_time_s: float | None = None,
+    rk4_substeps: int | None = None,
 ) -> InputSimulation:
     """Run the declared model on an input record (simulation, never one-step prediction).
 
@@ -484,7 +568,7 @@ def simulate_inputs(
         params: model parameters (default: the declared ones).
         param_multipliers: per-sample multipliers of parameter fields, arrays (T,) or (B, T).
         x0: initial state (default: the steady state of ``params`` at the first input).
-        sample_time_s, rk4_substeps: as for the env.
+        sample_time_s, rk4_substeps: as for the env (``None``: :class:`PlantConfig`'s default).
     """
     U = np.asarray(inputs, dtype=np.float64)
     single = U.ndim == 2
@@ -497,6 +581,12 @@ def simulate_inputs(
     if not np.isfinite(U).all():
         raise ValueError("inputs contain NaN or inf")
     B, T = U.shape[:2]
+    sample_time_s = check(
+        "sample_time_s", _or_default(sample_time_s, "sample_time_s"), SAMPLE_TIME_RANGE
+    )
+    rk4_substeps = check(
+        "rk4_substeps", _or_default(rk4_substeps, "rk4_substeps"), RK4_SUBSTEPS_RANGE
+    )
     p = params or FCCParams()
     mults = param_multipliers or {}
     unknown = sorted(set(mults) - set(PARAM_INDEX))

@@ -64,7 +64,10 @@ def test_library_lists_every_kind_with_targets():
             lambda: effects.make("sensor_bias:T_rx", offset=1),
             r"Unknown parameter\(s\) \['offset'\]",
         ),
-        (lambda: effects.make("sensor_lag:T_rx", tau_s=0), r"tau_s=0 outside the allowed range"),
+        (
+            lambda: effects.make("sensor_lag:T_rx", tau_s=0),
+            r"tau_s=0 is outside the allowed range: a number in \[1, 1800\] s",
+        ),
         (lambda: effects.parse("sensor_bias:T_fp,bias"), r"use name=value"),
         (lambda: effects.resolve([object()]), r"neither a library id"),
     ],
@@ -163,3 +166,14 @@ def test_catalyst_deactivation_shows_in_the_dilute_phases():
         [0], plant_effects=["catalyst_deactivation,loss_per_day=0.5"], **kw
     ).y_clean[0]
     assert deact[-1, 6] - base[-1, 6] > 1.0 and deact[-1, 7] - base[-1, 7] > 1.0
+
+
+def test_library_effects_take_only_the_path_of_the_hook_they_use():
+    """A process effect is not filed as a measurement effect (it would force the slower path)."""
+    for eid in effects.available():
+        e = effects.make(eid)
+        assert len(e.hooks) == 1, eid
+        assert effects.has_hook(e, "measure") == eid.startswith("sensor_"), eid
+        assert effects.has_hook(e, "d_state") is False
+    assert effects.has_hook(Offset(), "measure") and not effects.has_hook(Offset(), "d_state")
+    assert effects.has_hook(ExtraStage1Loss(1.0), "d_state")

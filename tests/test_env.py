@@ -192,29 +192,56 @@ def test_vector_env():
 @pytest.mark.parametrize(
     ("kwargs", "match"),
     [
-        ({"scenario": "f9"}, r"Unknown scenario 'f9'. Allowed: \['nominal', 'f1'"),
-        ({"scenario": "f1", "fault_time": -1}, r"fault_time=-1 is outside the episode"),
-        ({"scenario": "f1", "fault_time": 1.5}, r"fault_time must be an integer"),
+        (
+            {"scenario": "f9"},
+            r"scenario='f9' is outside the allowed range: one of \['nominal', 'f1'",
+        ),
+        (
+            {"scenario": "f1", "fault_time": -1},
+            r"fault_time=-1 is outside the allowed range: an integer in \[0, inf\)",
+        ),
+        (
+            {"scenario": "f1", "fault_time": 1.5},
+            r"fault_time=1.5 is outside the allowed range: an integer in \[0, inf\)",
+        ),
         (
             {"scenario": "f2", "fault_magnitude": -0.1},
-            r"fault_magnitude=-0.1 is outside .*\[0, 0.9\]",
+            r"fault_magnitude=-0.1 is outside the allowed range: a number in \[0, 0.9\]",
         ),
         ({"scenario": "f2", "fault_magnitude": float("nan")}, r"fault_magnitude=nan"),
-        ({"scenario": "f3", "fault_profile": "sudden"}, r"Unknown fault_profile 'sudden'"),
+        (
+            {"scenario": "f3", "fault_profile": "sudden"},
+            r"fault_profile='sudden' is outside the allowed range: one of \['abrupt', 'incipient'\]",
+        ),
         ({"scenario": "f3", "fault_profile": "incipient", "ramp_samples": 0}, r"ramp_samples"),
-        ({"valve_beta": 2.0}, r"valve_beta=2.0 outside the allowed range \[0, 1\]"),
-        ({"sample_time_s": 0.0}, r"sample_time_s=0.0 outside the allowed range"),
-        ({"noise_scale": -1}, r"noise_scale=-1 outside the allowed range"),
-        ({"rk4_substeps": 0}, r"rk4_substeps=0 outside the allowed range"),
+        ({"valve_beta": 2.0}, r"valve_beta=2.0 is outside the allowed range: a number in \[0, 1\]"),
+        (
+            {"sample_time_s": 0.0},
+            r"sample_time_s=0.0 is outside the allowed range: a number in \[0.5, 60\] s",
+        ),
+        (
+            {"noise_scale": -1},
+            r"noise_scale=-1 is outside the allowed range: a number in \[0, 100\]",
+        ),
+        (
+            {"rk4_substeps": 0},
+            r"rk4_substeps=0 is outside the allowed range: an integer in \[1, 100\]",
+        ),
         ({"excitation": {"T_fp_halfrange": 3}}, r"Unknown excitation option"),
-        ({"excitation": {"R_ar_halfrange_rel": 0.5}}, r"R_ar_halfrange_rel=0.5 outside"),
+        (
+            {"excitation": {"R_ar_halfrange_rel": 0.5}},
+            r"R_ar_halfrange_rel=0.5 is outside the allowed range: a number in \[0, 0.07\]",
+        ),
         pytest.param(
             {"render_mode": "ansi"},
             r"render_mode='ansi' is not supported",
             marks=pytest.mark.filterwarnings("ignore:.*render_mode.*:UserWarning"),
         ),
-        ({"horizon": 1}, r"horizon must be an integer number of samples >= 2, got 1"),
-        ({"scenario": "f1", "horizon": 1000}, r"fault_time=1900 is outside the episode"),
+        ({"horizon": 1}, r"horizon=1 is outside the allowed range: an integer in \[2, inf\)"),
+        (
+            {"scenario": "f1", "horizon": 1000},
+            r"fault_time=1900 is outside the allowed range: an integer in \[0, 1000\)",
+        ),
     ],
 )
 def test_bad_make_kwargs(kwargs, match):
@@ -226,21 +253,36 @@ def test_bad_reset_options_and_actions():
     env = gym.make("FCC-v0")
     with pytest.raises(ValueError, match=r"Unknown reset option\(s\) \['onset'\]"):
         env.reset(seed=0, options={"onset": 3})
-    with pytest.raises(ValueError, match=r"fault_time=4000 is outside the episode.*< 4000"):
+    with pytest.raises(
+        ValueError, match=r"fault_time=4000 is outside the allowed range: an integer in \[0, 4000\)"
+    ):
         env.reset(seed=0, options={"scenario": "f1", "fault_time": 4000})
     env.reset(seed=0)
-    with pytest.raises(ValueError, match=r"action must have shape \(2,\)"):
+    with pytest.raises(
+        ValueError, match=r"action=.* is outside the allowed range: shape \(2,\).*\(shape \(3,\)\)"
+    ):
         env.step(np.zeros(3))
-    with pytest.raises(ValueError, match=r"action must be finite"):
+    with pytest.raises(
+        ValueError,
+        match=r"action=\[nan, 0.0\] is outside the allowed range: finite values in \[-1, 1\]",
+    ):
         env.step(np.array([np.nan, 0.0]))
 
 
 def test_batch_bad_input():
-    with pytest.raises(ValueError, match="n_samples must be an integer >= 2"):
+    with pytest.raises(ValueError, match=r"seeds=\[\] is outside the allowed range: a non-empty"):
+        fcc_env.simulate_episodes([], 10)
+    with pytest.raises(ValueError, match=r"seeds=\[-3\] is outside the allowed range"):
+        fcc_env.simulate_episodes([-3], 10)
+    with pytest.raises(
+        ValueError, match=r"n_samples=1 is outside the allowed range: an integer in \[2, inf\)"
+    ):
         fcc_env.simulate_episodes([0], 1)
     with pytest.raises(ValueError, match="got 2 scenarios for 1 seeds"):
         fcc_env.simulate_episodes([0], 10, scenario=["f1", "f2"])
-    with pytest.raises(ValueError, match="Unknown scenario"):
+    with pytest.raises(
+        ValueError, match=r"scenario='f5' is outside the allowed range: one of \['nominal'"
+    ):
         fcc_env.simulate_episodes([0], 10, scenario="f5")
 
 
@@ -257,3 +299,101 @@ def test_operating_program_follows_spec_7_5():
             changes = np.flatnonzero(np.diff(ep)) + 1
             holds = np.diff(changes)
             assert holds.min() >= 20 and holds.max() <= 200
+
+
+# ---- FaultSpec / PlantConfig travel through the env and the batch ------------------------------
+def test_fault_spec_equals_the_old_keywords_in_make_reset_and_batch():
+    spec = fcc_env.FaultSpec(scenario="f3", onset=40, magnitude=0.2, profile="incipient")
+    old = dict(scenario="f3", fault_time=40, fault_magnitude=0.2, fault_profile="incipient")
+    a, ia = rollout(gym.make("FCC-v0", fault=spec), 5, 60)
+    b, ib = rollout(gym.make("FCC-v0", **old), 5, 60)
+    c, ic = rollout(gym.make("FCC-v0"), 5, 60, options={"fault": spec})
+    np.testing.assert_array_equal(a, b)
+    np.testing.assert_array_equal(a, c)
+    assert [i["fault_active"] for i in ia] == [i["fault_active"] for i in ib]
+    assert [i["fault_active"] for i in ia] == [i["fault_active"] for i in ic]
+    assert ia[-1]["fault_active"] and not ia[39]["fault_active"]
+    plant = fcc_env.PlantConfig.build(valve_beta=0.15, noise_scale=0.5)
+    new = fcc_env.simulate_episodes([5, 6], 60, fault=spec, plant=plant)
+    ref = fcc_env.simulate_episodes([5, 6], 60, valve_beta=0.15, noise_scale=0.5, **old)
+    np.testing.assert_array_equal(new.observations, ref.observations)
+    np.testing.assert_array_equal(new.states, ref.states)
+    assert new.fault_onsets == (40, 40) and new.scenarios == ("f3", "f3")
+
+
+def test_per_seed_scenarios_take_the_spec_s_other_fields():
+    spec = fcc_env.FaultSpec(onset=30, magnitude=0.05)
+    b = fcc_env.simulate_episodes([1, 2], 50, fault=spec, scenario=["f1", "f4"])
+    assert b.scenarios == ("f1", "f4") and b.fault_onsets == (30, 30)
+    assert b.fault_magnitudes == (0.05, 0.05)
+
+
+def test_fault_and_conflicting_old_keywords_raise():
+    spec = fcc_env.FaultSpec(scenario="f1", onset=30)
+    with pytest.raises(ValueError, match=r"conflicts with \{'fault_time': 31\}"):
+        fcc_env.simulate_episodes([0], 50, fault=spec, fault_time=31)
+    # agreeing keywords are fine
+    fcc_env.simulate_episodes([0], 50, fault=spec, scenario="f1", fault_time=30)
+    with pytest.raises(ValueError, match=r"conflicts with \{'scenario': 'f2'\}"):
+        gym.make("FCC-v0", fault=spec, scenario="f2")
+    env = gym.make("FCC-v0")
+    with pytest.raises(ValueError, match=r"conflicts with \{'fault_magnitude': 0.3\}"):
+        env.reset(seed=0, options={"fault": spec, "fault_magnitude": 0.3})
+    plant = fcc_env.PlantConfig.build()
+    with pytest.raises(ValueError, match=r"plant keyword\(s\) \['noise_scale'\] were both given"):
+        fcc_env.simulate_episodes([0], 50, plant=plant, noise_scale=0.0)
+    with pytest.raises(ValueError, match=r"fault=3 is outside the allowed range: a FaultSpec"):
+        fcc_env.simulate_episodes([0], 50, fault=3)
+
+
+def test_reset_options_override_make_kwargs_field_by_field():
+    env = gym.make("FCC-v0", scenario="f2", fault_time=100, fault_magnitude=0.1)
+    _, info = env.reset(seed=0, options={"fault_time": 50})
+    assert (info["scenario"], info["fault_time"], info["fault_magnitude"]) == ("f2", 50, 0.1)
+    _, info = env.reset(seed=0, options={"fault_time": None})  # back to the paper's onset
+    assert info["fault_time"] == fcc_env.FAULTS[fcc_env.Scenario.F2].default_onset
+    _, info = env.reset(seed=0)
+    assert info["fault_time"] == 100
+
+
+def test_draw_fault_is_kept_as_a_thin_wrapper():
+    from fcc_env.simulation import draw_fault
+
+    rng = np.random.default_rng(3)
+    got = draw_fault(rng, 1000, {"scenario": "random"})
+    want = fcc_env.FaultSpec(scenario="random").resolve(1000, np.random.default_rng(3))
+    assert got == want
+
+
+def test_envelope_reasons_come_from_one_check():
+    from fcc_env.simulation import TERMINATION_REASONS, envelope_codes, termination_reason
+
+    x0 = fcc_env.steady_state()
+    states = {None: x0}
+    for reason, (i, v) in {
+        "numerical_failure": (0, np.nan),
+        "well_empty": (8, 100.0),
+        "extinguished": (4, 500.0),
+        "afterburn": (9, x0[4] + 100.0),
+    }.items():
+        x = x0.copy()
+        x[i] = v
+        states[reason] = x
+    X = np.stack(list(states.values()))[None]
+    codes = envelope_codes(X)[0]
+    assert [TERMINATION_REASONS[c] for c in codes] == list(states)
+    assert [termination_reason(x) for x in X[0]] == list(states)
+    both = x0.copy()
+    both[8], both[4] = np.nan, 500.0  # the first reason in order wins
+    assert termination_reason(both) == "numerical_failure"
+
+
+def test_declared_ranges_are_public_and_used():
+    from fcc_env.simulation import SAMPLE_TIME_RANGE, VALVE_BETA_RANGE
+
+    assert SAMPLE_TIME_RANGE.describe() == "a number in [0.5, 60] s"
+    assert VALVE_BETA_RANGE.describe() == "a number in [0, 1]"
+    with pytest.raises(
+        ValueError, match=r"hold_max=5 is outside the allowed range: an integer >= hold_min=9"
+    ):
+        gym.make("FCC-v0", excitation={"hold_min": 9, "hold_max": 5})

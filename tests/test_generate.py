@@ -43,9 +43,12 @@ def test_cli_writes_files(tmp_path, capsys):
 @pytest.mark.parametrize(
     ("argv", "message"),
     [
-        (["--seeds", "a-b"], "bad seed list piece 'a-b'"),
-        (["--scenario", "f7"], "Unknown scenario 'f7'"),
-        (["--samples", "1"], "n_samples must be an integer >= 2"),
+        (
+            ["--seeds", "a-b"],
+            "seeds='a-b' is outside the allowed range: integers and ranges like '0-9,20' (bad piece 'a-b')",
+        ),
+        (["--scenario", "f7"], "scenario='f7' is outside the allowed range: one of ['nominal'"),
+        (["--samples", "1"], "n_samples=1 is outside the allowed range: an integer in [2, inf)"),
         (["--fault-magnitude", "2", "--scenario", "f1"], "fault_magnitude=2.0 is outside"),
         (["--plant-effect", "heat_loss:riser"], "Unknown plant effect 'heat_loss:riser'"),
     ],
@@ -65,5 +68,27 @@ def test_parse_seeds_and_read_errors(tmp_path):
     (tmp_path / "a.json").write_text('{"format": "other"}')
     with pytest.raises(ValueError, match="not an FCC dataset sidecar"):
         read_dataset(tmp_path / "a.csv")
-    with pytest.raises(ValueError, match=r"must end in \.csv"):
+    with pytest.raises(
+        ValueError, match=r"a\.parquet' is outside the allowed range: a file name ending in \.csv"
+    ):
         write_dataset(tmp_path / "a.parquet")
+
+
+def test_sidecar_records_fault_and_plant_and_null_for_no_termination(tmp_path):
+    spec = fcc_env.FaultSpec(scenario="f2", onset=10, profile="incipient", ramp_samples=5)
+    plant = fcc_env.PlantConfig.build(noise_scale=0.0)
+    path = write_dataset(tmp_path / "d.csv", fault=spec, plant=plant, seeds=[1], n_samples=20)
+    meta, cols = read_dataset(path)
+    assert meta["terminated_at"] == [None]
+    assert meta["fault"] == spec.to_json() and meta["scenario"] == "f2"
+    assert meta["plant"]["noise_scale"] == 0.0 and meta["plant"]["params"] is None
+    ref = fcc_env.simulate_episodes(
+        [1], 20, scenario="f2", fault_time=10, fault_profile="incipient", ramp_samples=5,
+        noise_scale=0.0,
+    )  # fmt: skip
+    np.testing.assert_array_equal(cols["fault_active"], ref.fault_active[0])
+
+
+def test_parse_seeds_rejects_negative_seeds():
+    with pytest.raises(ValueError, match=r"seeds=\[-1\] is outside the allowed range: a non-empty"):
+        parse_seeds("-1")
