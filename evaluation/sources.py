@@ -26,13 +26,11 @@ from evaluation.tracks import Track
 from fcc_env.scenarios import (
     DEFAULT_N_SAMPLES,
     DEFAULT_RAMP_SAMPLES,
-    N_SAMPLES_RANGE,
-    NOISE_SCALE_RANGE,
-    SAMPLE_TIME_RANGE,
     FaultProfile,
     FaultSpec,
     Scenario,
 )
+from fcc_env.simulation import N_SAMPLES_RANGE, NOISE_SCALE_RANGE, SAMPLE_TIME_RANGE
 from fcc_env.validation import Boolean, IntegerSequence, OptionSequence, check, invalid
 
 #: Default first training seed: far from the test seeds 0..N-1 of any realistic sweep.

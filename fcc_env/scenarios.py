@@ -72,14 +72,6 @@ MAX_FAULT_MAGNITUDE = 0.9
 DEFAULT_RAMP_SAMPLES = 500
 #: Episode length of the paper (4000 samples of 10 s); the env's and the harness's default.
 DEFAULT_N_SAMPLES = 4000
-#: Allowed episode lengths [samples] (two samples at least: one step).
-N_SAMPLES_RANGE = Integer(2, 10_000_000)
-#: Allowed multipliers on the specification's measurement-noise stds (0 = noise off).
-NOISE_SCALE_RANGE = Real(0.0, 100.0, why="a multiplier on the spec's noise stds; 0 = noise off")
-#: Allowed sample periods: RK4 stability and accuracy were verified for the spec's 10 s.
-SAMPLE_TIME_RANGE = Real(
-    0.5, 60.0, unit="s", why="RK4 stability and accuracy were verified for the spec's 10 s"
-)
 #: Allowed ``magnitude_scale`` of :class:`FaultSpec` (a multiplier on the paper's magnitudes).
 MAGNITUDE_SCALE_RANGE = Real(0.0, 10.0, closed="right")
 
