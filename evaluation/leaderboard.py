@@ -527,6 +527,16 @@ def build_parser() -> argparse.ArgumentParser:
         "dataset.json manifest (see evaluation.external.load_manifest) or the Santander FCCU "
         "data set (layout of shared/data/fccu-santander-mlpse); --seeds is ignored",
     )
+    p.add_argument(
+        "--track",
+        metavar="NAME[,NAME...]",
+        help=(
+            "benchmark v2: run the named tracks (paper, small, incipient, noisy, uncertain, "
+            "random, or all) with the physical-limit row and 95%% bootstrap intervals; writes "
+            "<out>/<track>/ and <out>/summary.md (default --out results/tracks). With --quick: "
+            "the baselines on 6 healthy and 3 faulty episodes per fault"
+        ),
+    )
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     return p
@@ -599,9 +609,53 @@ def resolve_options(
     )
 
 
+def _main_tracks(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
+    """``--track``: benchmark v2 (see :mod:`evaluation.trackboard`)."""
+    from evaluation.trackboard import run_track, write_summary, write_track
+    from evaluation.trackboard import track_table as trackboard_table
+    from evaluation.tracks import parse_tracks
+
+    try:
+        tracks = parse_tracks(args.track)
+    except ValueError as e:
+        parser.error(str(e))
+    if args.quick:
+        tracks = tuple(t.replace(n_healthy=6, n_faulty=3, n_train=3) for t in tracks)
+    from diagnosers import available
+
+    names = args.diagnosers or (BASELINES if args.quick else tuple(available()))
+    out = args.out or Path("results/tracks")
+    runs = []
+    for track in tracks:
+        try:
+            run_ = run_track(
+                track,
+                names,
+                out / track.name,
+                backend=args.backend,
+                workers=args.workers,
+                ray_address=args.ray_address,
+                progress=not args.no_progress,
+                figures=not args.no_figures,
+            )
+        except ValueError as e:
+            parser.error(str(e))
+        except RuntimeError as e:
+            parser.exit(1, f"{parser.prog}: {e}\nFinished cells are stored; re-run to resume.\n")
+        write_track(run_, out / track.name)
+        runs.append(run_)
+        print(trackboard_table(run_))
+        print(f"track {track.name}: {run_.wall_s:.1f} s", file=sys.stderr)
+    write_summary(runs, out)
+    print((out / "summary.md").read_text())
+    return 0
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    if args.track is not None:
+        return _main_tracks(args, parser)
     opts = resolve_options(args, parser)
     t0 = time.perf_counter()
     try:
