@@ -65,7 +65,9 @@ to make the benchmark honest about it, not to be detected.
 
 Per-episode effect parameters cannot share one :func:`fcc_env.simulate_episodes` call (one effect
 object serves the whole batch and is not told the episode), and neither can per-episode
-parameters; :func:`simulate_drawn_episodes` therefore runs one call per seed.
+parameters; :func:`simulate_drawn_episodes` therefore runs one call per seed, or one batch call
+once the simulator takes ``params`` per seed and ``episode_effects``
+(``scripts/simulation_per_episode.patch``), with identical numbers.
 
 >>> draw = PlantUncertainty().draw(7)
 >>> draw == PlantUncertainty().draw(7)
@@ -76,6 +78,7 @@ True
 
 from __future__ import annotations
 
+import inspect
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -302,7 +305,10 @@ def simulate_drawn_episodes(
     plant_effects: Sequence[Any] = (),
     **kwargs: Any,
 ) -> Any:
-    """:func:`fcc_env.simulate_episodes` with each seed's drawn plant (one call per seed).
+    """:func:`fcc_env.simulate_episodes` with each seed's drawn plant.
+
+    One batch call when the simulator takes per-episode ``params`` and ``episode_effects``
+    (``scripts/simulation_per_episode.patch``), else one call per seed; the numbers are the same.
 
     ``uncertainty`` defaults to the ``uncertain`` track's :class:`PlantUncertainty`; ``params`` is
     the base the draw scales; ``plant_effects`` are added to the drawn effects; other keywords go
@@ -315,6 +321,17 @@ def simulate_drawn_episodes(
     scenarios = [scenario] * len(seeds) if isinstance(scenario, str) else list(scenario)
     if len(scenarios) != len(seeds):
         raise ValueError(f"got {len(scenarios)} scenarios for {len(seeds)} seeds")
+    if "episode_effects" in inspect.signature(simulate_episodes).parameters:
+        draws = [unc.draw(seed, base=params) for seed in seeds]
+        return simulate_episodes(
+            seeds,
+            n_samples,
+            scenario=scenarios,
+            params=[d.params for d in draws],
+            plant_effects=list(plant_effects),
+            episode_effects=[d.effects for d in draws],
+            **kwargs,
+        )
     out = []
     for seed, sc in zip(seeds, scenarios, strict=True):
         d = unc.draw(seed, base=params)

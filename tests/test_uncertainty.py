@@ -155,3 +155,10 @@ def test_max_half_ranges_are_stated_for_every_option():
     unc = PlantUncertainty()
     for name, hi in MAX_HALF_RANGE.items():
         assert 0 <= getattr(unc, name) <= hi
+
+
+def test_an_episode_does_not_depend_on_its_batch():
+    batch = simulate_drawn_episodes([2, 3, 4], T, scenario=["f2", "nominal", "f4"], fault_time=50)
+    alone = simulate_drawn_episodes([3], T, scenario="nominal", fault_time=50)
+    np.testing.assert_array_equal(batch.observations[1], alone.observations[0])
+    np.testing.assert_array_equal(batch.y_clean[1], alone.y_clean[0])
