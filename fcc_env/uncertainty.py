@@ -81,13 +81,13 @@ from __future__ import annotations
 import inspect
 import math
 from collections.abc import Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from fcc_env.params import FCCParams
-from fcc_env.validation import Integer, Real, check
+from fcc_env.validation import Integer, Real, check, invalid
 
 __all__ = [
     "GROUP_FIELDS",
@@ -197,7 +197,7 @@ class PlantDraw:
     seed: int
     params: FCCParams
     effects: tuple[Any, ...]
-    truth: dict[str, Any] = field(compare=True)  # JSON-able: field values, multipliers, effects
+    truth: dict[str, Any]  # JSON-able: drawn field values, multipliers, effects, the ranges
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -224,8 +224,6 @@ class PlantUncertainty:
         check("ambient_period_h", self.ambient_period_h, Real(1.0, 240.0, unit="h"))
         lo_hi = self.feed_drift_period_h
         if not (isinstance(lo_hi, tuple) and len(lo_hi) == 2):
-            from fcc_env.validation import invalid
-
             raise invalid("feed_drift_period_h", lo_hi, "a pair (low, high) of hours in [1, 240]")
         lo = check("feed_drift_period_h[0]", lo_hi[0], Real(1.0, 240.0, unit="h"))
         check("feed_drift_period_h[1]", lo_hi[1], Real(lo, 240.0, unit="h"))
