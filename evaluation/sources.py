@@ -31,6 +31,7 @@ from fcc_env.scenarios import (
     Scenario,
 )
 from fcc_env.simulation import N_SAMPLES_RANGE, NOISE_SCALE_RANGE, SAMPLE_TIME_RANGE
+from fcc_env.uncertainty import PlantUncertainty
 from fcc_env.validation import Boolean, IntegerSequence, OptionSequence, check, invalid
 
 #: Default first training seed: far from the test seeds 0..N-1 of any realistic sweep.
@@ -271,6 +272,7 @@ def simulate_loaded(
     excitation: bool = True,
     noise_scale: float = 1.0,
     sample_time_s: float = 10.0,
+    plant_uncertainty: PlantUncertainty | None = None,
 ) -> list[LoadedEpisode]:
     """Simulate ``seeds`` with the fault ``spec`` and cut each at its termination sample."""
     import fcc_env
@@ -287,6 +289,7 @@ def simulate_loaded(
         excitation=excitation,
         noise_scale=noise_scale,
         sample_time_s=sample_time_s,
+        plant_uncertainty=plant_uncertainty,
     )
     out = []
     for b in range(len(res.seeds)):
@@ -344,7 +347,11 @@ class TrackData:
 
     def _simulate(self, seeds: Sequence[int], spec: FaultSpec) -> list[LoadedEpisode]:
         return simulate_loaded(
-            seeds, self.track.n_samples, spec, noise_scale=self.track.noise_scale
+            seeds,
+            self.track.n_samples,
+            spec,
+            noise_scale=self.track.noise_scale,
+            plant_uncertainty=PlantUncertainty() if self.track.plant_variation else None,
         )
 
     def train_episodes(self) -> list[Episode]:

@@ -47,20 +47,64 @@ class FaultProfile(StrEnum):
 
 @dataclass(frozen=True)
 class FaultDefinition:
+    """One fault: which parameters it scales, its paper size and onset, and the largest size the
+    plant carries (``max_magnitude``, with the physical reason)."""
+
     parameters: tuple[str, ...]  # FCCParams fields scaled by the fault
     direction: int  # +1: parameter grows, -1: parameter shrinks
     default_magnitude: float
     default_onset: int
     description: str
+    max_magnitude: float
+    max_reason: str
 
 
+# The maxima were measured on 20 excited seeds (bisection) and checked on 100 (no termination at
+# the maximum except f3): the plant has a finite catalyst well (30 t free inventory) and bed levels
+# fixed by the weirs, so a real unit would trip on an unsealed standpipe rather than carry the
+# change. The model is not altered to hide that; the allowed range stops where it starts.
 FAULTS: dict[Scenario, FaultDefinition] = {
-    Scenario.F1: FaultDefinition(("rho_b",), +1, 0.10, 1900, "catalyst density +10 %"),
-    Scenario.F2: FaultDefinition(
-        ("K_w1", "K_w2"), -1, 0.15, 1900, "weir constant of stages 1 and 2 −15 %"
+    Scenario.F1: FaultDefinition(
+        ("rho_b",),
+        +1,
+        0.10,
+        1900,
+        "catalyst density +10 %",
+        max_magnitude=0.13,
+        max_reason="at weir-fixed bed levels a denser catalyst takes its extra mass from the "
+        "30 t well, which unseals (below 3 t) beyond +13.9 %",
     ),
-    Scenario.F3: FaultDefinition(("k_sigma",), -1, 0.10, 2020, "CO2/CO ratio constant −10 %"),
-    Scenario.F4: FaultDefinition(("V_rx_sp_m3",), +1, 0.05, 2000, "catalyst reactor holdup +5 %"),
+    Scenario.F2: FaultDefinition(
+        ("K_w1", "K_w2"),
+        -1,
+        0.15,
+        1900,
+        "weir constant of stages 1 and 2 −15 %",
+        max_magnitude=0.35,
+        max_reason="higher weir crests cut the circulation; beyond −38 % the hotter regenerator "
+        "pushes excited episodes into an afterburn",
+    ),
+    Scenario.F3: FaultDefinition(
+        ("k_sigma",),
+        -1,
+        0.10,
+        2020,
+        "CO2/CO ratio constant −10 %",
+        max_magnitude=0.15,
+        max_reason="more CO reaches the dilute phases: from −4 % some excited episodes end in an "
+        "afterburn (about 1 in 10 at the paper's −10 %, counted per cell on the leaderboard), "
+        "beyond −15 % most do",
+    ),
+    Scenario.F4: FaultDefinition(
+        ("V_rx_sp_m3",),
+        +1,
+        0.05,
+        2000,
+        "catalyst reactor holdup +5 %",
+        max_magnitude=0.70,
+        max_reason="the level loop moves 40 t × m of catalyst from the well into the reactor; "
+        "beyond +73 % the well unseals (below 3 t)",
+    ),
 }
 
 SCENARIOS: tuple[str, ...] = tuple(s.value for s in Scenario)
@@ -164,6 +208,11 @@ def resolve_fault(
     onset = check("fault_time", onset, fault_time_range(horizon))
     mag = definition.default_magnitude if fault_magnitude is None else fault_magnitude
     mag = check("fault_magnitude", mag, FAULT_MAGNITUDE_RANGE)
+    mag = check(
+        "fault_magnitude",
+        mag,
+        Real(0.0, definition.max_magnitude, why=f"for {sc.value}: {definition.max_reason}"),
+    )
     ramp = 0
     if profile is FaultProfile.INCIPIENT:
         ramp = DEFAULT_RAMP_SAMPLES if ramp_samples is None else ramp_samples
@@ -341,7 +390,9 @@ class FaultSpec:
             if sc is not Scenario.NOMINAL:
                 onset = drawn_onset if onset is None else onset
                 if magnitude is None:
-                    magnitude = FAULTS[sc].default_magnitude * scale
+                    # clipped at what the plant carries (f1 above +13 % empties the well)
+                    d = FAULTS[sc]
+                    magnitude = min(d.default_magnitude * scale, d.max_magnitude)
         sc = Scenario(sc_name)
         return resolve_fault(
             sc,

@@ -47,6 +47,7 @@ from fcc_env.scenarios import (
     Scenario,
     episode_generators,
 )
+from fcc_env.uncertainty import PlantUncertainty
 from fcc_env.validation import Integer, IntegerSequence, Real, check, invalid
 
 #: Noise std per channel: absolute (°C) and relative to the value (R_ar, 0.5 %), spec §1.1.
@@ -415,6 +416,7 @@ def simulate_episodes(
     excitation: Any = None,
     noise_scale: float | None = None,
     params: FCCParams | None = None,
+    plant_uncertainty: PlantUncertainty | None = None,
 ) -> BatchResult:
     """Simulate many seeded episodes at once, identical to ``FCC-v0`` with zero actions.
 
@@ -430,6 +432,10 @@ def simulate_episodes(
             (``None`` = not given), never both.
         plant_effects: as for the env (:mod:`fcc_env.effects`); one effect object serves the
             whole batch, with a leading episode axis on its arrays.
+        plant_uncertainty: each episode's plant drawn by seed
+            (:meth:`fcc_env.uncertainty.PlantUncertainty.draw`: parameters within stated ranges
+            and benign slow disturbances), independent of the scenario, so a healthy and a faulty
+            episode of one seed share their plant; nothing of the draw is in the observations.
 
     Episodes run in parallel threads of the compiled kernel (numba ``prange``); with a user
     effect that has ``d_state`` the integration runs in numpy over the episode axis instead
@@ -467,6 +473,12 @@ def simulate_episodes(
     )
     effects = fx.resolve(plant_effects)
     B, T = len(seeds), int(n_samples)
+    configs = [config] * B
+    drawn: list[list[Any]] = [[] for _ in seeds]
+    if plant_uncertainty is not None:
+        draws = [plant_uncertainty.draw(s, base=config.params) for s in seeds]
+        configs = [dataclasses.replace(config, params=d.params) for d in draws]
+        drawn = [list(d.effects) for d in draws]
     k = np.arange(T)
     U = np.empty((B, T, N_INPUTS))
     Z = np.empty((B, T, N_MEASUREMENTS))
@@ -475,7 +487,7 @@ def simulate_episodes(
     schedule = None
     for b, (seed, spec) in enumerate(zip(seeds, specs, strict=True)):
         rng, _ = seeding.np_random(seed)
-        setup = setup_episode(rng, config, spec, T, effects)
+        setup = setup_episode(rng, configs[b], spec, T, [*effects, *drawn[b]])
         schedule = setup.schedule
         U[b] = schedule.inputs(k, setup.program.take(T))
         Z[b] = setup.noise_rng.standard_normal((T, N_MEASUREMENTS))
@@ -486,8 +498,12 @@ def simulate_episodes(
     fx.reset_all(effects)  # measurement effects start afresh for the batch as a whole
     pidx = np.stack(pidx_rows)
     PM = np.stack(pm_rows)
-    x0 = np.tile(config.initial_state(), (B, 1))
-    p_base = np.tile(config.params.as_array(), (B, 1))
+    if plant_uncertainty is None:
+        x0 = np.tile(config.initial_state(), (B, 1))
+        p_base = np.tile(config.params.as_array(), (B, 1))
+    else:  # each episode starts at its own plant's steady state
+        x0 = np.stack([c.initial_state() for c in configs])
+        p_base = np.stack([c.params.as_array() for c in configs])
     Y = np.empty((B, T, N_MEASUREMENTS))
     obs = np.empty((B, T, N_MEASUREMENTS), dtype=np.float32)
     X = np.empty((B, T, N_STATES))

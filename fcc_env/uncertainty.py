@@ -78,7 +78,6 @@ True
 
 from __future__ import annotations
 
-import inspect
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -315,32 +314,12 @@ def simulate_drawn_episodes(
     from fcc_env.simulation import simulate_episodes
 
     unc = PlantUncertainty() if uncertainty is None else uncertainty
-    seeds = [int(s) for s in seeds]
-    scenarios = [scenario] * len(seeds) if isinstance(scenario, str) else list(scenario)
-    if len(scenarios) != len(seeds):
-        raise ValueError(f"got {len(scenarios)} scenarios for {len(seeds)} seeds")
-    if "episode_effects" in inspect.signature(simulate_episodes).parameters:
-        draws = [unc.draw(seed, base=params) for seed in seeds]
-        return simulate_episodes(
-            seeds,
-            n_samples,
-            scenario=scenarios,
-            params=[d.params for d in draws],
-            plant_effects=list(plant_effects),
-            episode_effects=[d.effects for d in draws],
-            **kwargs,
-        )
-    out = []
-    for seed, sc in zip(seeds, scenarios, strict=True):
-        d = unc.draw(seed, base=params)
-        out.append(
-            simulate_episodes(
-                [seed],
-                n_samples,
-                scenario=sc,
-                params=d.params,
-                plant_effects=[*d.effects, *plant_effects],
-                **kwargs,
-            )
-        )
-    return concatenate_results(out)
+    return simulate_episodes(
+        list(seeds),
+        n_samples,
+        scenario=scenario,
+        params=params,
+        plant_effects=list(plant_effects),
+        plant_uncertainty=unc,
+        **kwargs,
+    )

@@ -161,8 +161,18 @@ def test_actions_move_the_plant_and_saturate():
     assert info["inputs"][1] == pytest.approx(0.85 * 148.4)
 
 
+class _WellLeak:
+    """A user effect that drains the catalyst well (the faults' allowed ranges stop short of
+    emptying it, see ``FaultDefinition.max_magnitude``)."""
+
+    def d_state(self, t, x, u, params):
+        dx = np.zeros_like(x)
+        dx[..., 8] = -400.0 if t >= 50.0 else 0.0  # kg/s
+        return dx
+
+
 def test_termination_when_the_well_empties():
-    env = gym.make("FCC-v0", scenario="f1", fault_time=5, fault_magnitude=0.9)
+    env = gym.make("FCC-v0", scenario="nominal", plant_effects=[_WellLeak()])
     ys, infos = rollout(env, 0, 200)
     assert infos[-1]["termination_reason"] == "well_empty"
     assert np.isfinite(ys).all()
@@ -303,8 +313,8 @@ def test_operating_program_follows_spec_7_5():
 
 # ---- FaultSpec / PlantConfig travel through the env and the batch ------------------------------
 def test_fault_spec_equals_the_old_keywords_in_make_reset_and_batch():
-    spec = fcc_env.FaultSpec(scenario="f3", onset=40, magnitude=0.2, profile="incipient")
-    old = dict(scenario="f3", fault_time=40, fault_magnitude=0.2, fault_profile="incipient")
+    spec = fcc_env.FaultSpec(scenario="f3", onset=40, magnitude=0.12, profile="incipient")
+    old = dict(scenario="f3", fault_time=40, fault_magnitude=0.12, fault_profile="incipient")
     a, ia = rollout(gym.make("FCC-v0", fault=spec), 5, 60)
     b, ib = rollout(gym.make("FCC-v0", **old), 5, 60)
     c, ic = rollout(gym.make("FCC-v0"), 5, 60, options={"fault": spec})
@@ -397,3 +407,23 @@ def test_declared_ranges_are_public_and_used():
         ValueError, match=r"hold_max=5 is outside the allowed range: an integer >= hold_min=9"
     ):
         gym.make("FCC-v0", excitation={"hold_min": 9, "hold_max": 5})
+
+
+@pytest.mark.parametrize("scenario", ["f1", "f2", "f3", "f4"])
+def test_fault_range_stops_where_the_plant_trips(scenario):
+    from fcc_env.scenarios import FAULTS, Scenario
+
+    d = FAULTS[Scenario(scenario)]
+    too_big = d.max_magnitude + 0.01
+    with pytest.raises(
+        ValueError,
+        match=rf"fault_magnitude={too_big!r} is outside .*\[0, {d.max_magnitude}\] \(for {scenario}: ",
+    ):
+        fcc_env.simulate_episodes(
+            [0], 50, scenario=scenario, fault_time=10, fault_magnitude=too_big
+        )
+    if scenario != "f3":  # f3 trips in about 1 of 10 episodes already at its paper size
+        res = fcc_env.simulate_episodes(
+            list(range(4)), 4000, scenario=scenario, fault_magnitude=d.max_magnitude
+        )
+        assert (res.terminated_at < 0).all(), res.termination_reasons

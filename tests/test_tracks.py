@@ -61,7 +61,7 @@ def test_paper_track_is_todays_leaderboard() -> None:
 def test_small_track_magnitudes() -> None:
     t = TRACKS["small"]
     mags = {f: t.fault_spec(f, 0).magnitude for f in FAULT_NAMES}
-    assert mags == {"f1": 0.02, "f2": 0.04, "f3": 0.03, "f4": 0.015}
+    assert mags == {"f1": 0.005, "f2": 0.03, "f3": 0.012, "f4": 0.01}
     assert all(t.fault_spec(f, 0).onset == PAPER_ONSET[f] for f in FAULT_NAMES)
 
 
