@@ -67,10 +67,11 @@ class PhysicalLimit:
         idx = [MEASUREMENT_NAMES.index(c) for c in self.config.channels]
         self._idx = np.array(idx)
         noise = np.array([MEASUREMENTS[i].noise_std for i in idx])
-        self._sigma = noise * data.track.noise_scale
+        #: noise std [channel unit] of each monitored channel on this track
+        self.noise_std = noise * data.track.noise_scale
 
     def _statistic(self, y: np.ndarray, y_ref: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        r = (y[:, self._idx] - y_ref[: y.shape[0], self._idx]) / self._sigma
+        r = (y[:, self._idx] - y_ref[: y.shape[0], self._idx]) / self.noise_std
         return r, EWMA(self.config.ewma_lambda).filter(r)
 
     def fit(self, seeds: Sequence[int] | None = None) -> PhysicalLimit:

@@ -1,0 +1,156 @@
+"""The physical-limit row, the track data source and the per-track tables (benchmark v2)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from diagnosers.alarm import EWMA
+from diagnosers.base import Episode
+from evaluation.intervals import limit_ratio
+from evaluation.oracle import ORACLE_LABEL, OracleConfig, PhysicalLimit, oracle_records
+from evaluation.records import CellResult, summarize
+from evaluation.sources import TrackData, simulate_loaded
+from evaluation.trackboard import run_track, track_rows, track_table, write_track
+from evaluation.tracks import TRACKS
+from fcc_env.params import MEASUREMENT_NAMES
+from fcc_env.scenarios import FaultSpec
+
+TINY = TRACKS["paper"].replace(n_healthy=2, n_faulty=1, n_train=2, n_validation=4)
+
+
+@pytest.fixture(scope="module")
+def oracle() -> PhysicalLimit:
+    return PhysicalLimit(TrackData(track=TINY)).fit()
+
+
+def test_oracle_is_exact_on_noise_free_episodes(oracle: PhysicalLimit) -> None:
+    data = oracle.data
+    seed = 0
+    spec = data.track.fault_spec("f2", seed)
+    clean = simulate_loaded([seed], TINY.n_samples, spec)[0].episode.y_clean
+    assert clean is not None
+    ep = Episode(
+        y=clean,
+        channels=tuple(MEASUREMENT_NAMES),
+        sample_time_s=10.0,
+        fault_onset=spec.onset,
+        scenario="f2",
+        seed=seed,
+    )
+    det = oracle.detect(ep)
+    onset = spec.onset
+    assert onset is not None
+    # Before the onset the healthy plant is known exactly: the residual is zero, no alarm.
+    assert not det.alarm[:onset].any()
+    assert np.allclose(det.residual[:onset], 0.0, atol=1e-9)
+    # After it, the alarm comes exactly when the fault's signature crosses the limit,
+    # recomputed here from the definition (normalised residual, EWMA, Hotelling's T²).
+    idx = [MEASUREMENT_NAMES.index(c) for c in oracle.config.channels]
+    ref = data.reference(seed)
+    r = (clean[:, idx] - ref[:, idx]) / oracle.noise_std
+    z = EWMA(oracle.config.ewma_lambda).filter(r)
+    d = z - oracle.t2_.mean_
+    t2 = np.einsum("ti,ij,tj->t", d, oracle.t2_.precision_, d)
+    first = int(np.argmax(t2 > oracle.limit_))
+    assert t2[first] > oracle.limit_ and det.alarm.argmax() == first >= onset
+
+
+def test_oracle_false_alarm_rate_near_its_target(oracle: PhysicalLimit) -> None:
+    recs = oracle_records(TrackData(track=TINY.replace(n_healthy=4, n_faulty=1)))
+    healthy = [r for r in recs if r.scenario == "nominal"]
+    assert np.mean([r.r_fd for r in healthy]) < 0.01
+    faulty = {r.scenario: r for r in recs if r.scenario != "nominal"}
+    assert set(faulty) == {"f1", "f2", "f3", "f4"}
+    assert all(r.t_dt <= 30 for r in faulty.values()), {k: v.t_dt for k, v in faulty.items()}
+
+
+def test_oracle_config_rejects_bad_values() -> None:
+    with pytest.raises(ValueError, match=r"ewma_lambda=0 is outside the allowed range"):
+        OracleConfig(ewma_lambda=0)
+    with pytest.raises(ValueError, match=r"target=0.7 is outside the allowed range"):
+        OracleConfig(target=0.7)
+
+
+def test_uncertain_track_shares_the_plant_and_hides_the_draw() -> None:
+    unc = TrackData(track=TRACKS["uncertain"].replace(n_healthy=1, n_faulty=1))
+    nominal = TrackData(track=TRACKS["paper"].replace(n_healthy=1, n_faulty=1))
+    seed = 3
+    healthy = unc.load_test("nominal", seed).episode
+    faulty = unc.load_test("f1", seed)
+    onset = faulty.fault_onset
+    assert onset is not None
+    # one plant per seed, whatever the scenario: identical before the onset
+    assert np.array_equal(healthy.y[:onset], faulty.episode.y[:onset])
+    # the draw changes the plant ...
+    plain = nominal.load_test("nominal", seed).episode
+    assert not np.allclose(healthy.y_clean, plain.y_clean)
+    # ... but not the measurement noise stream, and it is deterministic in the seed
+    noise_unc = healthy.y - healthy.y_clean
+    noise_plain = plain.y - plain.y_clean
+    assert np.allclose(noise_unc[:, 3:], noise_plain[:, 3:], atol=1e-3)
+    assert np.array_equal(unc.load_test("nominal", seed).episode.y, healthy.y)
+
+
+def _rec(label: str, scenario: str, seed: int, r_td: float, t_dt: float) -> CellResult:
+    faulty = scenario != "nominal"
+    return CellResult(
+        diagnoser=label,
+        diagnoser_name=label,
+        scenario=scenario,
+        seed=seed,
+        fault_onset=100 if faulty else None,
+        n_samples=400,
+        n_samples_planned=400,
+        n_fault_samples=300 if faulty else 0,
+        terminated_at=None,
+        termination_reason=None,
+        r_fd=0.0 if faulty else 0.001 * seed,
+        r_td=r_td,
+        t_dt=t_dt,
+        t_dt_s=t_dt * 10,
+        n_alarms=seed,
+        sample_time_s=10.0,
+        detect_wall_s=0.0,
+    )
+
+
+def test_track_rows_ratio_and_ranks() -> None:
+    recs = []
+    for s in range(6):
+        recs.append(_rec("a", "nominal", s, math.nan, math.nan))
+        recs.append(_rec(ORACLE_LABEL, "nominal", s, math.nan, math.nan))
+        recs.append(_rec("a", "f1", s, 0.5, 9.0 + s))
+        recs.append(_rec(ORACLE_LABEL, "f1", s, 0.99, 4.0))
+    rows = track_rows(recs, ["a"], ("f1",))
+    a, orc = rows
+    assert a.label == "a" and orc.label == ORACLE_LABEL
+    assert a.faults["f1"].ratio.estimate == pytest.approx(limit_ratio(np.mean(range(9, 15)), 4.0))
+    assert orc.faults["f1"].ratio.estimate == pytest.approx(1.0)
+    assert (orc.faults["f1"].rank, a.faults["f1"].rank) == ("1", "2")
+    assert a.alarmed_share == pytest.approx(5 / 6)  # seed 0 has no alarm
+    assert a.worst_seed == 5
+
+
+def test_run_track_end_to_end(tmp_path) -> None:
+    run = run_track(TINY, ["limits"], tmp_path / "paper", workers=0, progress=False)
+    labels = [r.label for r in run.rows]
+    assert labels == ["limits", ORACLE_LABEL]
+    summary = {(s.diagnoser, s.scenario): s for s in summarize(run.records)}
+    assert summary[(ORACLE_LABEL, "f1")].t_dt <= 2
+    paths = write_track(run, tmp_path / "paper")
+    assert {p.name for p in paths} >= {"leaderboard.md", "leaderboard.csv", "leaderboard.json"}
+    text = track_table(run)
+    assert "oracle (physical limit)" in text and "t_dt/oracle" in text
+    assert list((tmp_path / "paper" / "figures").rglob("*.png"))
+    # a second run resumes: nothing computed again
+    again = run_track(TINY, ["limits"], tmp_path / "paper", workers=0, progress=False)
+    assert again.n_computed == 0 and again.n_reused == len(TINY.test_cells())
+
+
+def test_fault_spec_of_a_track_is_not_random_in_the_env() -> None:
+    spec = TRACKS["random"].fault_spec(TRACKS["random"].drawn_fault(4), 4)
+    assert isinstance(spec, FaultSpec) and spec.scenario in {"f1", "f2", "f3", "f4"}
+    assert spec.onset is not None and spec.magnitude is not None
