@@ -637,6 +637,7 @@ def _main_tracks(args: argparse.Namespace, parser: argparse.ArgumentParser) -> i
                 ray_address=args.ray_address,
                 progress=not args.no_progress,
                 figures=not args.no_figures,
+                model_cache=out / "models",
             )
         except ValueError as e:
             parser.error(str(e))
@@ -645,7 +646,12 @@ def _main_tracks(args: argparse.Namespace, parser: argparse.ArgumentParser) -> i
         write_track(run_, out / track.name)
         runs.append(run_)
         print(trackboard_table(run_))
-        print(f"track {track.name}: {run_.wall_s:.1f} s", file=sys.stderr)
+        print(
+            f"track {track.name}: {run_.wall_s:.1f} s ({run_.n_computed} cells computed, "
+            f"{run_.n_reused} reused; {run_.n_trained} diagnosers trained, "
+            f"{run_.n_reused_models} models reused from another track)",
+            file=sys.stderr,
+        )
     write_summary(runs, out)
     print((out / "summary.md").read_text())
     return 0

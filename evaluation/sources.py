@@ -345,6 +345,19 @@ class TrackData:
     def cells(self) -> list[tuple[str, int]]:
         return self.track.test_cells()
 
+    def training_key(self) -> dict[str, Any]:
+        """What the training episodes depend on: tracks with equal keys train equal models."""
+        import fcc_env
+
+        t = self.track
+        return {
+            "model_version": fcc_env.MODEL_VERSION,
+            "n_samples": t.n_samples,
+            "noise_scale": t.noise_scale,
+            "plant_variation": t.plant_variation,
+            "train_seeds": [t.train_seeds.start, t.train_seeds.stop],
+        }
+
     def _simulate(self, seeds: Sequence[int], spec: FaultSpec) -> list[LoadedEpisode]:
         return simulate_loaded(
             seeds,

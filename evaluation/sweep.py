@@ -188,7 +188,7 @@ _MODEL_CACHE: dict[str, Diagnoser] = {}
 _MODEL_CACHE_SIZE = 8
 
 
-def _dir_files(path: Path) -> dict[str, bytes]:
+def dir_files(path: Path) -> dict[str, bytes]:
     return {
         p.relative_to(path).as_posix(): p.read_bytes()
         for p in sorted(path.rglob("*"))
@@ -235,7 +235,7 @@ def _train_task(
     wall = time.perf_counter() - t0
     with tempfile.TemporaryDirectory(prefix="fcc-train-") as d:
         diag.save(d)
-        files = _dir_files(Path(d))
+        files = dir_files(Path(d))
     info = {
         "train_wall_s": wall,
         "n_train_episodes": len(episodes),
@@ -437,7 +437,7 @@ def _score_all(
     refs: dict[str, Any] = {}
     if not runner.passes_paths:
         # Ship each model's files once (Ray's object store), not once per task.
-        refs = {lab: runner.put(_dir_files(store.model_dir(lab))) for lab in labels_needed}
+        refs = {lab: runner.put(dir_files(store.model_dir(lab))) for lab in labels_needed}
     handles: dict[Any, tuple[str, int]] = {}
     need_cell = {(sc, seed, s.key): cell for (sc, seed), ss in missing.items() for s, cell, _ in ss}
     for (sc, seed), ss in missing.items():

@@ -20,6 +20,9 @@ r_td over faults, mean t_dt / oracle ratio) and the wall time per track.
 from __future__ import annotations
 
 import math
+import os
+import shutil
+import tempfile
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -39,8 +42,8 @@ from evaluation.intervals import (
 from evaluation.oracle import ORACLE_LABEL, oracle_records
 from evaluation.records import CellResult
 from evaluation.sources import TrackData
-from evaluation.store import canonical_hash
-from evaluation.sweep import SweepConfig, default_specs, run_sweep
+from evaluation.store import ResultStore, canonical_hash
+from evaluation.sweep import DiagnoserSpec, SweepConfig, default_specs, dir_files, run_sweep
 from evaluation.tracks import Track
 from fcc_env.io import atomic_open, atomic_write, atomic_write_json
 
@@ -109,6 +112,8 @@ class TrackRun:
     wall_s: float
     n_computed: int
     n_reused: int
+    n_trained: int = 0
+    n_reused_models: int = 0
 
 
 def _by(records: Sequence[CellResult], label: str, scenario: str) -> list[CellResult]:
@@ -207,8 +212,14 @@ def run_track(
     ray_address: str | None = None,
     progress: bool = True,
     figures: bool = True,
+    model_cache: Path | None = None,
 ) -> TrackRun:
-    """Sweep ``diagnosers`` over ``track`` and add the physical-limit row (resumable)."""
+    """Sweep ``diagnosers`` over ``track`` and add the physical-limit row (resumable).
+
+    ``model_cache``: a directory of trained models shared by tracks; a track whose training
+    episodes equal another's (:meth:`TrackData.training_key`: same seeds, noise and plant
+    variation) reuses that track's models instead of training again.
+    """
     from evaluation.leaderboard import figure_cells, write_figures
 
     t0 = time.perf_counter()
@@ -216,6 +227,9 @@ def run_track(
     config = SweepConfig(diagnosers=default_specs(diagnosers), data=data)
     config.validate()
     store = out / "store" / canonical_hash(data.store_key())[:12]
+    n_reused_models = 0
+    if model_cache is not None:
+        n_reused_models = _models_from_cache(config, store, model_cache)
     results = run_sweep(
         config,
         store,
@@ -225,6 +239,8 @@ def run_track(
         progress=progress,
         figure_cells=figure_cells(config) if figures else (),
     )
+    if model_cache is not None:
+        _models_to_cache(config, store, model_cache)
     records = (*results.records, *oracle_records(data))
     rows = track_rows(records, [s.key for s in config.diagnosers], track.faults)
     if figures:
@@ -236,7 +252,51 @@ def run_track(
         wall_s=time.perf_counter() - t0,
         n_computed=results.n_computed,
         n_reused=results.n_reused,
+        n_trained=results.n_trained,
+        n_reused_models=n_reused_models,
     )
+
+
+def _cache_dir(config: SweepConfig, spec: DiagnoserSpec, cache: Path) -> Path:
+    data = config.data
+    assert isinstance(data, TrackData)
+    # model_hash with a constant data part: the package version and the resolved settings
+    key = {"training": data.training_key(), "model": config.model_hash(spec, "training-key")}
+    return cache / spec.key / canonical_hash(key)[:16]
+
+
+def _models_from_cache(config: SweepConfig, store_dir: Path, cache: Path) -> int:
+    """Copy cached models of an equal training set into the track's store; how many."""
+    store = ResultStore.open(store_dir, config.data.store_key())
+    n = 0
+    for spec in config.diagnosers:
+        mhash = config.model_hash(spec, store.data_hash)
+        src = _cache_dir(config, spec, cache)
+        if not store.has_model(spec.key, mhash) and (src / "model").is_dir():
+            files = dir_files(src / "model")
+            store.write_model(spec.key, mhash, files, {**spec.to_json(), "from_cache": str(src)})
+            n += 1
+    return n
+
+
+def _models_to_cache(config: SweepConfig, store_dir: Path, cache: Path) -> None:
+    """Offer the track's trained models to the cache (atomic: a renamed temporary copy)."""
+    store = ResultStore.open(store_dir, config.data.store_key())
+    for spec in config.diagnosers:
+        dst = _cache_dir(config, spec, cache)
+        if (dst / "model").is_dir():
+            continue
+        dst.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(dir=dst, prefix=".model.", suffix=".tmp"))
+        shutil.copytree(store.model_dir(spec.key), tmp, dirs_exist_ok=True, ignore=_spec_json)
+        try:
+            os.rename(tmp, dst / "model")
+        except OSError:  # another run cached it first
+            shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _spec_json(directory: str, names: list[str]) -> list[str]:
+    return ["spec.json"] if "spec.json" in names else []
 
 
 def _flat(row: TrackRow, track: str) -> dict[str, Any]:

@@ -154,3 +154,24 @@ def test_fault_spec_of_a_track_is_not_random_in_the_env() -> None:
     spec = TRACKS["random"].fault_spec(TRACKS["random"].drawn_fault(4), 4)
     assert isinstance(spec, FaultSpec) and spec.scenario in {"f1", "f2", "f3", "f4"}
     assert spec.onset is not None and spec.magnitude is not None
+
+
+def test_tracks_with_one_training_set_share_their_models(tmp_path) -> None:
+    cache = tmp_path / "models"
+    first = run_track(
+        TINY, ["limits"], tmp_path / "paper", workers=0, progress=False, figures=False,
+        model_cache=cache,
+    )  # fmt: skip
+    small = TRACKS["small"].replace(n_healthy=1, n_faulty=1, n_train=2, n_validation=4)
+    second = run_track(
+        small, ["limits"], tmp_path / "small", workers=0, progress=False, figures=False,
+        model_cache=cache,
+    )  # fmt: skip
+    assert (first.n_trained, first.n_reused_models) == (1, 0)
+    assert (second.n_trained, second.n_reused_models) == (0, 1)
+    noisy = TRACKS["noisy"].replace(n_healthy=1, n_faulty=1, n_train=2, n_validation=4)
+    third = run_track(
+        noisy, ["limits"], tmp_path / "noisy", workers=0, progress=False, figures=False,
+        model_cache=cache,
+    )  # fmt: skip
+    assert (third.n_trained, third.n_reused_models) == (1, 0)  # other noise: trained anew
