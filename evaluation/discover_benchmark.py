@@ -23,7 +23,7 @@ def run(n_samples: int, candidates: list[str] | None, seed: int = 0) -> tuple[fl
     t0 = time.perf_counter()
     rep = d.discover(data, candidates=candidates)
     dt = time.perf_counter() - t0
-    return dt, len(rep["rounds"]), rep["settings"]["n_candidates"]
+    return dt, len(rep.rounds), rep.settings["n_candidates"]
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -58,7 +58,7 @@ def check_detection(text: str, pname: str, truth: float, rel_tol: float, seed: i
     effect = fx.parse(text)
     data = d.from_batch(fcc_env.simulate_episodes([seed], N, plant_effects=[effect]))
     floor = heldout_rmse(d.from_batch(fcc_env.simulate_episodes([seed], N)))
-    rep = d.discover(data, max_effects=2)
+    rep = d.discover(data, max_effects=2).to_json()
     assert rep["effects"], f"{text}: nothing found; rounds {rep['rounds'][0]['candidates'][:3]}"
     first = rep["effects"][0]
     assert first["id"] == effect.effect_id
@@ -96,7 +96,9 @@ def test_library_effect_is_found_slow(text, pname, truth, rel_tol, seed):
 
 def test_clean_data_reports_no_effect():
     for seed in (0, 1):
-        rep = d.discover(d.from_batch(fcc_env.simulate_episodes([seed], N)), max_effects=1)
+        rep = d.discover(
+            d.from_batch(fcc_env.simulate_episodes([seed], N)), max_effects=1
+        ).to_json()
         assert rep["effects"] == [] and rep["unexplained"] is False
 
 
@@ -104,7 +106,9 @@ def test_clean_data_reports_no_effect():
 def test_clean_data_false_discovery_rate_over_20_seeds():
     found = 0
     for seed in range(100, 120):
-        rep = d.discover(d.from_batch(fcc_env.simulate_episodes([seed], N)), max_effects=1)
+        rep = d.discover(
+            d.from_batch(fcc_env.simulate_episodes([seed], N)), max_effects=1
+        ).to_json()
         found += bool(rep["effects"])
     assert found <= 1  # at least 95 % of seeds report nothing
 
@@ -112,7 +116,7 @@ def test_clean_data_false_discovery_rate_over_20_seeds():
 def test_two_effects_at_once_are_both_found():
     effects = ["sensor_bias:T_rg2,bias=2", "afterburn:dilute1,factor=1.3"]
     data = d.from_batch(fcc_env.simulate_episodes([1], N, plant_effects=effects))
-    rep = d.discover(data)
+    rep = d.discover(data).to_json()
     found = {e["id"]: e["params"] for e in rep["effects"]}
     assert set(found) == {"sensor_bias:T_rg2", "afterburn:dilute1"}
     assert found["sensor_bias:T_rg2"]["bias"] == pytest.approx(2.0, rel=0.1)
@@ -131,7 +135,7 @@ class SineOnStage2:
 
 def test_effect_outside_the_library_is_reported_unexplained():
     data = d.from_batch(fcc_env.simulate_episodes([1], N, plant_effects=[SineOnStage2()]))
-    rep = d.discover(data)
+    rep = d.discover(data).to_json()
     assert rep["unexplained"] is True
     assert "T_rg2" in rep["unexplained_channels"]
     # no wrong effect is named with confidence: either none, or flagged as not explaining
@@ -156,7 +160,9 @@ def test_user_candidate_is_plugged_in_and_found():
     data = d.from_batch(
         fcc_env.simulate_episodes([2], 2000, plant_effects=["heat_loss:stage2,extra_ua_kw_per_k=1"])
     )
-    rep = d.discover(data, candidates=["sensor_bias:T_rg2"], extra_candidates=[cand], max_effects=1)
+    rep = d.discover(
+        data, candidates=["sensor_bias:T_rg2"], extra_candidates=[cand], max_effects=1
+    ).to_json()
     assert rep["effects"][0]["id"] == "user:ua2_scale"
     assert rep["effects"][0]["params"]["scale"] == pytest.approx(1.5, rel=0.05)  # (2+1)/2
 
@@ -166,7 +172,7 @@ def test_output_lag_matches_library_measure():
     eff.reset()
     y = np.random.default_rng(0).standard_normal((50, 8)) + 700
     ref = np.array([eff.measure(k * 10.0, y[k])[4] for k in range(50)])
-    np.testing.assert_allclose(d._lag(y[:, 4], 45.0, 10.0), ref, rtol=0, atol=1e-9)
+    np.testing.assert_allclose(d.first_order_lag(y[:, 4], 45.0, 10.0), ref, rtol=0, atol=1e-9)
 
 
 # ---- data access: only measured + commanded -------------------------------------------------------
@@ -179,7 +185,7 @@ def test_loader_reads_only_measured_and_commanded_and_ignores_truth(tmp_path):
     kw = dict(
         candidates=["sensor_bias:T_rg2", "sensor_bias:T_rx", "sensor_lag:T_rg2"], max_effects=1
     )
-    rep1 = d.discover(path, out_dir=tmp_path / "a", plots=False, **kw)
+    rep1 = d.discover(path, out_dir=tmp_path / "a", plots=False, **kw).to_json()
     # corrupt every truth column and the truth sidecar field: nothing may change
     header = path.read_text().splitlines()[0].split(",")
     table = np.loadtxt(path, delimiter=",", skiprows=1)
@@ -189,7 +195,7 @@ def test_loader_reads_only_measured_and_commanded_and_ignores_truth(tmp_path):
     meta = json.loads(path.with_suffix(".json").read_text())
     meta["truth_plant_effects"] = [{"id": "sensor_bias:T_rx", "params": {"bias": -9}}]
     path.with_suffix(".json").write_text(json.dumps(meta))
-    rep2 = d.discover(path, out_dir=tmp_path / "b", plots=False, **kw)
+    rep2 = d.discover(path, out_dir=tmp_path / "b", plots=False, **kw).to_json()
     assert rep1["effects"][0]["id"] == "sensor_bias:T_rg2"
     assert rep1["effects"] == rep2["effects"] and rep1["rmse_after"] == rep2["rmse_after"]
 
@@ -226,11 +232,14 @@ def test_cli_writes_report_and_plots(tmp_path, capsys):
     [
         (
             ["--train-fraction", "0.95"],
-            r"train_fraction=0.95 outside the allowed range \(0.2, 0.9\)",
+            r"train_fraction=0.95 is outside the allowed range: a number in \(0.2, 0.9\)",
         ),
         (["--candidates", "sensor_bias:T_xx"], r"unknown candidate id\(s\) \['sensor_bias:T_xx'\]"),
         (["--candidates", "sensor_lag:T_fp"], "cannot be inverted"),
-        (["--max-effects", "11"], r"max_effects=11 outside the allowed range \[0, 10\]"),
+        (
+            ["--max-effects", "11"],
+            r"max_effects=11 is outside the allowed range: an integer in \[0, 10\]",
+        ),
     ],
 )
 def test_cli_bad_arguments_name_value_and_range(tmp_path, capsys, argv_extra, match):
@@ -278,10 +287,12 @@ def synthetic(seed: int, gain: float, n: int = 3000) -> d.MeasuredData:
 def test_arx_adapter_finds_the_missing_input_and_its_delay():
     model = d.ARXModel({"y": ["u1"]}, na=2, nb=2, candidate_delays=(0, 1, 2, 3, 4))
     data = synthetic(0, gain=0.1)
-    rep = d.discover(data, model=model)
+    rep = d.discover(data, model=model).to_json()
     assert rep["effects"][0]["id"] == "input:u2->y@2"
     assert rep["effects"][0]["params"]["gain"] == pytest.approx(0.1, rel=0.1)
-    floor = d.discover(synthetic(0, gain=0.0), model=model, max_effects=0)["rmse_before"]["y"]
+    floor = d.discover(synthetic(0, gain=0.0), model=model, max_effects=0).to_json()["rmse_before"][
+        "y"
+    ]
     gap = rep["rmse_before"]["y"] - floor
     assert rep["rmse_before"]["y"] - rep["rmse_after"]["y"] >= 0.8 * gap
     assert not any(e["id"].startswith("input:u3") for e in rep["effects"])
@@ -290,14 +301,14 @@ def test_arx_adapter_finds_the_missing_input_and_its_delay():
 def test_arx_adapter_clean_data_finds_nothing():
     model = d.ARXModel({"y": ["u1"]}, na=2, nb=2)
     for seed in range(3):
-        assert d.discover(synthetic(seed, gain=0.0), model=model)["effects"] == []
+        assert d.discover(synthetic(seed, gain=0.0), model=model).to_json()["effects"] == []
 
 
 def test_arx_adapter_on_fcc_data_finds_a_missing_measured_input():
     """T_rx declared from T_fp alone misses the regenerated-catalyst temperature path."""
     data = d.from_batch(fcc_env.simulate_episodes([0], N))
     model = d.ARXModel({"T_rx": ["T_fp"]}, na=2, nb=2)
-    rep = d.discover(data, model=model, max_effects=2)
+    rep = d.discover(data, model=model, max_effects=2).to_json()
     assert rep["effects"], "no missing input found"
     assert rep["effects"][0]["id"].split("->")[0] in {
         "input:T_rg1",

@@ -7,7 +7,7 @@ import pytest
 
 import fcc_env
 from evaluation import discover as d
-from evaluation.discover_lrgf import LRGFModel
+from evaluation.discover.lrgf import LRGFModel
 
 
 def synthetic(seed: int, gain: float, n: int = 2000) -> d.MeasuredData:
@@ -28,7 +28,7 @@ def synthetic(seed: int, gain: float, n: int = 2000) -> d.MeasuredData:
 
 def test_lrgf_adapter_finds_the_missing_input_and_its_delay():
     model = LRGFModel({"y": ["u1"]}, max_epochs=400, candidate_delays=(0, 1, 2, 3, 4))
-    rep = d.discover(synthetic(0, gain=0.3), model=model, max_effects=2)
+    rep = d.discover(synthetic(0, gain=0.3), model=model, max_effects=2).to_json()
     assert rep["effects"][0]["id"] == "input:u2->y@2"
     assert rep["effects"][0]["params"]["gain"] == pytest.approx(0.3, rel=0.1)
     assert rep["rmse_after"]["y"] < 0.5 * rep["rmse_before"]["y"]
@@ -38,7 +38,9 @@ def test_lrgf_adapter_finds_the_missing_input_and_its_delay():
 def test_lrgf_adapter_on_fcc_data():
     """T_rx declared from T_fp alone misses the regenerated-catalyst temperature."""
     data = d.from_batch(fcc_env.simulate_episodes([0], 2000))
-    rep = d.discover(data, model=LRGFModel({"T_rx": ["T_fp"]}, max_epochs=300), max_effects=1)
+    rep = d.discover(
+        data, model=LRGFModel({"T_rx": ["T_fp"]}, max_epochs=300), max_effects=1
+    ).to_json()
     assert rep["effects"], "no missing input found"
     assert rep["effects"][0]["id"].split("@")[0] in {"input:T_rg2->T_rx", "input:T_rg1->T_rx"}
     assert rep["rmse_after"]["T_rx"] < 0.6 * rep["rmse_before"]["T_rx"]
@@ -47,5 +49,13 @@ def test_lrgf_adapter_on_fcc_data():
 def test_lrgf_adapter_bad_input():
     with pytest.raises(ValueError, match="at least one output channel"):
         LRGFModel({})
-    with pytest.raises(ValueError, match=r"max_epochs=0 outside the allowed range"):
+    with pytest.raises(
+        ValueError, match=r"max_epochs=0 is outside the allowed range: an integer in \[1, 100000\]"
+    ):
         LRGFModel({"y": ["u1"]}, max_epochs=0)
+
+
+def test_old_module_path_still_gives_the_adapter():
+    from evaluation import discover_lrgf
+
+    assert discover_lrgf.LRGFModel is LRGFModel

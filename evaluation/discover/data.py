@@ -1,0 +1,156 @@
+"""Reading measured data: only what a plant really knows.
+
+:func:`load_measured` parses the ``measured`` (Table 1) and ``commanded`` columns of a dataset
+written by ``python -m fcc_env.generate`` (or a user's file in that format), plus the episode
+index and the sample time. It never parses the ``truth`` columns (``in_*``, ``clean_*``, ``x_*``,
+``fault_active``) nor the sidecar's ``truth_plant_effects``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fcc_env.validation import Real, check
+
+__all__ = [
+    "DATASET_FORMAT",
+    "INDEX_COLUMNS",
+    "TABLE1",
+    "MeasuredData",
+    "from_arrays",
+    "from_batch",
+    "load_measured",
+]
+
+TABLE1 = ("R_ar", "T_ar", "T_fp", "T_rx", "T_rg1", "T_rg2", "T_d1", "T_dg")
+INDEX_COLUMNS = ("episode", "k", "time_s")
+DATASET_FORMAT = "fcc-dataset"
+#: The sample time must be a finite positive number of seconds.
+POSITIVE_SECONDS = Real(0.0, math.inf, closed="neither", unit="s")
+
+
+@dataclass(frozen=True)
+class MeasuredData:
+    """What the loop may see: named channels, each (n_episodes, n_samples), and the sample time."""
+
+    channels: Mapping[str, np.ndarray]
+    sample_time_s: float
+    source: str = "<arrays>"
+
+    def __post_init__(self) -> None:
+        if not self.channels:
+            raise ValueError("measured data has no channels")
+        shapes = {np.shape(v) for v in self.channels.values()}
+        if len(shapes) != 1 or len(next(iter(shapes))) != 2:
+            raise ValueError(f"channels must share one (n_episodes, n_samples) shape, got {shapes}")
+        check("sample_time_s", self.sample_time_s, POSITIVE_SECONDS)
+        for name, v in self.channels.items():
+            if not np.isfinite(v).all():
+                raise ValueError(f"channel {name!r} contains NaN or inf")
+
+    @property
+    def n_episodes(self) -> int:
+        return int(next(iter(self.channels.values())).shape[0])
+
+    @property
+    def n_samples(self) -> int:
+        return int(next(iter(self.channels.values())).shape[1])
+
+    @property
+    def t_s(self) -> np.ndarray:
+        """Time since the episode start, seconds (equidistant samples)."""
+        return np.arange(self.n_samples) * self.sample_time_s
+
+    def require(self, names: Sequence[str], who: str) -> None:
+        missing = [n for n in names if n not in self.channels]
+        if missing:
+            raise ValueError(
+                f"{who} needs channel(s) {missing}, data {self.source!r} has {sorted(self.channels)}"
+            )
+
+    def stack(self, names: Sequence[str]) -> np.ndarray:
+        self.require(names, "stack")
+        return np.stack([np.asarray(self.channels[n], np.float64) for n in names], axis=-1)
+
+
+def from_arrays(
+    channels: Mapping[str, Any], sample_time_s: float = 10.0, source: str = "<arrays>"
+) -> MeasuredData:
+    """Measured data from arrays (T,) or (n_episodes, T) per channel name."""
+    out = {}
+    for name, v in channels.items():
+        a = np.asarray(v, dtype=np.float64)
+        out[str(name)] = a[None] if a.ndim == 1 else a
+    return MeasuredData(out, float(sample_time_s), source)
+
+
+def from_batch(batch: Any) -> MeasuredData:
+    """The measured part of a :class:`fcc_env.BatchResult`: noisy Table 1 + commanded u_F, R_ar."""
+    obs = np.asarray(batch.observations, dtype=np.float64)
+    ch = {name: obs[:, :, i] for i, name in enumerate(TABLE1)}
+    ch["cmd_u_F"] = np.asarray(batch.inputs[:, :, 0], np.float64)
+    ch["cmd_R_ar"] = np.asarray(batch.inputs[:, :, 1], np.float64)
+    return MeasuredData(ch, float(batch.sample_time_s), "<BatchResult>")
+
+
+def load_measured(path: str | os.PathLike) -> MeasuredData:
+    """Read the ``measured`` and ``commanded`` columns (and the episode index) of a dataset.
+
+    Only those columns are parsed: truth columns and ``truth_plant_effects`` are never read.
+    Raises ValueError naming the problem for a missing file, a bad sidecar or ragged episodes.
+    """
+    csv = Path(path)
+    if csv.suffix != ".csv":
+        raise ValueError(f"--data must be a .csv dataset (with a .json sidecar), got {str(csv)!r}")
+    if not csv.is_file():
+        raise ValueError(f"dataset {str(csv)!r} does not exist")
+    sidecar = csv.with_suffix(".json")
+    if not sidecar.is_file():
+        raise ValueError(f"dataset {str(csv)!r} has no JSON sidecar {sidecar.name!r}")
+    try:
+        meta = json.loads(sidecar.read_text())
+    except json.JSONDecodeError as e:
+        raise ValueError(f"sidecar {str(sidecar)!r} is not valid JSON: {e}") from e
+    if not isinstance(meta, dict) or meta.get("format") != DATASET_FORMAT:
+        raise ValueError(
+            f"sidecar {str(sidecar)!r} is not an FCC dataset sidecar (needs format "
+            f"{DATASET_FORMAT!r}, got {meta.get('format') if isinstance(meta, dict) else meta!r})"
+        )
+    roles = meta.get("roles")
+    if not isinstance(roles, dict) or not isinstance(roles.get("measured"), list):
+        raise ValueError(f"sidecar {str(sidecar)!r} has no roles.measured list")
+    wanted = [str(c) for c in roles["measured"]] + [str(c) for c in roles.get("commanded", [])]
+    dt = meta.get("sample_time_s")
+    dt = check("sample_time_s", dt, POSITIVE_SECONDS)
+    with csv.open() as fh:
+        header = [h.strip() for h in fh.readline().strip().split(",")]
+    missing = [c for c in wanted if c not in header]
+    if missing:
+        raise ValueError(f"dataset {str(csv)!r} lacks column(s) {missing} named in its sidecar")
+    index = [c for c in ("episode",) if c in header]
+    cols = index + wanted
+    try:
+        table = np.loadtxt(
+            csv, delimiter=",", skiprows=1, usecols=[header.index(c) for c in cols], ndmin=2
+        )
+    except ValueError as e:
+        raise ValueError(f"dataset {str(csv)!r} could not be parsed as numbers: {e}") from e
+    if table.shape[0] < 50:
+        raise ValueError(f"dataset {str(csv)!r} has {table.shape[0]} rows; the loop needs >= 50")
+    episode = table[:, 0].astype(int) if index else np.zeros(table.shape[0], int)
+    eps, counts = np.unique(episode, return_counts=True)
+    if len(set(counts.tolist())) != 1:
+        lengths = dict(zip(eps.tolist(), counts.tolist(), strict=True))
+        raise ValueError(f"episodes of {str(csv)!r} differ in length: {lengths}")
+    order = np.argsort(episode, kind="stable")
+    E, T = eps.size, int(counts[0])
+    channels = {c: table[order, len(index) + j].reshape(E, T) for j, c in enumerate(wanted)}
+    return MeasuredData(channels, float(dt), str(csv))

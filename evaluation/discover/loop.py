@@ -1,0 +1,328 @@
+"""The residual → missing-effect loop (:func:`discover`) over a pluggable declared model.
+
+1. *Residual*: the model is simulated on the measured inputs (output error, never one-step
+   prediction); the residual of every output channel is split in time into a training part (the
+   first ``train_fraction`` of every episode) and a held-out part (the rest).
+2. *Diagnose*: per channel, :func:`evaluation.residual_tests.diagnose`, before and after, on the
+   held-out part.
+3. *Trace*: every candidate effect is fitted on the training part by simulation-error least
+   squares (:func:`~evaluation.discover.fitting.fit_effects`) with the channels weighted by
+   1/σ̂_c², σ̂_c the white-noise level of the declared model's residual. Each fit is scored on
+   the held-out part: ``score = ΔSSE_w − n_params·ln(N_held)``.
+4. *Significance*: :func:`~evaluation.discover.scoring.heldout_comparison` with blocks of
+   ``block_len`` samples (default max(25, N_held/32)). A candidate is significant when its
+   p-value is below ``alpha / n_candidates`` (Bonferroni over the candidates of the round) and
+   its held-out weighted SSE falls by at least ``min_rel_reduction``. The best-scoring
+   significant candidate is added, all accepted effects are re-fitted jointly (and earlier ones
+   made redundant are dropped), and the loop repeats until no candidate is significant or
+   ``max_effects`` have been added.
+5. *Unexplained structure*: ``unexplained`` is set when any channel's held-out residual exceeds
+   the calibrated limits of :mod:`evaluation.discover.scoring`. Effects accepted while
+   structure remains are flagged ``"explains_structure": false``.
+6. *Report*: a :class:`~evaluation.discover.report.DiscoveryReport`, written to ``out_dir``.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from evaluation.discover.base import Candidate, ModelAdapter
+from evaluation.discover.data import MeasuredData, load_measured
+from evaluation.discover.fitting import fit_effects
+from evaluation.discover.physics import PhysicsModel
+from evaluation.discover.report import (
+    AcceptedEffect,
+    DiscoveryReport,
+    finite_or_none,
+    named,
+    per_channel,
+    plot_residuals,
+    residual_diagnostics,
+)
+from evaluation.discover.scoring import (
+    LF_LIMIT,
+    LF_WINDOW,
+    RATIO_LIMIT,
+    heldout_comparison,
+    noise_levels,
+    structure_statistics,
+)
+from fcc_env.validation import Integer, Real, check
+
+__all__ = ["ALPHA", "MAX_EFFECTS", "TRAIN_FRACTION", "TRAIN_FRACTION_RANGE", "discover"]
+
+TRAIN_FRACTION_RANGE = (0.2, 0.9)  # open interval
+TRAIN_FRACTION = Real(*TRAIN_FRACTION_RANGE, closed="neither")
+MAX_EFFECTS = Integer(0, 10)
+ALPHA = Real(0.0, 0.5, closed="neither")
+
+
+@dataclass
+class _Accepted:
+    cand: Candidate
+    theta: np.ndarray
+    stderr: np.ndarray
+    round: int
+    stats: dict[str, float]
+
+
+def discover(
+    data: MeasuredData | str | os.PathLike,
+    *,
+    model: ModelAdapter | None = None,
+    candidates: Sequence[str] | None = None,
+    extra_candidates: Sequence[Candidate] = (),
+    train_fraction: float = 0.6,
+    max_effects: int = 3,
+    alpha: float = 0.01,
+    min_rel_reduction: float = 0.01,
+    block_len: int | None = None,
+    out_dir: str | os.PathLike | None = None,
+    plots: bool = True,
+    max_lag: int = 20,
+) -> DiscoveryReport:
+    """Run the residual → missing-effect loop and return the report (also written to ``out_dir``).
+
+    Args:
+        data: :class:`MeasuredData` or a dataset path (read with :func:`load_measured`).
+        model: the declared model (default :class:`PhysicsModel`).
+        candidates: ids of the model's candidates to try (default: all it offers).
+        extra_candidates: user candidates (for :class:`PhysicsModel`: :class:`PhysicsCandidate`).
+        train_fraction: share of each episode used for fitting, in (0.2, 0.9).
+        max_effects: at most this many effects are added (0–10).
+        alpha: family-wise significance level per round (Bonferroni over the candidates).
+        min_rel_reduction: minimum relative held-out weighted-SSE reduction to accept.
+        block_len: block length of the held-out test (default max(25, N_held // 32)).
+        out_dir: where ``report.json`` and the plots go (None: nothing written).
+
+    Returns:
+        A frozen :class:`~evaluation.discover.report.DiscoveryReport`. Until the previous
+        release this function returned a plain dict; ``discover(...).to_json()`` gives exactly
+        that dict (the content of ``report.json``).
+    """
+    t_start = time.perf_counter()
+    train_fraction = check("train_fraction", train_fraction, TRAIN_FRACTION)
+    max_effects = check("max_effects", max_effects, MAX_EFFECTS)
+    alpha = check("alpha", alpha, ALPHA)
+    if not isinstance(data, MeasuredData):
+        data = load_measured(data)
+    model = model if model is not None else PhysicsModel()
+    T = data.n_samples
+    n_train = round(train_fraction * T)
+    n_hold = T - n_train
+    if n_train < 30 or n_hold < 30:
+        raise ValueError(f"{T} samples split at {train_fraction} leave too few for train/held-out")
+    model.prepare(data, n_train)
+    pool = model.candidates()
+    skipped = model.skipped_candidates()
+    if candidates is not None:
+        unknown = [c for c in candidates if c not in pool]
+        if unknown:
+            why = {c: skipped[c] for c in unknown if c in skipped}
+            raise ValueError(
+                f"unknown candidate id(s) {unknown}"
+                + (f" (not offered: {why})" if why else "")
+                + f". Available: {sorted(pool)}"
+            )
+        pool = {c: pool[c] for c in candidates}
+    for c in extra_candidates:
+        if not isinstance(c, Candidate):
+            raise ValueError(f"extra candidate {c!r} has no id/params (see Candidate)")
+        pool[c.id] = c
+    block_len = int(block_len or max(25, n_hold // 32))
+    chans = model.output_channels
+    Y = data.stack(chans)
+    empty = np.zeros((1, 0))
+    P0 = model.predict(data, [], empty, T)[0]
+    E0 = Y - P0
+    sigma = noise_levels(E0[:, :n_train])
+    sigma = np.where(sigma > 0, sigma, 1.0)
+    sqrt_w = 1.0 / sigma
+
+    accepted: list[_Accepted] = []
+    excluded: set[str] = set()  # dropped by backward elimination: not offered again
+    rounds: list[dict[str, Any]] = []
+    for rnd in range(1, max_effects + 1):
+        effs = [a.cand for a in accepted]
+        th_acc = np.concatenate([a.theta for a in accepted]) if accepted else np.zeros(0)
+        e0 = Y - model.predict(data, effs, th_acc[None], T)[0]
+        rows = []
+        for cid, cand in pool.items():
+            if cid in excluded or any(a.cand.id == cid for a in accepted):
+                continue
+            th0 = np.concatenate([th_acc, [p.typical for p in cand.params]])
+            free = np.r_[np.zeros(th_acc.size, bool), np.ones(len(cand.params), bool)]
+            fit = fit_effects(model, data, [*effs, cand], th0, free, Y, n_train, sqrt_w)
+            e1 = Y - model.predict(data, [*effs, cand], fit.theta[None], T)[0]
+            cmp = heldout_comparison(e0[:, n_train:], e1[:, n_train:], sqrt_w, block_len)
+            k = len(cand.params)
+            score = (cmp["sse0"] - cmp["sse1"]) - k * math.log(data.n_episodes * n_hold)
+            rows.append({"id": cid, "cand": cand, "fit": fit, "score": score, **cmp, "k": k})
+        if not rows:
+            break
+        thresh = alpha / len(rows)
+        for r in rows:
+            r["significant"] = bool(
+                r["p_value"] < thresh and r["rel_reduction"] >= min_rel_reduction and r["score"] > 0
+            )
+        rows.sort(key=lambda r: -r["score"] if np.isfinite(r["score"]) else np.inf)
+        sig = [r for r in rows if r["significant"]]
+        table = [
+            {
+                "id": r["id"],
+                "params": named(r["cand"], r["fit"].theta[-r["k"] :]),
+                "score": finite_or_none(r["score"]),
+                "rel_reduction": finite_or_none(r["rel_reduction"]),
+                "p_value": finite_or_none(r["p_value"]),
+                "significant": r["significant"],
+            }
+            for r in rows
+        ]
+        rounds.append({"round": rnd, "p_threshold": thresh, "candidates": table,
+                       "accepted": sig[0]["id"] if sig else None})  # fmt: skip
+        if not sig:
+            break
+        win = sig[0]
+        k = win["k"]
+        accepted.append(
+            _Accepted(win["cand"], win["fit"].theta[-k:], win["fit"].stderr[-k:], rnd,
+                      {x: win[x] for x in ("score", "rel_reduction", "p_value")})
+        )  # fmt: skip
+        if len(accepted) > 1:  # joint re-fit of everything accepted so far
+            effs = [a.cand for a in accepted]
+            th = np.concatenate([a.theta for a in accepted])
+            fit = fit_effects(
+                model, data, effs, th, np.ones(th.size, bool), Y, n_train, sqrt_w, grid=False
+            )
+            j = 0
+            for a in accepted:
+                n_p = len(a.cand.params)
+                a.theta, a.stderr = fit.theta[j : j + n_p], fit.stderr[j : j + n_p]
+                j += n_p
+            dropped = _backward_elimination(
+                model, data, accepted, Y, n_train, sqrt_w, block_len, alpha, min_rel_reduction
+            )
+            if dropped:
+                rounds[-1]["dropped"] = dropped
+                excluded.update(dropped)
+
+    effs = [a.cand for a in accepted]
+    th_acc = np.concatenate([a.theta for a in accepted]) if accepted else np.zeros(0)
+    P1 = model.predict(data, effs, th_acc[None], T)[0]
+    E1 = Y - P1
+    s_before = structure_statistics(E0[:, n_train:], sigma)
+    s_after = structure_statistics(E1[:, n_train:], sigma)
+    bad = (s_after["ratio"] > RATIO_LIMIT) | (s_after["lf"] > LF_LIMIT)
+    unexplained = bool(bad.any())
+    others = model.other_signals(data)
+    note = None
+    if accepted and unexplained:
+        note = (
+            "structure remains that the accepted effects do not explain; they improved the fit "
+            "significantly but are not claimed to be its cause"
+        )
+    elif unexplained:
+        note = "structure remains that no candidate explains"
+    elapsed_s = time.perf_counter() - t_start
+    plot_files = None
+    if out_dir is not None:
+        Path(out_dir).mkdir(parents=True, exist_ok=True)
+        if plots:
+            plot_files = tuple(plot_residuals(Path(out_dir), data, E0, E1, n_train, chans, max_lag))
+    report = DiscoveryReport(
+        model=model.name,
+        data=data.source,
+        n_episodes=data.n_episodes,
+        n_samples=T,
+        n_train=n_train,
+        channels=tuple(chans),
+        effects=tuple(
+            AcceptedEffect(
+                id=a.cand.id,
+                params=named(a.cand, a.theta),
+                stderr=named(a.cand, a.stderr),
+                ci95={
+                    p.name: [finite_or_none(v - 1.96 * s), finite_or_none(v + 1.96 * s)]
+                    for p, v, s in zip(a.cand.params, a.theta, a.stderr, strict=True)
+                },
+                round=a.round,
+                heldout={k: finite_or_none(v) for k, v in a.stats.items()},
+                explains_structure=not unexplained,
+            )
+            for a in accepted
+        ),
+        rmse_before=per_channel(chans, np.sqrt(np.mean(E0[:, n_train:] ** 2, axis=(0, 1)))),
+        rmse_after=per_channel(chans, np.sqrt(np.mean(E1[:, n_train:] ** 2, axis=(0, 1)))),
+        rmse_train_before=per_channel(chans, np.sqrt(np.mean(E0[:, :n_train] ** 2, axis=(0, 1)))),
+        rmse_train_after=per_channel(chans, np.sqrt(np.mean(E1[:, :n_train] ** 2, axis=(0, 1)))),
+        noise_std_estimate=per_channel(chans, sigma),
+        unexplained=unexplained,
+        unexplained_channels=tuple(c for c, b in zip(chans, bad, strict=True) if b),
+        structure_before={k: per_channel(chans, v) for k, v in s_before.items()},
+        structure_after={k: per_channel(chans, v) for k, v in s_after.items()},
+        structure_limits={"ratio": RATIO_LIMIT, "lf": LF_LIMIT, "lf_window": LF_WINDOW},
+        tests_before=residual_diagnostics(data, E0, n_train, chans, others, max_lag),
+        tests_after=residual_diagnostics(data, E1, n_train, chans, others, max_lag),
+        rounds=tuple(rounds),
+        skipped_candidates=skipped,
+        settings={
+            "train_fraction": float(train_fraction),
+            "max_effects": max_effects,
+            "alpha": alpha,
+            "min_rel_reduction": min_rel_reduction,
+            "block_len": block_len,
+            "n_candidates": len(pool),
+        },
+        note=note,
+        elapsed_s=elapsed_s,
+        plots=plot_files,
+    )
+    if out_dir is not None:
+        report.write(out_dir)
+    return report
+
+
+def _backward_elimination(
+    model: ModelAdapter, data: MeasuredData, accepted: list[_Accepted], Y: np.ndarray,
+    n_train: int, sqrt_w: np.ndarray, block_len: int, alpha: float, min_rel: float,
+) -> list[str]:  # fmt: skip
+    """Drop earlier effects made redundant by later ones (greedy forward selection's repair).
+
+    For each accepted effect but the newest, the others are re-fitted jointly without it; if the
+    held-out test no longer finds it significant (same level and minimum reduction as for
+    adding), it is removed and the others keep their re-fitted values.
+    """
+    dropped: list[str] = []
+    T = data.n_samples
+    for a in list(accepted[:-1]):
+        if len(accepted) < 2:
+            break
+        full_e = [x.cand for x in accepted]
+        full_th = np.concatenate([x.theta for x in accepted])
+        rest = [x for x in accepted if x is not a]
+        th = np.concatenate([x.theta for x in rest])
+        fit = fit_effects(
+            model, data, [x.cand for x in rest], th, np.ones(th.size, bool), Y, n_train,
+            sqrt_w, grid=False,
+        )  # fmt: skip
+        e_without = Y - model.predict(data, [x.cand for x in rest], fit.theta[None], T)[0]
+        e_with = Y - model.predict(data, full_e, full_th[None], T)[0]
+        cmp = heldout_comparison(e_without[:, n_train:], e_with[:, n_train:], sqrt_w, block_len)
+        if cmp["p_value"] < alpha / len(accepted) and cmp["rel_reduction"] >= min_rel:
+            continue
+        accepted.remove(a)
+        dropped.append(a.cand.id)
+        j = 0
+        for x in rest:
+            n_p = len(x.cand.params)
+            x.theta, x.stderr = fit.theta[j : j + n_p], fit.stderr[j : j + n_p]
+            j += n_p
+    return dropped
