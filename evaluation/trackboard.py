@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from diagnosers.registry import import_modules
 from evaluation.intervals import (
     Interval,
     bootstrap_ci,
@@ -207,13 +208,18 @@ def run_track(
     ray_address: str | None = None,
     progress: bool = True,
     figures: bool = True,
+    imports: Sequence[str] = (),
 ) -> TrackRun:
-    """Sweep ``diagnosers`` over ``track`` and add the physical-limit row (resumable)."""
+    """Sweep ``diagnosers`` over ``track`` and add the physical-limit row (resumable).
+
+    ``imports``: modules that register diagnosers of your own (:attr:`SweepConfig.imports`).
+    """
     from evaluation.leaderboard import figure_cells, write_figures
 
     t0 = time.perf_counter()
     data = TrackData(track=track)
-    config = SweepConfig(diagnosers=default_specs(diagnosers), data=data)
+    import_modules(imports)
+    config = SweepConfig(diagnosers=default_specs(diagnosers), data=data, imports=tuple(imports))
     config.validate()
     store = out / "store" / canonical_hash(data.store_key())[:12]
     results = run_sweep(
