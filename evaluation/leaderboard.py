@@ -149,9 +149,7 @@ def build_config(opts: LeaderboardOptions) -> SweepConfig:
         fault_profile=opts.fault_profile,
         ramp_samples=opts.ramp_samples,
     )
-    return SweepConfig(
-        diagnosers=default_specs(opts.diagnosers), data=data, imports=opts.imports
-    )
+    return SweepConfig(diagnosers=default_specs(opts.diagnosers), data=data, imports=opts.imports)
 
 
 def store_dir_for(config: SweepConfig, out: Path) -> Path:
