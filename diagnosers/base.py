@@ -14,6 +14,7 @@ from __future__ import annotations
 import inspect
 import json
 import os
+import sys
 from abc import ABC, abstractmethod
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
@@ -26,6 +27,24 @@ from fcc_env.io import atomic_open, atomic_write
 
 SAVE_FORMAT = "fcc-diagnoser"
 SAVE_FORMAT_VERSION = 1
+
+
+def auto_progress(progress: bool | None) -> bool:
+    """Resolve a ``progress`` option: ``None`` means "auto", a bar only when run interactively.
+
+    Interactive: standard error is a terminal and this is the main process (a sweep's worker
+    processes share the terminal, and their bars would garble the sweep's own).
+
+    >>> auto_progress(True), auto_progress(False)
+    (True, False)
+    """
+    if progress is not None:
+        return bool(progress)
+    import multiprocessing
+
+    isatty = getattr(sys.stderr, "isatty", None)
+    interactive = bool(isatty and isatty())
+    return interactive and multiprocessing.parent_process() is None
 
 
 class NotFittedError(RuntimeError):
