@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import inspect
 import json
+import logging
 import os
 import sys
 from abc import ABC, abstractmethod
@@ -24,6 +25,8 @@ from typing import Any, ClassVar, Self
 import numpy as np
 
 from fcc_env.io import atomic_open, atomic_write
+
+logger = logging.getLogger(__name__)
 
 SAVE_FORMAT = "fcc-diagnoser"
 SAVE_FORMAT_VERSION = 1
@@ -400,6 +403,12 @@ class Diagnoser(ABC):
         self._fitted_ = False
         self.channels_ = channels
         self.sample_time_s_ = float(episodes[0].sample_time_s)
+        logger.debug(
+            "fitting %r on %d episodes (%d samples)",
+            self,
+            len(episodes),
+            sum(ep.n_samples for ep in episodes),
+        )
         self._fit(episodes)
         self._fitted_ = True
         self.reset()

@@ -26,6 +26,7 @@ cluster, or this process with ``n_workers=0``).
 from __future__ import annotations
 
 import dataclasses
+import logging
 import os
 import tempfile
 import time
@@ -46,6 +47,8 @@ from evaluation.records import (
 )
 from evaluation.sources import DataSource, LoadedEpisode, SimulatedData
 from evaluation.store import ResultStore, canonical_hash, check_name
+
+logger = logging.getLogger(__name__)
 
 BASELINES: tuple[str, ...] = ("limits", "pca", "arx-band")
 #: Bumped when the meaning of a stored cell record changes (part of every cell hash).
@@ -370,6 +373,15 @@ def run_sweep(
             if no_cell or no_det:
                 missing.setdefault((sc, seed), []).append((s, no_cell, no_det))
     n_missing = sum(need_cell for v in missing.values() for _, need_cell, _ in v)
+    logger.info(
+        "sweep in %s: %d of %d diagnosers to train, %d of %d cells to score (%s backend)",
+        store.root,
+        len(to_train),
+        len(specs),
+        n_missing,
+        len(specs) * len(cells),
+        backend,
+    )
 
     if to_train or missing:
         runner = make_backend(backend, n_workers, max(len(to_train), len(missing)), ray_address)
