@@ -19,6 +19,11 @@ Units: ``t_dt`` in samples (``Ts`` = 10 s for FCC-v0; the CSV also has ``t_dt_s`
 in the paper's Table 2. Mean ``t_dt`` is over detected faults only; ``misses`` counts the test
 episodes whose fault was never detected. Standard deviations use ``ddof=1`` (``–`` with one seed).
 
+Diagnosers of your own: ``--import MODULE[,MODULE]`` imports modules that register them
+(``@diagnosers.register``) before any name is resolved, here and in every worker
+(:attr:`evaluation.sweep.SweepConfig.imports`); installed packages can use the
+``fcc_fault_diagnosis.diagnosers`` entry-point group instead (:mod:`diagnosers.registry`).
+
 Table formatting (:func:`markdown_table`, :func:`summary_rows`) is separate from computation
 (:func:`run`) and from the CLI (:func:`main`), the only place that prints.
 """
