@@ -93,8 +93,10 @@ def default_specs(
             hyperparameters for smoke runs and tests) instead of the defaults.
     """
     names = available() if names is None else list(names)
+    classes = [diagnoser_class(n) for n in names]  # unknown names: the registry's message
     return tuple(
-        DiagnoserSpec(n, dict(diagnoser_class(n).fast_params()) if test else {}) for n in names
+        DiagnoserSpec(n, dict(cls.fast_params()) if test else {})
+        for n, cls in zip(names, classes, strict=True)
     )
 
 
