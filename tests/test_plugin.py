@@ -314,3 +314,20 @@ def test_reset_is_documented() -> None:
     assert doc is not None and "Returns:" in doc
     for key in RESET_OPTION_NAMES:
         assert f"``{key}``" in doc, key
+
+
+def test_cli_import_finds_modules_in_the_current_directory(tmp_path, monkeypatch) -> None:
+    """A console script (``fcc-leaderboard``) does not put the current directory on sys.path;
+    ``--import`` does, as ``python -m`` would, so a module beside the user is found."""
+    from evaluation.leaderboard import build_parser, import_user_modules
+
+    (tmp_path / "fcc_cwd_plugin_mod.py").write_text("LOADED = True\n")
+    monkeypatch.chdir(tmp_path)
+    monkeypatch.setattr(sys, "path", [p for p in sys.path if p not in ("", str(tmp_path))])
+    monkeypatch.delitem(sys.modules, "fcc_cwd_plugin_mod", raising=False)
+    parser = build_parser()
+    args = parser.parse_args(["--import", "fcc_cwd_plugin_mod", "--import", "fcc_cwd_plugin_mod"])
+    assert args.imports == [("fcc_cwd_plugin_mod",), ("fcc_cwd_plugin_mod",)]
+    import_user_modules(args, parser)
+    assert sys.modules["fcc_cwd_plugin_mod"].LOADED and sys.path[0] == str(tmp_path)
+    sys.modules.pop("fcc_cwd_plugin_mod")
