@@ -20,11 +20,14 @@ from abc import ABC, abstractmethod
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, ClassVar, Self
+from typing import TYPE_CHECKING, Any, ClassVar, Self
 
 import numpy as np
 
 from fcc_env.io import atomic_open, atomic_write
+
+if TYPE_CHECKING:  # annotations only: building episodes needs no simulator import
+    from fcc_env.simulation import BatchResult
 
 logger = logging.getLogger(__name__)
 
@@ -111,7 +114,7 @@ class Episode:
 
     # ---- constructors from data ----------------------------------------------------------------
     @classmethod
-    def from_batch(cls, batch: Any) -> list[Episode]:
+    def from_batch(cls, batch: BatchResult) -> list[Episode]:
         """The episodes of an :class:`fcc_env.BatchResult`, one per seed.
 
         Each episode keeps its samples before ``terminated_at`` (the env would have ended there)
