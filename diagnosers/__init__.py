@@ -6,7 +6,8 @@ True
 """
 
 from diagnosers.base import Decision, Detection, Diagnoser, Episode, NotFittedError
-from diagnosers.registry import available, diagnoser_class, make, register
+from diagnosers.registry import available, diagnoser_class, import_modules, make, register
+from fcc_env import __version__  # the project's one version
 
 # isort: split
 # Importing the model modules registers their diagnosers (after the registry exists).
@@ -21,8 +22,10 @@ __all__ = [
     "Diagnoser",
     "Episode",
     "NotFittedError",
+    "__version__",
     "available",
     "diagnoser_class",
+    "import_modules",
     "make",
     "register",
 ]

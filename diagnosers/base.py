@@ -13,19 +13,44 @@ from __future__ import annotations
 
 import inspect
 import json
+import logging
 import os
+import sys
 from abc import ABC, abstractmethod
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, ClassVar, Self
+from typing import TYPE_CHECKING, Any, ClassVar, Self
 
 import numpy as np
 
 from fcc_env.io import atomic_open, atomic_write
 
+if TYPE_CHECKING:  # annotations only: building episodes needs no simulator import
+    from fcc_env.simulation import BatchResult
+
+logger = logging.getLogger(__name__)
+
 SAVE_FORMAT = "fcc-diagnoser"
 SAVE_FORMAT_VERSION = 1
+
+
+def auto_progress(progress: bool | None) -> bool:
+    """Resolve a ``progress`` option: ``None`` means "auto", a bar only when run interactively.
+
+    Interactive: standard error is a terminal and this is the main process (a sweep's worker
+    processes share the terminal, and their bars would garble the sweep's own).
+
+    >>> auto_progress(True), auto_progress(False)
+    (True, False)
+    """
+    if progress is not None:
+        return bool(progress)
+    import multiprocessing
+
+    isatty = getattr(sys.stderr, "isatty", None)
+    interactive = bool(isatty and isatty())
+    return interactive and multiprocessing.parent_process() is None
 
 
 class NotFittedError(RuntimeError):
@@ -86,6 +111,158 @@ class Episode:
             raise ValueError(
                 f"Unknown channel {name!r}. Available: {list(self.channels)}"
             ) from None
+
+    # ---- constructors from data ----------------------------------------------------------------
+    @classmethod
+    def from_batch(cls, batch: BatchResult) -> list[Episode]:
+        """The episodes of an :class:`fcc_env.BatchResult`, one per seed.
+
+        Each episode keeps its samples before ``terminated_at`` (the env would have ended there)
+        and carries its scenario, seed, fault onset (``None`` when healthy or when the episode
+        ended before the onset) and noise-free measurements ``y_clean``.
+
+        >>> import fcc_env, diagnosers
+        >>> batch = fcc_env.simulate_episodes([1000, 1001], 300)
+        >>> det = diagnosers.make("limits").fit(diagnosers.Episode.from_batch(batch))
+        >>> test = fcc_env.simulate_episodes([0], 300, scenario="f1", fault_time=150)
+        >>> [ep] = diagnosers.Episode.from_batch(test)
+        >>> ep.scenario, ep.seed, ep.fault_onset, det.detect(ep).alarm.shape
+        ('f1', 0, 150, (300,))
+        """
+        from fcc_env.params import MEASUREMENT_NAMES  # local: diagnosers works without the env
+
+        obs = np.asarray(batch.observations)
+        if obs.ndim != 3:
+            raise ValueError(
+                f"batch.observations must have shape (n_episodes, n_samples, n_channels); "
+                f"got {obs.shape}"
+            )
+        out = []
+        for b in range(obs.shape[0]):
+            term = int(batch.terminated_at[b])
+            n_used = term if term >= 0 else obs.shape[1]
+            onset = batch.fault_onsets[b]
+            out.append(
+                cls(
+                    y=np.asarray(obs[b, :n_used], dtype=np.float64),
+                    channels=tuple(MEASUREMENT_NAMES),
+                    sample_time_s=float(batch.sample_time_s),
+                    fault_onset=None if onset is None or onset >= n_used else int(onset),
+                    scenario=str(batch.scenarios[b]),
+                    seed=int(batch.seeds[b]),
+                    y_clean=np.asarray(batch.y_clean[b, :n_used], dtype=np.float64),
+                )
+            )
+        return out
+
+    @classmethod
+    def from_dataset(cls, path: str | os.PathLike) -> list[Episode]:
+        """The episodes of a ``python -m fcc_env.generate`` dataset (CSV + JSON sidecar).
+
+        The CSV stacks its episodes; the ``episode`` column (or, in a file without one, the
+        ``seed`` column) tells them apart, so a file of several seeds gives several episodes, in
+        file order. Channels are the sidecar's ``measured`` columns; ``clean_<channel>`` columns,
+        when all present, become ``y_clean``. Scenario, seed, fault onset and ``terminated_at``
+        come from the sidecar's per-episode lists when it has them (each episode is cut at its
+        ``terminated_at``, as in :meth:`from_batch`).
+        """
+        from fcc_env.generate import read_dataset  # local: diagnosers works without the env
+
+        meta, cols = read_dataset(path)
+        roles = meta.get("roles") if isinstance(meta.get("roles"), dict) else {}
+        channels = tuple(roles.get("measured") or ())
+        missing = [c for c in channels if c not in cols]
+        if not channels or missing:
+            raise ValueError(
+                f"dataset {str(path)!r}: the sidecar's roles.measured must name columns of the "
+                f"CSV; got {list(channels)}, missing {missing}, columns {sorted(cols)}"
+            )
+        dt = meta.get("sample_time_s")
+        if dt is None:
+            raise ValueError(
+                f"dataset {str(path)!r}: the sidecar has no sample_time_s; add it (in seconds)"
+            )
+        key = next((k for k in ("episode", "seed") if k in cols), None)
+        n_rows = len(cols[channels[0]])
+        ids = np.asarray(cols[key]) if key is not None else np.zeros(n_rows)
+        # episodes in file order (np.unique would sort them)
+        order = list(dict.fromkeys(ids.tolist()))
+        clean = [f"clean_{c}" for c in channels]
+        has_clean = all(c in cols for c in clean)
+
+        def per_episode(field_name: str, i: int) -> Any:
+            values = meta.get(field_name)
+            return values[i] if isinstance(values, list) and i < len(values) else None
+
+        out = []
+        for i, ep_id in enumerate(order):
+            rows = np.flatnonzero(ids == ep_id)
+            term = per_episode("terminated_at", i)
+            n_used = len(rows) if term is None else min(int(term), len(rows))
+            rows = rows[:n_used]
+            onset = per_episode("fault_onsets", i)
+            seed = per_episode("seeds", i)
+            if seed is None and "seed" in cols:
+                seed = cols["seed"][rows[0]]
+            out.append(
+                cls(
+                    y=np.column_stack([cols[c][rows] for c in channels]),
+                    channels=channels,
+                    sample_time_s=float(dt),
+                    fault_onset=None if onset is None or onset >= n_used else int(onset),
+                    scenario=str(per_episode("scenarios", i) or meta.get("scenario", "unknown")),
+                    seed=None if seed is None else int(seed),
+                    y_clean=np.column_stack([cols[c][rows] for c in clean]) if has_clean else None,
+                )
+            )
+        return out
+
+    @classmethod
+    def from_frame(
+        cls,
+        df: Any,
+        *,
+        channels: Sequence[str] | None = None,
+        sample_time_s: float,
+        fault_onset: int | None = None,
+        scenario: str = "unknown",
+        seed: int | None = None,
+    ) -> Episode:
+        """One episode from a pandas ``DataFrame`` (one row per sample, one column per channel).
+
+        Args:
+            df: the record; pandas is optional for this library and imported here only.
+            channels: the columns to use, in this order (default: every column).
+            sample_time_s: sample period in seconds.
+            fault_onset, scenario, seed: as for :class:`Episode`.
+        """
+        try:
+            import pandas as pd
+        except ImportError as e:
+            raise ImportError(
+                "Episode.from_frame needs pandas, which is not installed: pip install pandas "
+                "(or build Episode(y=array, channels=..., sample_time_s=...) directly)"
+            ) from e
+        if not isinstance(df, pd.DataFrame):
+            raise TypeError(f"df must be a pandas DataFrame, got {type(df).__name__}")
+        names = tuple(str(c) for c in df.columns) if channels is None else tuple(channels)
+        missing = [c for c in names if c not in df.columns]
+        if missing:
+            raise ValueError(
+                f"channels {missing} are not columns of the frame. Columns: {list(df.columns)}"
+            )
+        try:
+            y = df.loc[:, list(names)].to_numpy(dtype=np.float64)
+        except (TypeError, ValueError) as e:
+            raise ValueError(f"channels {list(names)} must hold numbers: {e}") from e
+        return cls(
+            y=y,
+            channels=names,
+            sample_time_s=sample_time_s,
+            fault_onset=fault_onset,
+            scenario=scenario,
+            seed=seed,
+        )
 
 
 @dataclass(frozen=True)
@@ -172,9 +349,39 @@ class Diagnoser(ABC):
         """Deprecated alias of :meth:`fast_params`, kept for one release."""
         return cls.fast_params()
 
+    @classmethod
+    def _check_param_names(cls, names: Iterable[str]) -> None:
+        """Raise ``ValueError`` naming any of ``names`` that ``__init__`` does not accept."""
+        allowed = cls._param_names()
+        unknown = sorted(set(names) - set(allowed))
+        if unknown:
+            label = cls.name or cls.__name__
+            raise ValueError(
+                f"Unknown hyperparameter(s) {unknown} for diagnoser {label!r}. Allowed: {allowed}"
+            )
+
     def get_params(self) -> dict[str, Any]:
         """Hyperparameters as passed to ``__init__`` (JSON-serialisable by convention)."""
         return {k: getattr(self, k) for k in self._param_names()}
+
+    def set_params(self, **params: Any) -> Self:
+        """Set hyperparameters (scikit-learn style) and return ``self``.
+
+        Names are checked against ``__init__``'s signature, as :func:`diagnosers.make` does;
+        values are validated by the next :meth:`fit`, like those given to ``__init__``. A fitted
+        diagnoser becomes unfitted (its learned state belongs to the old hyperparameters, and
+        :meth:`save` would pair them with the new ones): call :meth:`fit` again.
+
+        >>> import diagnosers
+        >>> diagnosers.make("limits").set_params(alpha=0.05).get_params()["alpha"]
+        0.05
+        """
+        self._check_param_names(params)
+        for k, v in params.items():
+            setattr(self, k, v)
+        if params:
+            self._fitted_ = False
+        return self
 
     def __repr__(self) -> str:
         args = ", ".join(f"{k}={v!r}" for k, v in self.get_params().items())
@@ -199,6 +406,12 @@ class Diagnoser(ABC):
         self._fitted_ = False
         self.channels_ = channels
         self.sample_time_s_ = float(episodes[0].sample_time_s)
+        logger.debug(
+            "fitting %r on %d episodes (%d samples)",
+            self,
+            len(episodes),
+            sum(ep.n_samples for ep in episodes),
+        )
         self._fit(episodes)
         self._fitted_ = True
         self.reset()
@@ -341,16 +554,34 @@ class Diagnoser(ABC):
         return obj
 
     # ---- hooks ---------------------------------------------------------------------------------
+    # A subclass implements _fit, _reset, _update, _get_state and _set_state; _detect,
+    # _validate_params, _save_extra and _load_extra are optional. The public methods have
+    # already checked their input when a hook runs (see each hook), so hooks do not re-check.
     def _validate_params(self) -> None:  # noqa: B027 - optional hook
-        """Check hyperparameters; raise ValueError naming the value and the allowed range."""
+        """Check hyperparameters; raise ValueError naming the value and the allowed range.
+
+        Called by :meth:`fit` before :meth:`_fit` (never by ``__init__``): use
+        :func:`fcc_env.validation.check_params` with a table of constraints.
+        """
 
     @abstractmethod
     def _get_state(self) -> dict[str, np.ndarray]:
-        """Learned numeric state as named arrays (everything ``_update`` needs besides params)."""
+        """Learned numeric state as named arrays (everything ``_update`` needs besides params).
+
+        Called by :meth:`save` on a fitted diagnoser. Returns ``{name: array}`` of plain numbers
+        (no objects: the file is read with ``allow_pickle=False``); scalars become 0-d arrays.
+        Streaming state (filter memories) is not learned state and stays out.
+        """
 
     @abstractmethod
     def _set_state(self, state: dict[str, np.ndarray]) -> None:
-        """Inverse of :meth:`_get_state` (also sets ``signal_names_``)."""
+        """Inverse of :meth:`_get_state`: restore the learned attributes from ``state``.
+
+        Called by :meth:`load` on a fresh instance built with the saved hyperparameters, after
+        ``channels_`` and ``sample_time_s_`` are set; must also set ``signal_names_``. Returns
+        nothing; a missing key raises ``KeyError`` (reported by ``load`` as a corrupted file).
+        :meth:`load` calls :meth:`reset` afterwards.
+        """
 
     def _save_extra(self, directory: Path) -> None:  # noqa: B027 - optional hook
         """Write extra files (e.g. torch ``weights.pt``) into ``directory``."""
@@ -359,15 +590,41 @@ class Diagnoser(ABC):
         """Read what :meth:`_save_extra` wrote; torch files with ``weights_only=True``."""
 
     @abstractmethod
-    def _fit(self, episodes: list[Episode]) -> None: ...
+    def _fit(self, episodes: list[Episode]) -> None:
+        """Learn from healthy ``episodes`` and set the learned attributes (names ending in ``_``).
+
+        Receives a non-empty list of :class:`Episode` sharing one channel tuple; ``channels_``
+        and ``sample_time_s_`` are already set and :meth:`_validate_params` has passed. Must set
+        ``signal_names_`` (names of the monitored quantities, one per entry of
+        :attr:`Decision.signal`). Returns nothing: :meth:`fit` returns ``self`` and then calls
+        :meth:`reset`.
+        """
 
     @abstractmethod
-    def _reset(self) -> None: ...
+    def _reset(self) -> None:
+        """Clear the streaming state (filter memories, counters) before a new episode.
+
+        Called by :meth:`reset` and by :meth:`detect` before and after it scores; must not touch
+        learned attributes. Returns nothing.
+        """
 
     @abstractmethod
-    def _update(self, y: np.ndarray) -> Decision: ...
+    def _update(self, y: np.ndarray) -> Decision:
+        """Consume one sample and decide.
+
+        Receives ``y``, float64 of shape ``(n_channels,)`` in ``channels_`` order, finite
+        (checked by :meth:`update`). Returns a :class:`Decision` whose arrays have one entry per
+        name of ``signal_names_``.
+        """
 
     def _detect(self, y: np.ndarray) -> Detection:
+        """Score a whole episode from a freshly reset state.
+
+        Receives ``y``, float64 of shape ``(n_samples, n_channels)`` in ``channels_`` order,
+        finite. Returns a :class:`Detection` equal to calling :meth:`_update` on every row (the
+        default does exactly that; override with a vectorised version, which the conformance
+        tests compare with the streaming path).
+        """
         return Detection.from_decisions([self._update(row) for row in y], self.signal_names_)
 
     def _check_fitted(self) -> None:

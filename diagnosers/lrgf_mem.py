@@ -77,6 +77,10 @@ Training data split: the healthy episodes passed to ``fit`` are divided into a t
 first ``n − max(1, n // 3)`` episodes) for the nominal and error models, and a calibration part
 (the rest) for ``v`` and h. With a single episode, the nominal and error models are trained on its
 first 70 % and calibrated on the remaining 30 % (simulated over the whole episode).
+
+``progress`` (default ``None``): a tqdm bar over the training epochs when run interactively
+(standard error is a terminal, in the main process; :func:`diagnosers.base.auto_progress`),
+``True``/``False`` to force it. It does not change the fit.
 """
 
 from __future__ import annotations
@@ -160,7 +164,7 @@ PARAMETER_CONSTRAINTS: dict[str, Any] = {
     "mem_max_epochs": Integer(1, 100_000),
     "mem_select": Options(MemSelect),
     "seed": Integer(0),
-    "progress": Boolean(),
+    "progress": (Boolean(), None),
 }
 
 #: The bank of ``lrgf-mem``: the paper's (14)–(16) with the inputs the model's physics needs.
@@ -257,7 +261,7 @@ class _LRGFMEMBase(Diagnoser):
         mem_max_epochs: int = 200,
         mem_select: str = "always",
         seed: int = 0,
-        progress: bool = False,
+        progress: bool | None = None,
     ) -> None:
         self.relations = relations
         self.n_hidden = n_hidden
@@ -626,7 +630,7 @@ class LRGFMEM(_LRGFMEMBase):
         mem_max_epochs: int = 200,
         mem_select: str = "if_better",
         seed: int = 0,
-        progress: bool = False,
+        progress: bool | None = None,
     ) -> None:
         super().__init__(
             relations=relations,

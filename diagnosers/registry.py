@@ -1,17 +1,42 @@
 """Registry of diagnosers: ``make(name, **hyperparameters)``, ``available()``, ``diagnoser_class``.
 
+Diagnosers outside this package join the registry in one of three ways:
+
+* a module that defines them with ``@diagnosers.register("name")`` is imported (by the user's
+  code, or by ``python -m evaluation.leaderboard --import MODULE``: :func:`import_modules`);
+* an installed distribution declares an entry point in the group
+  ``fcc_fault_diagnosis.diagnosers`` (:data:`ENTRY_POINT_GROUP`), for example in its
+  ``pyproject.toml``::
+
+      [project.entry-points."fcc_fault_diagnosis.diagnosers"]
+      my-det = "my_package.detectors"            # a module that registers on import
+      other-det = "my_package.detectors:Other"   # or a Diagnoser subclass, registered as other-det
+
+  Entry points are loaded lazily, the first time :func:`available` is called or a name is not
+  found, in the driver and in every worker process alike.
+
 >>> diagnoser_class("limits").fast_params()
 {}
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
+import importlib
+import logging
+import warnings
+from collections.abc import Callable, Iterable
+from importlib import metadata
 from typing import Any
 
 from diagnosers.base import Diagnoser
 
+logger = logging.getLogger(__name__)
+
+#: Entry-point group of third-party diagnosers (see the module docstring).
+ENTRY_POINT_GROUP = "fcc_fault_diagnosis.diagnosers"
+
 _REGISTRY: dict[str, type[Diagnoser]] = {}
+_ENTRY_POINTS_LOADED = False
 
 
 def register(name: str) -> Callable[[type[Diagnoser]], type[Diagnoser]]:
@@ -19,7 +44,12 @@ def register(name: str) -> Callable[[type[Diagnoser]], type[Diagnoser]]:
 
     def deco(cls: type[Diagnoser]) -> type[Diagnoser]:
         if name in _REGISTRY and _REGISTRY[name] is not cls:
-            raise ValueError(f"diagnoser name {name!r} is already registered to {_REGISTRY[name]}")
+            # A module imported twice under two names (``python script.py`` runs it as
+            # __main__) defines a second class of the same qualified name: say so.
+            raise ValueError(
+                f"diagnoser name {name!r} is already registered to {_REGISTRY[name]}; "
+                f"cannot register {cls} too (choose another name, or import the module once)"
+            )
         cls.name = name
         _REGISTRY[name] = cls
         return cls
@@ -27,26 +57,73 @@ def register(name: str) -> Callable[[type[Diagnoser]], type[Diagnoser]]:
     return deco
 
 
+def import_modules(modules: Iterable[str]) -> None:
+    """Import ``modules`` (dotted names) so that the diagnosers they register become available.
+
+    A module is imported, never run as a script, so it needs no ``if __name__ == "__main__"``
+    guard. Raises ``ValueError`` naming a module that cannot be imported, with the reason.
+    """
+    for mod in modules:
+        if not isinstance(mod, str) or not mod.strip():
+            raise ValueError(f"module={mod!r} is outside the allowed range: a dotted module name")
+        try:
+            importlib.import_module(mod.strip())
+        except ImportError as e:
+            raise ValueError(
+                f"cannot import module {mod!r} ({type(e).__name__}: {e}); give a dotted module "
+                "name importable from the current directory or the installed packages, "
+                "e.g. examples.cusum_diagnoser"
+            ) from e
+
+
+def load_entry_points(*, force: bool = False) -> None:
+    """Load the diagnosers of :data:`ENTRY_POINT_GROUP` (once per process unless ``force``).
+
+    An entry point that fails to load is skipped with a ``RuntimeWarning`` naming it, so one
+    broken plug-in does not hide the others.
+    """
+    global _ENTRY_POINTS_LOADED
+    if _ENTRY_POINTS_LOADED and not force:
+        return
+    _ENTRY_POINTS_LOADED = True
+    for ep in metadata.entry_points(group=ENTRY_POINT_GROUP):
+        try:
+            obj = ep.load()
+        except Exception as e:  # a third-party module may raise anything on import
+            warnings.warn(
+                f"diagnoser entry point {ep.name!r} = {ep.value!r} failed to load "
+                f"({type(e).__name__}: {e}); skipped",
+                RuntimeWarning,
+                stacklevel=2,
+            )
+            continue
+        if isinstance(obj, type) and issubclass(obj, Diagnoser) and not obj.name:
+            register(ep.name)(obj)
+        logger.debug("loaded diagnoser entry point %s = %s", ep.name, ep.value)
+
+
 def available() -> list[str]:
-    """Names accepted by :func:`make`, sorted."""
+    """Names accepted by :func:`make`, sorted (entry-point plug-ins included)."""
+    load_entry_points()
     return sorted(_REGISTRY)
 
 
 def diagnoser_class(name: str) -> type[Diagnoser]:
     """The class registered as ``name`` (e.g. to read its :meth:`Diagnoser.fast_params`)."""
+    if name not in _REGISTRY:
+        load_entry_points()
     try:
         return _REGISTRY[name]
     except KeyError:
-        raise ValueError(f"Unknown diagnoser {name!r}. Available: {available()}") from None
+        raise ValueError(
+            f"Unknown diagnoser {name!r}. Available: {available()}. A diagnoser of your own "
+            "must be registered first: import its module (leaderboard: --import MODULE) or "
+            f"install a package with a {ENTRY_POINT_GROUP!r} entry point"
+        ) from None
 
 
 def make(name: str, **hyperparameters: Any) -> Diagnoser:
     """Build the diagnoser registered as ``name`` with the given hyperparameters."""
     cls = diagnoser_class(name)
-    allowed = cls._param_names()
-    unknown = sorted(set(hyperparameters) - set(allowed))
-    if unknown:
-        raise ValueError(
-            f"Unknown hyperparameter(s) {unknown} for diagnoser {name!r}. Allowed: {allowed}"
-        )
+    cls._check_param_names(hyperparameters)
     return cls(**hyperparameters)

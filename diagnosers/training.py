@@ -34,6 +34,7 @@ import torch
 from torch import nn
 from tqdm.auto import tqdm
 
+from diagnosers.base import auto_progress
 from diagnosers.lrgf import LRGF
 from diagnosers.mem import NNARXErrorModel
 from diagnosers.modules import build_module, export_module, paper_lrgf, paper_mem
@@ -282,7 +283,7 @@ def fit_lrgf(
     spsa: SPSAOptions | None = None,
     seed: int = 0,
     num_threads: int | None = 1,
-    progress: bool = False,
+    progress: bool | None = False,
 ) -> FitResult:
     """Train ``model`` in place on free-run (simulation) error; returns a :class:`FitResult`.
 
@@ -308,7 +309,8 @@ def fit_lrgf(
         spsa: SPSA settings (``None``: defaults).
         seed: seed of all randomness in training (SPSA perturbations).
         num_threads: torch intra-op threads during training (``None`` leaves them alone).
-        progress: show a tqdm progress bar.
+        progress: show a tqdm progress bar (``None``: when run interactively,
+            :func:`diagnosers.base.auto_progress`).
 
     Returns:
         the training record; ``model`` holds the best parameters found.
@@ -353,6 +355,7 @@ def fit_lrgf(
         val = va_sse / va_n if va_n else float("nan")
         return train, val
 
+    progress = auto_progress(progress)
     with _training_context(seed, num_threads):
         t0 = time.perf_counter()
         if method is Method.ADAM:
@@ -502,7 +505,7 @@ def fit_mem(
     standardize: bool = True,
     seed: int = 0,
     num_threads: int | None = 1,
-    progress: bool = False,
+    progress: bool | None = False,
 ) -> FitResult:
     """Train the model error model on the nominal model's residual ``r = y - y_m``.
 
@@ -534,7 +537,8 @@ def fit_mem(
         standardize: compute and store the scaler from the training data.
         seed: seed of the window offsets.
         num_threads: torch intra-op threads during training (``None`` leaves them alone).
-        progress: show a tqdm progress bar.
+        progress: show a tqdm progress bar (``None``: when run interactively,
+            :func:`diagnosers.base.auto_progress`).
 
     Returns:
         the training record; ``mem`` holds the best parameters found.
@@ -593,6 +597,7 @@ def fit_mem(
                 sse, cnt = sse + float(s), cnt + n
         return sse / cnt if cnt else float("nan")
 
+    progress = auto_progress(progress)
     with _training_context(seed, num_threads):
         t0 = time.perf_counter()
         gen = torch.Generator().manual_seed(seed)

@@ -19,6 +19,11 @@ Units: ``t_dt`` in samples (``Ts`` = 10 s for FCC-v0; the CSV also has ``t_dt_s`
 in the paper's Table 2. Mean ``t_dt`` is over detected faults only; ``misses`` counts the test
 episodes whose fault was never detected. Standard deviations use ``ddof=1`` (``–`` with one seed).
 
+Diagnosers of your own: ``--import MODULE[,MODULE]`` imports modules that register them
+(``@diagnosers.register``) before any name is resolved, here and in every worker
+(:attr:`evaluation.sweep.SweepConfig.imports`); installed packages can use the
+``fcc_fault_diagnosis.diagnosers`` entry-point group instead (:mod:`diagnosers.registry`).
+
 Table formatting (:func:`markdown_table`, :func:`summary_rows`) is separate from computation
 (:func:`run`) and from the CLI (:func:`main`), the only place that prints.
 """
@@ -29,6 +34,7 @@ import argparse
 import csv
 import dataclasses
 import math
+import os
 import sys
 import time
 from collections.abc import Mapping, Sequence
@@ -36,6 +42,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from diagnosers.registry import import_modules
 from evaluation.harness import (
     BACKENDS,
     BASELINES,
@@ -112,6 +119,7 @@ class LeaderboardOptions:
     fault_magnitude_scale: float = 1.0
     fault_profile: str = "abrupt"
     ramp_samples: int | None = None
+    imports: tuple[str, ...] = ()
 
 
 def _package_version() -> str:
@@ -135,7 +143,7 @@ def build_config(opts: LeaderboardOptions) -> SweepConfig:
             # defaults that name FCC-v0 channels get the Santander analogue
             params = ext_params.get(name, {})
             specs.append(DiagnoserSpec(name, dict(params)))
-        return SweepConfig(diagnosers=tuple(specs), data=data)
+        return SweepConfig(diagnosers=tuple(specs), data=data, imports=opts.imports)
     data = SimulatedData(
         scenarios=opts.scenarios,
         test_seeds=tuple(range(opts.seed_base, opts.seed_base + opts.seeds)),
@@ -146,7 +154,7 @@ def build_config(opts: LeaderboardOptions) -> SweepConfig:
         fault_profile=opts.fault_profile,
         ramp_samples=opts.ramp_samples,
     )
-    return SweepConfig(diagnosers=default_specs(opts.diagnosers), data=data)
+    return SweepConfig(diagnosers=default_specs(opts.diagnosers), data=data, imports=opts.imports)
 
 
 def store_dir_for(config: SweepConfig, out: Path) -> Path:
@@ -433,6 +441,17 @@ def build_parser() -> argparse.ArgumentParser:
         "never the test seeds",
     )
     p.add_argument(
+        "--import",
+        dest="imports",
+        type=_csv_list,
+        action="append",
+        default=[],
+        metavar="MODULE[,MODULE]",
+        help="import these modules first (repeatable): modules that register diagnosers of "
+        "your own with @diagnosers.register, then named in --diagnosers. Imported (not run), "
+        "from the current directory or the installed packages, here and in every worker",
+    )
+    p.add_argument(
         "--diagnosers",
         type=_csv_list,
         default=None,
@@ -606,7 +625,28 @@ def resolve_options(
         fault_magnitude_scale=VALIDATION_FAULT_SCALE if args.validation else 1.0,
         fault_profile=args.fault_profile,
         ramp_samples=args.ramp_samples,
+        imports=_imports(args),
     )
+
+
+def _imports(args: argparse.Namespace) -> tuple[str, ...]:
+    """The ``--import`` modules, flattened, in order, without repeats."""
+    return tuple(dict.fromkeys(m for group in args.imports for m in group))
+
+
+def import_user_modules(args: argparse.Namespace, parser: argparse.ArgumentParser) -> None:
+    """Import the ``--import`` modules, as ``python -m`` would find them: the current directory
+    first (a console script does not put it on ``sys.path``; local workers inherit the path)."""
+    modules = _imports(args)
+    if not modules:
+        return
+    cwd = os.getcwd()
+    if cwd not in sys.path and "" not in sys.path:
+        sys.path.insert(0, cwd)
+    try:
+        import_modules(modules)
+    except ValueError as e:
+        parser.error(f"--import: {e}")
 
 
 def _main_tracks(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
@@ -638,6 +678,7 @@ def _main_tracks(args: argparse.Namespace, parser: argparse.ArgumentParser) -> i
                 progress=not args.no_progress,
                 figures=not args.no_figures,
                 model_cache=out / "models",
+                imports=_imports(args),
             )
         except ValueError as e:
             parser.error(str(e))
@@ -660,6 +701,7 @@ def _main_tracks(args: argparse.Namespace, parser: argparse.ArgumentParser) -> i
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    import_user_modules(args, parser)  # before any name is resolved
     if args.track is not None:
         return _main_tracks(args, parser)
     opts = resolve_options(args, parser)

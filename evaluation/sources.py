@@ -292,24 +292,14 @@ def simulate_loaded(
         plant_uncertainty=plant_uncertainty,
     )
     out = []
-    for b in range(len(res.seeds)):
+    # Episode.from_batch cuts each episode at its termination and drops an onset it never reached
+    for b, episode in enumerate(Episode.from_batch(res)):
         term = int(res.terminated_at[b])
-        n_used = term if term >= 0 else int(n_samples)
         onset = res.fault_onsets[b]
-        onset = None if onset is None else int(onset)
-        episode = Episode(
-            y=np.asarray(res.observations[b, :n_used], dtype=np.float64),
-            channels=tuple(fcc_env.MEASUREMENT_NAMES),
-            sample_time_s=float(res.sample_time_s),
-            fault_onset=onset if onset is not None and onset < n_used else None,
-            scenario=str(res.scenarios[b]),
-            seed=int(res.seeds[b]),
-            y_clean=np.asarray(res.y_clean[b, :n_used]),
-        )
         out.append(
             LoadedEpisode(
                 episode=episode,
-                fault_onset=onset,
+                fault_onset=None if onset is None else int(onset),
                 n_samples_planned=int(n_samples),
                 terminated_at=term if term >= 0 else None,
                 termination_reason=res.termination_reasons[b] if term >= 0 else None,

@@ -26,6 +26,7 @@ cluster, or this process with ``n_workers=0``).
 from __future__ import annotations
 
 import dataclasses
+import logging
 import os
 import tempfile
 import time
@@ -35,7 +36,7 @@ from pathlib import Path
 from typing import Any
 
 from diagnosers.base import Detection, Diagnoser
-from diagnosers.registry import available, diagnoser_class, make
+from diagnosers.registry import available, diagnoser_class, import_modules, make
 from evaluation.backends import BACKENDS, Backend, limit_threads, make_backend
 from evaluation.records import (
     CellResult,
@@ -46,6 +47,8 @@ from evaluation.records import (
 )
 from evaluation.sources import DataSource, LoadedEpisode, SimulatedData
 from evaluation.store import ResultStore, canonical_hash, check_name
+
+logger = logging.getLogger(__name__)
 
 BASELINES: tuple[str, ...] = ("limits", "pca", "arx-band")
 #: Bumped when the meaning of a stored cell record changes (part of every cell hash).
@@ -106,13 +109,25 @@ class SweepConfig:
         data: a :class:`DataSource` (:class:`SimulatedData` or
             :class:`evaluation.external.ExternalData`).
         t_on: start-up samples not scored for false alarms (the paper's ``t_on``; 0 scores all).
+        imports: modules that register diagnosers of your own (``@diagnosers.register``),
+            imported before the names are resolved, in this process and in every worker (a
+            ``spawn`` worker or a Ray worker starts from a fresh interpreter). They must be
+            importable there: from the installed packages, or from a directory on ``sys.path``
+            (local workers inherit the driver's). Not part of any hash: they say where the code
+            is, not what it computes.
     """
 
     diagnosers: tuple[DiagnoserSpec, ...]
     data: DataSource = field(default_factory=SimulatedData)
     t_on: int = 0
+    imports: tuple[str, ...] = ()
 
     def validate(self) -> None:
+        if isinstance(self.imports, str) or not all(isinstance(m, str) for m in self.imports):
+            raise ValueError(
+                f"imports={self.imports!r} is outside the allowed range: a tuple of module names"
+            )
+        import_modules(self.imports)
         if not self.diagnosers:
             raise ValueError(f"a sweep needs at least one diagnoser. Available: {available()}")
         labels = [d.key for d in self.diagnosers]
@@ -221,11 +236,12 @@ def _load_model(model_hash: str, source: str | Mapping[str, bytes]) -> Diagnoser
 
 
 def _train_task(
-    spec: DiagnoserSpec, data: DataSource, _serial: bool = False
+    spec: DiagnoserSpec, data: DataSource, imports: tuple[str, ...] = (), _serial: bool = False
 ) -> tuple[dict[str, bytes], dict[str, Any]]:
     """Fit one diagnoser on the healthy training episodes; return its saved files and facts."""
     if not _serial:
         limit_threads()
+    import_modules(imports)  # a fresh worker has not seen the user's registrations
     t0 = time.perf_counter()
     episodes = data.train_episodes()
     try:
@@ -256,6 +272,7 @@ class _EpisodeTask:
     model_hashes: tuple[str, ...]
     model_paths: tuple[str, ...] | None  # local backend; None when models come as bytes
     keep: tuple[bool, ...] = ()  # per label: return the whole detection (a figure cell)
+    imports: tuple[str, ...] = ()  # SweepConfig.imports, imported in the worker
 
 
 def _episode_task(
@@ -264,6 +281,7 @@ def _episode_task(
     """``(record, detection arrays or None)`` per label of the task."""
     if not _serial:
         limit_threads()
+    import_modules(task.imports)
     loaded = task.data.load_test(task.scenario, task.seed)
     out = []
     keep = task.keep or (False,) * len(task.labels)
@@ -357,6 +375,15 @@ def run_sweep(
             if no_cell or no_det:
                 missing.setdefault((sc, seed), []).append((s, no_cell, no_det))
     n_missing = sum(need_cell for v in missing.values() for _, need_cell, _ in v)
+    logger.info(
+        "sweep in %s: %d of %d diagnosers to train, %d of %d cells to score (%s backend)",
+        store.root,
+        len(to_train),
+        len(specs),
+        n_missing,
+        len(specs) * len(cells),
+        backend,
+    )
 
     if to_train or missing:
         runner = make_backend(backend, n_workers, max(len(to_train), len(missing)), ray_address)
@@ -406,7 +433,7 @@ def _train_all(
 ) -> None:
     if not to_train:
         return
-    handles = {runner.submit(_train_task, s, config.data): s for s in to_train}
+    handles = {runner.submit(_train_task, s, config.data, config.imports): s for s in to_train}
     with _progress_bar(len(to_train), "training", progress) as bar:
         it = runner.completed(list(handles))
         while True:
@@ -455,6 +482,7 @@ def _score_all(
                 else None
             ),
             keep=tuple(det for _, _, det in ss),
+            imports=tuple(config.imports),
         )
         args = [] if runner.passes_paths else [refs[lab] for lab in labels]
         handles[runner.submit(_episode_task, task, *args)] = (sc, seed)
@@ -494,6 +522,7 @@ def load_cell(
     config: SweepConfig, store_dir: str | os.PathLike, label: str, scenario: str, seed: int
 ) -> tuple[LoadedEpisode, Diagnoser]:
     """The episode of one cell and the trained diagnoser ``label`` loaded from the store."""
+    import_modules(config.imports)
     store = ResultStore.open(store_dir, config.data.store_key())
     specs = {s.key: s for s in config.diagnosers}
     if label not in specs:

@@ -31,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from diagnosers.registry import import_modules
 from evaluation.intervals import (
     Interval,
     bootstrap_ci,
@@ -213,18 +214,21 @@ def run_track(
     progress: bool = True,
     figures: bool = True,
     model_cache: Path | None = None,
+    imports: Sequence[str] = (),
 ) -> TrackRun:
     """Sweep ``diagnosers`` over ``track`` and add the physical-limit row (resumable).
 
     ``model_cache``: a directory of trained models shared by tracks; a track whose training
     episodes equal another's (:meth:`TrackData.training_key`: same seeds, noise and plant
-    variation) reuses that track's models instead of training again.
+    variation) reuses that track's models instead of training again. ``imports``: modules
+    that register diagnosers of your own (:attr:`SweepConfig.imports`).
     """
     from evaluation.leaderboard import figure_cells, write_figures
 
     t0 = time.perf_counter()
     data = TrackData(track=track)
-    config = SweepConfig(diagnosers=default_specs(diagnosers), data=data)
+    import_modules(imports)
+    config = SweepConfig(diagnosers=default_specs(diagnosers), data=data, imports=tuple(imports))
     config.validate()
     store = out / "store" / canonical_hash(data.store_key())[:12]
     n_reused_models = 0

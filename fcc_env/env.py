@@ -196,6 +196,32 @@ class FCCEnv(gym.Env):
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
+        """Start a new episode at the steady operating point.
+
+        Args:
+            seed: seeds ``self.np_random`` (and through it the fault draw, the operating
+                program and the measurement noise); ``None`` continues the current generator,
+                so consecutive resets give new episodes. The same seed gives the same episode.
+            options: per-episode overrides of the ``make`` keywords (``None``: none). Keys:
+
+                * ``fault``: a whole :class:`fcc_env.FaultSpec` replacing the ``make`` fault
+                  (any of the keys below given with it must agree with it);
+                * ``scenario`` (``"nominal"``, ``"f1"``..``"f4"`` or ``"random"``),
+                  ``fault_time`` (onset sample), ``fault_magnitude`` (relative size),
+                  ``fault_profile`` (``"abrupt"`` or ``"incipient"``), ``ramp_samples``
+                  (incipient ramp length): change single fields of the ``make`` fault;
+                * ``plant_effects``: undeclared plant effects for this episode
+                  (:mod:`fcc_env.effects`), replacing those given to ``make``.
+
+                Other keys raise ``ValueError`` naming them and the allowed keys.
+
+        Returns:
+            ``(observation, info)``: the eight Table 1 measurements of sample 0 (float32, with
+            noise, order ``fcc_env.MEASUREMENT_NAMES``) and the info dict of :meth:`step`
+            (``t``, ``time_s``, ``scenario``, ``fault_active``, ``fault_time``,
+            ``fault_magnitude``, ``y_clean``, ``state``, ``inputs``, ``action_saturated``,
+            ``afterburn_warning``, ``termination_reason`` and the auxiliary variables).
+        """
         super().reset(seed=seed)
         options = {} if options is None else dict(options)
         unknown = sorted(set(options) - set(RESET_OPTION_NAMES))
