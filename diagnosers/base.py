@@ -86,6 +86,17 @@ class Episode:
     y_clean: np.ndarray | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
+        ch = self.channels
+        if (
+            not isinstance(ch, Sequence)
+            or isinstance(ch, str | bytes)
+            or not all(isinstance(c, str) for c in ch)
+        ):
+            raise ValueError(
+                f"Episode channels={ch!r} is outside the allowed range: a sequence of channel "
+                "names, e.g. ('T_rx', 'T_rg1'), not one string"
+            )
+        object.__setattr__(self, "channels", tuple(ch))
         y = np.asarray(self.y, dtype=np.float64)
         if y.ndim != 2 or y.shape[1] != len(self.channels):
             raise ValueError(
