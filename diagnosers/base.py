@@ -41,15 +41,17 @@ def _as_episode(obj: Any, what: str) -> Episode:
     )
 
 
-def require_varying(y: np.ndarray, names: Sequence[str], who: str) -> None:
-    """Refuse training data in which a used channel never changes (``y``: samples x channels).
+def require_varying(y: np.ndarray, names: Sequence[str], who: str, *, every: bool = True) -> None:
+    """Refuse constant training data (``y``: samples x the channels ``names``).
 
-    A constant channel has no spread to calibrate a band or a scale on: the detector would alarm
-    on every sample, or compute a non-finite band.
+    ``every=True`` refuses when any of the channels never changes (a model output, whose band
+    would have no spread to calibrate on: a non-finite band or alarms on every sample);
+    ``every=False`` only when all of them are constant (a detector that can leave a flat channel
+    out of its scale, but learns nothing from all-flat data).
     """
     y = np.asarray(y, dtype=np.float64)
     flat = [str(n) for n, col in zip(names, y.T, strict=True) if col.size and np.ptp(col) == 0.0]
-    if flat:
+    if flat and (every or len(flat) == len(names)):
         raise ValueError(
             f"{who} cannot be trained: the training data are constant in channel(s) {flat} "
             "(every sample has the same value); train on records in which they vary"

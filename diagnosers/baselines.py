@@ -123,7 +123,7 @@ class LimitChecker(Diagnoser):
         y = _stack(episodes)[:, self.channel_idx_]
         if y.shape[0] < 2:
             raise ValueError(f"limits needs at least 2 training samples, got {y.shape[0]}")
-        require_varying(y, [self.channels_[i] for i in self.channel_idx_], "limits")
+        require_varying(y, [self.channels_[i] for i in self.channel_idx_], "limits", every=False)
         self.mean_ = y.mean(axis=0)
         self.std_ = y.std(axis=0, ddof=1)
         self._finish()
@@ -259,7 +259,7 @@ class PCADetector(Diagnoser):
         n = x.shape[0]
         if n <= m:
             raise ValueError(f"pca needs more training samples than channels ({m}), got {n}")
-        require_varying(x, [self.channels_[i] for i in idx], "pca")
+        require_varying(x, [self.channels_[i] for i in idx], "pca", every=False)
         mean = x.mean(axis=0)
         scale = x.std(axis=0, ddof=1)
         scale = np.where(scale > 0.0, scale, 1.0)
@@ -435,10 +435,9 @@ class ARXBand(Diagnoser):
     def _fit(self, episodes: list[Episode]) -> None:
         self.output_idx_ = _channel_indices([self.output], self.channels_, "output")
         self.input_idx_ = _channel_indices(list(self.inputs), self.channels_, "inputs")
-        used = np.concatenate([self.output_idx_, self.input_idx_])
         require_varying(
-            np.concatenate([ep.y[:, used] for ep in episodes]),
-            [self.channels_[i] for i in used],
+            np.concatenate([ep.y[:, self.output_idx_] for ep in episodes]),
+            [self.output],
             "arx-band",
         )
         n0 = self.n_warmup_

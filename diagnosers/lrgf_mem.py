@@ -347,10 +347,10 @@ class _LRGFMEMBase(Diagnoser):
                     raise ValueError(
                         f"relation channel {c!r} is not in the episodes' channels {list(idx)}"
                     )
-        used = sorted({idx[c] for o, ins in relations for c in (o, *ins)})
+        outputs = sorted({idx[o] for o, _ in relations})  # a flat output: no band to calibrate
         require_varying(
-            np.concatenate([e.y[:, used] for e in episodes]),
-            [self.channels_[i] for i in used],
+            np.concatenate([e.y[:, outputs] for e in episodes]),
+            [self.channels_[i] for i in outputs],
             self.name or type(self).__name__,
         )
         train, cal, cal_from = self._split(episodes)
