@@ -53,6 +53,36 @@ def auto_progress(progress: bool | None) -> bool:
     return interactive and multiprocessing.parent_process() is None
 
 
+def _as_episode(obj: Any, what: str) -> Episode:
+    """``obj`` if it is an :class:`Episode`; else a ValueError that says how to build one."""
+    if isinstance(obj, Episode):
+        return obj
+    kind = type(obj).__module__.replace("builtins", "").strip(".")
+    kind = f"{kind}.{type(obj).__qualname__}" if kind else type(obj).__qualname__
+    shape = f" of shape {obj.shape}" if hasattr(obj, "shape") else ""
+    raise ValueError(
+        f"{what} takes Episode objects, got a {kind}{shape}: wrap the measurements as "
+        "Episode(y, channels=..., sample_time_s=...) from diagnosers"
+    )
+
+
+def require_varying(y: np.ndarray, names: Sequence[str], who: str, *, every: bool = True) -> None:
+    """Refuse constant training data (``y``: samples x the channels ``names``).
+
+    ``every=True`` refuses when any of the channels never changes (a model output, whose band
+    would have no spread to calibrate on: a non-finite band or alarms on every sample);
+    ``every=False`` only when all of them are constant (a detector that can leave a flat channel
+    out of its scale, but learns nothing from all-flat data).
+    """
+    y = np.asarray(y, dtype=np.float64)
+    flat = [str(n) for n, col in zip(names, y.T, strict=True) if col.size and np.ptp(col) == 0.0]
+    if flat and (every or len(flat) == len(names)):
+        raise ValueError(
+            f"{who} cannot be trained: the training data are constant in channel(s) {flat} "
+            "(every sample has the same value); train on records in which they vary"
+        )
+
+
 class NotFittedError(RuntimeError):
     """Raised when a diagnoser is used before :meth:`Diagnoser.fit`."""
 
@@ -83,6 +113,17 @@ class Episode:
     y_clean: np.ndarray | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
+        ch = self.channels
+        if (
+            not isinstance(ch, Sequence)
+            or isinstance(ch, str | bytes)
+            or not all(isinstance(c, str) for c in ch)
+        ):
+            raise ValueError(
+                f"Episode channels={ch!r} is outside the allowed range: a sequence of channel "
+                "names, e.g. ('T_rx', 'T_rg1'), not one string"
+            )
+        object.__setattr__(self, "channels", tuple(ch))
         y = np.asarray(self.y, dtype=np.float64)
         if y.ndim != 2 or y.shape[1] != len(self.channels):
             raise ValueError(
@@ -392,7 +433,9 @@ class Diagnoser(ABC):
         """Learn from healthy episodes and return ``self``."""
         if isinstance(episodes, Episode):
             episodes = [episodes]
-        episodes = list(episodes)
+        if isinstance(episodes, np.ndarray | str | bytes) or not hasattr(episodes, "__iter__"):
+            _as_episode(episodes, "fit")
+        episodes = [_as_episode(ep, "fit") for ep in episodes]
         if not episodes:
             raise ValueError("fit needs at least one healthy episode, got none")
         channels = episodes[0].channels
@@ -400,6 +443,11 @@ class Diagnoser(ABC):
             if ep.channels != channels:
                 raise ValueError(
                     f"all training episodes must share channels; got {ep.channels} and {channels}"
+                )
+            if not np.isclose(ep.sample_time_s, episodes[0].sample_time_s, rtol=1e-9, atol=0.0):
+                raise ValueError(
+                    f"all training episodes must share one sample time; got sample_time_s="
+                    f"{ep.sample_time_s!r} and {episodes[0].sample_time_s!r}"
                 )
         self._validate_params()
         # A failed re-fit must not leave an object that looks fitted with half-updated state.
@@ -438,10 +486,17 @@ class Diagnoser(ABC):
     def _check_episode(self, episode: Episode) -> None:
         """Fitted, and ``episode`` has the training channels in the training order."""
         self._check_fitted()
+        episode = _as_episode(episode, "detect")
         if episode.channels != self.channels_:
             raise ValueError(
                 f"episode channels {episode.channels} differ from the training channels "
                 f"{self.channels_}"
+            )
+        if not np.isclose(episode.sample_time_s, self.sample_time_s_, rtol=1e-9, atol=0.0):
+            raise ValueError(
+                f"episode sample_time_s={episode.sample_time_s!r} differs from the training "
+                f"sample time {self.sample_time_s_!r} s: the models are discrete-time, so "
+                "resample the record or train on data of this sample time"
             )
 
     def detect(self, episode: Episode) -> Detection:
@@ -478,6 +533,7 @@ class Diagnoser(ABC):
             "format": SAVE_FORMAT,
             "format_version": SAVE_FORMAT_VERSION,
             "diagnoser": self.name,
+            "class": f"{type(self).__module__}.{type(self).__qualname__}",
             "params": self.get_params(),
             "channels": list(self.channels_),
             "sample_time_s": self.sample_time_s_,
@@ -527,17 +583,33 @@ class Diagnoser(ABC):
                     f"{cfg_path}: field {key!r} is missing or of the wrong type "
                     f"(got {config.get(key)!r}); the file is corrupted"
                 )
-        obj = make(config["diagnoser"], **config["params"])
+        if not all(isinstance(c, str) for c in config["channels"]):
+            raise ValueError(f"{cfg_path}: channels must be names (str), got {config['channels']}")
+        try:
+            obj = make(config["diagnoser"], **config["params"])
+            # a saved config is checked like constructor arguments: a hand-edited alpha=5 fails
+            obj._validate_params()
+        except (ValueError, TypeError) as e:
+            raise ValueError(f"{cfg_path}: {e}") from e
+        saved_class = config.get("class")
+        actual_class = f"{type(obj).__module__}.{type(obj).__qualname__}"
+        if saved_class is not None and saved_class != actual_class:
+            raise ValueError(
+                f"{cfg_path}: diagnoser {config['diagnoser']!r} is a {actual_class}, but the "
+                f"file was saved by a {saved_class!r}; the config was edited or relabelled"
+            )
         if cls is not Diagnoser and not isinstance(obj, cls):
             raise ValueError(
                 f"{src} holds a {config['diagnoser']!r} diagnoser, not a {cls.__name__}"
             )
+        state_path = src / "state.npz"
         try:
-            with np.load(src / "state.npz", allow_pickle=False) as data:
+            with np.load(state_path, allow_pickle=False) as data:
                 state = {k: data[k] for k in data.files}
-        except (OSError, ValueError) as e:
+        except Exception as e:  # BadZipFile, EOFError, zlib.error...: one clear message
             raise ValueError(
-                f"{src / 'state.npz'} is missing or not a numeric state file: {e}"
+                f"{state_path} is missing, truncated or not a numeric state file "
+                f"({type(e).__name__}); the saved diagnoser is corrupted: save it again"
             ) from e
         obj.channels_ = tuple(config["channels"])
         obj.sample_time_s_ = float(config["sample_time_s"])
@@ -545,8 +617,13 @@ class Diagnoser(ABC):
             obj._set_state(state)
         except KeyError as e:
             raise ValueError(
-                f"{src / 'state.npz'} lacks the array {e} that a {config['diagnoser']!r} "
+                f"{state_path} lacks the array {e} that a {config['diagnoser']!r} "
                 "diagnoser needs; the directory is corrupted or from another version"
+            ) from e
+        except (ValueError, TypeError, IndexError) as e:
+            raise ValueError(
+                f"{state_path} does not fit a {config['diagnoser']!r} diagnoser with the saved "
+                f"settings ({e}); the directory is corrupted, edited or relabelled"
             ) from e
         obj._load_extra(src)
         obj._fitted_ = True

@@ -18,7 +18,7 @@ from scipy import signal as sps
 from scipy import stats
 
 from diagnosers.alarm import two_sided_normal_quantile
-from diagnosers.base import Decision, Detection, Diagnoser, Episode
+from diagnosers.base import Decision, Detection, Diagnoser, Episode, require_varying
 from diagnosers.mem import band
 from diagnosers.registry import register
 from fcc_env.validation import Integer, Real, check, check_params, invalid
@@ -123,6 +123,7 @@ class LimitChecker(Diagnoser):
         y = _stack(episodes)[:, self.channel_idx_]
         if y.shape[0] < 2:
             raise ValueError(f"limits needs at least 2 training samples, got {y.shape[0]}")
+        require_varying(y, [self.channels_[i] for i in self.channel_idx_], "limits", every=False)
         self.mean_ = y.mean(axis=0)
         self.std_ = y.std(axis=0, ddof=1)
         self._finish()
@@ -258,6 +259,7 @@ class PCADetector(Diagnoser):
         n = x.shape[0]
         if n <= m:
             raise ValueError(f"pca needs more training samples than channels ({m}), got {n}")
+        require_varying(x, [self.channels_[i] for i in idx], "pca", every=False)
         mean = x.mean(axis=0)
         scale = x.std(axis=0, ddof=1)
         scale = np.where(scale > 0.0, scale, 1.0)
@@ -433,6 +435,11 @@ class ARXBand(Diagnoser):
     def _fit(self, episodes: list[Episode]) -> None:
         self.output_idx_ = _channel_indices([self.output], self.channels_, "output")
         self.input_idx_ = _channel_indices(list(self.inputs), self.channels_, "inputs")
+        require_varying(
+            np.concatenate([ep.y[:, self.output_idx_] for ep in episodes]),
+            [self.output],
+            "arx-band",
+        )
         n0 = self.n_warmup_
         n_par = int(self.na) + self.input_idx_.size * int(self.nb) + 1
         parts = [self._regressors(*self._split(ep.y)) for ep in episodes if ep.n_samples > n0]

@@ -100,13 +100,13 @@ from diagnosers.alarm import (
     LimitMethod,
     calibrate_limit,
 )
-from diagnosers.base import Decision, Detection, Diagnoser, Episode
+from diagnosers.base import Decision, Detection, Diagnoser, Episode, require_varying
 from diagnosers.lrgf import LRGF, InitialState, LRGFStepper, NeuronFilters, lrgf_activation
 from diagnosers.mem import BandScale, MEMStepper, NNARXErrorModel, OutputActivation, band, t_alpha
 from diagnosers.registry import register
 from diagnosers.training import Method, build_module, export_module, fit_lrgf, fit_mem
 from fcc_env.io import atomic_open, atomic_write
-from fcc_env.validation import Boolean, Integer, Options, Real, check_params
+from fcc_env.validation import Boolean, Integer, Options, Real, check_params, invalid
 
 __all__ = [
     "BANK_RELATIONS",
@@ -306,7 +306,24 @@ class _LRGFMEMBase(Diagnoser):
             output, inputs = item
             if isinstance(inputs, str):
                 inputs = [inputs]
-            out.append((str(output), tuple(str(i) for i in inputs)))
+            if not isinstance(output, str):
+                raise invalid("relations", rel, "[[output, [inputs...]], ...]", f"{item!r}")
+            if not isinstance(inputs, list | tuple) or not inputs:
+                raise invalid(
+                    "relations", rel, "[[output, [inputs...]], ...]", f"{output!r} has no inputs"
+                )
+            if not all(isinstance(i, str) for i in inputs):
+                raise invalid("relations", rel, "channel names (str)", f"inputs {list(inputs)!r}")
+            if output in inputs:
+                raise invalid(
+                    "relations",
+                    rel,
+                    "[[output, [inputs...]], ...] with the output not among its inputs",
+                    f"{output!r} is its own input",
+                )
+            out.append((output, tuple(inputs)))
+        if not out:
+            raise invalid("relations", rel, "a non-empty list of [output, [inputs...]]")
         return out
 
     def _validate_params(self) -> None:
@@ -334,6 +351,12 @@ class _LRGFMEMBase(Diagnoser):
                     raise ValueError(
                         f"relation channel {c!r} is not in the episodes' channels {list(idx)}"
                     )
+        outputs = sorted({idx[o] for o, _ in relations})  # a flat output: no band to calibrate
+        require_varying(
+            np.concatenate([e.y[:, outputs] for e in episodes]),
+            [self.channels_[i] for i in outputs],
+            self.name or type(self).__name__,
+        )
         train, cal, cal_from = self._split(episodes)
         self.in_idx_ = [np.array([idx[c] for c in ins]) for _, ins in relations]
         self.out_idx_ = np.array([idx[o] for o, _ in relations])
@@ -562,6 +585,12 @@ class _LRGFMEMBase(Diagnoser):
             self.train_fit_loss_ = state["train_fit_loss"]
         except KeyError as e:
             raise ValueError(f"saved state lacks array {e.args[0]!r}") from None
+        relations = self._relations()
+        if [len(i) for i in self.in_idx_] != [len(ins) for _, ins in relations]:
+            raise ValueError(
+                f"the state holds relations with {[len(i) for i in self.in_idx_]} inputs, the "
+                f"settings of {self.name!r} {[len(ins) for _, ins in relations]}"
+            )
         self._finish()
 
     def _save_extra(self, directory: Path) -> None:
@@ -579,17 +608,34 @@ class _LRGFMEMBase(Diagnoser):
     def _load_extra(self, directory: Path) -> None:
         try:
             configs = json.loads((directory / "models.json").read_text())
-            tensors = torch.load(directory / "weights.pt", weights_only=True)
-        except (OSError, json.JSONDecodeError, RuntimeError) as e:
-            raise ValueError(f"{directory} lacks valid models.json / weights.pt: {e}") from e
-        if not isinstance(tensors, dict):
-            raise ValueError(f"{directory / 'weights.pt'} is not a state dict")
+        except (OSError, json.JSONDecodeError, UnicodeDecodeError) as e:
+            raise ValueError(
+                f"{directory / 'models.json'} is missing or not valid JSON: {e}"
+            ) from e
+        weights = directory / "weights.pt"
+        try:
+            tensors = torch.load(weights, weights_only=True)
+        except Exception as e:
+            # torch's text for a refused pickle suggests weights_only=False, i.e. executing the
+            # file: never relay that advice about a file that may have been tampered with.
+            raise ValueError(
+                f"{weights} is not a valid model file of this library ({type(e).__name__}); "
+                "it is corrupted or was not written by Diagnoser.save: save the diagnoser again"
+            ) from None
+        if not isinstance(tensors, dict) or not isinstance(configs, list):
+            raise ValueError(f"{weights} is not a valid model file of this library")
         self.lrgf_, self.mem_ = [], []
         for j, cfg in enumerate(configs):
             for part, store in (("lrgf", self.lrgf_), ("mem", self.mem_)):
                 prefix = f"{j}.{part}."
                 sd = {k[len(prefix) :]: v for k, v in tensors.items() if k.startswith(prefix)}
-                module = build_module(cfg[part], sd)
+                try:
+                    module = build_module(cfg[part], sd)
+                except Exception as e:
+                    raise ValueError(
+                        f"{directory}: models.json and weights.pt do not describe a valid model "
+                        f"({type(e).__name__}: {e})"
+                    ) from None
                 module.eval()
                 store.append(module)
         self._bank = None

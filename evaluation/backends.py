@@ -30,7 +30,44 @@ def limit_threads() -> None:
         sys.modules["numba"].set_num_threads(1)
 
 
-def init_worker() -> None:
+#: Seconds between a worker's checks that the driver process is still alive.
+PARENT_POLL_S = 0.5
+
+
+def _exit_with_parent(parent_pid: int, poll_s: float = PARENT_POLL_S) -> None:
+    """Make this worker exit when ``parent_pid`` dies, even when the parent is SIGKILLed.
+
+    On Linux the kernel signals it (``prctl(PR_SET_PDEATHSIG, SIGKILL)``); everywhere a daemon
+    thread also polls ``os.getppid()`` (re-parenting means the parent is gone) and calls
+    ``os._exit``. Without this a killed leaderboard leaves its spawn workers running forever.
+    """
+    import threading
+    import time
+
+    if sys.platform.startswith("linux"):
+        try:
+            import ctypes
+            import signal
+
+            libc = ctypes.CDLL(None, use_errno=True)
+            pr_set_pdeathsig = 1
+            libc.prctl(pr_set_pdeathsig, int(signal.SIGKILL), 0, 0, 0)
+        except (OSError, AttributeError):  # no libc prctl: the thread below suffices
+            pass
+
+    def watch() -> None:
+        while os.getppid() == parent_pid:
+            time.sleep(poll_s)
+        os._exit(1)
+
+    if os.getppid() != parent_pid:  # already orphaned between spawn and here
+        os._exit(1)
+    threading.Thread(target=watch, name="fcc-parent-watch", daemon=True).start()
+
+
+def init_worker(parent_pid: int | None = None) -> None:
+    if parent_pid is not None:
+        _exit_with_parent(parent_pid)
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     import numba
 
@@ -60,6 +97,7 @@ class LocalBackend:
             max_workers=n_workers,
             mp_context=multiprocessing.get_context("spawn"),
             initializer=init_worker,
+            initargs=(os.getpid(),),
         )
 
     def put(self, obj: Any) -> Any:

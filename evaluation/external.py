@@ -443,6 +443,21 @@ def load_manifest(directory: str | Path) -> tuple[ExternalData, dict[str, dict[s
         raise ValueError(
             f"{path}: test_files must be a list of {{'path', 'onset', 'name'}} objects ({e})"
         ) from e
+    for key in ("inputs", "outputs", "train_files", "column_names"):
+        v = spec.get(key)
+        if key == "column_names" and v is None:
+            continue
+        if not isinstance(v, list) or not all(isinstance(x, str) for x in v):
+            raise ValueError(
+                f"{path}: {key}={v!r} is outside the allowed range: a JSON list of names "
+                f'(strings), e.g. ["{v if isinstance(v, str) else "name"}"]'
+            )
+    sample_time = spec.get("sample_time_s", 1.0)
+    if isinstance(sample_time, bool) or not isinstance(sample_time, int | float):
+        raise ValueError(
+            f"{path}: sample_time_s={sample_time!r} is outside the allowed range: a positive "
+            "number of seconds (a JSON number, not text)"
+        )
     data = ExternalData(
         directory=str(Path(directory)),
         inputs=tuple(spec["inputs"]),
@@ -450,13 +465,21 @@ def load_manifest(directory: str | Path) -> tuple[ExternalData, dict[str, dict[s
         train_files=tuple(spec["train_files"]),
         test_files=tests,
         column_names=tuple(spec["column_names"]) if spec.get("column_names") else None,
-        sample_time_s=float(spec.get("sample_time_s", 1.0)),
+        sample_time_s=float(sample_time),
         delimiter=str(spec.get("delimiter", ",")),
     )
     data.validate()
     params = spec.get("diagnoser_params") or {}
-    if not isinstance(params, dict):
+    if not isinstance(params, dict) or not all(isinstance(v, dict) for v in params.values()):
         raise ValueError(f"{path}: diagnoser_params must map diagnoser names to objects")
+    from diagnosers import available, make
+
+    for name, kw in params.items():  # bad settings fail here, before any training starts
+        if name in available():
+            try:
+                make(name, **kw)._validate_params()
+            except (ValueError, TypeError) as e:
+                raise ValueError(f"{path}: diagnoser_params[{name!r}]: {e}") from e
     return data, params
 
 

@@ -40,7 +40,7 @@ import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 from diagnosers.registry import import_modules
 from evaluation.harness import (
@@ -561,6 +561,40 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+def check_out_dir(out: Path) -> None:
+    """Refuse an output directory that is, or lies under, an existing non-directory."""
+    for p in (out, *out.parents):
+        if p.exists():
+            if not p.is_dir():
+                where = "is" if p == out else f"lies under {str(p)!r}, which is"
+                raise ValueError(
+                    f"--out {str(out)!r} {where} a regular file, not a directory; "
+                    "choose another output directory"
+                )
+            return
+
+
+def _check_backend(backend: str) -> None:
+    """``--backend ray`` needs Ray: say so before any work, not in a traceback."""
+    if backend == "ray":
+        try:
+            import ray  # noqa: F401
+        except ImportError:
+            raise ValueError(
+                "--backend ray needs Ray, which is not installed: "
+                "pip install 'fcc-fault-diagnosis[ray]', or use --backend local"
+            ) from None
+
+
+def _store_failure(parser: argparse.ArgumentParser, e: Exception) -> NoReturn:
+    """Exit on a store or run failure; suggest re-running only where it can succeed."""
+    from evaluation.store import StoreError
+
+    if isinstance(e, StoreError):  # a re-run meets the same file: the message says what to do
+        parser.exit(1, f"{parser.prog}: {e}\n")
+    parser.exit(1, f"{parser.prog}: {e}\nFinished cells are stored; re-run to resume.\n")
+
+
 def resolve_options(
     args: argparse.Namespace, parser: argparse.ArgumentParser
 ) -> LeaderboardOptions:
@@ -602,6 +636,11 @@ def resolve_options(
         parser.error("--ramp-samples needs --fault-profile incipient")
     if args.validation and (args.quick or args.external is not None):
         parser.error("--validation cannot be combined with --quick or --external")
+    try:
+        _check_backend(args.backend)
+        check_out_dir(args.out or (VALIDATION_OUT if args.validation else DEFAULT_OUT))
+    except ValueError as e:
+        parser.error(str(e))
     if args.validation:
         seeds = args.seeds or VALIDATION_SEEDS
     else:
@@ -665,6 +704,11 @@ def _main_tracks(args: argparse.Namespace, parser: argparse.ArgumentParser) -> i
 
     names = args.diagnosers or (BASELINES if args.quick else tuple(available()))
     out = args.out or Path("results/tracks")
+    try:
+        _check_backend(args.backend)
+        check_out_dir(out)
+    except ValueError as e:
+        parser.error(str(e))
     runs = []
     for track in tracks:
         try:
@@ -683,7 +727,7 @@ def _main_tracks(args: argparse.Namespace, parser: argparse.ArgumentParser) -> i
         except ValueError as e:
             parser.error(str(e))
         except RuntimeError as e:
-            parser.exit(1, f"{parser.prog}: {e}\nFinished cells are stored; re-run to resume.\n")
+            _store_failure(parser, e)
         write_track(run_, out / track.name)
         runs.append(run_)
         print(trackboard_table(run_))
@@ -711,7 +755,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ValueError as e:  # bad configuration: say what and exit like argparse does
         parser.error(str(e))
     except RuntimeError as e:  # a diagnoser failed to train or score: finished cells are kept
-        parser.exit(1, f"{parser.prog}: {e}\nFinished cells are stored; re-run to resume.\n")
+        _store_failure(parser, e)
     written = write_outputs(results, opts.out, figures=opts.figures)
     reference = _reference(results.config)
     print(markdown_table(results.summary(), reference=reference), end="")

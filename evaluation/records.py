@@ -22,6 +22,9 @@ from diagnosers.base import Detection, Diagnoser, Episode
 from evaluation.metrics import episode_scores
 from evaluation.sources import LoadedEpisode
 
+#: Python types a stored cell field may hold, by the annotation of :class:`CellResult`.
+_FIELD_KINDS: dict[str, type | tuple[type, ...]] = {"str": str, "int": int, "float": (int, float)}
+
 
 @dataclass(frozen=True)
 class CellResult:
@@ -71,7 +74,13 @@ class CellResult:
             v = obj[f.name]
             if f.type == "float" and v is None:
                 v = float("nan")
-            kwargs[f.name] = v
+            kind = _FIELD_KINDS.get(f.type.replace(" | None", ""))
+            ok = kind is None or (isinstance(v, kind) and not isinstance(v, bool))
+            if not ok and not (v is None and "None" in f.type):
+                raise ValueError(
+                    f"cell record field {f.name}={v!r} has the wrong type (expected {f.type})"
+                )
+            kwargs[f.name] = float(v) if f.type == "float" else v
         return cls(**kwargs)
 
 

@@ -36,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from fcc_env.io import atomic_open, atomic_write_json
+from fcc_env.io import TMP_SUFFIX, atomic_open, atomic_write_json, remove_stale_tmp
 
 __all__ = [
     "CELL_FORMAT",
@@ -55,6 +55,9 @@ MODEL_SPEC_FORMAT = "fcc-sweep-model"
 STORE_VERSION = 1
 
 MANIFEST = "sweep.json"
+#: Temporary files and model directories older than this (seconds) are left over from a killed
+#: sweep and removed when the store is opened; younger ones may belong to a sweep still running.
+STALE_TMP_AGE_S = 3600.0
 _NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._+-]*$")
 
 
@@ -152,7 +155,9 @@ class ResultStore:
                     f"{str(obj.get('data_hash'))[:12]}..., this sweep {data_hash[:12]}...): the "
                     f"simulation options, training seeds or data files differ; {remedy}"
                 )
-            return cls(root, data_hash)
+            store = cls(root, data_hash)
+            store.remove_stale_tmp()
+            return store
         if root.is_dir() and any(root.iterdir()):
             raise StoreError(
                 f"{root} is not empty and has no {MANIFEST}, so it is not a result store; "
@@ -170,6 +175,24 @@ class ResultStore:
         )
         return cls(root, data_hash)
 
+    def remove_stale_tmp(self, min_age_s: float = STALE_TMP_AGE_S) -> list[Path]:
+        """Delete the temporary files and model directories a killed sweep left behind.
+
+        Only names of the store's own temporaries (``.<name>.<random>.tmp``) last modified at
+        least ``min_age_s`` seconds ago are removed. Returns what was removed.
+        """
+        import time
+
+        removed = remove_stale_tmp(self.root, min_age_s=min_age_s)
+        models = self.root / "models"
+        if models.is_dir():
+            now = time.time()
+            for d in models.glob(f".*{TMP_SUFFIX}"):
+                if d.is_dir() and now - d.stat().st_mtime >= min_age_s:
+                    shutil.rmtree(d, ignore_errors=True)
+                    removed.append(d)
+        return removed
+
     # ---- cells -------------------------------------------------------------------------------
     def cell_path(self, label: str, scenario: str, seed: int) -> Path:
         check_name("diagnoser label", label)
@@ -185,6 +208,11 @@ class ResultStore:
             StoreError: the file is corrupted, foreign, or was computed with other settings.
         """
         path = self.cell_path(label, scenario, seed)
+        if path.exists() and not path.is_file():
+            raise StoreError(
+                f"{path} is a directory or special file where a cell file belongs; remove it, "
+                "then re-run to compute this cell"
+            )
         if not path.is_file():
             return None
         remedy = f"delete {path} to recompute this cell"
@@ -295,7 +323,9 @@ class ResultStore:
         """
         final = self.model_dir(label)
         if final.exists():
-            raise StoreError(f"{final} already exists; delete it first to retrain")
+            # Another sweep on this store may have trained the same model meanwhile: accept it.
+            if self.has_model(label, model_hash):  # raises if it is another model
+                return final
         final.parent.mkdir(parents=True, exist_ok=True)
         tmp = Path(tempfile.mkdtemp(dir=final.parent, prefix=f".{label}.", suffix=".tmp"))
         try:
@@ -315,7 +345,13 @@ class ResultStore:
                     "spec": dict(spec),
                 },
             )
-            os.rename(tmp, final)
+            try:
+                os.rename(tmp, final)
+            except OSError:
+                # a concurrent sweep renamed its copy first: keep it if it is this model
+                if not final.is_dir() or not self.has_model(label, model_hash):
+                    raise
+                shutil.rmtree(tmp, ignore_errors=True)
         except BaseException:
             shutil.rmtree(tmp, ignore_errors=True)
             raise

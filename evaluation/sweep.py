@@ -140,7 +140,11 @@ class SweepConfig:
             if not isinstance(spec, DiagnoserSpec):
                 raise ValueError(f"diagnosers must be DiagnoserSpec objects, got {spec!r}")
             check_name("diagnoser label", spec.key)
-            spec.build()  # unknown name or hyperparameter -> ValueError naming the allowed set
+            try:
+                # unknown name or hyperparameter, or a bad value: fail before any training
+                spec.build()._validate_params()
+            except (ValueError, TypeError) as e:
+                raise ValueError(f"diagnoser {spec.key!r}: {e}") from e
             canonical_hash(spec.to_json())  # params must be JSON-serialisable
         if not isinstance(self.data, DataSource):
             raise ValueError(f"data={self.data!r} does not implement the DataSource protocol")
@@ -368,7 +372,10 @@ def run_sweep(
     missing: dict[tuple[str, int], list[tuple[DiagnoserSpec, bool, bool]]] = {}
     for sc, seed in cells:
         for s in specs:
-            no_cell = store.read_cell(s.key, sc, seed, chash[s.key]) is None
+            rec = store.read_cell(s.key, sc, seed, chash[s.key])
+            no_cell = rec is None
+            if rec is not None:  # a bad stored record is reported before any work is done
+                _cell_result(store, rec, s.key, sc, seed)
             no_det = (sc, seed) in figures and (
                 store.read_detection(s.key, sc, seed, chash[s.key]) is None
             )
@@ -401,11 +408,7 @@ def run_sweep(
             rec = store.read_cell(s.key, sc, seed, chash[s.key])
             if rec is None:  # only if a file vanished while we ran
                 raise RuntimeError(f"cell {s.key}/{sc}/seed {seed} is missing after the sweep")
-            try:
-                records.append(CellResult.from_json(rec))
-            except (ValueError, TypeError) as e:
-                path = store.cell_path(s.key, sc, seed)
-                raise ValueError(f"{path}: {e}; delete it to recompute this cell") from e
+            records.append(_cell_result(store, rec, s.key, sc, seed))
     return SweepResults(
         config=config,
         store_dir=store.root,
@@ -415,6 +418,17 @@ def run_sweep(
         n_trained=len(to_train),
         wall_s=time.perf_counter() - t_start,
     )
+
+
+def _cell_result(
+    store: ResultStore, rec: Mapping[str, Any], label: str, scenario: str, seed: int
+) -> CellResult:
+    """The stored record as a :class:`CellResult`; a bad one names its file and the remedy."""
+    try:
+        return CellResult.from_json(rec)
+    except (ValueError, TypeError) as e:
+        path = store.cell_path(label, scenario, seed)
+        raise ValueError(f"{path}: {e}; delete it to recompute this cell") from e
 
 
 def _progress_bar(total: int, desc: str, enabled: bool) -> Any:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
 
 import gymnasium as gym
@@ -11,7 +12,13 @@ from gymnasium import spaces
 from fcc_env import effects as fx
 from fcc_env.params import MEASUREMENT_NAMES, N_MEASUREMENTS, NOMINAL_INPUTS
 from fcc_env.physics import AUX_NAMES, aux_kernel, measure_kernel, step_kernel
-from fcc_env.scenarios import DEFAULT_N_SAMPLES, RANDOM_SCENARIO, FaultSpec, Scenario
+from fcc_env.scenarios import (
+    DEFAULT_N_SAMPLES,
+    RANDOM_SCENARIO,
+    FaultSpec,
+    Scenario,
+    fault_time_range,
+)
 from fcc_env.simulation import (
     AFTERBURN_WARNING_C,
     FAULT_OPTION_NAMES,
@@ -25,7 +32,7 @@ from fcc_env.simulation import (
     setup_episode,
     termination_reason,
 )
-from fcc_env.validation import check, invalid
+from fcc_env.validation import Integer, check, invalid
 
 #: Actuator limits on the applied inputs (program + action), as fractions of nominal.
 U_F_LIMITS_REL = (0.5, 1.5)
@@ -180,6 +187,9 @@ class FCCEnv(gym.Env):
         # Validate now so a bad make() fails at once, not at the first reset.
         if self.fault_spec.scenario != RANDOM_SCENARIO:
             self.fault_spec.resolve(self.horizon)
+        elif self.fault_spec.onset is not None:
+            # a random draw may pick a fault: its onset must fit every episode, not only some
+            check("fault_time", self.fault_spec.onset, fault_time_range(self.horizon))
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(
                 f"render_mode={render_mode!r} is not supported. Allowed: "
@@ -222,6 +232,14 @@ class FCCEnv(gym.Env):
             ``fault_magnitude``, ``y_clean``, ``state``, ``inputs``, ``action_saturated``,
             ``afterburn_warning``, ``termination_reason`` and the auxiliary variables).
         """
+        seed = check("seed", seed, Integer(0), None)
+        if options is not None and not isinstance(options, Mapping):
+            raise invalid(
+                "options",
+                options,
+                f"a dict with keys from {list(RESET_OPTION_NAMES)}, or None",
+                "e.g. options={'scenario': 'f1'}",
+            )
         super().reset(seed=seed)
         options = {} if options is None else dict(options)
         unknown = sorted(set(options) - set(RESET_OPTION_NAMES))
@@ -263,7 +281,12 @@ class FCCEnv(gym.Env):
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         if not hasattr(self, "_x"):
             raise gym.error.ResetNeeded("call reset() before step()")
-        a = np.asarray(action, dtype=np.float64)
+        raw = np.asarray(action)
+        if raw.dtype.kind not in "biuf":
+            raise invalid(
+                "action", action, "two real numbers [Δu_F, ΔR_ar] in [-1, 1]", f"dtype {raw.dtype}"
+            )
+        a = raw.astype(np.float64)
         if a.shape != (2,):
             raise invalid(
                 "action", action, "shape (2,): [Δu_F, ΔR_ar] in [-1, 1]", f"shape {a.shape}"

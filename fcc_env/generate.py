@@ -28,23 +28,34 @@ from fcc_env.io import atomic_open, atomic_write_json
 from fcc_env.params import INPUT_NAMES, MEASUREMENT_NAMES, STATE_NAMES, FCCParams
 from fcc_env.scenarios import DEFAULT_N_SAMPLES, SCENARIOS, FaultSpec
 from fcc_env.simulation import (
+    DEFAULT_MEMORY_BUDGET_BYTES,
     DEFAULT_VALVE_BETA,
     FAULT_OPTION_NAMES,
     PLANT_OPTION_NAMES,
     SEEDS_RANGE,
     PlantConfig,
+    check_memory,
     plant_from_request,
     simulate_episodes,
 )
-from fcc_env.validation import check, invalid
+from fcc_env.validation import Real, check, invalid
 
 DATASET_FORMAT = "fcc-dataset"
 DATASET_FORMAT_VERSION = 1
 
 
-def parse_seeds(text: str) -> list[int]:
-    """``"0-4,10"`` → ``[0, 1, 2, 3, 4, 10]``; errors name the bad piece."""
-    seeds: list[int] = []
+def parse_seeds(
+    text: str,
+    *,
+    n_samples: int | None = None,
+    memory_budget_bytes: float = DEFAULT_MEMORY_BUDGET_BYTES,
+) -> list[int]:
+    """``"0-4,10"`` → ``[0, 1, 2, 3, 4, 10]``; errors name the bad piece.
+
+    With ``n_samples``, a request whose batch would exceed ``memory_budget_bytes``
+    (:func:`fcc_env.simulation.check_memory`) is refused before the seed list is built.
+    """
+    pieces: list[range] = []
     for part in text.split(","):
         part = part.strip()
         try:
@@ -53,13 +64,20 @@ def parse_seeds(text: str) -> list[int]:
                 a, b = int(lo), int(hi)
                 if b < a:
                     raise ValueError
-                seeds.extend(range(a, b + 1))
+                pieces.append(range(a, b + 1))
             else:
-                seeds.append(int(part))
+                a = int(part)
+                pieces.append(range(a, a + 1))
         except ValueError:
             raise invalid(
                 "seeds", text, "integers and ranges like '0-9,20'", f"bad piece {part!r}"
             ) from None
+    if n_samples is not None:
+        try:
+            check_memory(sum(map(len, pieces)), n_samples, memory_budget_bytes)
+        except ValueError as e:
+            raise ValueError(f"--seeds {text} --samples {n_samples}: {e}") from None
+    seeds = [s for r in pieces for s in r]
     return list(check("seeds", seeds, SEEDS_RANGE))
 
 
@@ -87,6 +105,7 @@ def write_dataset(
     include_states: bool = False,
     plant_effects: Sequence[Any] = (),
     scenario: str | None = None,
+    memory_budget_bytes: float = DEFAULT_MEMORY_BUDGET_BYTES,
     **env_kwargs: Any,
 ) -> Path:
     """Simulate ``seeds`` and write ``path`` (``.csv``) plus ``path.with_suffix('.json')``.
@@ -95,7 +114,8 @@ def write_dataset(
     keywords ``scenario`` and ``env_kwargs`` (``fault_time``, ``valve_beta``, ``noise_scale``...);
     the sidecar records the resolved ``fault`` and ``plant``. ``plant_effects`` are undeclared
     effects (:mod:`fcc_env.effects`): recorded under ``truth_plant_effects`` for reproducibility,
-    a field the modelling loop never reads. Both files are written atomically
+    a field the modelling loop never reads. A request whose arrays would exceed
+    ``memory_budget_bytes`` (default 4 GiB) is refused before simulating. Both files are written atomically
     (:mod:`fcc_env.io`), so a crash never leaves a torn file. Returns the CSV path.
     """
     from fcc_env import MODEL_VERSION
@@ -113,7 +133,12 @@ def write_dataset(
     config = plant_from_request(plant, env_kwargs)
     effects = fx.resolve(plant_effects)
     batch = simulate_episodes(
-        list(seeds), n_samples, fault=spec, plant=config, plant_effects=effects
+        seeds,
+        n_samples,
+        fault=spec,
+        plant=config,
+        plant_effects=effects,
+        memory_budget_bytes=memory_budget_bytes,
     )
     B, T = batch.observations.shape[:2]
     cols: dict[str, np.ndarray] = {
@@ -219,6 +244,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--no-excitation", action="store_true", help="hold inputs at nominal")
     parser.add_argument("--states", action="store_true", help="also write the 11 states")
     parser.add_argument(
+        "--memory-budget-gib",
+        type=float,
+        default=DEFAULT_MEMORY_BUDGET_BYTES / 2**30,
+        metavar="GIB",
+        help="refuse requests whose arrays would need more memory "
+        f"(default {DEFAULT_MEMORY_BUDGET_BYTES / 2**30:g} GiB)",
+    )
+    parser.add_argument(
         "--plant-effect",
         action="append",
         default=[],
@@ -228,6 +261,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     )
     args = parser.parse_args(argv)
     try:
+        budget = check("--memory-budget-gib", args.memory_budget_gib, Real(0, closed="neither"))
+        budget *= 2**30
         fault = FaultSpec.from_options(
             {
                 "scenario": args.scenario,
@@ -246,8 +281,9 @@ def main(argv: Sequence[str] | None = None) -> int:
             args.out,
             fault=fault,
             plant=plant,
-            seeds=parse_seeds(args.seeds),
+            seeds=parse_seeds(args.seeds, n_samples=args.samples, memory_budget_bytes=budget),
             n_samples=args.samples,
+            memory_budget_bytes=budget,
             include_states=args.states,
             plant_effects=[fx.parse(t) for t in args.plant_effect],
         )

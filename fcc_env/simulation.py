@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping, Sequence, Sized
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -76,6 +76,43 @@ N_SAMPLES_RANGE = Integer(2, why="an episode has an initial and at least one lat
 
 #: Allowed episode seeds: at least one, non-negative (Gymnasium's seeding), repeats allowed.
 SEEDS_RANGE = IntegerSequence(0, unique=False, why="one episode per seed")
+
+#: Default ceiling on the bytes of the arrays of one :class:`BatchResult` (4 GiB): a request that
+#: would need more is refused before simulating, rather than killed by the OS part-way through.
+#: Raise it with ``memory_budget_bytes=`` (``python -m fcc_env.generate --memory-budget-gib``).
+DEFAULT_MEMORY_BUDGET_BYTES: int = 4 * 2**30
+
+#: Bytes per (episode, sample) of a :class:`BatchResult`: float32 observations, float64 y_clean,
+#: inputs, states and aux, bool fault_active.
+_BYTES_PER_SAMPLE = 8 * 4 + (8 + 6 + 11 + len(AUX_NAMES)) * 8 + 1
+
+
+def batch_nbytes(n_episodes: int, n_samples: int) -> int:
+    """Bytes of the arrays of a :class:`BatchResult` of ``n_episodes`` x ``n_samples``."""
+    return int(n_episodes) * int(n_samples) * _BYTES_PER_SAMPLE
+
+
+def _gib(n: float) -> str:
+    return f"{n / 2**30:.3g} GiB"
+
+
+def check_memory(
+    n_episodes: int, n_samples: int, budget_bytes: float = DEFAULT_MEMORY_BUDGET_BYTES
+) -> int:
+    """Refuse a batch whose arrays would exceed ``budget_bytes``; returns the estimate.
+
+    The message names the request, the estimate and the budget.
+    """
+    budget = check("memory_budget_bytes", budget_bytes, Real(0, closed="neither"))
+    need = batch_nbytes(n_episodes, n_samples)
+    if need > budget:
+        raise ValueError(
+            f"{n_episodes} episodes x {n_samples} samples need about {_gib(need)} of arrays, "
+            f"more than the memory budget of {_gib(budget)}: ask for fewer seeds or samples, "
+            "split the request, or raise memory_budget_bytes (CLI: --memory-budget-gib)"
+        )
+    return need
+
 
 #: The slide-valve head share of the declared plant (``valve_beta``'s default).
 DEFAULT_VALVE_BETA: float = FCCParams().beta_sv
@@ -417,6 +454,7 @@ def simulate_episodes(
     noise_scale: float | None = None,
     params: FCCParams | None = None,
     plant_uncertainty: PlantUncertainty | None = None,
+    memory_budget_bytes: float = DEFAULT_MEMORY_BUDGET_BYTES,
 ) -> BatchResult:
     """Simulate many seeded episodes at once, identical to ``FCC-v0`` with zero actions.
 
@@ -436,13 +474,18 @@ def simulate_episodes(
             (:meth:`fcc_env.uncertainty.PlantUncertainty.draw`: parameters within stated ranges
             and benign slow disturbances), independent of the scenario, so a healthy and a faulty
             episode of one seed share their plant; nothing of the draw is in the observations.
+        memory_budget_bytes: refuse (``ValueError``, before simulating) a request whose result
+            arrays would need more bytes (:data:`DEFAULT_MEMORY_BUDGET_BYTES`, 4 GiB).
 
     Episodes run in parallel threads of the compiled kernel (numba ``prange``); with a user
     effect that has ``d_state`` the integration runs in numpy over the episode axis instead
     (slower, same numbers as the env).
     """
-    seeds = list(check("seeds", seeds, SEEDS_RANGE))
     n_samples = check("n_samples", n_samples, N_SAMPLES_RANGE)
+    if isinstance(seeds, Sized) and not isinstance(seeds, str | bytes):
+        check_memory(len(seeds), n_samples, memory_budget_bytes)  # before copying the seeds
+    seeds = list(check("seeds", seeds, SEEDS_RANGE))
+    check_memory(len(seeds), n_samples, memory_budget_bytes)
     per_seed = scenario is not None and not isinstance(scenario, str)
     base = FaultSpec.from_request(
         fault,

@@ -1,0 +1,387 @@
+"""Bad input gives one clear message naming the value or the file (issue items 7-11)."""
+
+from __future__ import annotations
+
+import builtins
+import json
+import os
+import time
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import fcc_env
+from diagnosers import Diagnoser, Episode, diagnoser_class, make
+from evaluation.store import ResultStore, StoreError
+from fcc_env import simulate_episodes
+from fcc_env.simulation import DEFAULT_MEMORY_BUDGET_BYTES, batch_nbytes
+
+CH = tuple(fcc_env.MEASUREMENT_NAMES)
+
+
+@pytest.fixture(scope="module")
+def episodes() -> list[Episode]:
+    b = simulate_episodes([0, 1], 400)
+    return [Episode(b.observations[i], CH, b.sample_time_s) for i in range(2)]
+
+
+@pytest.fixture(scope="module")
+def pca(episodes) -> Diagnoser:
+    return make("pca").fit(episodes)
+
+
+# ---- item 7: memory budget -------------------------------------------------------------------
+def test_simulate_refuses_a_request_over_the_memory_budget() -> None:
+    with pytest.raises(ValueError) as e:
+        simulate_episodes(range(10**9), 2)
+    msg = str(e.value)
+    assert "1000000000 episodes x 2 samples" in msg and "643 GiB" in msg and "4 GiB" in msg
+    with pytest.raises(ValueError, match=r"2 episodes x 5 samples .* budget of 1e-06 GiB"):
+        simulate_episodes([0, 1], 5, memory_budget_bytes=2**30 * 1e-6)
+    assert DEFAULT_MEMORY_BUDGET_BYTES == 4 * 2**30
+    b = simulate_episodes([0], 3)
+    arrays = (b.observations, b.y_clean, b.fault_active, b.inputs, b.states, b.aux)
+    assert sum(a.nbytes for a in arrays) == batch_nbytes(1, 3)
+
+
+def test_generate_cli_refuses_before_building_the_seed_list(tmp_path, capsys) -> None:
+    from fcc_env.generate import main
+
+    t0 = time.perf_counter()
+    with pytest.raises(SystemExit) as e:
+        main(["--seeds", "0-999999999", "--samples", "2", "--out", str(tmp_path / "x.csv")])
+    assert e.value.code == 2 and time.perf_counter() - t0 < 5
+    err = capsys.readouterr().err
+    assert "--seeds 0-999999999 --samples 2" in err and "GiB" in err and "budget of 4 GiB" in err
+    with pytest.raises(SystemExit):
+        main(["--seeds", "0", "--out", str(tmp_path / "y.csv"), "--memory-budget-gib", "-1"])
+    assert "--memory-budget-gib=-1.0" in capsys.readouterr().err
+    assert not list(tmp_path.iterdir())
+
+
+# ---- items 9-10: the environment and the batch simulator -------------------------------------
+ENV_ID = "fcc/FCC-v0" if "fcc/FCC-v0" in gym.registry else "FCC-v0"
+
+
+@pytest.mark.parametrize(
+    ("call", "match"),
+    [
+        (lambda env: env.reset(options="f1"), r"options='f1' is outside .* a dict"),
+        (lambda env: env.reset(seed=1.5), r"seed=1\.5 is outside the allowed range"),
+        (lambda env: env.step(["a", "b"]), r"action=\['a', 'b'\] is outside .*dtype <U1"),
+        (lambda env: env.step(np.array([1j, 0])), r"action=array\(\[0\.\+1\.j.*complex128"),
+        (lambda env: env.step(None), r"action=None is outside"),
+    ],
+)
+def test_env_bad_calls(call, match) -> None:
+    env = gym.make(ENV_ID, horizon=10)
+    env.reset(seed=0)
+    with pytest.raises(ValueError, match=match):
+        call(env)
+
+
+def test_random_scenario_with_an_onset_beyond_the_horizon_fails_at_make() -> None:
+    with pytest.raises(ValueError, match=r"fault_time=50 is outside .* \[0, 20\)"):
+        gym.make(ENV_ID, scenario="random", fault_time=50, horizon=20)
+
+
+@pytest.mark.parametrize(
+    ("seeds", "match"),
+    [
+        ([1.5], r"seeds=\[1\.5\] .* \(1\.5 is not\)"),
+        (3, r"seeds=3 is outside"),
+        ("12", r"seeds='12' is outside"),
+        (None, r"seeds=None is outside"),
+    ],
+)
+def test_simulate_bad_seeds(seeds, match) -> None:
+    with pytest.raises(ValueError, match=match):
+        simulate_episodes(seeds, 3)
+
+
+# ---- items 8-10: diagnosers ------------------------------------------------------------------
+def test_arrays_instead_of_episodes(episodes, pca) -> None:
+    y = episodes[0].y
+    with pytest.raises(ValueError, match=r"fit takes Episode .*numpy\.ndarray of shape \(400, 8\)"):
+        make("pca").fit(y)
+    with pytest.raises(ValueError, match=r"fit takes Episode .*Episode\(y, channels"):
+        make("pca").fit([y])
+    with pytest.raises(ValueError, match=r"detect takes Episode .*numpy\.ndarray"):
+        pca.detect(y)
+
+
+def test_detect_refuses_another_sample_time_or_channels(episodes, pca) -> None:
+    ep = episodes[0]
+    with pytest.raises(ValueError, match=r"sample_time_s=5\.0 differs .* 10\.0 s"):
+        pca.detect(Episode(ep.y, CH, 5.0))
+    with pytest.raises(ValueError, match=r"episode channels .* differ"):
+        pca.detect(Episode(ep.y[:, ::-1], CH[::-1], ep.sample_time_s))
+
+
+def test_a_string_as_channel_list_is_refused(episodes) -> None:
+    with pytest.raises(ValueError, match=r"channels='T_rx' is outside"):
+        Episode(np.zeros((3, 4)), "T_rx", 10.0)
+    with pytest.raises(ValueError, match=r"channels='T_rx' is outside"):
+        make("limits", channels="T_rx").fit(episodes)
+
+
+@pytest.mark.parametrize("name", ["limits", "pca", "arx-band", "lrgf-mem"])
+def test_constant_training_data_is_refused(name) -> None:
+    const = [Episode(np.ones((300, 8)), CH, 10.0)]
+    with pytest.raises(ValueError, match=rf"{name} cannot be trained: .* constant .*'T_rx'"):
+        make(name, **diagnoser_class(name).fast_params()).fit(const)
+
+
+@pytest.mark.parametrize(
+    ("params", "match"),
+    [
+        ({"seed": "a"}, r"seed='a' is outside the allowed range"),
+        ({"seed": -1}, r"seed=-1 is outside the allowed range"),
+        ({"seed": 1.0}, r"seed=1\.0 is outside the allowed range"),
+        ({"lr": "fast"}, r"lr='fast' is outside the allowed range"),
+        ({"relations": [["T_rx", []]]}, r"relations=.*\('T_rx' has no inputs\)"),
+        ({"relations": [["T_rx", ["T_rx", "T_fp"]]]}, r"\('T_rx' is its own input\)"),
+        ({"relations": []}, r"relations=\[\] is outside"),
+    ],
+)
+def test_bad_lrgf_mem_settings_are_refused_in_fit(episodes, params, match) -> None:
+    with pytest.raises(ValueError, match=match):
+        make("lrgf-mem", **{**diagnoser_class("lrgf-mem").fast_params(), **params}).fit(episodes)
+
+
+def test_pca_non_numeric_hyperparameter(episodes) -> None:
+    with pytest.raises(ValueError, match=r"alpha='x' is outside the allowed range"):
+        make("pca", alpha="x").fit(episodes)
+
+
+# ---- items 8-9: saved diagnosers -------------------------------------------------------------
+def _edit_config(d: Path, **changes) -> None:
+    cfg = json.loads((d / "config.json").read_text())
+    for k, v in changes.items():
+        if k == "alpha":
+            cfg["params"]["alpha"] = v
+        else:
+            cfg[k] = v
+    (d / "config.json").write_text(json.dumps(cfg))
+
+
+def test_saved_config_is_validated_on_load(pca, tmp_path) -> None:
+    d = pca.save(tmp_path / "m")
+    _edit_config(d, alpha=5)
+    with pytest.raises(ValueError, match=r"config\.json: alpha=5 is outside the allowed range"):
+        Diagnoser.load(d)
+
+
+def test_truncated_state_file(pca, tmp_path) -> None:
+    d = pca.save(tmp_path / "m")
+    data = (d / "state.npz").read_bytes()
+    (d / "state.npz").write_bytes(data[: len(data) // 2])
+    with pytest.raises(ValueError, match=r"state\.npz is missing, truncated .*BadZipFile"):
+        Diagnoser.load(d)
+
+
+@pytest.fixture(scope="module")
+def lrgf_dir(episodes, tmp_path_factory) -> Path:
+    params = {**diagnoser_class("lrgf-mem").fast_params(), "max_epochs": 5, "mem_max_epochs": 2}
+    diag = make("lrgf-mem", **params).fit(episodes)
+    return diag.save(tmp_path_factory.mktemp("lrgf") / "m")
+
+
+def _copy(src: Path, dst: Path) -> Path:
+    dst.mkdir()
+    for p in src.iterdir():
+        (dst / p.name).write_bytes(p.read_bytes())
+    return dst
+
+
+def test_relabelled_model_is_refused(lrgf_dir, tmp_path) -> None:
+    d = _copy(lrgf_dir, tmp_path / "m")
+    _edit_config(d, diagnoser="lrgf-mem-paper")
+    with pytest.raises(ValueError, match=r"config\.json: .*LRGFMEMPaper, but .*LRGFMEM'"):
+        Diagnoser.load(d)
+    # without the class field, the state's structure still gives it away
+    cfg = json.loads((d / "config.json").read_text())
+    del cfg["class"]
+    (d / "config.json").write_text(json.dumps(cfg))
+    with pytest.raises(ValueError, match=r"state\.npz does not fit a 'lrgf-mem-paper'"):
+        Diagnoser.load(d)
+
+
+@pytest.mark.parametrize("content", [b"garbage, not a model", b"\x80\x02csubprocess\nrun\n."])
+def test_garbage_weights_file(lrgf_dir, tmp_path, content) -> None:
+    d = _copy(lrgf_dir, tmp_path / "m")
+    (d / "weights.pt").write_bytes(content)
+    with pytest.raises(ValueError) as e:
+        Diagnoser.load(d)
+    msg = str(e.value)
+    assert "weights.pt is not a valid model file" in msg
+    assert "weights_only" not in msg and e.value.__cause__ is None
+
+
+# ---- item 11: the result store ---------------------------------------------------------------
+def test_a_cell_path_that_is_a_directory_is_reported_when_read(tmp_path) -> None:
+    st = ResultStore.open(tmp_path / "s", {"d": 1})
+    st.cell_path("limits", "f1", 0).mkdir(parents=True)
+    with pytest.raises(StoreError, match=r"seed-0\.json is a directory"):
+        st.read_cell("limits", "f1", 0, "h")
+
+
+def test_concurrent_sweep_wrote_the_same_model(tmp_path) -> None:
+    st = ResultStore.open(tmp_path / "s", {"d": 1})
+    first = st.write_model("pca", "h1", {"a.txt": b"1"}, {})
+    assert st.write_model("pca", "h1", {"a.txt": b"2"}, {}) == first  # accepted, not an error
+    assert (first / "a.txt").read_bytes() == b"1"
+    with pytest.raises(StoreError, match=r"models/pca was trained with other diagnoser"):
+        st.write_model("pca", "h2", {"a.txt": b"3"}, {})
+
+
+def test_write_model_race_on_rename(tmp_path, monkeypatch) -> None:
+    st = ResultStore.open(tmp_path / "s", {"d": 1})
+    real_rename = os.rename
+
+    def racing(src, dst):  # the other sweep renames its copy first
+        other = ResultStore(st.root, st.data_hash)
+        monkeypatch.setattr(os, "rename", real_rename)
+        other.write_model("pca", "h1", {"a.txt": b"other"}, {})
+        return real_rename(src, dst)
+
+    monkeypatch.setattr(os, "rename", racing)
+    final = st.write_model("pca", "h1", {"a.txt": b"mine"}, {})
+    assert (final / "a.txt").read_bytes() == b"other"
+    assert not list(final.parent.glob(".*.tmp"))
+
+
+def test_stale_tmp_files_are_removed_on_open(tmp_path) -> None:
+    st = ResultStore.open(tmp_path / "s", {"d": 1})
+    cell_dir = st.cell_path("limits", "f1", 0).parent
+    cell_dir.mkdir(parents=True)
+    old, young = cell_dir / ".seed-0.json.abc.tmp", cell_dir / ".seed-1.json.def.tmp"
+    old_model = st.root / "models" / ".pca.xyz.tmp"
+    old_model.mkdir(parents=True)
+    for p in (old, young):
+        p.write_text("{")
+    past = time.time() - 2 * 3600
+    os.utime(old, (past, past))
+    os.utime(old_model, (past, past))
+    ResultStore.open(tmp_path / "s", {"d": 1})
+    assert not old.exists() and not old_model.exists() and young.exists()
+
+
+# ---- items 8, 10, 11: the sweep and the leaderboard CLI --------------------------------------
+def _small_sweep():
+    from evaluation.harness import SimulatedData, SweepConfig, default_specs
+
+    return SweepConfig(
+        diagnosers=default_specs(("limits",)),
+        data=SimulatedData(
+            scenarios=("nominal",), test_seeds=(0,), train_seeds=(200,), n_samples=300
+        ),
+    )
+
+
+def test_wrong_type_in_a_cell_file_is_reported_before_any_work(tmp_path, monkeypatch) -> None:
+    from evaluation import sweep
+
+    cfg = _small_sweep()
+    sweep.run_sweep(cfg, tmp_path / "s", n_workers=0, progress=False)
+    cell = next((tmp_path / "s" / "cells").rglob("seed-0.json"))
+    obj = json.loads(cell.read_text())
+    obj["record"]["r_fd"] = "high"
+    cell.write_text(json.dumps(obj))
+    (tmp_path / "s" / "models" / "limits" / "spec.json").unlink()  # work would be to retrain
+    (tmp_path / "s" / "models" / "limits").rename(tmp_path / "s" / "models" / ".old")
+    monkeypatch.setattr(sweep, "make_backend", lambda *a: pytest.fail("work started"))
+    with pytest.raises(ValueError, match=r"seed-0\.json: .*r_fd='high' has the wrong type"):
+        sweep.run_sweep(cfg, tmp_path / "s", n_workers=0, progress=False)
+
+
+def test_bad_hyperparameter_fails_before_training(tmp_path, monkeypatch) -> None:
+    from evaluation import sweep
+    from evaluation.harness import DiagnoserSpec
+
+    cfg = _small_sweep()
+    cfg = type(cfg)(diagnosers=(DiagnoserSpec("pca", {"alpha": 5}),), data=cfg.data)
+    monkeypatch.setattr(sweep, "make_backend", lambda *a: pytest.fail("work started"))
+    with pytest.raises(ValueError, match=r"diagnoser 'pca': alpha=5 is outside"):
+        sweep.run_sweep(cfg, tmp_path / "s", n_workers=0, progress=False)
+
+
+def _cli(args: list[str], capsys) -> tuple[int, str]:
+    from evaluation.leaderboard import main
+
+    with pytest.raises(SystemExit) as e:
+        main([*args, "--no-progress", "--no-figures"])
+    return e.value.code, capsys.readouterr().err
+
+
+def test_cli_out_on_or_under_a_regular_file(tmp_path, capsys) -> None:
+    f = tmp_path / "file.txt"
+    f.write_text("x")
+    code, err = _cli(["--quick", "--out", str(f)], capsys)
+    assert code == 2 and f"--out '{f}' is a regular file" in err and "Traceback" not in err
+    code, err = _cli(["--quick", "--out", str(f / "sub")], capsys)
+    assert code == 2 and f"lies under '{f}', which is a regular file" in err
+
+
+def test_cli_backend_ray_without_ray(tmp_path, capsys, monkeypatch) -> None:
+    real_import = builtins.__import__
+
+    def no_ray(name, *a, **kw):
+        if name == "ray" or name.startswith("ray."):
+            raise ImportError("No module named 'ray'")
+        return real_import(name, *a, **kw)
+
+    monkeypatch.setattr(builtins, "__import__", no_ray)
+    code, err = _cli(["--quick", "--backend", "ray", "--out", str(tmp_path / "o")], capsys)
+    assert code == 2 and "--backend ray needs Ray, which is not installed" in err
+    assert not (tmp_path / "o").exists()
+
+
+def test_cli_store_error_does_not_say_rerun(tmp_path, capsys, monkeypatch) -> None:
+    import evaluation.leaderboard as lb
+
+    def corrupted(opts):
+        raise StoreError("/x/cells/seed-0.json is not valid JSON: delete it to recompute")
+
+    monkeypatch.setattr(lb, "run", corrupted)
+    code, err = _cli(["--quick", "--out", str(tmp_path / "o")], capsys)
+    assert code == 1 and "seed-0.json is not valid JSON" in err and "re-run" not in err
+
+
+# ---- item 10: external-data manifests --------------------------------------------------------
+def _manifest(tmp_path: Path, **changes) -> Path:
+    rng = np.random.default_rng(0)
+    for name in ("train.csv", "test.csv"):
+        y = rng.normal(size=(200, 2))
+        (tmp_path / name).write_text("a,b\n" + "\n".join(f"{p},{q}" for p, q in y))
+    spec = {
+        "inputs": ["a"],
+        "outputs": ["b"],
+        "train_files": ["train.csv"],
+        "test_files": [{"path": "test.csv", "onset": None}],
+        "sample_time_s": 60,
+        **changes,
+    }
+    (tmp_path / "dataset.json").write_text(json.dumps(spec))
+    return tmp_path
+
+
+@pytest.mark.parametrize(
+    ("changes", "match"),
+    [
+        ({"inputs": "a"}, r"dataset\.json: inputs='a' is outside .* list of names"),
+        ({"outputs": ["b", 3]}, r"dataset\.json: outputs=\['b', 3\] is outside"),
+        ({"sample_time_s": "ten"}, r"dataset\.json: sample_time_s='ten' is outside"),
+        (
+            {"diagnoser_params": {"pca": {"alpha": "x"}}},
+            r"dataset\.json: diagnoser_params\['pca'\]: alpha='x' is outside",
+        ),
+    ],
+)
+def test_bad_manifest(tmp_path, changes, match) -> None:
+    from evaluation.external import load_manifest
+
+    with pytest.raises(ValueError, match=match):
+        load_manifest(_manifest(tmp_path, **changes))
