@@ -33,6 +33,7 @@ import numpy as np
 from diagnosers.base import Episode
 from evaluation.sources import DataDescription, LoadedEpisode
 from evaluation.store import check_name
+from fcc_env.io import read_csv_columns
 
 __all__ = [
     "SANTANDER_ARX_PARAMS",
@@ -140,27 +141,9 @@ def read_table(
     else:
         if path.suffix.lower() != ".csv":
             raise ValueError(f"{path}: unsupported file type {path.suffix!r}. Allowed: {SUFFIXES}")
-        skip = 0
-        if column_names is None:
-            with path.open(newline="") as fh:
-                header = next(csv.reader(fh, delimiter=delimiter), None)
-            if header is None:
-                raise ValueError(f"{path} is empty; expected a header row and data")
-            names = [h.strip() for h in header]
-            skip = 1
-        else:
-            names = list(column_names)
-        _check_columns(path, columns, names)
-        idx = [names.index(c) for c in columns]
-        try:
-            data = np.loadtxt(path, delimiter=delimiter, skiprows=skip, usecols=idx, ndmin=2)
-        except ValueError as e:
-            raise ValueError(
-                f"{path}: could not read numeric data ({e}); check the delimiter, the header "
-                "(column_names=None expects one) and for text or empty fields"
-            ) from e
-        if data.shape[1] != len(columns):
-            raise ValueError(f"{path}: expected {len(columns)} columns, read {data.shape[1]}")
+        _, data = read_csv_columns(
+            path, list(columns), column_names=column_names, delimiter=delimiter
+        )
     if data.shape[0] == 0:
         raise ValueError(f"{path} has no data rows")
     bad = ~np.isfinite(data)

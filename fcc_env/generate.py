@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from fcc_env import effects as fx
-from fcc_env.io import atomic_open, atomic_write_json
+from fcc_env.io import atomic_open, atomic_write_json, read_csv_columns
 from fcc_env.params import INPUT_NAMES, MEASUREMENT_NAMES, STATE_NAMES, FCCParams
 from fcc_env.scenarios import DEFAULT_N_SAMPLES, SCENARIOS, FaultSpec
 from fcc_env.simulation import (
@@ -199,8 +199,9 @@ def write_dataset(
     return out
 
 
-def read_dataset(path: str | os.PathLike) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
-    """Read a dataset written by :func:`write_dataset`: ``(sidecar, {column: array})``."""
+def read_sidecar(path: str | os.PathLike) -> dict[str, Any]:
+    """The JSON sidecar of the dataset ``path`` (a ``.csv`` written by :func:`write_dataset`),
+    checked: the dataset and its sidecar exist and the sidecar has this library's format tag."""
     csv = Path(path)
     sidecar = csv.with_suffix(".json")
     if not csv.is_file():
@@ -210,11 +211,21 @@ def read_dataset(path: str | os.PathLike) -> tuple[dict[str, Any], dict[str, np.
     try:
         meta = json.loads(sidecar.read_text())
     except json.JSONDecodeError as e:
-        raise ValueError(f"{sidecar} is not valid JSON: {e}") from e
+        raise ValueError(f"sidecar {str(sidecar)!r} is not valid JSON: {e}") from e
     if not isinstance(meta, dict) or meta.get("format") != DATASET_FORMAT:
-        raise ValueError(f"{sidecar} is not an FCC dataset sidecar (format {DATASET_FORMAT!r})")
-    table = np.genfromtxt(csv, delimiter=",", names=True)
-    return meta, {n: np.asarray(table[n]) for n in table.dtype.names}
+        got = meta.get("format") if isinstance(meta, dict) else meta
+        raise ValueError(
+            f"sidecar {str(sidecar)!r} is not an FCC dataset sidecar (needs format "
+            f"{DATASET_FORMAT!r}, got {got!r})"
+        )
+    return meta
+
+
+def read_dataset(path: str | os.PathLike) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
+    """Read a dataset written by :func:`write_dataset`: ``(sidecar, {column: array})``."""
+    meta = read_sidecar(path)
+    names, table = read_csv_columns(path)
+    return meta, {n: table[:, j] for j, n in enumerate(names)}
 
 
 def main(argv: Sequence[str] | None = None) -> int:

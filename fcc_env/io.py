@@ -1,4 +1,4 @@
-"""File helpers shared by every package: one atomic writer, one JSON scrubber.
+"""File helpers shared by every package: one atomic writer, one JSON scrubber, one CSV reader.
 
 Every file the project writes (datasets, saved diagnosers, result-store cells, reports) goes
 through :func:`atomic_write`: the bytes go to a temporary file in the target's folder, are
@@ -17,11 +17,12 @@ PosixPath(...x.json')
 
 from __future__ import annotations
 
+import csv
 import json
 import math
 import os
 import tempfile
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import IO, Any
@@ -35,6 +36,7 @@ __all__ = [
     "atomic_write_json",
     "json_default",
     "json_safe",
+    "read_csv_columns",
     "remove_stale_tmp",
 ]
 
@@ -145,3 +147,55 @@ def remove_stale_tmp(directory: str | os.PathLike, *, min_age_s: float = 0.0) ->
                 p.unlink(missing_ok=True)
                 removed.append(p)
     return removed
+
+
+def read_csv_columns(
+    path: str | os.PathLike,
+    columns: Sequence[str] | None = None,
+    *,
+    column_names: Sequence[str] | None = None,
+    delimiter: str = ",",
+) -> tuple[list[str], np.ndarray]:
+    """The one CSV reader: ``(names, data)`` of the numeric ``columns`` of a CSV file.
+
+    Args:
+        path: the file.
+        columns: the columns wanted, by name, in this order (``None``: all of them).
+        column_names: names of all columns of a headerless file, in order; ``None`` reads them
+            from the first row.
+        delimiter: field separator.
+
+    Returns:
+        The names read and a float array ``(n_rows, n_columns)``.
+
+    Raises:
+        ValueError: a missing or empty file, an unknown column (the message lists the available
+            ones) or a field that is not a number; each message names the file.
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise ValueError(f"{p} does not exist or is not a file")
+    skip = 0
+    if column_names is None:
+        with p.open(newline="") as fh:
+            header = next(csv.reader(fh, delimiter=delimiter), None)
+        if header is None:
+            raise ValueError(f"{p} is empty; expected a header row and data")
+        names = [h.strip() for h in header]
+        skip = 1
+    else:
+        names = [str(c) for c in column_names]
+    wanted = names if columns is None else [str(c) for c in columns]
+    missing = [c for c in wanted if c not in names]
+    if missing:
+        raise ValueError(f"{p}: unknown column(s) {missing}. Available: {names}")
+    try:
+        data = np.loadtxt(
+            p, delimiter=delimiter, skiprows=skip, usecols=[names.index(c) for c in wanted], ndmin=2
+        )
+    except ValueError as e:
+        raise ValueError(
+            f"{p}: could not read numeric data ({e}); check the delimiter, the header and for "
+            "text or empty fields"
+        ) from e
+    return names, data

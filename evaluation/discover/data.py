@@ -8,7 +8,6 @@ index and the sample time. It never parses the ``truth`` columns (``in_*``, ``cl
 
 from __future__ import annotations
 
-import json
 import math
 import os
 from collections.abc import Mapping, Sequence
@@ -18,6 +17,8 @@ from typing import Any
 
 import numpy as np
 
+from fcc_env.generate import DATASET_FORMAT, read_sidecar
+from fcc_env.io import read_csv_columns
 from fcc_env.validation import Real, check
 
 __all__ = [
@@ -32,7 +33,7 @@ __all__ = [
 
 TABLE1 = ("R_ar", "T_ar", "T_fp", "T_rx", "T_rg1", "T_rg2", "T_d1", "T_dg")
 INDEX_COLUMNS = ("episode", "k", "time_s")
-DATASET_FORMAT = "fcc-dataset"
+
 #: The sample time must be a finite positive number of seconds.
 POSITIVE_SECONDS = Real(0.0, math.inf, closed="neither", unit="s")
 
@@ -110,23 +111,10 @@ def load_measured(path: str | os.PathLike) -> MeasuredData:
     csv = Path(path)
     if csv.suffix != ".csv":
         raise ValueError(f"--data must be a .csv dataset (with a .json sidecar), got {str(csv)!r}")
-    if not csv.is_file():
-        raise ValueError(f"dataset {str(csv)!r} does not exist")
-    sidecar = csv.with_suffix(".json")
-    if not sidecar.is_file():
-        raise ValueError(f"dataset {str(csv)!r} has no JSON sidecar {sidecar.name!r}")
-    try:
-        meta = json.loads(sidecar.read_text())
-    except json.JSONDecodeError as e:
-        raise ValueError(f"sidecar {str(sidecar)!r} is not valid JSON: {e}") from e
-    if not isinstance(meta, dict) or meta.get("format") != DATASET_FORMAT:
-        raise ValueError(
-            f"sidecar {str(sidecar)!r} is not an FCC dataset sidecar (needs format "
-            f"{DATASET_FORMAT!r}, got {meta.get('format') if isinstance(meta, dict) else meta!r})"
-        )
+    meta = read_sidecar(csv)
     roles = meta.get("roles")
     if not isinstance(roles, dict) or not isinstance(roles.get("measured"), list):
-        raise ValueError(f"sidecar {str(sidecar)!r} has no roles.measured list")
+        raise ValueError(f"sidecar {str(csv.with_suffix('.json'))!r} has no roles.measured list")
     wanted = [str(c) for c in roles["measured"]] + [str(c) for c in roles.get("commanded", [])]
     dt = meta.get("sample_time_s")
     dt = check("sample_time_s", dt, POSITIVE_SECONDS)
@@ -136,11 +124,8 @@ def load_measured(path: str | os.PathLike) -> MeasuredData:
     if missing:
         raise ValueError(f"dataset {str(csv)!r} lacks column(s) {missing} named in its sidecar")
     index = [c for c in ("episode",) if c in header]
-    cols = index + wanted
     try:
-        table = np.loadtxt(
-            csv, delimiter=",", skiprows=1, usecols=[header.index(c) for c in cols], ndmin=2
-        )
+        _, table = read_csv_columns(csv, index + wanted)
     except ValueError as e:
         raise ValueError(f"dataset {str(csv)!r} could not be parsed as numbers: {e}") from e
     if table.shape[0] < 50:
