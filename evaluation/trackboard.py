@@ -62,6 +62,7 @@ class FaultCell:
     terminated: int
     n: int
     rank: str = ""
+    ended_reasons: tuple[tuple[str, int], ...] = ()  # (termination reason, episodes)
 
 
 @dataclass(frozen=True)
@@ -97,6 +98,7 @@ class TrackRow:
                     "t_dt_over_oracle": c.ratio.to_json(),
                     "misses": c.misses,
                     "terminated": c.terminated,
+                    "ended_reasons": dict(c.ended_reasons),
                     "n": c.n,
                     "rank_r_td": c.rank,
                 }
@@ -121,6 +123,15 @@ def _by(records: Sequence[CellResult], label: str, scenario: str) -> list[CellRe
     return [r for r in records if r.diagnoser == label and r.scenario == scenario]
 
 
+def _reasons(records: Sequence[CellResult]) -> tuple[tuple[str, int], ...]:
+    counts: dict[str, int] = {}
+    for r in records:
+        if r.terminated_at is not None:
+            reason = r.termination_reason or "unknown"
+            counts[reason] = counts.get(reason, 0) + 1
+    return tuple(sorted(counts.items()))
+
+
 def track_rows(
     records: Sequence[CellResult], labels: Sequence[str], faults: Sequence[str]
 ) -> list[TrackRow]:
@@ -141,6 +152,7 @@ def track_rows(
                 misses=sum(r.missed for r in recs),
                 terminated=sum(r.terminated_at is not None for r in _by(records, label, f)),
                 n=len(recs),
+                ended_reasons=_reasons(_by(records, label, f)),
             )
         rows.append(
             TrackRow(
@@ -179,7 +191,9 @@ def track_table(run: TrackRun) -> str:
         "r_fd: share of a healthy episode in alarm; r_td: share of the post-onset samples in "
         "alarm; t_dt: samples from onset to the first alarm (mean over detected faults); "
         "t_dt/oracle: (t_dt + 1) / (oracle t_dt + 1) over seeds both detected. Brackets: 95 % "
-        "BCa bootstrap intervals over seeds; ranks on r_td, '=' marks overlapping intervals.",
+        "BCa bootstrap intervals over seeds; ranks on r_td, '=' marks overlapping intervals. "
+        "missed/ended: faults never detected / episodes the plant ended early (with the "
+        "reasons: well_empty, afterburn, extinguished), scored on their samples before the end.",
         "",
         "| " + " | ".join(head) + " |",
         "|" + "---|" * len(head),
@@ -197,7 +211,8 @@ def track_table(run: TrackRun) -> str:
                 f"{_ci(c.r_td, 3)} ({c.rank})",
                 _ci(c.t_dt, 0),
                 _ci(c.ratio, 2),
-                f"{c.misses}/{c.terminated}",
+                f"{c.misses}/{c.terminated}"
+                + "".join(f" {reason}×{n}" for reason, n in c.ended_reasons),
             ]
         lines.append("| " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
