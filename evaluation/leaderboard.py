@@ -366,7 +366,8 @@ def write_figures(results: SweepResults, directory: Path) -> list[Path]:
     """One PNG per scenario × diagnoser on the scenario's first test seed.
 
     Diagnosers with a :meth:`~diagnosers.base.Diagnoser.band_view` (``lrgf-mem``: one band per
-    relation around its measured output) get a second one, ``<label>-bands.png``. The arrays come
+    relation around its measured output) get a second one, ``<label>-bands.png``, whose strip shows
+    the detector's alarms with the band exits as a separate row. The arrays come
     from the scoring pass (``run_sweep(figure_cells=...)`` keeps them in the store); a cell whose
     arrays are missing (a sweep run without figures) is skipped.
     """
@@ -387,11 +388,14 @@ def write_figures(results: SweepResults, directory: Path) -> list[Path]:
             )
             paths.append(save_png(fig, directory / sc / f"{spec.key}.png"))
             if bands is not None:
+                # the panels show the models' bands; shading and strip the detector's alarms,
+                # the band exits a row of their own (they are not the detector's decision)
                 fig = detection_figure(
                     episode,
                     bands,
-                    title=f"{spec.key} on {sc}, seed {seed}: model bands (alarms: band exits)",
+                    title=f"{spec.key} on {sc}, seed {seed}: model bands",
                     fault_onset=onset,
+                    decisions=detection,
                 )
                 paths.append(save_png(fig, directory / sc / f"{spec.key}-bands.png"))
     return paths

@@ -6,7 +6,14 @@ import numpy as np
 import pytest
 
 from diagnosers.base import Detection, Episode
-from evaluation.plots import detection_figure, save_png, select_signals
+from evaluation.plots import (
+    ALARM_LABEL,
+    EXIT_LABEL,
+    axis_label,
+    detection_figure,
+    save_png,
+    select_signals,
+)
 
 
 def _episode(n: int = 300) -> Episode:
@@ -26,10 +33,10 @@ def test_band_figure_layout_and_png(tmp_path) -> None:
     sig = rng.normal(size=(n, 2))
     sig[220:, 1] += 5.0
     det = _detection(sig, -np.full((n, 2), 3.0), np.full((n, 2), 3.0))
-    fig = detection_figure(_episode(n), det)
+    fig = detection_figure(_episode(n), det, units={"s1": "°C", "s2": "t/h"})
     axes = fig.get_axes()
     assert len(axes) == 3  # two signal panels and the alarm panel
-    assert [ax.get_ylabel() for ax in axes[:2]] == ["s1", "s2"]
+    assert [ax.get_ylabel() for ax in axes[:2]] == ["s1 [°C]", "s2 [t/h]"]
     assert axes[0].get_yscale() == "linear"
     assert axes[0].collections[0].get_label() == "band"
     det.lower[:40], det.upper[:40] = -np.inf, np.inf  # no limit during a warm-up: still a band
@@ -57,3 +64,104 @@ def test_select_signals_and_bad_input() -> None:
         detection_figure(_episode(n), det, max_signals=0)
     with pytest.raises(ValueError, match="detection has 300 samples but the episode has 200"):
         detection_figure(_episode(200), det)
+
+
+def _strip_rows(fig) -> dict[str, np.ndarray]:
+    """The strip's named on/off rows: label -> boolean per sample (the step line above its row)."""
+    strip = fig.get_axes()[-1]
+    return {
+        line.get_label(): np.asarray(line.get_ydata()) > np.min(line.get_ydata())
+        for line in strip.get_lines()
+        if not line.get_label().startswith("_")
+    }
+
+
+def _legend_labels(fig) -> list[str]:
+    return [t.get_text() for legend in fig.legends for t in legend.get_texts()]
+
+
+def test_every_y_axis_has_a_unit_and_the_legend_names_the_alarm_shading() -> None:
+    n = 300
+    rng = np.random.default_rng(2)
+    meas = 500.0 + rng.normal(size=(n, 2))
+    det = Detection(np.zeros(n, bool), meas, meas - 3, meas + 3, np.zeros((n, 2)), ("T_rx", "R_ar"))
+    stat = np.exp(rng.normal(size=(n, 2)))
+    t2 = Detection(
+        np.zeros(n, bool),
+        stat,
+        np.full((n, 2), -np.inf),
+        np.full((n, 2), 9.0),
+        stat,
+        ("T2", "SPE"),
+    )
+    for d, want in ((det, ["T_rx [°C]", "R_ar [t/h]"]), (t2, ["T² [-]", "SPE [-]"])):
+        fig = detection_figure(_episode(n), d)
+        labels = [ax.get_ylabel() for ax in fig.get_axes()]
+        assert labels[:2] == want
+        assert all("[" in lab and "]" in lab for lab in labels), labels
+        assert "[" in fig.get_axes()[-1].get_xlabel()
+        # one figure legend (outside the panels, so it covers no data) with the alarm shading
+        assert all(ax.get_legend() is None for ax in fig.get_axes())
+        assert f"{ALARM_LABEL} (shaded)" in _legend_labels(fig)
+        assert "fault onset" in _legend_labels(fig)
+
+
+def test_axis_label_units() -> None:
+    assert axis_label("T_rg2") == "T_rg2 [°C]"
+    assert axis_label("T_rx [°C]") == "T_rx [°C]"  # already carries its unit
+    assert axis_label("T2[ewma]") == "T² of EWMA residuals [-]"
+    assert axis_label("ewma[T_rx]") == "EWMA of T_rx residual [-]"
+    assert axis_label("F3") == "F3 [?]"  # unknown: never a guessed unit
+    assert axis_label("F3", {"F3": "kg/s"}) == "F3 [kg/s]"
+
+
+def test_subtitle_names_the_shown_channels_and_why() -> None:
+    n = 300
+    sig = np.zeros((n, 8))
+    sig[:, [2, 5, 7]] = 10.0  # these leave their limits
+    names = tuple(f"c{i}" for i in range(8))
+    det = Detection(np.ones(n, bool), sig, -np.ones((n, 8)), np.ones((n, 8)), sig, names)
+    title = detection_figure(_episode(n), det, title="limits on f1").get_suptitle()
+    assert title.splitlines()[0] == "limits on f1"
+    assert "shown: c2, c5, c7 (3 of 8 monitored signals, those most often outside" in title
+    det2 = Detection(
+        det.alarm, sig[:, :2], det.lower[:, :2], det.upper[:, :2], sig[:, :2], names[:2]
+    )
+    assert "all 2 monitored signals shown" in detection_figure(_episode(n), det2).get_suptitle()
+
+
+def test_band_figure_strip_shows_the_detector_alarms_and_band_exits_apart() -> None:
+    n = 300
+    rng = np.random.default_rng(4)
+    y = rng.normal(size=(n, 2))
+    lo, hi = np.full((n, 2), -1.5), np.full((n, 2), 1.5)
+    exits = np.any((y < lo) | (y > hi), axis=1)
+    bands = Detection(exits, y, lo, hi, y, ("T_rx [°C]", "T_rg1 [°C]"))
+    alarm = np.zeros(n, bool)
+    alarm[200:260] = True  # the detector raises far fewer alarms than there are band exits
+    stat = np.ones((n, 1))
+    decisions = Detection(
+        alarm, stat, np.full((n, 1), -np.inf), np.full((n, 1), 5.0), stat, ("T2[ewma]",)
+    )
+    assert exits.sum() > 20 and not np.array_equal(exits, alarm)
+    fig = detection_figure(_episode(n), bands, decisions=decisions)
+    rows = _strip_rows(fig)
+    assert set(rows) == {ALARM_LABEL, EXIT_LABEL}
+    np.testing.assert_array_equal(rows[ALARM_LABEL], alarm)
+    np.testing.assert_array_equal(rows[EXIT_LABEL], exits)
+    assert EXIT_LABEL in _legend_labels(fig)
+    assert [t.get_text() for t in fig.get_axes()[-1].get_yticklabels()] == [
+        "band exit",
+        "detector alarm",
+    ]
+    # the shading in the panels is the detector's: one span, 200..259, not the scattered exits
+    shade = fig.get_axes()[0].collections[-1]
+    xs = np.concatenate([p.vertices[:, 0] for p in shade.get_paths()])
+    assert xs.min() == 200 and xs.max() == 259
+    # without a separate view the strip has only the detector's row
+    alone = _strip_rows(detection_figure(_episode(n), decisions))
+    assert set(alone) == {ALARM_LABEL}
+    np.testing.assert_array_equal(alone[ALARM_LABEL], alarm)
+    short = Detection(exits[:200], y[:200], lo[:200], hi[:200], y[:200], bands.signal_names)
+    with pytest.raises(ValueError, match="decisions has 300 samples but the episode has 200"):
+        detection_figure(_episode(200), short, decisions=decisions)
