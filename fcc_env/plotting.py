@@ -9,6 +9,8 @@ import numpy as np
 
 from fcc_env.params import MEASUREMENTS
 
+_ONSET_STYLE = {"color": "tab:red", "linestyle": "--", "linewidth": 1.0}
+
 
 def _figure(width_in: float, height_in: float):
     # An explicit Agg canvas: no pyplot state, safe in worker processes and without a display.
@@ -20,20 +22,66 @@ def _figure(width_in: float, height_in: float):
     return fig
 
 
-def trend_image(y: np.ndarray, k_now: int, sample_time_s: float) -> np.ndarray:
-    """RGB array (H, W, 3) uint8 of the recent measurements ``y`` (n, 8) ending at sample k_now."""
+def trend_figure(
+    y: np.ndarray,
+    k_now: int,
+    sample_time_s: float,
+    *,
+    scenario: str | None = None,
+    fault_onset: int | None = None,
+):
+    """The env's trend frame as a matplotlib Figure: the recent measurements ``y`` (n, 8).
+
+    ``y`` ends at sample ``k_now``. The title names the scenario and the time (sample and
+    hours); the fault onset is a dashed line once it has happened (``k_now >= fault_onset``),
+    and the title says since when. ``fault_onset=None``: no fault (or none known).
+    """
     fig = _figure(8, 6)
+    fig.set_layout_engine("constrained")
     axes = fig.subplots(4, 2, sharex=True)
     n = y.shape[0]
-    t_h = (np.arange(k_now - n + 1, k_now + 1)) * sample_time_s / 3600.0
+    hours = sample_time_s / 3600.0
+    t_h = (np.arange(k_now - n + 1, k_now + 1)) * hours
+    onset_seen = fault_onset is not None and k_now >= fault_onset
     for i, ax in enumerate(axes.T.ravel()):
         m = MEASUREMENTS[i]
-        ax.plot(t_h, y[:, i], lw=0.8)
+        ax.plot(t_h, y[:, i], lw=0.8, label="measurement")
         ax.set_ylabel(f"{m.name} [{m.unit}]", fontsize=7)
         ax.tick_params(labelsize=6)
+        if onset_seen and fault_onset >= k_now - n + 1:  # the onset lies in the window
+            ax.axvline(fault_onset * hours, **_ONSET_STYLE, label="fault onset")
     for ax in axes[-1]:
         ax.set_xlabel("time [h]", fontsize=7)
-    fig.tight_layout()
+    if scenario is None:
+        what = ""
+    elif onset_seen:
+        what = (
+            f"scenario {scenario}, fault since sample {fault_onset} ({fault_onset * hours:.2f} h)"
+        )
+    elif fault_onset is None:
+        what = f"scenario {scenario}, no fault"
+    else:
+        what = f"scenario {scenario}, no fault yet"
+    title = f"FCC-v0, sample {k_now}, t = {k_now * hours:.2f} h"
+    fig.suptitle(f"{title}\n{what}" if what else title, fontsize=9)
+    if onset_seen:
+        handles, labels = axes[0, 0].get_legend_handles_labels()
+        if "fault onset" in labels:
+            i = labels.index("fault onset")
+            fig.legend([handles[i]], [labels[i]], loc="outside lower center", fontsize=7)
+    return fig
+
+
+def trend_image(
+    y: np.ndarray,
+    k_now: int,
+    sample_time_s: float,
+    *,
+    scenario: str | None = None,
+    fault_onset: int | None = None,
+) -> np.ndarray:
+    """RGB array (H, W, 3) uint8 of :func:`trend_figure` (same arguments)."""
+    fig = trend_figure(y, k_now, sample_time_s, scenario=scenario, fault_onset=fault_onset)
     fig.canvas.draw()
     return np.asarray(fig.canvas.buffer_rgba())[..., :3].copy()
 

@@ -14,6 +14,7 @@ from evaluation.plots import (
     save_png,
     select_signals,
 )
+from fcc_env.plotting import trend_figure, trend_image
 
 
 def _episode(n: int = 300) -> Episode:
@@ -165,3 +166,28 @@ def test_band_figure_strip_shows_the_detector_alarms_and_band_exits_apart() -> N
     short = Detection(exits[:200], y[:200], lo[:200], hi[:200], y[:200], bands.signal_names)
     with pytest.raises(ValueError, match="decisions has 300 samples but the episode has 200"):
         detection_figure(_episode(200), short, decisions=decisions)
+
+
+def test_env_trend_frame_names_scenario_time_and_onset() -> None:
+    y = 500.0 + np.random.default_rng(5).normal(size=(200, 8))
+    before = trend_figure(y, 199, 10.0, scenario="f1", fault_onset=250)
+    after = trend_figure(y, 299, 10.0, scenario="f1", fault_onset=250)
+    healthy = trend_figure(y, 299, 10.0, scenario="nominal")
+    assert before.get_suptitle() == "FCC-v0, sample 199, t = 0.55 h\nscenario f1, no fault yet"
+    assert after.get_suptitle().endswith("scenario f1, fault since sample 250 (0.69 h)")
+    assert healthy.get_suptitle().endswith("scenario nominal, no fault")
+    axes = after.get_axes()
+    assert all("[" in ax.get_ylabel() and "]" in ax.get_ylabel() for ax in axes)
+    onset_lines = [ln for ln in axes[0].get_lines() if ln.get_label() == "fault onset"]
+    assert len(onset_lines) == 1 and onset_lines[0].get_xdata()[0] == 250 * 10.0 / 3600
+    assert not [ln for ln in before.get_axes()[0].get_lines() if ln.get_label() == "fault onset"]
+    assert [t.get_text() for lg in after.legends for t in lg.get_texts()] == ["fault onset"]
+    # the rasterised frames differ by scenario and by time, at one fixed size
+    frames = [
+        trend_image(y, 299, 10.0, scenario="f1", fault_onset=250),
+        trend_image(y, 299, 10.0, scenario="nominal"),
+        trend_image(y, 399, 10.0, scenario="nominal"),
+    ]
+    assert len({f.shape for f in frames}) == 1 and frames[0].dtype == np.uint8
+    assert not np.array_equal(frames[0], frames[1])
+    assert not np.array_equal(frames[1], frames[2])
