@@ -92,8 +92,10 @@ def _check_samples(what: str, det: Detection, n: int) -> None:
 def _shown_text(det: Detection, idx: list[int], kind: str) -> str:
     """Which signals the panels show and why (the figure's subtitle)."""
     k = det.signal.shape[1]
+    if k == 1:
+        return "the one monitored signal"
     if len(idx) == k:
-        return f"all {k} monitored signal{'s' if k > 1 else ''} shown"
+        return f"all {k} monitored signals shown"
     names = ", ".join(det.signal_names[j] for j in idx)
     return f"shown: {names} ({len(idx)} of {k} monitored signals, those most often outside their {kind})"
 
@@ -153,7 +155,9 @@ def detection_figure(
         lo_ok, hi_ok = np.isfinite(lo), np.isfinite(hi)
         if np.array_equal(lo_ok, hi_ok) and lo_ok.mean() > 0.5:
             # a two-sided band (absent where the diagnoser sets no limit, e.g. its warm-up)
-            kind = "bands"
+            # limits constant over the record are a limit pair, else a model's band
+            if lo_ok.any() and (np.ptp(lo[lo_ok]) > 0 or np.ptp(hi[hi_ok]) > 0):
+                kind = "bands"
             ax.fill_between(
                 t,
                 np.where(lo_ok, lo, 0.0),
