@@ -86,37 +86,56 @@ def trend_image(
     return np.asarray(fig.canvas.buffer_rgba())[..., :3].copy()
 
 
+def scenarios_figure(
+    episodes: Mapping[str, np.ndarray],
+    onsets: Mapping[str, int | None],
+    sample_time_s: float,
+    channels: Sequence[int] = (3, 4, 5, 6, 7),
+    *,
+    title: str | None = None,
+):
+    """One panel per channel, one line per scenario, fault onsets marked (a Figure).
+
+    Every y axis carries its unit; one legend for the figure sits below the panels (it covers no
+    data) and names the scenarios and the dashed onset lines.
+    """
+    fig = _figure(11, 2.2 * len(channels) + 0.8)
+    fig.set_layout_engine("constrained")
+    axes = fig.subplots(len(channels), 1, sharex=True, squeeze=False)[:, 0]
+    for name, y in episodes.items():
+        t_h = np.arange(y.shape[0]) * sample_time_s / 3600.0
+        for ax, c in zip(axes, channels, strict=True):
+            ax.plot(t_h, y[:, c], lw=0.7, label=name)
+    # Onsets a few samples apart would overprint labels on the plot: the legend names them.
+    known = {name: onset for name, onset in onsets.items() if onset is not None}
+    for i, onset in enumerate(sorted(set(known.values()))):
+        for ax in axes:
+            ax.axvline(
+                onset * sample_time_s / 3600.0, ls="--", lw=0.8, color="k", alpha=0.5,
+                label="_" if i else "fault onset: " + ", ".join(
+                    f"{name} {k * sample_time_s / 3600.0:.2f} h" for name, k in known.items()
+                ),
+            )  # fmt: skip
+    for ax, c in zip(axes, channels, strict=True):
+        ax.set_ylabel(f"{MEASUREMENTS[c].name} [{MEASUREMENTS[c].unit}]")
+    axes[-1].set_xlabel("time [h]")
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside lower center", ncol=len(labels), fontsize=8)
+    fig.suptitle(title or "FCC-v0: the healthy plant and each fault, one line per scenario")
+    return fig
+
+
 def plot_scenarios(
     episodes: Mapping[str, np.ndarray],
     onsets: Mapping[str, int | None],
     sample_time_s: float,
     path: str | Path,
     channels: Sequence[int] = (3, 4, 5, 6, 7),
+    *,
+    title: str | None = None,
 ) -> Path:
-    """One panel per channel, one line per scenario, fault onsets marked; saved as PNG."""
-    fig = _figure(11, 2.2 * len(channels))
-    axes = fig.subplots(len(channels), 1, sharex=True, squeeze=False)[:, 0]
-    for name, y in episodes.items():
-        t_h = np.arange(y.shape[0]) * sample_time_s / 3600.0
-        for ax, c in zip(axes, channels, strict=True):
-            ax.plot(t_h, y[:, c], lw=0.7, label=name)
-    for name, onset in onsets.items():
-        if onset is not None:
-            for ax in axes:
-                ax.axvline(onset * sample_time_s / 3600.0, ls="--", lw=0.8, color="k", alpha=0.5)
-            axes[0].annotate(
-                f"{name} onset",
-                (onset * sample_time_s / 3600.0, 1.0),
-                xycoords=("data", "axes fraction"),
-                fontsize=7,
-                rotation=90,
-                va="top",
-            )
-    for ax, c in zip(axes, channels, strict=True):
-        ax.set_ylabel(f"{MEASUREMENTS[c].name} [{MEASUREMENTS[c].unit}]")
-    axes[0].legend(ncol=len(episodes), fontsize=8, loc="upper left")
-    axes[-1].set_xlabel("time [h]")
-    fig.tight_layout()
+    """:func:`scenarios_figure` saved as PNG at ``path`` (parent directories are created)."""
+    fig = scenarios_figure(episodes, onsets, sample_time_s, channels, title=title)
     out = Path(path)
     out.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(out)

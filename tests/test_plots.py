@@ -14,7 +14,7 @@ from evaluation.plots import (
     save_png,
     select_signals,
 )
-from fcc_env.plotting import trend_figure, trend_image
+from fcc_env.plotting import plot_scenarios, scenarios_figure, trend_figure, trend_image
 
 
 def _episode(n: int = 300) -> Episode:
@@ -191,3 +191,24 @@ def test_env_trend_frame_names_scenario_time_and_onset() -> None:
     assert len({f.shape for f in frames}) == 1 and frames[0].dtype == np.uint8
     assert not np.array_equal(frames[0], frames[1])
     assert not np.array_equal(frames[1], frames[2])
+
+
+def test_demo_scenarios_figure_units_and_legend_outside(tmp_path) -> None:
+    y = 500.0 + np.random.default_rng(6).normal(size=(400, 8))
+    episodes = {"nominal": y, "f1": y + 1.0, "f3": y - 1.0}
+    onsets = {"nominal": None, "f1": 200, "f3": 210}
+    fig = scenarios_figure(episodes, onsets, 10.0)
+    axes = fig.get_axes()
+    assert [ax.get_ylabel() for ax in axes] == [
+        "T_rx [°C]",
+        "T_rg1 [°C]",
+        "T_rg2 [°C]",
+        "T_d1 [°C]",
+        "T_dg [°C]",
+    ]
+    assert axes[-1].get_xlabel() == "time [h]"
+    assert all(ax.get_legend() is None for ax in axes)
+    labels = [t.get_text() for lg in fig.legends for t in lg.get_texts()]
+    assert labels == ["nominal", "f1", "f3", "fault onset: f1 0.56 h, f3 0.58 h"]
+    path = plot_scenarios(episodes, onsets, 10.0, tmp_path / "demo" / "s.png")
+    assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
