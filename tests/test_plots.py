@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from diagnosers.base import Detection, Episode
+from evaluation.leaderboard import table_legend
 from evaluation.plots import (
     ALARM_LABEL,
     EXIT_LABEL,
@@ -14,6 +15,7 @@ from evaluation.plots import (
     save_png,
     select_signals,
 )
+from evaluation.trackboard import track_legend
 from fcc_env.plotting import plot_scenarios, scenarios_figure, trend_figure, trend_image
 
 
@@ -212,3 +214,25 @@ def test_demo_scenarios_figure_units_and_legend_outside(tmp_path) -> None:
     assert labels == ["nominal", "f1", "f3", "fault onset: f1 0.56 h, f3 0.58 h"]
     path = plot_scenarios(episodes, onsets, 10.0, tmp_path / "demo" / "s.png")
     assert path.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_table_legends_define_metrics_units_and_dispersion_alike() -> None:
+    classic, track = table_legend(10.0), track_legend(10.0)
+    for text in (classic, track):
+        assert text.startswith("Legend: r_fd: false detection rate")
+        for term in ("r_td: true detection rate", "t_dt: detection time", "[samples]"):
+            assert term in text
+        assert "(1 sample = 10 s)" in text and "[0-1, lower is better]" in text
+        assert "–: no value" in text
+    assert "a ± b: mean ± standard deviation over the test seeds" in classic
+    assert "a [lo, hi]: estimate and 95 % BCa bootstrap interval" in track
+    assert "t_dt/oracle" in track and "missed/ended" in track
+    # the metric definitions are worded once, the same way in both tables
+    for metric in ("r_fd", "r_td"):
+        assert _definition(classic, metric) in track
+    assert "(1 sample" not in table_legend() and "(1 sample" not in track_legend()
+
+
+def _definition(text: str, metric: str) -> str:
+    start = text.index(f"{metric}: ")
+    return text[start : text.index("]", start) + 1]
