@@ -3,7 +3,8 @@
 Runs a sweep (:func:`evaluation.harness.run_sweep`), then writes into ``--out``
 (default ``results/leaderboard``):
 
-* ``leaderboard.md`` - the Markdown table printed to stdout: one row per diagnoser plus the
+* ``leaderboard.md`` - the Markdown table printed to stdout (its legend, :func:`table_legend`, is
+  in the file's header and printed to stderr): one row per diagnoser plus the
   paper's Table 2 as a reference row; columns ``r_fd`` on healthy episodes, then ``r_td`` and
   ``t_dt`` for each fault, each mean ± standard deviation over test seeds, with the miss count.
 * ``leaderboard.csv`` - one row per diagnoser × scenario: ``diagnoser, scenario, n_seeds, r_fd,
@@ -68,6 +69,7 @@ __all__ = [
     "markdown_table",
     "run",
     "summary_rows",
+    "table_legend",
     "write_outputs",
 ]
 
@@ -288,14 +290,36 @@ def _reference(config: SweepConfig) -> dict[str, Any] | None:
     return PAPER_TABLE2 if config.data.describe().paper_setup else None
 
 
+def table_legend(sample_time_s: float | None = None) -> str:
+    """What the table's columns, units and signs mean (one paragraph, Markdown).
+
+    Args:
+        sample_time_s: the data's sample time, to say what a sample of ``t_dt`` is in seconds
+            (``None``: not said).
+    """
+    ts = f" (1 sample = {sample_time_s:g} s)" if sample_time_s else ""
+    return (
+        "Legend: r_fd: false detection rate, the share of a healthy episode's samples in alarm "
+        "[0-1, lower is better]; r_td: true detection rate, the share of the samples from the "
+        "fault onset on in alarm [0-1, higher is better]; t_dt: detection time, from the onset "
+        f"to the first alarm [samples]{ts}, mean over the detected faults, '(k/n missed)': k of "
+        "n faulty episodes never alarmed after the onset. a ± b: mean ± standard deviation over "
+        "the test seeds (the spread of single episodes, not an interval for the mean); no ±: "
+        "one seed, or the paper's published values; –: no value (e.g. no seed detected the "
+        "fault)."
+    )
+
+
+def _sample_time(results: SweepResults) -> float | None:
+    return results.records[0].sample_time_s if results.records else None
+
+
 def header_text(results: SweepResults) -> str:
-    """What the table is about: data, seeds, units, ranking."""
+    """What the table is about: data, seeds, the legend (metrics, units, ±), ranking."""
     description = results.config.data.describe()
     lines = [f"# Fault-detection leaderboard: {description.label}", "", *description.lines]
     lines += [
-        "Cells: mean ± std over test seeds. r_fd: false detection rate on healthy episodes; "
-        "r_td: true detection rate after the onset; t_dt: detection time in samples, mean over "
-        "detected faults, with the number of missed faults.",
+        table_legend(_sample_time(results)),
         "Rows are sorted by mean r_td over faults minus r_fd on healthy episodes.",
         "",
     ]
@@ -366,7 +390,8 @@ def write_figures(results: SweepResults, directory: Path) -> list[Path]:
     """One PNG per scenario × diagnoser on the scenario's first test seed.
 
     Diagnosers with a :meth:`~diagnosers.base.Diagnoser.band_view` (``lrgf-mem``: one band per
-    relation around its measured output) get a second one, ``<label>-bands.png``. The arrays come
+    relation around its measured output) get a second one, ``<label>-bands.png``, whose strip shows
+    the detector's alarms with the band exits as a separate row. The arrays come
     from the scoring pass (``run_sweep(figure_cells=...)`` keeps them in the store); a cell whose
     arrays are missing (a sweep run without figures) is skipped.
     """
@@ -387,11 +412,14 @@ def write_figures(results: SweepResults, directory: Path) -> list[Path]:
             )
             paths.append(save_png(fig, directory / sc / f"{spec.key}.png"))
             if bands is not None:
+                # the panels show the models' bands; shading and strip the detector's alarms,
+                # the band exits a row of their own (they are not the detector's decision)
                 fig = detection_figure(
                     episode,
                     bands,
-                    title=f"{spec.key} on {sc}, seed {seed}: model bands (alarms: band exits)",
+                    title=f"{spec.key} on {sc}, seed {seed}: model bands",
                     fault_onset=onset,
+                    decisions=detection,
                 )
                 paths.append(save_png(fig, directory / sc / f"{spec.key}-bands.png"))
     return paths
@@ -758,7 +786,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         _store_failure(parser, e)
     written = write_outputs(results, opts.out, figures=opts.figures)
     reference = _reference(results.config)
-    print(markdown_table(results.summary(), reference=reference), end="")
+    print(markdown_table(results.summary(), reference=reference), end="", flush=True)
+    # stdout stays the bare table (to pipe or paste); its legend follows on stderr
+    print(table_legend(_sample_time(results)), file=sys.stderr)
     print(
         f"{results.n_computed} cells computed, {results.n_reused} reused, "
         f"{results.n_trained} diagnosers trained in {time.perf_counter() - t0:.1f} s; "

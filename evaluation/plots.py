@@ -6,26 +6,66 @@ Pure presentation: functions take an :class:`~diagnosers.base.Episode` and the
 ``show``), so it is safe in workers and tests; :func:`save_png` writes the file.
 
 Each figure has one panel per monitored signal (at most ``max_signals``; with more, those that
-leave their band most often are shown, since they explain the alarms) with the measured signal or
-statistic, its lower/upper limit (a band for two-sided checks), the fault onset as a dashed
-vertical line and alarmed samples shaded; a last panel shows the alarm sequence.
+leave their band most often are shown, since they explain the alarms, and the subtitle says so)
+with the measured signal or statistic and its unit, its lower/upper limit (a band for two-sided
+checks), the fault onset as a dashed vertical line and the detector's alarms shaded. A last strip
+shows the detector's decision; when the panels show another view of the same models (a
+:meth:`~diagnosers.base.Diagnoser.band_view`), the view's own exits are a second, named row of
+the strip, never mistaken for alarms. One legend for the whole figure sits below the panels.
 """
 
 from __future__ import annotations
 
 import os
+import re
+from collections.abc import Mapping
 from pathlib import Path
 
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
+from matplotlib.patches import Patch
 
 from diagnosers.base import Detection, Episode
+from fcc_env.params import MEASUREMENTS
 
-__all__ = ["detection_figure", "save_png", "select_signals"]
+__all__ = ["axis_label", "detection_figure", "save_png", "select_signals"]
 
 _ONSET_STYLE = {"color": "tab:red", "linestyle": "--", "linewidth": 1.2}
 _ALARM_COLOR = "tab:orange"
+_EXIT_COLOR = "tab:purple"
+#: Strip labels: the detector's decision and, for a band view, the view's own exits.
+ALARM_LABEL = "detector alarm"
+EXIT_LABEL = "band exit (an output outside its band; not an alarm)"
+
+_UNITS = {m.name: m.unit for m in MEASUREMENTS}
+_HAS_UNIT = re.compile(r"\s\[[^\]]*\]$")  # "T_rx [°C]": a name that already carries its unit
+_EWMA_OF = re.compile(r"^ewma\[(.+)\]$")
+
+
+def axis_label(name: str, units: Mapping[str, str] | None = None) -> str:
+    """The y-axis label of signal ``name``, with its unit in brackets.
+
+    Measurements take their unit from ``units`` or, failing that, from the FCC-v0 table
+    (:data:`fcc_env.params.MEASUREMENTS`); test statistics (``T2``, ``SPE``, EWMA of normalised
+    residuals) are dimensionless, ``[-]``; a name that ends in ``" [unit]"`` is kept; an unknown
+    channel (external data without units) is marked ``[?]`` rather than given a guessed unit.
+    """
+    if _HAS_UNIT.search(name):
+        return name
+    unit = (units or {}).get(name, _UNITS.get(name))
+    if unit is not None:
+        return f"{name} [{unit}]"
+    if name == "T2":
+        return "T² [-]"
+    if name == "SPE":
+        return "SPE [-]"
+    if name == "T2[ewma]":
+        return "T² of EWMA residuals [-]"
+    m = _EWMA_OF.match(name)
+    if m:
+        return f"EWMA of {m.group(1)} residual [-]"
+    return f"{name} [?]"
 
 
 def select_signals(det: Detection, max_signals: int) -> list[int]:
@@ -41,6 +81,32 @@ def select_signals(det: Detection, max_signals: int) -> list[int]:
     return sorted(int(i) for i in order)
 
 
+def _check_samples(what: str, det: Detection, n: int) -> None:
+    if det.alarm.shape != (n,):
+        raise ValueError(
+            f"{what} has {det.alarm.shape[0]} samples but the episode has {n}; "
+            "pass the episode the detection was computed on"
+        )
+
+
+def _shown_text(det: Detection, idx: list[int], kind: str) -> str:
+    """Which signals the panels show and why (the figure's subtitle)."""
+    k = det.signal.shape[1]
+    if k == 1:
+        return "the one monitored signal"
+    if len(idx) == k:
+        return f"all {k} monitored signals shown"
+    names = ", ".join(det.signal_names[j] for j in idx)
+    return f"shown: {names} ({len(idx)} of {k} monitored signals, those most often outside their {kind})"
+
+
+def _raster(ax, t: np.ndarray, on: np.ndarray, row: int, color: str, label: str) -> None:
+    """One on/off row of the strip: a step line at ``row`` rising by 0.8 where ``on``."""
+    y = row + 0.8 * on.astype(float)
+    ax.fill_between(t, row, y, step="post", color=color, alpha=0.5, linewidth=0)
+    ax.step(t, y, where="post", color=color, linewidth=0.8, label=label)
+
+
 def detection_figure(
     episode: Episode,
     det: Detection,
@@ -48,39 +114,50 @@ def detection_figure(
     title: str | None = None,
     max_signals: int = 3,
     fault_onset: int | None = None,
+    decisions: Detection | None = None,
+    units: Mapping[str, str] | None = None,
 ) -> Figure:
     """Draw ``det`` over ``episode`` (see the module doc for the layout).
 
     Args:
         episode: the scored episode (its ``fault_onset`` marks the onset unless
             ``fault_onset`` is given).
-        det: the diagnoser's detection on ``episode`` (same number of samples).
+        det: what the panels show: the diagnoser's detection on ``episode``, or another view of
+            it (a band view, then pass the detection as ``decisions``); same number of samples.
         title: figure title; default names the scenario and seed.
         max_signals: at most this many signal panels (``>= 1``).
         fault_onset: onset sample to mark, overriding ``episode.fault_onset``.
+        decisions: the detector's own detection when ``det`` is another view of it: its
+            ``alarm`` is shaded and is the strip's alarm row, while ``det.alarm`` (e.g. band
+            exits) becomes a separate row named :data:`EXIT_LABEL`. ``None``: ``det`` is the
+            detection.
+        units: units of channels not in the FCC-v0 table (e.g. external data), by name.
     """
     if max_signals < 1:
         raise ValueError(f"max_signals={max_signals!r} must be >= 1")
     n = episode.n_samples
-    if det.alarm.shape != (n,):
-        raise ValueError(
-            f"detection has {det.alarm.shape[0]} samples but the episode has {n}; "
-            "pass the episode the detection was computed on"
-        )
+    _check_samples("detection", det, n)
+    if decisions is not None:
+        _check_samples("decisions", decisions, n)
+    alarm = det.alarm if decisions is None else decisions.alarm
     onset = episode.fault_onset if fault_onset is None else fault_onset
     idx = select_signals(det, max_signals)
     t = np.arange(n)
-    fig = Figure(figsize=(9.0, 2.2 * len(idx) + 1.4), layout="constrained")
+    fig = Figure(figsize=(9.0, 2.2 * len(idx) + 2.2), layout="constrained")
     FigureCanvasAgg(fig)
     axes = fig.subplots(
         len(idx) + 1, 1, sharex=True, gridspec_kw={"height_ratios": [3] * len(idx) + [1]}
     )
+    kind = "limits"
     for ax, j in zip(axes[:-1], idx, strict=True):
         s, lo, hi = det.signal[:, j], det.lower[:, j], det.upper[:, j]
         ax.plot(t, s, color="tab:blue", linewidth=0.7, label="signal")
         lo_ok, hi_ok = np.isfinite(lo), np.isfinite(hi)
         if np.array_equal(lo_ok, hi_ok) and lo_ok.mean() > 0.5:
             # a two-sided band (absent where the diagnoser sets no limit, e.g. its warm-up)
+            # limits constant over the record are a limit pair, else a model's band
+            if lo_ok.any() and (np.ptp(lo[lo_ok]) > 0 or np.ptp(hi[hi_ok]) > 0):
+                kind = "bands"
             ax.fill_between(
                 t,
                 np.where(lo_ok, lo, 0.0),
@@ -95,7 +172,7 @@ def detection_figure(
             if hi_ok.any():
                 ax.plot(t, np.where(hi_ok, hi, np.nan), color="k", linewidth=1.0, label="limit")
             if lo_ok.any():
-                ax.plot(t, np.where(lo_ok, lo, np.nan), color="k", linewidth=1.0)
+                ax.plot(t, np.where(lo_ok, lo, np.nan), color="k", linewidth=1.0, label="limit")
         # A one-sided, positive statistic (T², SPE) spans decades after a fault; exact zeros (a
         # diagnoser's silent warm-up) are simply not drawn on the log axis.
         if not lo_ok.any() and np.all(s >= 0) and np.mean(s > 0) > 0.5:
@@ -104,7 +181,7 @@ def detection_figure(
             t,
             0,
             1,
-            where=det.alarm,
+            where=alarm,
             transform=ax.get_xaxis_transform(),
             color=_ALARM_COLOR,
             alpha=0.15,
@@ -112,19 +189,39 @@ def detection_figure(
         )
         if onset is not None:
             ax.axvline(onset, **_ONSET_STYLE, label="fault onset")
-        ax.set_ylabel(det.signal_names[j])
-        ax.legend(loc="upper left", fontsize="small", ncol=3)
+        ax.set_ylabel(axis_label(det.signal_names[j], units))
+    hours = 3600.0 / episode.sample_time_s
+    top = axes[0].secondary_xaxis("top", functions=(lambda k: k / hours, lambda h: h * hours))
+    top.set_xlabel("time [h]")
     ax_a = axes[-1]
-    ax_a.step(t, det.alarm.astype(float), where="post", color=_ALARM_COLOR, linewidth=0.8)
+    rows = [(alarm, _ALARM_COLOR, ALARM_LABEL)]
+    if decisions is not None:
+        rows.insert(0, (det.alarm, _EXIT_COLOR, EXIT_LABEL))
+    for r, (on, color, label) in enumerate(rows):
+        _raster(ax_a, t, on, r, color, label)
     if onset is not None:
         ax_a.axvline(onset, **_ONSET_STYLE)
-    ax_a.set_ylim(-0.1, 1.1)
-    ax_a.set_yticks([0, 1], ["ok", "alarm"])
-    ax_a.set_xlabel(f"sample (Ts = {episode.sample_time_s:g} s)")
+    ax_a.set_ylim(-0.1, len(rows) - 0.1)
+    ax_a.set_yticks(
+        [r + 0.4 for r in range(len(rows))], [label.split(" (")[0] for *_, label in rows]
+    )
+    ax_a.set_ylabel("state [on/off]")
+    ax_a.set_xlabel(f"sample [-] (Ts = {episode.sample_time_s:g} s)")
     ax_a.set_xlim(0, max(n - 1, 1))
+    # One legend for the figure, outside the panels: it never covers data.
+    handles, labels = [], []
+    for ax in axes:
+        for h, lab in zip(*ax.get_legend_handles_labels(), strict=True):
+            if lab not in labels and lab != ALARM_LABEL:
+                handles.append(h)
+                labels.append(lab)
+    handles.append(Patch(color=_ALARM_COLOR, alpha=0.4))
+    labels.append(f"{ALARM_LABEL} (shaded)")
+    fig.legend(handles, labels, loc="outside lower center", ncol=min(len(labels), 3),
+               fontsize="small")  # fmt: skip
     if title is None:
         title = f"{episode.scenario}, seed {episode.seed}"
-    fig.suptitle(title)
+    fig.suptitle(f"{title}\n{_shown_text(det, idx, kind)}", fontsize="medium")
     return fig
 
 

@@ -48,7 +48,15 @@ from evaluation.sweep import DiagnoserSpec, SweepConfig, default_specs, dir_file
 from evaluation.tracks import Track
 from fcc_env.io import atomic_open, atomic_write, atomic_write_json
 
-__all__ = ["TrackRow", "TrackRun", "run_track", "track_rows", "track_table", "write_track"]
+__all__ = [
+    "TrackRow",
+    "TrackRun",
+    "run_track",
+    "track_legend",
+    "track_rows",
+    "track_table",
+    "write_track",
+]
 
 
 @dataclass(frozen=True)
@@ -177,6 +185,28 @@ def _ci(iv: Interval, digits: int) -> str:
     return f"{iv.estimate:.{digits}f} [{iv.low:.{digits}f}, {iv.high:.{digits}f}]"
 
 
+def track_legend(sample_time_s: float | None = None) -> str:
+    """What a track table's columns, units and brackets mean (worded as the classic table's).
+
+    Args:
+        sample_time_s: the data's sample time, to say what a sample of ``t_dt`` is in seconds
+            (``None``: not said).
+    """
+    ts = f" (1 sample = {sample_time_s:g} s)" if sample_time_s else ""
+    return (
+        "Legend: r_fd: false detection rate, the share of a healthy episode's samples in alarm "
+        "[0-1, lower is better]; healthy eps. alarmed: the share of healthy episodes with any "
+        "alarm [0-1]; worst r_fd (seed): the largest r_fd of one healthy episode and its seed; "
+        "r_td: true detection rate, the share of the samples from the fault onset on in alarm "
+        "[0-1, higher is better], (rank) on r_td with '=' where intervals overlap; t_dt: "
+        f"detection time, from the onset to the first alarm [samples]{ts}, mean over the "
+        "detected faults; t_dt/oracle: (t_dt + 1) / (oracle t_dt + 1) [-] over the seeds both "
+        "detected, 1 = as fast as the physical limit; missed/ended: faulty episodes never "
+        "alarmed after the onset / episodes the plant ended early, with the reasons (well_empty, afterburn, extinguished; scored on their samples before the end). a [lo, hi]: estimate and 95 % BCa "
+        "bootstrap interval over the seeds; –: no value."
+    )
+
+
 def track_table(run: TrackRun) -> str:
     """Markdown table of a track (header sentences, legend, rows)."""
     faults = run.track.faults
@@ -188,12 +218,7 @@ def track_table(run: TrackRun) -> str:
         "",
         run.track.description,
         "",
-        "r_fd: share of a healthy episode in alarm; r_td: share of the post-onset samples in "
-        "alarm; t_dt: samples from onset to the first alarm (mean over detected faults); "
-        "t_dt/oracle: (t_dt + 1) / (oracle t_dt + 1) over seeds both detected. Brackets: 95 % "
-        "BCa bootstrap intervals over seeds; ranks on r_td, '=' marks overlapping intervals. "
-        "missed/ended: faults never detected / episodes the plant ended early (with the "
-        "reasons: well_empty, afterburn, extinguished), scored on their samples before the end.",
+        track_legend(run.records[0].sample_time_s if run.records else None),
         "",
         "| " + " | ".join(head) + " |",
         "|" + "---|" * len(head),

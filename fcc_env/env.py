@@ -127,7 +127,8 @@ class FCCEnv(gym.Env):
     | horizon | 4000 | samples the scenario is laid out on: onsets must fall inside it and random |
     |  |  | onsets are drawn from its middle half. ``max_episode_steps`` (``horizon − 1``) truncates; |
     |  |  | the env cannot see that wrapper, so pass both when you change the length. |
-    | render_mode | None | "rgb_array" for a trend plot |
+    | render_mode | None | "rgb_array": a trend frame of the last 500 samples with the scenario, |
+    |  |  | the time (sample and hours) and, once passed, the fault onset |
 
     ## Version History
     * v0: first release (spec revision with slide-valve hydraulics and entrainment return).
@@ -335,7 +336,14 @@ class FCCEnv(gym.Env):
             return None
         from fcc_env.plotting import trend_image  # matplotlib only when rendering
 
-        return trend_image(np.array(self._history[-500:]), self._k, self.config.sample_time_s)
+        nominal = self.fault.scenario is Scenario.NOMINAL
+        return trend_image(
+            np.array(self._history[-500:]),
+            self._k,
+            self.config.sample_time_s,
+            scenario=self.fault.scenario.value,
+            fault_onset=None if nominal else self.fault.onset,
+        )
 
     # ---- helpers -------------------------------------------------------------------------------
     def _mult(self, k: int) -> np.ndarray:
