@@ -49,7 +49,6 @@ from evaluation.harness import (
     BASELINES,
     TRAIN_SEED_BASE,
     CellResult,
-    CellSummary,
     DiagnoserSpec,
     SimulatedData,
     SweepConfig,
@@ -59,6 +58,17 @@ from evaluation.harness import (
 )
 from evaluation.records import unpack_detection
 from evaluation.store import ResultStore, canonical_hash
+from evaluation.tables import (
+    PAPER_TABLE2,
+    SUMMARY_COLUMNS,
+    data_label,
+    header_text,
+    markdown_table,
+    reference_row,
+    sample_time,
+    summary_rows,
+    table_legend,
+)
 from fcc_env.io import atomic_open, atomic_write, atomic_write_json
 
 __all__ = [
@@ -72,19 +82,6 @@ __all__ = [
     "table_legend",
     "write_outputs",
 ]
-
-#: The seed paper's Table 2 (Patan et al., IFAC 2005; LRGF + model-error model): r_fd on healthy data, then per fault
-#: (r_td, t_dt [samples]). No dispersion is published, so the reference row has none.
-PAPER_TABLE2: dict[str, Any] = {
-    "label": "paper Table 2 (LRGF+MEM)",
-    "r_fd": 0.0881,
-    "faults": {
-        "f1": (0.6978, 250.0),
-        "f2": (0.7184, 370.0),
-        "f3": (0.6634, 80.0),
-        "f4": (0.5294, 55.0),
-    },
-}
 
 QUICK_SEEDS = 3
 QUICK_TRAIN_EPISODES = 3
@@ -180,165 +177,19 @@ def run(opts: LeaderboardOptions) -> SweepResults:
     )
 
 
-# ---- formatting (pure) -------------------------------------------------------------------------
-def _fmt(mean: float, std: float, digits: int) -> str:
-    if math.isnan(mean):
-        return "–"
-    s = f"{mean:.{digits}f}"
-    return s + (f" ± {std:.{digits}f}" if not math.isnan(std) else "")
-
-
-def _fmt_tdt(c: CellSummary) -> str:
-    core = _fmt(c.t_dt, c.t_dt_std, 0)
-    if c.misses:
-        core += f" ({c.misses}/{c.n_seeds} missed)"
-    return core
-
-
-def _score(rows: Sequence[CellSummary]) -> float:
-    """Primary ranking metric: mean r_td over faults minus mean r_fd over healthy scenarios."""
-    td = [c.r_td for c in rows if c.faulty and not math.isnan(c.r_td)]
-    fd = [c.r_fd for c in rows if not c.faulty and not math.isnan(c.r_fd)]
-    if not td and not fd:
-        return -math.inf
-    return (sum(td) / len(td) if td else 0.0) - (sum(fd) / len(fd) if fd else 0.0)
-
-
-def markdown_table(
-    summaries: Sequence[CellSummary],
-    *,
-    reference: dict[str, Any] | None = None,
-) -> str:
-    """The leaderboard as a Markdown table (pure function of the summaries).
-
-    Columns: for every healthy scenario ``r_fd``; for every fault scenario ``r_td`` and ``t_dt``
-    [samples]. Rows are sorted by mean ``r_td`` over faults minus mean ``r_fd`` over healthy
-    scenarios (higher is better). ``reference`` (e.g. :data:`PAPER_TABLE2`) adds a last row.
-    """
-    scenarios: list[tuple[str, bool]] = []
-    by_diag: dict[str, dict[str, CellSummary]] = {}
-    for c in summaries:
-        if (c.scenario, c.faulty) not in scenarios:
-            scenarios.append((c.scenario, c.faulty))
-        by_diag.setdefault(c.diagnoser, {})[c.scenario] = c
-    header = ["diagnoser"]
-    for sc, faulty in scenarios:
-        header += [f"{sc} r_td", f"{sc} t_dt"] if faulty else [f"r_fd ({sc})"]
-    lines = ["| " + " | ".join(header) + " |", "|" + "|".join(["---"] * len(header)) + "|"]
-    order = sorted(by_diag, key=lambda d: -_score(list(by_diag[d].values())))
-    for diag in order:
-        row = [diag]
-        for sc, faulty in scenarios:
-            c = by_diag[diag].get(sc)
-            if c is None:
-                row += ["", ""] if faulty else [""]
-            elif faulty:
-                row += [_fmt(c.r_td, c.r_td_std, 4), _fmt_tdt(c)]
-            else:
-                row.append(_fmt(c.r_fd, c.r_fd_std, 4))
-        lines.append("| " + " | ".join(row) + " |")
-    if reference is not None:
-        row = [reference["label"]]
-        for sc, faulty in scenarios:
-            ref = reference["faults"].get(sc)
-            if faulty:
-                row += [f"{ref[0]:.4f}", f"{ref[1]:.0f}"] if ref else ["", ""]
-            else:
-                row.append(f"{reference['r_fd']:.4f}" if sc == "nominal" else "")
-        lines.append("| " + " | ".join(row) + " |")
-    return "\n".join(lines) + "\n"
-
-
-_SUMMARY_COLUMNS = (
-    "diagnoser",
-    "scenario",
-    "n_seeds",
-    "r_fd",
-    "r_fd_std",
-    "r_td",
-    "r_td_std",
-    "t_dt",
-    "t_dt_std",
-    "t_dt_s",
-    "t_dt_s_std",
-    "misses",
-    "n_detected",
-    "n_terminated",
-)
-
-
-def summary_rows(summaries: Sequence[CellSummary], *, data: str, version: str) -> list[dict]:
-    """Rows of ``leaderboard.csv`` (NaN written as empty fields)."""
-    rows = []
-    for c in summaries:
-        d = c.to_json()
-        row = {
-            k: ("" if isinstance(d[k], float) and math.isnan(d[k]) else d[k])
-            for k in _SUMMARY_COLUMNS
-        }
-        row.update(data=data, package_version=version)
-        rows.append(row)
-    return rows
-
-
-def _data_label(config: SweepConfig) -> str:
-    return config.data.describe().label
-
-
-def _reference(config: SweepConfig) -> dict[str, Any] | None:
-    """The paper's row, shown only beside the paper's own set-up."""
-    return PAPER_TABLE2 if config.data.describe().paper_setup else None
-
-
-def table_legend(sample_time_s: float | None = None) -> str:
-    """What the table's columns, units and signs mean (one paragraph, Markdown).
-
-    Args:
-        sample_time_s: the data's sample time, to say what a sample of ``t_dt`` is in seconds
-            (``None``: not said).
-    """
-    ts = f" (1 sample = {sample_time_s:g} s)" if sample_time_s else ""
-    return (
-        "Legend: r_fd: false detection rate, the share of a healthy episode's samples in alarm "
-        "[0-1, lower is better]; r_td: true detection rate, the share of the samples from the "
-        "fault onset on in alarm [0-1, higher is better]; t_dt: detection time, from the onset "
-        f"to the first alarm [samples]{ts}, mean over the detected faults, '(k/n missed)': k of "
-        "n faulty episodes never alarmed after the onset. a ± b: mean ± standard deviation over "
-        "the test seeds (the spread of single episodes, not an interval for the mean); no ±: "
-        "one seed, or the paper's published values; –: no value (e.g. no seed detected the "
-        "fault)."
-    )
-
-
-def _sample_time(results: SweepResults) -> float | None:
-    return results.records[0].sample_time_s if results.records else None
-
-
-def header_text(results: SweepResults) -> str:
-    """What the table is about: data, seeds, the legend (metrics, units, ±), ranking."""
-    description = results.config.data.describe()
-    lines = [f"# Fault-detection leaderboard: {description.label}", "", *description.lines]
-    lines += [
-        table_legend(_sample_time(results)),
-        "Rows are sorted by mean r_td over faults minus r_fd on healthy episodes.",
-        "",
-    ]
-    return "\n".join(lines) + "\n"  # a blank line before the table, as Markdown needs
-
-
 # ---- outputs -----------------------------------------------------------------------------------
 def write_outputs(results: SweepResults, out: Path, *, figures: bool = True) -> list[Path]:
     """Write the table, CSVs, raw results and figures of ``results`` into ``out``."""
     out.mkdir(parents=True, exist_ok=True)
     summaries = results.summary()
-    reference = _reference(results.config)
+    reference = reference_row(results.config)
     md = header_text(results) + markdown_table(summaries, reference=reference)
     written = []
     written.append(atomic_write(out / "leaderboard.md", md))
     version = _package_version()
-    data_label = _data_label(results.config)
-    rows = summary_rows(summaries, data=data_label, version=version)
-    fields = [*_SUMMARY_COLUMNS, "data", "package_version"]
+    label = data_label(results.config)
+    rows = summary_rows(summaries, data=label, version=version)
+    fields = [*SUMMARY_COLUMNS, "data", "package_version"]
     written.append(_write_csv(out / "leaderboard.csv", fields, rows))
     records = [r.to_json() for r in results.records]
     written.append(
@@ -785,10 +636,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     except RuntimeError as e:  # a diagnoser failed to train or score: finished cells are kept
         _store_failure(parser, e)
     written = write_outputs(results, opts.out, figures=opts.figures)
-    reference = _reference(results.config)
+    reference = reference_row(results.config)
     print(markdown_table(results.summary(), reference=reference), end="", flush=True)
     # stdout stays the bare table (to pipe or paste); its legend follows on stderr
-    print(table_legend(_sample_time(results)), file=sys.stderr)
+    print(table_legend(sample_time(results)), file=sys.stderr)
     print(
         f"{results.n_computed} cells computed, {results.n_reused} reused, "
         f"{results.n_trained} diagnosers trained in {time.perf_counter() - t0:.1f} s; "
