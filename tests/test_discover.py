@@ -375,3 +375,36 @@ def test_heldout_test_is_not_capped_by_bursty_effects():
     # the same prediction change on data it does not explain is rejected
     worse = d.heldout_comparison(e1, e1 - s, np.ones(1) / 0.3, 50)
     assert worse["p_value"] > 0.5 and worse["rel_reduction"] < 0
+
+
+def test_cli_reads_external_data_through_a_manifest(tmp_path, capsys):
+    """--external DIR / --manifest FILE: inputs, outputs and sample time from the manifest."""
+    from evaluation.discover.cli import main
+
+    write_dataset(tmp_path / "healthy.csv", seeds=[0], n_samples=N,
+                  plant_effects=["sensor_bias:T_rg2,bias=2"])  # fmt: skip
+    write_dataset(tmp_path / "fault.csv", scenario="f1", seeds=[1], n_samples=200, fault_time=100)
+    manifest = {
+        "inputs": ["cmd_u_F", "cmd_R_ar", "T_ar", "T_fp"],
+        "outputs": ["R_ar", "T_rx", "T_rg1", "T_rg2", "T_d1", "T_dg"],
+        "train_files": ["healthy.csv"],
+        "test_files": [{"path": "fault.csv", "onset": 100}],
+        "sample_time_s": 10,
+    }
+    (tmp_path / "dataset.json").write_text(json.dumps(manifest))
+    argv = ["--out", str(tmp_path / "o"), "--no-plots", "--max-effects", "1"]
+    assert main(["--external", str(tmp_path), *argv, "--candidates", "sensor_bias:T_rg2"]) == 0
+    rep = json.loads((tmp_path / "o" / "report.json").read_text())
+    assert rep["model"] == "fcc-physics" and [e["id"] for e in rep["effects"]] == [
+        "sensor_bias:T_rg2"
+    ]
+    assert rep["data"].startswith("external:") and rep["n_samples"] == N
+    # channels that are not the physics model's: a linear ARX model of the outputs
+    (tmp_path / "m.json").write_text(json.dumps({**manifest, "inputs": ["cmd_u_F", "T_fp"],
+                                                 "outputs": ["T_rx"]}))  # fmt: skip
+    assert main(["--manifest", str(tmp_path / "m.json"), *argv]) == 0
+    rep = json.loads((tmp_path / "o" / "report.json").read_text())
+    assert rep["model"] != "fcc-physics" and rep["channels"] == ["T_rx"]
+    with pytest.raises(SystemExit):
+        main(["--manifest", str(tmp_path / "nope.json"), *argv])
+    assert "nope.json" in capsys.readouterr().err
