@@ -5,7 +5,8 @@ Each file is one record (an episode). The user says which columns are the channe
 its fault starts (``None`` for a healthy test run, which is scored for false alarms only).
 :class:`ExternalData` implements the harness's ``DataSource`` protocol, so
 ``run_sweep(SweepConfig(diagnosers=..., data=ExternalData(...)), store)`` trains on the healthy
-files and scores the fault files exactly like simulated scenarios (one "seed", 0, per file).
+files and scores the fault files exactly like simulated scenarios (one "seed", 0, per file, or
+one per episode of a multi-episode file).
 
 CSV files either have a header row (``column_names=None``) or are headerless with
 ``column_names`` naming every column in order. A file with an ``episode`` column (the project's own
@@ -175,8 +176,9 @@ class ExternalData:
 
     Each test file is one cell per diagnoser, with scenario ``ExternalFile.key`` and seed 0; a
     test file with several episodes is one cell per episode, seed = the episode number. The
-    store hash includes every field and the SHA-256 of every file, so changed data are never
-    mixed with stored results.
+    store hash includes every field (``episode_column`` too, so stores written before files were
+    split are not resumed with split episodes) and the SHA-256 of every file, so changed data
+    are never mixed with stored results.
     """
 
     directory: str
@@ -251,8 +253,6 @@ class ExternalData:
 
     def store_key(self) -> dict[str, Any]:
         key = dataclasses.asdict(self)
-        if key["episode_column"] == "episode":
-            del key["episode_column"]  # the default: same key as before the field existed
         key["directory"] = str(Path(self.directory).resolve())
         key["kind"] = "external"
         key["sha256"] = {
@@ -264,7 +264,10 @@ class ExternalData:
     def describe(self) -> DataDescription:
         return DataDescription(
             label=f"external:{Path(self.directory).name}",
-            lines=("External records: one test file per scenario (seed 0); see results.json.",),
+            lines=(
+                "External records: one test file per scenario (seed 0, or one seed per episode "
+                "of a multi-episode file); see results.json.",
+            ),
         )
 
     def _episode_key(self, path: Path) -> str | None:

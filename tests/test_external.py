@@ -302,7 +302,7 @@ def test_episode_column_splits_a_multi_episode_file(tmp_path) -> None:
     # without the episode column the file is one record, as before
     one = dataclasses.replace(data, episode_column=None)
     assert one.cells() == [("f2", 0)] and [ep.n_samples for ep in one.train_episodes()] == [150]
-    assert "episode_column" not in data.store_key() and one.store_key() != data.store_key()
+    assert data.store_key()["episode_column"] == "episode" and one.store_key() != data.store_key()
 
 
 def test_manifest_episode_column_must_be_a_name(tmp_path) -> None:
