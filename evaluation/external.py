@@ -5,10 +5,15 @@ Each file is one record (an episode). The user says which columns are the channe
 its fault starts (``None`` for a healthy test run, which is scored for false alarms only).
 :class:`ExternalData` implements the harness's ``DataSource`` protocol, so
 ``run_sweep(SweepConfig(diagnosers=..., data=ExternalData(...)), store)`` trains on the healthy
-files and scores the fault files exactly like simulated scenarios (one "seed", 0, per file).
+files and scores the fault files exactly like simulated scenarios (one "seed", 0, per file, or
+one per episode of a multi-episode file).
 
 CSV files either have a header row (``column_names=None``) or are headerless with
-``column_names`` naming every column in order. Parquet files need ``pyarrow`` (not a dependency of
+``column_names`` naming every column in order. A file with an ``episode`` column (the project's own
+``python -m fcc_env.generate`` files stack several episodes that way) holds several records: each
+episode is its own training episode, or its own test cell (scenario = the file's name, seed = the
+episode number; the file's onset applies within each episode). ``episode_column`` names that
+column (``None``: every file is one record). Parquet files need ``pyarrow`` (not a dependency of
 this package); without it loading one raises an ``ImportError`` that says so.
 
 The third-party FCCU data set of ``shared/data/fccu-santander-mlpse`` (Santander et al. 2022
@@ -33,7 +38,7 @@ import numpy as np
 from diagnosers.base import Episode
 from evaluation.sources import DataDescription, LoadedEpisode
 from evaluation.store import check_name
-from fcc_env.io import read_csv_columns
+from fcc_env.io import read_csv_columns, read_header, read_parquet_columns
 
 __all__ = [
     "SANTANDER_ARX_PARAMS",
@@ -128,16 +133,7 @@ def read_table(
     if not path.is_file():
         raise ValueError(f"{path} does not exist or is not a file")
     if _is_parquet(path):
-        try:
-            import pyarrow.parquet as pq
-        except ImportError as e:
-            raise ImportError(
-                f"reading {path} needs pyarrow (pip install pyarrow); or convert it to CSV"
-            ) from e
-        names = list(pq.read_schema(path).names)
-        _check_columns(path, columns, names)
-        table = pq.read_table(path, columns=list(columns))
-        data = np.column_stack([table.column(c).to_numpy().astype(np.float64) for c in columns])
+        _, data = read_parquet_columns(path, list(columns))
     else:
         if path.suffix.lower() != ".csv":
             raise ValueError(f"{path}: unsupported file type {path.suffix!r}. Allowed: {SUFFIXES}")
@@ -154,12 +150,6 @@ def read_table(
             f"{row} ({int(bad.sum())} in all); clean or drop those samples first"
         )
     return data
-
-
-def _check_columns(path: Path, wanted: Sequence[str], names: Sequence[str]) -> None:
-    missing = [c for c in wanted if c not in names]
-    if missing:
-        raise ValueError(f"{path}: unknown column(s) {missing}. Available: {list(names)}")
 
 
 def _file_digest(path: Path) -> str:
@@ -181,10 +171,14 @@ class ExternalData:
         column_names: names of all columns, in order, for headerless CSVs; ``None`` = header row.
         sample_time_s: sample period [s].
         delimiter: CSV field separator.
+        episode_column: the column that tells a file's stacked episodes apart (used when a file
+            has it and it is not a channel); ``None``: every file is one record.
 
-    Each test file is one cell per diagnoser, with scenario ``ExternalFile.key`` and seed 0. The
-    store hash includes every field and the SHA-256 of every file, so changed data are never
-    mixed with stored results.
+    Each test file is one cell per diagnoser, with scenario ``ExternalFile.key`` and seed 0; a
+    test file with several episodes is one cell per episode, seed = the episode number. The
+    store hash includes every field (``episode_column`` too, so stores written before files were
+    split are not resumed with split episodes) and the SHA-256 of every file, so changed data
+    are never mixed with stored results.
     """
 
     directory: str
@@ -195,6 +189,7 @@ class ExternalData:
     column_names: tuple[str, ...] | None = None
     sample_time_s: float = 1.0
     delimiter: str = ","
+    episode_column: str | None = "episode"
 
     @property
     def channels(self) -> tuple[str, ...]:
@@ -269,43 +264,92 @@ class ExternalData:
     def describe(self) -> DataDescription:
         return DataDescription(
             label=f"external:{Path(self.directory).name}",
-            lines=("External records: one test file per scenario (seed 0); see results.json.",),
+            lines=(
+                "External records: one test file per scenario (seed 0, or one seed per episode "
+                "of a multi-episode file); see results.json.",
+            ),
         )
+
+    def _episode_key(self, path: Path) -> str | None:
+        """The episode column of ``path`` if it has one (and it is not a channel)."""
+        col = self.episode_column
+        if col is None or col in self.channels:
+            return None
+        names = self.column_names or read_header(path, delimiter=self.delimiter)
+        return col if col in names else None
+
+    def _episodes_of(self, path: Path) -> list[int]:
+        key = self._episode_key(path)
+        if key is None:
+            return [0]
+        ids = read_table(path, (key,), column_names=self.column_names, delimiter=self.delimiter)
+        return _episode_ids(path, ids[:, 0])
 
     def cells(self) -> list[tuple[str, int]]:
-        return [(tf.key, 0) for tf in self.test_files]
+        return [
+            (tf.key, e) for tf in self.test_files for e in self._episodes_of(self._path(tf.path))
+        ]
 
-    def _load(self, file: str, onset: int | None, name: str) -> Episode:
+    def _load(self, file: str, onset: int | None, name: str) -> list[Episode]:
+        """The episodes of one file (one, or one per value of its episode column)."""
         path = self._path(file)
-        y = read_table(
-            path, self.channels, column_names=self.column_names, delimiter=self.delimiter
-        )
-        if onset is not None and onset >= y.shape[0]:
-            raise ValueError(
-                f"{path}: fault onset {onset} is beyond the record's {y.shape[0]} samples"
+        key = self._episode_key(path)
+        cols = self.channels if key is None else (*self.channels, key)
+        table = read_table(path, cols, column_names=self.column_names, delimiter=self.delimiter)
+        if key is None:
+            parts = [(0, table)]
+        else:
+            ids = table[:, -1]
+            parts = [(e, table[ids == e, :-1]) for e in _episode_ids(path, ids)]
+        out = []
+        for e, y in parts:
+            where = str(path) if key is None else f"{path} episode {e}"
+            if onset is not None and onset >= y.shape[0]:
+                raise ValueError(
+                    f"{where}: fault onset {onset} is beyond the record's {y.shape[0]} samples"
+                )
+            out.append(
+                Episode(
+                    y=y,
+                    channels=self.channels,
+                    sample_time_s=float(self.sample_time_s),
+                    fault_onset=onset,
+                    scenario=name,
+                    seed=e,
+                )
             )
-        return Episode(
-            y=y,
-            channels=self.channels,
-            sample_time_s=float(self.sample_time_s),
-            fault_onset=onset,
-            scenario=name,
-            seed=0,
-        )
+        return out
 
     def train_episodes(self) -> list[Episode]:
-        return [self._load(f, None, Path(f).stem) for f in self.train_files]
+        return [ep for f in self.train_files for ep in self._load(f, None, Path(f).stem)]
 
     def load_test(self, scenario: str, seed: int) -> LoadedEpisode:
         for tf in self.test_files:
             if tf.key == scenario:
-                ep = self._load(tf.path, tf.onset, tf.key)
+                eps = {ep.seed: ep for ep in self._load(tf.path, tf.onset, tf.key)}
+                if seed not in eps:
+                    raise ValueError(
+                        f"test record {scenario!r} ({tf.path}) has no episode {seed}. "
+                        f"Available: {sorted(eps)}"
+                    )
+                ep = eps[seed]
                 return LoadedEpisode(
                     episode=ep, fault_onset=tf.onset, n_samples_planned=ep.n_samples
                 )
         raise ValueError(
             f"Unknown test record {scenario!r}. Available: {[tf.key for tf in self.test_files]}"
         )
+
+
+def _episode_ids(path: Path, ids: np.ndarray) -> list[int]:
+    """The distinct episode numbers of a column, in file order; each must be a whole number."""
+    bad = ids != np.round(ids)
+    if bad.any():
+        raise ValueError(
+            f"{path}: episode column value {ids[bad][0]!r} (data row {int(np.argmax(bad))}) is not "
+            "a whole number"
+        )
+    return [int(v) for v in dict.fromkeys(ids.tolist())]
 
 
 def _santander_columns(directory: Path) -> list[tuple[str, str]]:
@@ -386,24 +430,32 @@ _MANIFEST_KEYS = {
     "sample_time_s",
     "delimiter",
     "diagnoser_params",
+    "episode_column",
 }
 
 
 def load_manifest(directory: str | Path) -> tuple[ExternalData, dict[str, dict[str, Any]]]:
     """Describe a user's directory by its ``dataset.json``: the data and per-diagnoser params.
 
+    ``directory`` is the data directory (holding ``dataset.json``) or the manifest file itself
+    (any name; file paths in it are relative to its folder).
+
     The manifest is JSON (never executed) with the fields of :class:`ExternalData`::
 
         {"inputs": ["T2", "Frgc"], "outputs": ["Tr"], "train_files": ["healthy.csv"],
          "test_files": [{"path": "leak.csv", "onset": 120, "name": "leak"},
                         {"path": "normal.csv", "onset": null}],
-         "sample_time_s": 60, "column_names": null, "delimiter": ",",
+         "sample_time_s": 60, "column_names": null, "delimiter": ",", "episode_column": "episode",
          "diagnoser_params": {"arx-band": {"output": "Tr", "inputs": ["T2", "Frgc"]}}}
 
     ``diagnoser_params`` (optional) gives hyperparameters for diagnosers whose defaults name
     FCC-v0 channels. Returns ``(data, diagnoser_params)``.
     """
-    path = Path(directory) / MANIFEST_NAME
+    path = Path(directory)
+    if path.is_file():  # the manifest itself (any name); the data are beside it
+        directory = path.parent
+    else:
+        path = path / MANIFEST_NAME
     try:
         spec = json.loads(path.read_text())
     except OSError as e:
@@ -450,6 +502,7 @@ def load_manifest(directory: str | Path) -> tuple[ExternalData, dict[str, dict[s
         column_names=tuple(spec["column_names"]) if spec.get("column_names") else None,
         sample_time_s=float(sample_time),
         delimiter=str(spec.get("delimiter", ",")),
+        episode_column=_episode_column(path, spec),
     )
     data.validate()
     params = spec.get("diagnoser_params") or {}
@@ -464,6 +517,16 @@ def load_manifest(directory: str | Path) -> tuple[ExternalData, dict[str, dict[s
             except (ValueError, TypeError) as e:
                 raise ValueError(f"{path}: diagnoser_params[{name!r}]: {e}") from e
     return data, params
+
+
+def _episode_column(path: Path, spec: dict[str, Any]) -> str | None:
+    v = spec.get("episode_column", "episode")
+    if v is not None and not isinstance(v, str):
+        raise ValueError(
+            f"{path}: episode_column={v!r} is outside the allowed range: a column name (string) "
+            "or null"
+        )
+    return v
 
 
 def load_external(directory: str | Path) -> tuple[ExternalData, dict[str, dict[str, Any]]]:

@@ -1,7 +1,11 @@
 """Write simulated FCC datasets: ``python -m fcc_env.generate --scenario f1 --seeds 0-9 --out DIR``.
 
-A dataset is one CSV file (one row per sample, episodes stacked, an ``episode`` column) plus a JSON
-sidecar of the same stem. Column roles are declared in the sidecar:
+A dataset is one table file (one row per sample, episodes stacked, an ``episode`` column) plus a
+JSON sidecar of the same stem. The table is CSV (``--out x.csv``) or Parquet (``--out x.parquet``,
+needs the optional ``pyarrow``: ``pip install 'fcc-fault-diagnosis[parquet]'``). The sidecar's
+``columns`` maps every column, in file order, to its ``unit``, ``description`` and ``role``; "none"
+is always JSON ``null`` (a nominal episode's fault onset and magnitude, an episode that was never
+terminated), never ``-1``. Column roles are also listed in ``roles``:
 
 * ``measured``: the Table 1 measurements as the sensors report them (noisy);
 * ``commanded``: manipulated variables as commanded (``cmd_u_F`` valve, ``cmd_R_ar`` air);
@@ -24,8 +28,22 @@ from typing import Any
 import numpy as np
 
 from fcc_env import effects as fx
-from fcc_env.io import atomic_open, atomic_write_json, read_csv_columns
-from fcc_env.params import INPUT_NAMES, MEASUREMENT_NAMES, STATE_NAMES, FCCParams
+from fcc_env.io import (
+    PARQUET_SUFFIXES,
+    atomic_open,
+    atomic_write_json,
+    read_columns,
+    require_pyarrow,
+)
+from fcc_env.params import (
+    INPUT_NAMES,
+    INPUT_UNITS,
+    MEASUREMENT_NAMES,
+    MEASUREMENTS,
+    STATE_NAMES,
+    STATE_UNITS,
+    FCCParams,
+)
 from fcc_env.scenarios import DEFAULT_N_SAMPLES, SCENARIOS, FaultSpec
 from fcc_env.simulation import (
     DEFAULT_MEMORY_BUDGET_BYTES,
@@ -41,7 +59,71 @@ from fcc_env.simulation import (
 from fcc_env.validation import Real, check, invalid
 
 DATASET_FORMAT = "fcc-dataset"
-DATASET_FORMAT_VERSION = 1
+#: 2: ``columns`` maps each column to its unit, description and role (was a list of names; a
+#: dict iterates over the same names in the same order); ``fault_magnitudes`` null, not 0, for an
+#: episode without a fault; Parquet tables.
+DATASET_FORMAT_VERSION = 2
+#: Table file endings :func:`write_dataset` writes.
+DATASET_SUFFIXES = (".csv", *PARQUET_SUFFIXES)
+
+_INPUT_DESCRIPTIONS = {
+    "u_F": "regenerated-catalyst slide-valve command (flow-equivalent opening)",
+    "R_ar": "combustion air flow rate",
+    "T_ar": "air temperature",
+    "T_fp": "feed temperature",
+    "F_feed": "feed rate",
+    "f_coke": "feed coking factor",
+}
+_STATE_DESCRIPTIONS = {
+    "W_rx": "reactor/stripper catalyst holdup",
+    "C_sc": "coke on spent catalyst",
+    "W1": "stage-1 dense-bed holdup",
+    "C1": "stage-1 coke on catalyst",
+    "T1": "stage-1 dense-bed temperature",
+    "W2": "stage-2 dense-bed holdup",
+    "C2": "stage-2 coke on catalyst (regenerated catalyst)",
+    "T2": "stage-2 dense-bed temperature",
+    "W_sp": "regenerated-catalyst well/standpipe inventory",
+    "T_d1": "stage-1 dilute-phase temperature",
+    "T_dg": "general dilute-phase temperature",
+}
+
+
+def column_metadata(names: Sequence[str]) -> dict[str, dict[str, str]]:
+    """``{column: {"unit", "description", "role"}}`` for the columns :func:`write_dataset` writes."""
+    meas = {m.name: m for m in MEASUREMENTS}
+    inputs = dict(zip(INPUT_NAMES, INPUT_UNITS, strict=True))
+    states = dict(zip(STATE_NAMES, STATE_UNITS, strict=True))
+    fixed = {
+        "episode": ("-", "episode index in this file (0, 1, ...)", "index"),
+        "seed": ("-", "simulation seed of the episode", "index"),
+        "k": ("-", "sample index within the episode", "index"),
+        "time_s": ("s", "time since the episode start", "index"),
+        "cmd_u_F": ("kg/s", "commanded " + _INPUT_DESCRIPTIONS["u_F"], "commanded"),
+        "cmd_R_ar": ("t/h", "commanded " + _INPUT_DESCRIPTIONS["R_ar"], "commanded"),
+        "fault_active": ("-", "1 while the fault is applied, else 0", "truth"),
+    }
+    out: dict[str, dict[str, str]] = {}
+    for n in names:
+        prefix, _, base = n.partition("_")
+        if n in fixed:
+            unit, desc, role = fixed[n]
+        elif n in meas:
+            unit, desc, role = meas[n].unit, f"{meas[n].description} (measured, noisy)", "measured"
+        elif prefix == "in" and base in inputs:
+            unit, desc, role = (
+                inputs[base],
+                f"{_INPUT_DESCRIPTIONS[base]} applied to the plant",
+                "truth",
+            )
+        elif prefix == "clean" and base in meas:
+            unit, desc, role = meas[base].unit, f"{meas[base].description} (noise-free)", "truth"
+        elif prefix == "x" and base in states:
+            unit, desc, role = states[base], f"state: {_STATE_DESCRIPTIONS[base]}", "truth"
+        else:
+            raise ValueError(f"column {n!r} has no metadata; add it to fcc_env.generate")
+        out[n] = {"unit": unit, "description": desc, "role": role}
+    return out
 
 
 def parse_seeds(
@@ -108,7 +190,8 @@ def write_dataset(
     memory_budget_bytes: float = DEFAULT_MEMORY_BUDGET_BYTES,
     **env_kwargs: Any,
 ) -> Path:
-    """Simulate ``seeds`` and write ``path`` (``.csv``) plus ``path.with_suffix('.json')``.
+    """Simulate ``seeds`` and write ``path`` (``.csv``, or ``.parquet``/``.pq`` with ``pyarrow``)
+    plus ``path.with_suffix('.json')``.
 
     ``fault`` and ``plant`` as for :func:`fcc_env.simulate_episodes`, or (as before) the env's
     keywords ``scenario`` and ``env_kwargs`` (``fault_time``, ``valve_beta``, ``noise_scale``...);
@@ -116,13 +199,16 @@ def write_dataset(
     effects (:mod:`fcc_env.effects`): recorded under ``truth_plant_effects`` for reproducibility,
     a field the modelling loop never reads. A request whose arrays would exceed
     ``memory_budget_bytes`` (default 4 GiB) is refused before simulating. Both files are written atomically
-    (:mod:`fcc_env.io`), so a crash never leaves a torn file. Returns the CSV path.
+    (:mod:`fcc_env.io`), so a crash never leaves a torn file, with the permissions of a plain
+    ``open`` (0o666 less the umask). Returns the table's path.
     """
     from fcc_env import MODEL_VERSION
 
     out = Path(path)
-    if out.suffix != ".csv":
-        raise invalid("path", str(out), "a file name ending in .csv")
+    if out.suffix.lower() not in DATASET_SUFFIXES:
+        raise invalid("path", str(out), f"a file name ending in one of {list(DATASET_SUFFIXES)}")
+    parquet = out.suffix.lower() in PARQUET_SUFFIXES
+    pq = require_pyarrow(out, "writing") if parquet else None  # before simulating
     fault_kw = {k: env_kwargs.pop(k) for k in FAULT_OPTION_NAMES if k in env_kwargs}
     spec = FaultSpec.from_request(fault, {**fault_kw, "scenario": scenario})
     unknown = sorted(set(env_kwargs) - set(PLANT_OPTION_NAMES))
@@ -171,7 +257,11 @@ def write_dataset(
         "seeds": list(batch.seeds),
         "scenarios": list(batch.scenarios),
         "fault_onsets": list(batch.fault_onsets),
-        "fault_magnitudes": list(batch.fault_magnitudes),
+        # None (JSON null) for an episode without a fault, as its onset
+        "fault_magnitudes": [
+            None if onset is None else float(m)
+            for onset, m in zip(batch.fault_onsets, batch.fault_magnitudes, strict=True)
+        ],
         # None (JSON null) for an episode that stayed inside the envelope
         "terminated_at": [int(t) if t >= 0 else None for t in batch.terminated_at],
         "n_samples": T,
@@ -186,21 +276,28 @@ def write_dataset(
             "commanded": ["cmd_u_F", "cmd_R_ar"],
             "truth": [n for n in names if n.startswith(("in_", "clean_", "x_"))] + ["fault_active"],
         },
-        "columns": names,
+        "columns": column_metadata(names),
     }
     out.parent.mkdir(parents=True, exist_ok=True)
-    data = np.column_stack([cols[n] for n in names])
-    fmt = ["%d", "%d", "%d", "%.1f"] + ["%.10g"] * (len(names) - 4)
-    fmt[names.index("fault_active")] = "%d"
-    # CSV first, sidecar last: a sidecar never describes a CSV that is not there
-    with atomic_open(out, "w") as fh:
-        np.savetxt(fh, data, delimiter=",", header=",".join(names), comments="", fmt=fmt)
+    # table first, sidecar last: a sidecar never describes a table that is not there
+    if pq is not None:
+        import pyarrow as pa
+
+        table = pa.table({n: np.ascontiguousarray(cols[n]) for n in names})
+        with atomic_open(out, "wb") as fh:
+            pq.write_table(table, fh)
+    else:
+        data = np.column_stack([cols[n] for n in names])
+        fmt = ["%d", "%d", "%d", "%.1f"] + ["%.10g"] * (len(names) - 4)
+        fmt[names.index("fault_active")] = "%d"
+        with atomic_open(out, "w") as fh:
+            np.savetxt(fh, data, delimiter=",", header=",".join(names), comments="", fmt=fmt)
     atomic_write_json(out.with_suffix(".json"), meta)
     return out
 
 
 def read_sidecar(path: str | os.PathLike) -> dict[str, Any]:
-    """The JSON sidecar of the dataset ``path`` (a ``.csv`` written by :func:`write_dataset`),
+    """The JSON sidecar of the dataset ``path`` (a table written by :func:`write_dataset`),
     checked: the dataset and its sidecar exist and the sidecar has this library's format tag."""
     csv = Path(path)
     sidecar = csv.with_suffix(".json")
@@ -222,18 +319,23 @@ def read_sidecar(path: str | os.PathLike) -> dict[str, Any]:
 
 
 def read_dataset(path: str | os.PathLike) -> tuple[dict[str, Any], dict[str, np.ndarray]]:
-    """Read a dataset written by :func:`write_dataset`: ``(sidecar, {column: array})``."""
+    """Read a dataset written by :func:`write_dataset` (CSV or Parquet): ``(sidecar, {column:
+    array})``."""
     meta = read_sidecar(path)
-    names, table = read_csv_columns(path)
+    names, table = read_columns(path)
     return meta, {n: table[:, j] for j, n in enumerate(names)}
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = argparse.ArgumentParser(
         prog="python -m fcc_env.generate",
-        description="Simulate FCC-v0 episodes and write them as CSV + JSON sidecar.",
+        description="Simulate FCC-v0 episodes and write them as CSV or Parquet + JSON sidecar.",
     )
-    parser.add_argument("--out", required=True, help="output CSV path (sidecar: same stem .json)")
+    parser.add_argument(
+        "--out",
+        required=True,
+        help="output .csv or .parquet (needs pyarrow) path (sidecar: same stem .json)",
+    )
     parser.add_argument(
         "--scenario", default="nominal", help=f"one of {list(SCENARIOS)} or 'random'"
     )
@@ -298,7 +400,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             include_states=args.states,
             plant_effects=[fx.parse(t) for t in args.plant_effect],
         )
-    except ValueError as e:
+    except (ValueError, ImportError) as e:
         parser.error(str(e))
     print(f"wrote {path} and {path.with_suffix('.json')}")
     return 0

@@ -1,4 +1,5 @@
-"""File helpers shared by every package: one atomic writer, one JSON scrubber, one CSV reader.
+"""File helpers shared by every package: one atomic writer, one JSON scrubber, one table reader
+(CSV, or Parquet with the optional ``pyarrow``).
 
 Every file the project writes (datasets, saved diagnosers, result-store cells, reports) goes
 through :func:`atomic_write`: the bytes go to a temporary file in the target's folder, are
@@ -30,14 +31,19 @@ from typing import IO, Any
 import numpy as np
 
 __all__ = [
+    "PARQUET_SUFFIXES",
     "TMP_SUFFIX",
     "atomic_open",
     "atomic_write",
     "atomic_write_json",
     "json_default",
     "json_safe",
+    "read_columns",
     "read_csv_columns",
+    "read_header",
+    "read_parquet_columns",
     "remove_stale_tmp",
+    "require_pyarrow",
 ]
 
 #: Suffix of the temporary files of :func:`atomic_open` (a kill leaves them behind; see
@@ -199,3 +205,81 @@ def read_csv_columns(
             "text or empty fields"
         ) from e
     return names, data
+
+
+#: File name endings read as Parquet.
+PARQUET_SUFFIXES = (".parquet", ".pq")
+
+
+def require_pyarrow(path: str | os.PathLike, action: str = "reading") -> Any:
+    """``pyarrow.parquet``, or an ImportError that names the file and how to install it."""
+    try:
+        import pyarrow.parquet as pq
+    except ImportError as e:
+        raise ImportError(
+            f"{action} {os.fspath(path)} needs pyarrow, an optional dependency: "
+            "pip install 'fcc-fault-diagnosis[parquet]' (or pip install 'pyarrow>=14'); "
+            "or use a .csv file"
+        ) from e
+    return pq
+
+
+def read_parquet_columns(
+    path: str | os.PathLike, columns: Sequence[str] | None = None
+) -> tuple[list[str], np.ndarray]:
+    """``(names, data)`` of the numeric ``columns`` of a Parquet file (needs ``pyarrow``).
+
+    Same contract as :func:`read_csv_columns`: ``names`` are all the file's columns, ``data``
+    the wanted ones as floats ``(n_rows, n_columns)``; errors name the file.
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise ValueError(f"{p} does not exist or is not a file")
+    pq = require_pyarrow(p)
+    try:
+        names = list(pq.read_schema(p).names)
+    except Exception as e:  # pyarrow raises its own error types for a damaged file
+        raise ValueError(f"{p}: not a readable Parquet file ({e})") from e
+    wanted = names if columns is None else [str(c) for c in columns]
+    missing = [c for c in wanted if c not in names]
+    if missing:
+        raise ValueError(f"{p}: unknown column(s) {missing}. Available: {names}")
+    table = pq.read_table(p, columns=wanted)
+    try:
+        cols = [table.column(c).to_numpy(zero_copy_only=False).astype(np.float64) for c in wanted]
+    except (ValueError, TypeError) as e:
+        raise ValueError(f"{p}: could not read numeric data ({e})") from e
+    data = np.column_stack(cols) if cols else np.empty((table.num_rows, 0))
+    return names, data
+
+
+def read_header(path: str | os.PathLike, *, delimiter: str = ",") -> list[str]:
+    """The column names of a CSV (its first row) or Parquet file (its schema), nothing else."""
+    p = Path(path)
+    if not p.is_file():
+        raise ValueError(f"{p} does not exist or is not a file")
+    if p.suffix.lower() in PARQUET_SUFFIXES:
+        try:
+            return list(require_pyarrow(p).read_schema(p).names)
+        except ImportError:
+            raise
+        except Exception as e:
+            raise ValueError(f"{p}: not a readable Parquet file ({e})") from e
+    with p.open(newline="") as fh:
+        header = next(csv.reader(fh, delimiter=delimiter), None)
+    if header is None:
+        raise ValueError(f"{p} is empty; expected a header row and data")
+    return [h.strip() for h in header]
+
+
+def read_columns(
+    path: str | os.PathLike,
+    columns: Sequence[str] | None = None,
+    *,
+    column_names: Sequence[str] | None = None,
+    delimiter: str = ",",
+) -> tuple[list[str], np.ndarray]:
+    """:func:`read_parquet_columns` for a ``.parquet``/``.pq`` file, else :func:`read_csv_columns`."""
+    if Path(path).suffix.lower() in PARQUET_SUFFIXES:
+        return read_parquet_columns(path, columns)
+    return read_csv_columns(path, columns, column_names=column_names, delimiter=delimiter)

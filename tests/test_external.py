@@ -259,3 +259,62 @@ def test_directory_without_manifest(tmp_path):
 
     with pytest.raises(ValueError, match=r"neither a dataset\.json manifest"):
         load_external(tmp_path)
+
+
+def _generated_dir(tmp_path: Path) -> Path:
+    """Two of the project's own multi-episode files described by a manifest."""
+    import json
+
+    from fcc_env.generate import write_dataset
+
+    write_dataset(tmp_path / "train.csv", seeds=[10, 11, 12], n_samples=50)
+    write_dataset(tmp_path / "test.csv", scenario="f2", seeds=[1, 2], n_samples=50, fault_time=20)
+    manifest = {
+        "inputs": ["cmd_u_F", "cmd_R_ar", "T_ar", "T_fp"],
+        "outputs": ["R_ar", "T_rx", "T_rg1", "T_rg2", "T_d1", "T_dg"],
+        "train_files": ["train.csv"],
+        "test_files": [{"path": "test.csv", "onset": 20, "name": "f2"}],
+        "sample_time_s": 10,
+    }
+    (tmp_path / "dataset.json").write_text(json.dumps(manifest))
+    return tmp_path
+
+
+def test_episode_column_splits_a_multi_episode_file(tmp_path) -> None:
+    from evaluation.external import load_external
+
+    data, _ = load_external(_generated_dir(tmp_path))
+    train = data.train_episodes()
+    assert [ep.n_samples for ep in train] == [50, 50, 50] and [ep.seed for ep in train] == [0, 1, 2]
+    assert data.cells() == [("f2", 0), ("f2", 1)]
+    loaded = data.load_test("f2", 1)
+    assert loaded.episode.n_samples == 50 and loaded.episode.fault_onset == 20
+    import fcc_env
+
+    batch = fcc_env.simulate_episodes([2], 50, scenario="f2", fault_time=20)
+    j = data.channels.index("T_rx")
+    np.testing.assert_allclose(
+        loaded.episode.y[:, j], batch.observations[0, :, fcc_env.MEASUREMENT_NAMES.index("T_rx")],
+        rtol=1e-9,
+    )  # fmt: skip
+    with pytest.raises(ValueError, match="has no episode 5"):
+        data.load_test("f2", 5)
+    # without the episode column the file is one record, as before
+    one = dataclasses.replace(data, episode_column=None)
+    assert one.cells() == [("f2", 0)] and [ep.n_samples for ep in one.train_episodes()] == [150]
+    assert data.store_key()["episode_column"] == "episode" and one.store_key() != data.store_key()
+
+
+def test_manifest_episode_column_must_be_a_name(tmp_path) -> None:
+    import json
+
+    from evaluation.external import load_manifest
+
+    d = _generated_dir(tmp_path)
+    spec = json.loads((d / "dataset.json").read_text())
+    (d / "other.json").write_text(json.dumps({**spec, "episode_column": 3}))
+    with pytest.raises(ValueError, match=r"other\.json: episode_column=3 is outside"):
+        load_manifest(d / "other.json")
+    (d / "other.json").write_text(json.dumps({**spec, "episode_column": None}))
+    data, _ = load_manifest(d / "other.json")  # a manifest file of any name
+    assert data.episode_column is None and data.directory == str(d)

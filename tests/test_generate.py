@@ -68,10 +68,13 @@ def test_parse_seeds_and_read_errors(tmp_path):
     (tmp_path / "a.json").write_text('{"format": "other"}')
     with pytest.raises(ValueError, match="not an FCC dataset sidecar"):
         read_dataset(tmp_path / "a.csv")
+    # .parquet is a dataset format now (test_parquet_dataset_equals_the_csv_one)
     with pytest.raises(
-        ValueError, match=r"a\.parquet' is outside the allowed range: a file name ending in \.csv"
+        ValueError,
+        match=r"a\.xlsx' is outside the allowed range: a file name ending in one of "
+        r"\['\.csv', '\.parquet', '\.pq'\]",
     ):
-        write_dataset(tmp_path / "a.parquet")
+        write_dataset(tmp_path / "a.xlsx")
 
 
 def test_sidecar_records_fault_and_plant_and_null_for_no_termination(tmp_path):
@@ -92,3 +95,102 @@ def test_sidecar_records_fault_and_plant_and_null_for_no_termination(tmp_path):
 def test_parse_seeds_rejects_negative_seeds():
     with pytest.raises(ValueError, match=r"seeds=\[-1\] is outside the allowed range: a non-empty"):
         parse_seeds("-1")
+
+
+# --- data formats (issue "A library people can plug into", item 4) ----------------------------
+
+needs_pyarrow = pytest.mark.skipif(
+    __import__("importlib").util.find_spec("pyarrow") is None, reason="pyarrow not installed"
+)
+
+
+def test_sidecar_columns_give_unit_description_role_and_null_for_none(tmp_path):
+    path = write_dataset(tmp_path / "n.csv", seeds=[0, 1], n_samples=40, include_states=True)
+    meta, cols = read_dataset(path)
+    assert meta["format_version"] == 2
+    assert list(meta["columns"]) == list(cols)  # names, in file order, as before
+    assert meta["columns"]["T_rx"]["unit"] == "°C" and meta["columns"]["T_rx"]["role"] == "measured"
+    assert meta["columns"]["R_ar"]["unit"] == "t/h"
+    assert meta["columns"]["cmd_u_F"]["role"] == "commanded"
+    assert meta["columns"]["x_C1"] == {
+        "unit": "kg/kg",
+        "description": "state: stage-1 coke on catalyst",
+        "role": "truth",
+    }
+    for name, info in meta["columns"].items():
+        assert set(info) == {"unit", "description", "role"} and info["description"], name
+        if info["role"] != "index":
+            assert name in meta["roles"][info["role"]], name
+    # one convention for "none": null, never -1 (nor 0 for a magnitude)
+    assert meta["fault_onsets"] == [None, None] and meta["fault_magnitudes"] == [None, None]
+    assert meta["terminated_at"] == [None, None]
+
+    def values(o):
+        if isinstance(o, dict):
+            for v in o.values():
+                yield from values(v)
+        elif isinstance(o, list):
+            for v in o:
+                yield from values(v)
+        else:
+            yield o
+
+    assert -1 not in list(values(meta))
+
+
+def test_generated_files_get_normal_permissions(tmp_path):
+    import os
+
+    old = os.umask(0o022)
+    try:
+        main(["--out", str(tmp_path / "p.csv"), "--samples", "20"])
+    finally:
+        os.umask(old)
+    for f in (tmp_path / "p.csv", tmp_path / "p.json"):
+        assert f.stat().st_mode & 0o777 == 0o644, (f, oct(f.stat().st_mode))
+
+
+@needs_pyarrow
+def test_parquet_dataset_equals_the_csv_one(tmp_path, capsys):
+    import os
+
+    from diagnosers.base import Episode
+    from evaluation.discover import load_measured
+
+    kw = dict(scenario="f1", seeds=[2, 4], n_samples=60, fault_time=30)
+    csv_meta, csv_cols = read_dataset(write_dataset(tmp_path / "a.csv", **kw))
+    old = os.umask(0o022)
+    try:
+        assert main(["--out", str(tmp_path / "a.parquet"), "--scenario", "f1", "--seeds", "2,4",
+                     "--samples", "60", "--fault-time", "30"]) == 0  # fmt: skip
+    finally:
+        os.umask(old)
+    assert "a.parquet" in capsys.readouterr().out
+    assert (tmp_path / "a.parquet").stat().st_mode & 0o777 == 0o644
+    pq_meta, pq_cols = read_dataset(tmp_path / "a.parquet")
+    assert pq_meta == csv_meta and list(pq_cols) == list(csv_cols)
+    for n in csv_cols:
+        np.testing.assert_allclose(pq_cols[n], csv_cols[n], rtol=1e-9, err_msg=n)
+    eps = Episode.from_dataset(tmp_path / "a.parquet")
+    assert [e.seed for e in eps] == [2, 4] and eps[0].fault_onset == 30
+    m = load_measured(tmp_path / "a.parquet")
+    assert m.n_episodes == 2 and m.n_samples == 60
+
+
+def test_parquet_without_pyarrow_names_the_file_and_the_extra(tmp_path, monkeypatch, capsys):
+    import sys
+
+    monkeypatch.setitem(sys.modules, "pyarrow", None)
+    monkeypatch.setitem(sys.modules, "pyarrow.parquet", None)
+    out = tmp_path / "x.parquet"
+    with pytest.raises(SystemExit):
+        main(["--out", str(out), "--samples", "20"])
+    err = capsys.readouterr().err
+    assert f"writing {out} needs pyarrow" in err and "fcc-fault-diagnosis[parquet]" in err
+    assert not out.exists() and not out.with_suffix(".json").exists()
+
+
+def test_unknown_table_suffix_is_refused(tmp_path, capsys):
+    with pytest.raises(SystemExit):
+        main(["--out", str(tmp_path / "x.xlsx"), "--samples", "20"])
+    assert "x.xlsx" in capsys.readouterr().err

@@ -46,6 +46,7 @@ from evaluation.discover.data import (
     MeasuredData,
     from_arrays,
     from_batch,
+    from_external,
     load_measured,
 )
 from evaluation.discover.fitting import ar1_inflation, fit_effects
@@ -96,6 +97,7 @@ __all__ = [
     "fit_effects",
     "from_arrays",
     "from_batch",
+    "from_external",
     "heldout_comparison",
     "library_candidates",
     "load_measured",

@@ -1,16 +1,45 @@
-"""Command line: ``python -m evaluation.discover --data PATH.csv --out DIR [--candidates id,id]
-[--train-fraction 0.6] [--max-effects 3] [--alpha 0.01] [--no-plots]``."""
+"""Command line: ``python -m evaluation.discover (--data PATH.csv | --external DIR | --manifest
+DIR/dataset.json) --out DIR [--candidates id,id] [--train-fraction 0.6] [--max-effects 3]
+[--alpha 0.01] [--no-plots]``.
+
+``--data`` reads a dataset with this project's JSON sidecar (CSV or Parquet). ``--external`` and
+``--manifest`` read a user's directory through its manifest
+(:func:`evaluation.external.load_manifest`: inputs, outputs, sample time, the healthy
+``train_files``). When the manifest's channels include those of the FCC physics model
+(:class:`~evaluation.discover.physics.PhysicsModel`) it is used; otherwise the declared model is
+a linear ARX model of each output from the manifest's inputs
+(:class:`~evaluation.discover.arx.ARXModel`), whose candidates are missing measured inputs.
+"""
 
 from __future__ import annotations
 
 import argparse
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 from evaluation.discover.loop import discover
 from evaluation.discover.report import REPORT_FILE
 
 __all__ = ["main"]
+
+
+def _source(args: argparse.Namespace) -> tuple[Any, Any]:
+    """``(data, model)``: the dataset path and the default model, or a manifest's records and
+    the physics model (if its channels allow) or an ARX model of its outputs from its inputs."""
+    if args.data is not None:
+        return args.data, None
+    from evaluation.discover.arx import ARXModel
+    from evaluation.discover.data import from_external
+    from evaluation.discover.physics import PHYSICS_INPUT_CHANNELS, PHYSICS_OUTPUT_CHANNELS
+    from evaluation.external import load_manifest
+
+    ext, _ = load_manifest(args.external if args.external is not None else args.manifest)
+    data = from_external(ext)
+    needed = {"cmd_u_F", "cmd_R_ar", *PHYSICS_INPUT_CHANNELS, *PHYSICS_OUTPUT_CHANNELS}
+    if needed <= set(data.channels):
+        return data, None
+    return data, ARXModel({o: tuple(ext.inputs) for o in ext.outputs})
 
 
 def main(argv: Sequence[str] | None = None) -> int:
@@ -19,7 +48,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         description="Find the effect the declared FCC model lacks in measured data, add it, and "
         "report the held-out error before and after (DIR/report.json + plots).",
     )
-    parser.add_argument("--data", required=True, help="dataset CSV (sidecar: same stem .json)")
+    src = parser.add_mutually_exclusive_group(required=True)
+    src.add_argument("--data", help="dataset .csv/.parquet with its .json sidecar (same stem)")
+    src.add_argument("--external", metavar="DIR", help="data directory with a dataset.json")
+    src.add_argument("--manifest", metavar="FILE", help="a manifest file (dataset.json format)")
     parser.add_argument("--out", required=True, help="output folder")
     parser.add_argument("--candidates", default=None, help="comma-separated candidate ids (all)")
     parser.add_argument("--train-fraction", type=float, default=0.6, help="in (0.2, 0.9); 0.6")
@@ -31,8 +63,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     if args.candidates:
         cands = [c.strip() for c in args.candidates.split(",") if c.strip()]
     try:
+        data, model = _source(args)
         report = discover(
-            args.data,
+            data,
+            model=model,
             candidates=cands,
             train_fraction=args.train_fraction,
             max_effects=args.max_effects,
@@ -40,7 +74,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             out_dir=args.out,
             plots=not args.no_plots,
         )
-    except ValueError as e:
+    except (ValueError, ImportError) as e:
         parser.error(str(e))
     for e in report.effects:
         print(f"effect {e.id}: {dict(e.params)} (95% CI {dict(e.ci95)})")

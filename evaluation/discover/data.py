@@ -17,8 +17,8 @@ from typing import Any
 
 import numpy as np
 
-from fcc_env.generate import DATASET_FORMAT, read_sidecar
-from fcc_env.io import read_csv_columns
+from fcc_env.generate import DATASET_FORMAT, DATASET_SUFFIXES, read_sidecar
+from fcc_env.io import read_columns, read_header
 from fcc_env.validation import Real, check
 
 __all__ = [
@@ -28,6 +28,7 @@ __all__ = [
     "MeasuredData",
     "from_arrays",
     "from_batch",
+    "from_external",
     "load_measured",
 ]
 
@@ -109,8 +110,11 @@ def load_measured(path: str | os.PathLike) -> MeasuredData:
     Raises ValueError naming the problem for a missing file, a bad sidecar or ragged episodes.
     """
     csv = Path(path)
-    if csv.suffix != ".csv":
-        raise ValueError(f"--data must be a .csv dataset (with a .json sidecar), got {str(csv)!r}")
+    if csv.suffix.lower() not in DATASET_SUFFIXES:
+        raise ValueError(
+            f"--data must be a {'/'.join(DATASET_SUFFIXES)} dataset (with a .json sidecar), "
+            f"got {str(csv)!r}"
+        )
     meta = read_sidecar(csv)
     roles = meta.get("roles")
     if not isinstance(roles, dict) or not isinstance(roles.get("measured"), list):
@@ -118,14 +122,13 @@ def load_measured(path: str | os.PathLike) -> MeasuredData:
     wanted = [str(c) for c in roles["measured"]] + [str(c) for c in roles.get("commanded", [])]
     dt = meta.get("sample_time_s")
     dt = check("sample_time_s", dt, POSITIVE_SECONDS)
-    with csv.open() as fh:
-        header = [h.strip() for h in fh.readline().strip().split(",")]
+    header = read_header(csv)
     missing = [c for c in wanted if c not in header]
     if missing:
         raise ValueError(f"dataset {str(csv)!r} lacks column(s) {missing} named in its sidecar")
     index = [c for c in ("episode",) if c in header]
     try:
-        _, table = read_csv_columns(csv, index + wanted)
+        _, table = read_columns(csv, index + wanted)
     except ValueError as e:
         raise ValueError(f"dataset {str(csv)!r} could not be parsed as numbers: {e}") from e
     if table.shape[0] < 50:
@@ -139,3 +142,20 @@ def load_measured(path: str | os.PathLike) -> MeasuredData:
     E, T = eps.size, int(counts[0])
     channels = {c: table[order, len(index) + j].reshape(E, T) for j, c in enumerate(wanted)}
     return MeasuredData(channels, float(dt), str(csv))
+
+
+def from_external(data: Any) -> MeasuredData:
+    """The healthy training records of an :class:`evaluation.external.ExternalData` (e.g. from
+    :func:`evaluation.external.load_manifest`): its ``inputs`` and ``outputs`` channels, one
+    episode per record (a file's ``episode`` column splits it), at its ``sample_time_s``.
+
+    The loop needs equal-length episodes: longer records are cut to the shortest one's length.
+    Test records are not read (a fault record is not data to model).
+    """
+    episodes = data.train_episodes()
+    n = min(ep.n_samples for ep in episodes)
+    channels = {
+        c: np.stack([np.asarray(ep.y[:n, j], np.float64) for ep in episodes])
+        for j, c in enumerate(data.channels)
+    }
+    return MeasuredData(channels, float(data.sample_time_s), f"external:{data.directory}")

@@ -4,7 +4,9 @@
 record with :func:`scipy.optimize.least_squares` (bounded trust-region reflective, ``"trf"``).
 The Jacobian is a forward finite difference whose ``1 + n_params`` perturbed parameter sets are
 simulated as one batched ``predict`` call together with the trial point, so one optimiser
-iteration costs one batched simulation. The start is the best point of the parameters' grids.
+iteration costs one batched simulation. The start is the best point of a global first pass: the
+parameters' grids (:attr:`ParamInfo.grid`, or :func:`range_grid` over the declared range when a
+candidate gives none) plus the start value, all evaluated in one batched ``predict`` call.
 
 **Parameter intervals** are σ²(JᵀJ)⁻¹ at the optimum (J the weighted simulation-error
 Jacobian), inflated by (1+ρ̄)/(1−ρ̄), ρ̄ the mean lag-1 autocorrelation of the fitted residual (an
@@ -15,19 +17,49 @@ than AR(1) still make them optimistic.
 from __future__ import annotations
 
 import itertools
+import math
 from collections.abc import Sequence
 
 import numpy as np
 from scipy.optimize import least_squares
 
-from evaluation.discover.base import Candidate, FitResult, ModelAdapter
+from evaluation.discover.base import Candidate, FitResult, ModelAdapter, ParamInfo
 from evaluation.discover.data import MeasuredData
 
-__all__ = ["ar1_inflation", "fit_effects", "weighted_residuals"]
+__all__ = ["ar1_inflation", "fit_effects", "range_grid", "weighted_residuals"]
 
 #: Residual given to every sample of a parameter set whose simulation diverged: a huge cost that
 #: makes the optimiser back off (the trust region shrinks) instead of failing on NaN.
 DIVERGED_RESIDUAL = 1e6
+
+
+#: Points of :func:`range_grid`, and the largest grid product evaluated jointly (above it, each
+#: free parameter's grid is scanned alone with the others at their start values).
+RANGE_GRID_POINTS = 9
+MAX_GRID_ROWS = 256
+
+
+def range_grid(p: ParamInfo, n: int = RANGE_GRID_POINTS) -> tuple[float, ...]:
+    """A start grid over a parameter's declared range [low, high], plus its null value.
+
+    Log-spaced when the range is positive and spans at least a factor 20 (time constants),
+    linear otherwise.
+
+    >>> range_grid(ParamInfo("tau_s", 60.0, 1.0, 1800.0, 1.0), 5)
+    (1.0, 6.51, 42.4, 276.0, 1800.0)
+    >>> range_grid(ParamInfo("bias", 4.0, -50.0, 50.0), 5)
+    (-50.0, -25.0, 0.0, 25.0, 50.0)
+    """
+    lo, hi = float(p.low), float(p.high)
+    if not (np.isfinite(lo) and np.isfinite(hi)) or hi <= lo:
+        return ()
+    if lo > 0 and hi / lo >= 20:
+        pts = np.geomspace(lo, hi, n)
+    else:
+        pts = np.linspace(lo, hi, n)
+    if lo <= p.null <= hi:
+        pts = np.append(pts, p.null)
+    return tuple(float(f"{v:.3g}") if lo < v < hi else float(v) for v in np.unique(pts))
 
 
 def ar1_inflation(res: np.ndarray) -> float:
@@ -92,11 +124,26 @@ def fit_effects(
         return weighted_residuals(model, data, effects, rows, Y, n_train, sqrt_w)
 
     if grid and fidx.size:
-        axes = [infos[i].grid or (theta[i],) for i in fidx]
-        pts = np.array(list(itertools.product(*axes)), float)
-        if pts.shape[0] > 1:
-            rows = np.tile(theta, (pts.shape[0], 1))
-            rows[:, fidx] = pts
+        axes = [
+            sorted(
+                {
+                    theta[i],
+                    *(v for v in infos[i].grid or range_grid(infos[i]) if lo[i] <= v <= hi[i]),
+                }
+            )
+            for i in fidx
+        ]
+        if math.prod(len(a) for a in axes) <= MAX_GRID_ROWS:
+            rows = np.tile(theta, (math.prod(len(a) for a in axes), 1))
+            rows[:, fidx] = np.array(list(itertools.product(*axes)), float)
+        else:  # one parameter at a time, the others at their start values
+            blocks = []
+            for j, a in zip(fidx, axes, strict=True):
+                b = np.tile(theta, (len(a), 1))
+                b[:, j] = a
+                blocks.append(b)
+            rows = np.concatenate(blocks)
+        if rows.shape[0] > 1:
             cost = np.sum(residuals(rows) ** 2, axis=1)
             theta = rows[int(np.argmin(cost))]
     cov = np.zeros((theta.size, theta.size))
