@@ -5,7 +5,7 @@
 True
 """
 
-from diagnosers.base import Decision, Detection, Diagnoser, Episode, NotFittedError
+from diagnosers.base import UNKNOWN, Decision, Detection, Diagnoser, Episode, NotFittedError
 from diagnosers.registry import available, diagnoser_class, make, register
 
 # isort: split
@@ -14,12 +14,14 @@ from diagnosers import (
     baselines,  # noqa: F401  (registers limits, pca, arx-band)
     lrgf_mem,  # noqa: F401  (registers lrgf-mem-paper, lrgf-mem)
 )
+from diagnosers import isolation  # noqa: F401, E402  (registers lrgf-iso, lrgf-lda)
 
 __all__ = [
     "Decision",
     "Detection",
     "Diagnoser",
     "Episode",
+    "UNKNOWN",
     "NotFittedError",
     "available",
     "diagnoser_class",
