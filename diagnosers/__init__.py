@@ -12,16 +12,16 @@ from diagnosers.registry import available, diagnoser_class, make, register
 # Importing the model modules registers their diagnosers (after the registry exists).
 from diagnosers import (
     baselines,  # noqa: F401  (registers limits, pca, arx-band)
+    isolation,  # noqa: F401  (registers lrgf-iso, lrgf-lda)
     lrgf_mem,  # noqa: F401  (registers lrgf-mem-paper, lrgf-mem)
 )
-from diagnosers import isolation  # noqa: F401, E402  (registers lrgf-iso, lrgf-lda)
 
 __all__ = [
+    "UNKNOWN",
     "Decision",
     "Detection",
     "Diagnoser",
     "Episode",
-    "UNKNOWN",
     "NotFittedError",
     "available",
     "diagnoser_class",

@@ -238,9 +238,7 @@ def isolability_markdown(res: Isolability) -> str:
         "|---|" + "---|" * len(CHANNELS),
     ]
     for i, fi in enumerate(f):
-        lines.append(
-            f"| {fi} | " + " | ".join(f"{v:+.1f}" for v in res.mean_signature[i]) + " |"
-        )
+        lines.append(f"| {fi} | " + " | ".join(f"{v:+.1f}" for v in res.mean_signature[i]) + " |")
     return "\n".join(lines) + "\n"
 
 
@@ -254,9 +252,7 @@ def main(argv: Sequence[str] | None = None) -> None:
     a = p.parse_args(argv)
     names = sorted(TRACKS) if a.track == "all" else [t.strip() for t in a.track.split(",")]
     for name in names:
-        res = isolability(
-            name, n_seeds=a.seeds, horizon=a.horizon, alpha=a.alpha, window=a.window
-        )
+        res = isolability(name, n_seeds=a.seeds, horizon=a.horizon, alpha=a.alpha, window=a.window)
         print(isolability_markdown(res))
 
 

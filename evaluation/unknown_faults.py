@@ -82,7 +82,7 @@ class GatedEffect:
     def transform_inputs(self, t_s: np.ndarray, u: np.ndarray) -> np.ndarray:
         t_s = np.asarray(t_s, dtype=np.float64)
         moved = self.effect.transform_inputs(np.maximum(t_s - self.onset_s, 0.0), u)
-        on = (t_s >= self.onset_s).reshape(t_s.shape + (1,))
+        on = (t_s >= self.onset_s).reshape((*t_s.shape, 1))
         return np.where(on, moved, u)
 
     def measure(self, t: float, y: np.ndarray) -> np.ndarray:
