@@ -207,3 +207,30 @@ def test_isolability_separates_f1_from_f3_at_once() -> None:
     assert res.t_sep[0, 1] <= 5 and res.t_sep[1, 0] <= 50  # f1 jumps, f3 builds up
     assert res.angle[0, 1] == pytest.approx(res.angle[1, 0]) and res.angle[0, 1] > 90
     assert "| f1 |" in isolability_markdown(res)
+
+
+def test_harness_trains_isolators_on_labelled_faults_and_tables_them(tmp_path: Path) -> None:
+    from evaluation.oracle import oracle_records
+    from evaluation.sweep import DiagnoserSpec, SweepConfig, run_sweep
+    from evaluation.trackboard import TrackRun, isolation_table, track_rows, write_track
+
+    tiny = TRACKS["paper"].replace(n_healthy=1, n_faulty=1, n_train=2, n_validation=2)
+    data = TrackData(track=tiny)
+    specs = (DiagnoserSpec("lrgf-iso", LRGFISO.fast_params()), DiagnoserSpec("limits"))
+    config = SweepConfig(diagnosers=specs, data=data)
+    res = run_sweep(config, tmp_path / "store", n_workers=0, progress=False)
+    iso = [r for r in res.records if r.diagnoser == "lrgf-iso" and r.fault_onset is not None]
+    assert {r.scenario for r in iso} == {"f1", "f2", "f3", "f4"}
+    for r in iso:  # every faulty cell carries its isolation scores
+        assert r.diagnosis in {"f1", "f2", "f3", "f4", "unknown", "missed"}
+        assert 0.0 <= r.r_ti <= 1.0 and 0.0 <= r.r_fi <= 1.0
+    assert all(r.diagnosis == "" for r in res.records if r.diagnoser == "limits")
+    model = next((tmp_path / "store").rglob("lrgf-iso/**/config.json")).parent
+    assert Diagnoser.load(model).classes_ == ("f1", "f2", "f3", "f4")  # type: ignore[attr-defined]
+    records = (*res.records, *oracle_records(data))
+    rows = track_rows(records, ["lrgf-iso", "limits"], tiny.faults)
+    run = TrackRun(tiny, records, tuple(rows), 0.0, res.n_computed, res.n_reused)
+    text = isolation_table(run)
+    assert "### Isolation" in text and "| lrgf-iso |" in text and "| limits |" not in text
+    paths = write_track(run, tmp_path / "out")
+    assert (tmp_path / "out" / "figures" / "confusion-lrgf-iso.png") in paths
