@@ -45,10 +45,11 @@ class Episode:
         channels: channel names, one per column of ``y`` (for FCC-v0:
             ``fcc_env.MEASUREMENT_NAMES``).
         sample_time_s: sample period in seconds.
-        fault_onset: ground-truth onset sample, or ``None`` for a healthy record. Used only to
-            score; the harness never passes it to :meth:`Diagnoser.fit` (training data are
-            healthy anyway).
-        scenario: scenario name (``"nominal"``, ``"f1"``... or a file stem for external data).
+        fault_onset: ground-truth onset sample, or ``None`` for a healthy record. Used to
+            score; the harness passes faulty training records (labelled by ``scenario``) only
+            to diagnosers that isolate (:attr:`Diagnoser.isolates`).
+        scenario: scenario name (``"nominal"``, ``"f1"``... or a file stem for external data);
+            for an isolating diagnoser's faulty training records, the fault class.
         seed: seed the episode was simulated with, if any.
         y_clean: optional noise-free measurements (simulation only; for plots and diagnostics).
     """

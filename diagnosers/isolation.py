@@ -4,28 +4,39 @@ Both diagnosers here *compose* an inner :class:`diagnosers.lrgf_mem.LRGFMEM` (``
 trained on the healthy training episodes exactly as ``lrgf-mem`` is: their alarms are that
 detector's alarms, sample for sample, so isolation cannot cost detection. While alarmed, they
 compare the bank's residuals with what they learned from labelled training faults
-(``Episode.fault_onset`` and ``Episode.scenario``, training seeds only):
+(``Episode.fault_onset`` and ``Episode.scenario``, training seeds only).
 
-* ``lrgf-iso`` (structured residuals, nearest direction): the bank's normalised remaining
-  errors ``e = (y − y_m − y_e) / v`` of its three relations (T_rx, T_rg1, T_rg2) are averaged by
-  an EWMA of weight ``iso_lambda`` (``q``), and ``q``'s *direction* is compared with each fault's
-  signature directions, a few prototype unit vectors per fault (spherical k-means over the
-  alarmed post-onset samples of its training episodes; a fault's signature turns as its effect
-  propagates, so one direction is not enough). The score of class ``c`` is the best cosine
-  ``max_p q̂·μ_cp`` (the GLR of a known direction with unknown size under white noise ranks the
-  same way: ``‖q‖² cos²``). The diagnosis is the best class, or ``"unknown"`` when its cosine is
-  below that class's threshold: the ``unknown_quantile`` quantile of its own training samples'
-  cosines (a share ``unknown_quantile`` of training-fault samples fall into "unknown").
-* ``lrgf-lda`` (data-driven baseline): linear discriminant analysis (scikit-learn's
-  :class:`~sklearn.discriminant_analysis.LinearDiscriminantAnalysis` fits it) on exponential
-  windows of the residuals: EWMAs of ``e`` at the weights ``LDA_LAMBDAS``, a 3 × 4 feature vector.
-  "unknown" when the Mahalanobis distance (pooled covariance) to the chosen class's mean exceeds
-  the ``1 − unknown_quantile`` quantile of that class's training distances. Only the fitted arrays
-  (class means, pooled covariance, priors) are stored; prediction is computed from them, so
-  loading never unpickles anything.
+**Features** (shared). The bank's normalised remaining errors ``e = (y − y_m − y_e) / v`` of its
+three relations (T_rx, T_rg1, T_rg2) are averaged by EWMAs of the weights
+:data:`FEATURE_LAMBDAS` (exponential windows of about 3 to 100 samples): a 12-vector ``q`` that
+holds the *time course* of the signature as well as its direction (f1, f2 and f4 point nearly
+the same way, see :mod:`evaluation.isolability`; they differ in how the relations respond over
+time). The feature of an alarmed sample is ``q − q_0``, ``q_0`` the value just before the
+alarm began (an alarm begins after ``alarm_gap`` quiet samples): the healthy model error of the
+slow averages cancels. Signatures turn as a fault propagates, so each *age* of the alarm (samples
+since it began, bins :data:`AGE_EDGES`) has its own classifier.
 
-Thresholds are set on the training faults only (training seeds 1000+); the hyperparameters were
-chosen on validation seeds (5000+). Before the alarm the diagnosis is ``""``.
+* ``lrgf-iso`` (structured residuals, nearest direction): per age bin and fault, a few prototype
+  directions (spherical k-means of the training samples' unit features); the score of a fault
+  is the best cosine with its prototypes (the GLR of a known direction with unknown size under
+  white noise ranks hypotheses the same way). "unknown" when the best fault's cosine is below its
+  threshold: the ``unknown_quantile`` quantile of its own training cosines, and never an angle
+  tighter than ``min_angle_deg``.
+* ``lrgf-lda`` (data-driven baseline): linear discriminant analysis per age bin (fitted by
+  scikit-learn's :class:`~sklearn.discriminant_analysis.LinearDiscriminantAnalysis`); "unknown"
+  when the Mahalanobis distance (pooled covariance) to the chosen class's mean exceeds the
+  ``1 − unknown_quantile`` quantile of that class's training distances, and never less than the
+  χ² quantile of the Gaussian model. Only the fitted arrays (class means, pooled precision,
+  priors, thresholds) are stored; prediction is computed from them, so loading never unpickles.
+
+**Decision.** Per-sample scores and acceptance flags are smoothed over the samples of one alarm
+by an EWMA of weight ``score_lambda`` (sequential evidence: one odd sample does not flip the
+label); the diagnosis is the best smoothed class, or "unknown" when its smoothed acceptance is
+below one half. Before the alarm, and between alarms, the diagnosis is ``""``.
+
+Thresholds are set on the training faults only (training seeds 1000+); the hyperparameters
+(``score_lambda``, ``min_angle_deg``, ``unknown_quantile``) were chosen on validation seeds
+(5000+) of the paper track (``python -m evaluation.isolation_study --seeds validation``).
 """
 
 from __future__ import annotations
@@ -391,7 +402,7 @@ class LRGFLDA(_IsolatingLRGF):
         detector: dict[str, Any] | None = None,
         unknown_quantile: float = 0.01,
         alarm_gap: int = 100,
-        score_lambda: float = 0.1,
+        score_lambda: float = 0.03,
         seed: int = 0,
     ) -> None:
         self.detector = detector

@@ -145,7 +145,8 @@ def separation_times(
                     t[i, j, b] = 0.0
                     continue
                 clean_j = signatures(data, fj, seed, onset=k0)[0]
-                glr = (_ss_min(r[:n], clean_j[:n]) - ss_i) / 2.0
+                m = min(n, clean_j.shape[0])  # the hypothesis' plant may end early (envelope)
+                glr = (_ss_min(r[:m], clean_j[:m]) - ss_i[:m]) / 2.0
                 t[i, j, b] = _first_hold(glr, level)
     return t, sig, np.asarray(seeds)
 
