@@ -118,6 +118,22 @@ def detection_figure(
     ax_a.step(t, det.alarm.astype(float), where="post", color=_ALARM_COLOR, linewidth=0.8)
     if onset is not None:
         ax_a.axvline(onset, **_ONSET_STYLE)
+    if det.diagnosis is not None:  # an isolating diagnoser: its diagnosis along the time axis
+        labels = [x for x in dict.fromkeys(det.diagnosis.tolist()) if x]
+        for i, lab in enumerate(labels):
+            ax_a.fill_between(
+                t,
+                0,
+                1,
+                where=det.diagnosis == lab,
+                step="post",
+                color=f"C{i}",
+                alpha=0.6,
+                linewidth=0,
+                label=f"diagnosis: {lab}",
+            )
+        if labels:
+            ax_a.legend(loc="upper left", fontsize="small", ncol=min(len(labels), 5))
     ax_a.set_ylim(-0.1, 1.1)
     ax_a.set_yticks([0, 1], ["ok", "alarm"])
     ax_a.set_xlabel(f"sample (Ts = {episode.sample_time_s:g} s)")

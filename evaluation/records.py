@@ -167,6 +167,8 @@ def pack_detection(
         for f in _DET_FIELDS:
             out[f"{view}_{f}"] = getattr(det, f)
         out[f"{view}_signal_names"] = np.array(det.signal_names, dtype=str)
+        if det.diagnosis is not None:  # isolating diagnosers: the diagnosis per sample
+            out[f"{view}_diagnosis"] = np.asarray(det.diagnosis, dtype=str)
     return out
 
 
@@ -194,6 +196,7 @@ def unpack_detection(
             Detection(
                 **{f: arrays[f"{view}_{f}"] for f in _DET_FIELDS},
                 signal_names=tuple(str(n) for n in arrays[f"{view}_signal_names"]),
+                diagnosis=arrays.get(f"{view}_diagnosis"),
             )
         )
     det, bands = views

@@ -234,3 +234,19 @@ def test_harness_trains_isolators_on_labelled_faults_and_tables_them(tmp_path: P
     assert "### Isolation" in text and "| lrgf-iso |" in text and "| limits |" not in text
     paths = write_track(run, tmp_path / "out")
     assert (tmp_path / "out" / "figures" / "confusion-lrgf-iso.png") in paths
+
+
+def test_figure_and_packed_detection_carry_the_diagnosis(fitted: dict[str, Diagnoser]) -> None:
+    from evaluation.plots import detection_figure
+    from evaluation.records import pack_detection, unpack_detection
+    from evaluation.sources import LoadedEpisode
+
+    ep = inject_step_fault(steady(34, 1200), onset=600, magnitude=3.0, channel="T_rg1")
+    det = fitted["lrgf-iso"].detect(ep)
+    arrays = pack_detection(LoadedEpisode(ep, 600, 1200), det)
+    _, _, back, _ = unpack_detection(arrays)
+    assert back.diagnosis is not None
+    np.testing.assert_array_equal(back.diagnosis, det.diagnosis)
+    fig = detection_figure(ep, det)
+    texts = [t.get_text() for t in fig.axes[-1].get_legend().get_texts()]
+    assert "diagnosis: step_T_rg1" in texts
