@@ -260,6 +260,19 @@ class SimulatedData:
         loaded = self._simulate(self.train_seeds, "nominal")
         return [le.episode for le in loaded if le.episode.n_samples >= 2]
 
+    def train_fault_episodes(self) -> list[Episode]:
+        """Labelled faulty training episodes for diagnosers that isolate: every fault scenario
+        of ``scenarios`` on every training seed, with the test episodes' fault settings."""
+        out = []
+        for sc in self.scenarios:
+            if sc == "nominal":
+                continue
+            for le in self._simulate(self.train_seeds, sc):
+                ep = le.episode
+                if ep.fault_onset is not None and ep.n_samples - ep.fault_onset >= 2:
+                    out.append(ep)
+        return out
+
     def load_test(self, scenario: str, seed: int) -> LoadedEpisode:
         return self._simulate([seed], scenario)[0]
 

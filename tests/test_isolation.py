@@ -250,3 +250,18 @@ def test_figure_and_packed_detection_carry_the_diagnosis(fitted: dict[str, Diagn
     fig = detection_figure(ep, det)
     texts = [t.get_text() for t in fig.axes[-1].get_legend().get_texts()]
     assert "diagnosis: step_T_rg1" in texts
+
+
+def test_simulated_data_labels_its_training_faults() -> None:
+    from evaluation.sources import SimulatedData
+
+    data = SimulatedData(
+        scenarios=("nominal", "f1", "f3"), train_seeds=(1000, 1001), n_samples=2300
+    )
+    eps = data.train_fault_episodes()
+    assert [(e.scenario, e.seed, e.fault_onset) for e in eps] == [
+        ("f1", 1000, 1900),
+        ("f1", 1001, 1900),
+        ("f3", 1000, 2020),
+        ("f3", 1001, 2020),
+    ]
