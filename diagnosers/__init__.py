@@ -5,7 +5,7 @@
 True
 """
 
-from diagnosers.base import Decision, Detection, Diagnoser, Episode, NotFittedError
+from diagnosers.base import UNKNOWN, Decision, Detection, Diagnoser, Episode, NotFittedError
 from diagnosers.registry import available, diagnoser_class, import_modules, make, register
 from fcc_env import __version__  # the project's one version
 
@@ -13,10 +13,12 @@ from fcc_env import __version__  # the project's one version
 # Importing the model modules registers their diagnosers (after the registry exists).
 from diagnosers import (
     baselines,  # noqa: F401  (registers limits, pca, arx-band)
+    isolation,  # noqa: F401  (registers lrgf-iso, lrgf-lda)
     lrgf_mem,  # noqa: F401  (registers lrgf-mem-paper, lrgf-mem)
 )
 
 __all__ = [
+    "UNKNOWN",
     "Decision",
     "Detection",
     "Diagnoser",

@@ -33,6 +33,10 @@ logger = logging.getLogger(__name__)
 
 SAVE_FORMAT = "fcc-diagnoser"
 SAVE_FORMAT_VERSION = 1
+#: The diagnosis of an isolating diagnoser that is alarmed but fits none of its fault classes.
+UNKNOWN = "unknown"
+#: The diagnosis while not alarmed (no diagnosis).
+NO_DIAGNOSIS = ""
 
 
 def auto_progress(progress: bool | None) -> bool:
@@ -96,10 +100,11 @@ class Episode:
         channels: channel names, one per column of ``y`` (for FCC-v0:
             ``fcc_env.MEASUREMENT_NAMES``).
         sample_time_s: sample period in seconds.
-        fault_onset: ground-truth onset sample, or ``None`` for a healthy record. Used only to
-            score; the harness never passes it to :meth:`Diagnoser.fit` (training data are
-            healthy anyway).
-        scenario: scenario name (``"nominal"``, ``"f1"``... or a file stem for external data).
+        fault_onset: ground-truth onset sample, or ``None`` for a healthy record. Used to
+            score; the harness passes faulty training records (labelled by ``scenario``) only
+            to diagnosers that isolate (:attr:`Diagnoser.isolates`).
+        scenario: scenario name (``"nominal"``, ``"f1"``... or a file stem for external data);
+            for an isolating diagnoser's faulty training records, the fault class.
         seed: seed the episode was simulated with, if any.
         y_clean: optional noise-free measurements (simulation only; for plots and diagnostics).
     """
@@ -322,11 +327,22 @@ class Decision:
     lower: np.ndarray
     upper: np.ndarray
     residual: np.ndarray
+    #: isolating diagnosers (:attr:`Diagnoser.isolates`): one of the trained fault classes,
+    #: :data:`UNKNOWN`, or :data:`NO_DIAGNOSIS` (``""``) while not alarmed
+    diagnosis: str = NO_DIAGNOSIS
+    #: isolating diagnosers: a score per class of :attr:`Detection.class_names` (higher = fits
+    #: better), ``None`` for a diagnoser that only detects
+    class_scores: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
 class Detection:
-    """Decisions over a whole episode: each array has a leading time axis of length n_samples."""
+    """Decisions over a whole episode: each array has a leading time axis of length n_samples.
+
+    An isolating diagnoser also fills ``diagnosis`` (``(T,)`` str: a class of ``class_names``,
+    :data:`UNKNOWN`, or ``""`` while not alarmed) and ``class_scores`` (``(T, C)``, one column
+    per name of ``class_names``); a detector leaves them ``None`` and ``()``.
+    """
 
     alarm: np.ndarray  # (T,) bool
     signal: np.ndarray  # (T, k)
@@ -334,11 +350,51 @@ class Detection:
     upper: np.ndarray  # (T, k)
     residual: np.ndarray  # (T, k)
     signal_names: tuple[str, ...]
+    diagnosis: np.ndarray | None = None  # (T,) str, isolating diagnosers only
+    class_scores: np.ndarray | None = None  # (T, C), isolating diagnosers only
+    class_names: tuple[str, ...] = ()
+
+    def __post_init__(self) -> None:
+        n = len(self.alarm)
+        if self.diagnosis is not None:
+            diag = np.asarray(self.diagnosis, dtype=str)
+            if diag.shape != (n,):
+                raise ValueError(f"Detection.diagnosis must have shape ({n},), got {diag.shape}")
+            object.__setattr__(self, "diagnosis", diag)
+        if self.class_scores is not None:
+            cs = np.asarray(self.class_scores, dtype=np.float64)
+            if cs.shape != (n, len(self.class_names)):
+                raise ValueError(
+                    f"Detection.class_scores must have shape ({n}, {len(self.class_names)}) for "
+                    f"class_names {self.class_names}, got {cs.shape}"
+                )
+            object.__setattr__(self, "class_scores", cs)
+
+    @property
+    def isolates(self) -> bool:
+        """Whether the detection carries a diagnosis per sample."""
+        return self.diagnosis is not None
 
     @classmethod
     def from_decisions(
-        cls, decisions: Sequence[Decision], signal_names: tuple[str, ...]
+        cls,
+        decisions: Sequence[Decision],
+        signal_names: tuple[str, ...],
+        class_names: tuple[str, ...] | None = None,
     ) -> Detection:
+        """Stack per-sample decisions; with ``class_names`` also their diagnoses and scores."""
+        iso: dict[str, Any] = {}
+        if class_names is not None:
+            scores = [d.class_scores for d in decisions]
+            iso = {
+                "diagnosis": np.array([d.diagnosis for d in decisions], dtype=str).reshape(-1),
+                "class_scores": (
+                    np.stack(scores).reshape(len(decisions), len(class_names))
+                    if all(s is not None for s in scores)
+                    else None
+                ),
+                "class_names": tuple(class_names),
+            }
         return cls(
             alarm=np.array([d.alarm for d in decisions], dtype=bool),
             signal=np.stack([d.signal for d in decisions]),
@@ -346,6 +402,7 @@ class Detection:
             upper=np.stack([d.upper for d in decisions]),
             residual=np.stack([d.residual for d in decisions]),
             signal_names=signal_names,
+            **iso,
         )
 
     def decision(self, k: int) -> Decision:
@@ -355,7 +412,24 @@ class Detection:
             lower=self.lower[k],
             upper=self.upper[k],
             residual=self.residual[k],
+            diagnosis=NO_DIAGNOSIS if self.diagnosis is None else str(self.diagnosis[k]),
+            class_scores=None if self.class_scores is None else self.class_scores[k],
         )
+
+
+def check_labelled(episodes: Sequence[Episode]) -> None:
+    """Training episodes of an isolating diagnoser: one healthy at least, faults labelled."""
+    if not any(ep.fault_onset is None for ep in episodes):
+        raise ValueError(
+            "an isolating diagnoser needs at least one healthy episode (fault_onset=None) "
+            "among its training episodes, got none"
+        )
+    for ep in episodes:
+        if ep.fault_onset is not None and ep.scenario in (UNKNOWN, NO_DIAGNOSIS, "nominal"):
+            raise ValueError(
+                f"faulty training episode (seed {ep.seed}) has scenario={ep.scenario!r}; a "
+                f"labelled fault needs a class name other than {UNKNOWN!r}, '' and 'nominal'"
+            )
 
 
 class Diagnoser(ABC):
@@ -367,6 +441,9 @@ class Diagnoser(ABC):
 
     #: registry name, set by :func:`diagnosers.register`.
     name: ClassVar[str] = ""
+    #: whether the diagnoser also isolates: it is then trained on healthy *and* labelled faulty
+    #: episodes (``fault_onset`` and ``scenario`` set) and its decisions carry a diagnosis
+    isolates: ClassVar[bool] = False
 
     # ---- scikit-learn style parameter handling -------------------------------------------------
     @classmethod
@@ -430,7 +507,11 @@ class Diagnoser(ABC):
 
     # ---- public API ----------------------------------------------------------------------------
     def fit(self, episodes: Sequence[Episode]) -> Self:
-        """Learn from healthy episodes and return ``self``."""
+        """Learn from healthy episodes and return ``self``.
+
+        An isolating diagnoser (:attr:`isolates`) also receives labelled faulty episodes
+        (``fault_onset`` set, ``scenario`` the fault class); it needs at least one healthy one.
+        """
         if isinstance(episodes, Episode):
             episodes = [episodes]
         if isinstance(episodes, np.ndarray | str | bytes) or not hasattr(episodes, "__iter__"):
@@ -438,6 +519,8 @@ class Diagnoser(ABC):
         episodes = [_as_episode(ep, "fit") for ep in episodes]
         if not episodes:
             raise ValueError("fit needs at least one healthy episode, got none")
+        if self.isolates:
+            check_labelled(episodes)
         channels = episodes[0].channels
         for ep in episodes:
             if ep.channels != channels:

@@ -487,6 +487,10 @@ def resolve_options(
         diags = tuple(d for d in BASELINES if d in avail)
     else:
         diags = tuple(avail)
+        if args.external is not None:  # recorded data have no labelled training faults
+            from diagnosers import diagnoser_class
+
+            diags = tuple(d for d in diags if not diagnoser_class(d).isolates)
     unknown = [d for d in diags if d not in avail]
     if unknown:
         parser.error(f"unknown diagnoser(s) {unknown}. Available: {avail}")

@@ -201,6 +201,11 @@ def detection_figure(
         _raster(ax_a, t, on, r, color, label)
     if onset is not None:
         ax_a.axvline(onset, **_ONSET_STYLE)
+    if det.diagnosis is not None:  # an isolating diagnoser: its diagnosis along the time axis
+        labels = [x for x in dict.fromkeys(det.diagnosis.tolist()) if x]
+        for i, lab in enumerate(labels):
+            rows.append((det.diagnosis == lab, f"C{i}", f"diagnosis: {lab}"))
+            _raster(ax_a, t, det.diagnosis == lab, len(rows) - 1, f"C{i}", f"diagnosis: {lab}")
     ax_a.set_ylim(-0.1, len(rows) - 0.1)
     ax_a.set_yticks(
         [r + 0.4 for r in range(len(rows))], [label.split(" (")[0] for *_, label in rows]

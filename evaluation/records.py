@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from diagnosers.base import Detection, Diagnoser, Episode
+from evaluation.isolation import UNKNOWN, isolation_scores
 from evaluation.metrics import episode_scores
 from evaluation.sources import LoadedEpisode
 
@@ -51,6 +52,12 @@ class CellResult:
     n_alarms: int  # alarmed samples in the episode
     sample_time_s: float
     detect_wall_s: float  # wall time of Diagnoser.detect on this episode
+    # isolating diagnosers only (evaluation.isolation); "" / nan otherwise and when healthy
+    diagnosis: str = ""  # episode label: majority diagnosis of the alarmed post-onset samples
+    t_it: float = math.nan  # isolation time [samples] (right label held for 100 samples)
+    r_ti: float = math.nan  # true isolation rate
+    r_fi: float = math.nan  # false isolation rate
+    cdr: float = math.nan  # correct diagnosis rate among the alarmed post-onset samples
 
     @property
     def faulty(self) -> bool:
@@ -69,6 +76,8 @@ class CellResult:
         """Inverse of :meth:`to_json`; JSON ``null`` scores become ``nan``."""
         kwargs = {}
         for f in dataclasses.fields(cls):
+            if f.name not in obj and f.default is not dataclasses.MISSING:
+                continue  # a field added later (isolation scores): its default
             if f.name not in obj:
                 raise ValueError(f"cell record lacks the field {f.name!r}")
             v = obj[f.name]
@@ -109,6 +118,12 @@ def detect_and_score(
     if loaded.fault_onset is not None and onset is None:
         # Terminated before the fault: r_fd over the fault-free samples, nothing to detect.
         scores["r_td"] = scores["t_dt"] = nan
+    iso: dict[str, Any] = {}
+    if det.diagnosis is not None and onset is not None:
+        # a fault the diagnoser was not trained on is rightly called "unknown"
+        truth = ep.scenario if ep.scenario in det.class_names else UNKNOWN
+        iso = isolation_scores(det.diagnosis, truth, onset)
+        iso["diagnosis"] = iso.pop("label")
     record = CellResult(
         diagnoser=label or diagnoser.name,
         diagnoser_name=diagnoser.name,
@@ -127,6 +142,7 @@ def detect_and_score(
         n_alarms=int(np.count_nonzero(det.alarm)),
         sample_time_s=float(ep.sample_time_s),
         detect_wall_s=wall,
+        **iso,
     )
     return record, det
 
@@ -160,6 +176,8 @@ def pack_detection(
         for f in _DET_FIELDS:
             out[f"{view}_{f}"] = getattr(det, f)
         out[f"{view}_signal_names"] = np.array(det.signal_names, dtype=str)
+        if det.diagnosis is not None:  # isolating diagnosers: the diagnosis per sample
+            out[f"{view}_diagnosis"] = np.asarray(det.diagnosis, dtype=str)
     return out
 
 
@@ -187,6 +205,7 @@ def unpack_detection(
             Detection(
                 **{f: arrays[f"{view}_{f}"] for f in _DET_FIELDS},
                 signal_names=tuple(str(n) for n in arrays[f"{view}_signal_names"]),
+                diagnosis=arrays.get(f"{view}_diagnosis"),
             )
         )
     det, bands = views

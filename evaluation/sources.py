@@ -260,6 +260,19 @@ class SimulatedData:
         loaded = self._simulate(self.train_seeds, "nominal")
         return [le.episode for le in loaded if le.episode.n_samples >= 2]
 
+    def train_fault_episodes(self) -> list[Episode]:
+        """Labelled faulty training episodes for diagnosers that isolate: every fault scenario
+        of ``scenarios`` on every training seed, with the test episodes' fault settings."""
+        out = []
+        for sc in self.scenarios:
+            if sc == "nominal":
+                continue
+            for le in self._simulate(self.train_seeds, sc):
+                ep = le.episode
+                if ep.fault_onset is not None and ep.n_samples - ep.fault_onset >= 2:
+                    out.append(ep)
+        return out
+
     def load_test(self, scenario: str, seed: int) -> LoadedEpisode:
         return self._simulate([seed], scenario)[0]
 
@@ -360,6 +373,30 @@ class TrackData:
     def train_episodes(self) -> list[Episode]:
         loaded = self._simulate(list(self.track.train_seeds), FaultSpec())
         return [le.episode for le in loaded if le.episode.n_samples >= 2]
+
+    def train_fault_episodes(self) -> list[Episode]:
+        """Labelled faulty training episodes, for diagnosers that isolate (``isolates``).
+
+        Every fault of the track on every training seed, its size, onset and profile drawn from
+        the track's distributions with that training seed (:meth:`Track.fault_spec`): the same
+        seeds as the healthy training episodes, never a test or validation seed. An episode that
+        ended before its onset has no faulty sample and is dropped.
+        """
+        out = []
+        for fault in self.track.faults:
+            for seed in self.track.train_seeds:
+                ep = self._simulate([seed], self.track.fault_spec(fault, seed))[0].episode
+                if ep.fault_onset is not None and ep.n_samples - ep.fault_onset >= 2:
+                    out.append(ep)
+        return out
+
+    def fault_training_key(self) -> dict[str, Any]:
+        """What the labelled training faults depend on besides :meth:`training_key`: the
+        track's fault distributions (tracks sharing healthy training may differ here)."""
+        key = self.track.to_json()
+        for k in ("n_healthy", "n_faulty", "description", "test_seed_start"):
+            key.pop(k, None)
+        return key
 
     def load_test(self, scenario: str, seed: int) -> LoadedEpisode:
         return self._simulate([seed], self.track.fault_spec(scenario, seed))[0]

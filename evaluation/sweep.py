@@ -248,6 +248,15 @@ def _train_task(
     import_modules(imports)  # a fresh worker has not seen the user's registrations
     t0 = time.perf_counter()
     episodes = data.train_episodes()
+    if spec.build().isolates:
+        # an isolating diagnoser also learns labelled faults (training seeds only)
+        faulty = getattr(data, "train_fault_episodes", None)
+        if faulty is None:
+            raise RuntimeError(
+                f"training {spec.key}: it isolates faults, but the data source "
+                f"{type(data).__name__} has no labelled training faults (train_fault_episodes)"
+            )
+        episodes = episodes + faulty()
     try:
         diag = spec.build().fit(episodes)
     except Exception as e:

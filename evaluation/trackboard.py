@@ -51,6 +51,7 @@ from fcc_env.io import atomic_open, atomic_write, atomic_write_json
 __all__ = [
     "TrackRow",
     "TrackRun",
+    "isolation_table",
     "run_track",
     "track_legend",
     "track_rows",
@@ -306,6 +307,8 @@ def _cache_dir(config: SweepConfig, spec: DiagnoserSpec, cache: Path) -> Path:
     assert isinstance(data, TrackData)
     # model_hash with a constant data part: the package version and the resolved settings
     key = {"training": data.training_key(), "model": config.model_hash(spec, "training-key")}
+    if spec.build().isolates:  # it also learns the track's labelled faults
+        key["faults"] = data.fault_training_key()
     return cache / spec.key / canonical_hash(key)[:16]
 
 
@@ -381,11 +384,94 @@ def _write_csv(path: Path, rows: Sequence[dict[str, Any]]) -> Path:
     return path
 
 
+def isolation_labels(records: Sequence[CellResult]) -> list[str]:
+    """The diagnosers of ``records`` that isolate (their faulty records carry a diagnosis)."""
+    return list(dict.fromkeys(r.diagnoser for r in records if r.diagnosis))
+
+
+def isolation_table(run: TrackRun) -> str:
+    """Markdown: isolation indexes per isolating diagnoser and fault, and its confusion matrix
+    (``""`` when no diagnoser of the run isolates). Definitions: :mod:`evaluation.isolation`."""
+    from evaluation.isolation import MISSED, confusion_matrix
+
+    labels = isolation_labels(run.records)
+    if not labels:
+        return ""
+    faults = run.track.faults
+    head = ["diagnoser"]
+    for f in faults:
+        head += [f"{f} CDR", f"{f} t_it", f"{f} r_fi"]
+    lines = [
+        "",
+        "### Isolation",
+        "",
+        "CDR: share of the alarmed post-onset samples with the right diagnosis; t_it: samples "
+        "from onset until the right label holds for 100 samples (mean over isolated faults); "
+        "r_fi: share of the post-onset samples with a wrong fault label. Brackets: 95 % BCa "
+        "bootstrap intervals over seeds.",
+        "",
+        "| " + " | ".join(head) + " |",
+        "|" + "---|" * len(head),
+    ]
+    tables = []
+    for label in labels:
+        cells = [label]
+        truths, diags = [], []
+        for f in faults:
+            recs = [r for r in _by(run.records, label, f) if r.n_fault_samples > 0]
+            cells += [
+                _ci(bootstrap_ci([r.cdr for r in recs]), 3),
+                _ci(bootstrap_ci([r.t_it for r in recs]), 0),
+                _ci(bootstrap_ci([r.r_fi for r in recs]), 3),
+            ]
+            truths += [f] * len(recs)
+            diags += [r.diagnosis or MISSED for r in recs]
+        lines.append("| " + " | ".join(cells) + " |")
+        rows, cols, m = confusion_matrix(truths, diags, faults)
+        tables += [
+            "",
+            f"Confusion of `{label}` (episodes; rows: true fault, columns: diagnosis):",
+            "",
+            "| true \\ diagnosis | " + " | ".join(cols) + " |",
+            "|---|" + "---|" * len(cols),
+            *(
+                f"| {r} | " + " | ".join(str(c) for c in row) + " |"
+                for r, row in zip(rows, m, strict=True)
+            ),
+        ]
+    return "\n".join(lines + tables) + "\n"
+
+
+def confusion_figures(run: TrackRun, out: Path) -> list[Path]:
+    """One confusion-matrix PNG per isolating diagnoser: ``<out>/figures/confusion-<label>.png``."""
+    from evaluation.isolation import MISSED, confusion_matrix
+    from evaluation.isolation_study import confusion_figure
+
+    paths = []
+    for label in isolation_labels(run.records):
+        recs = [
+            r for f in run.track.faults for r in _by(run.records, label, f) if r.n_fault_samples > 0
+        ]
+        rows, cols, m = confusion_matrix(
+            [r.scenario for r in recs], [r.diagnosis or MISSED for r in recs], run.track.faults
+        )
+        paths.append(
+            confusion_figure(
+                rows,
+                cols,
+                m,
+                f"{label}, track {run.track.name}",
+                out / "figures" / f"confusion-{label}.png",
+            )
+        )
+    return paths
+
+
 def write_track(run: TrackRun, out: Path) -> list[Path]:
     """The track's table (Markdown, CSV, JSON) and its per-seed records."""
     name = run.track.name
     paths = [
-        atomic_write(out / "leaderboard.md", track_table(run)),
+        atomic_write(out / "leaderboard.md", track_table(run) + isolation_table(run)),
         _write_csv(out / "leaderboard.csv", [_flat(r, name) for r in run.rows]),
         atomic_write_json(
             out / "leaderboard.json",
@@ -396,6 +482,7 @@ def write_track(run: TrackRun, out: Path) -> list[Path]:
         atomic_write_json(
             out / "results.json", {"records": [r.to_json() for r in run.records]}, indent=1
         ),
+        *confusion_figures(run, out),
     ]
     return paths
 

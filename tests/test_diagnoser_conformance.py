@@ -51,9 +51,24 @@ def test_episode() -> Episode:
 
 
 @pytest.fixture(scope="module")
-def fitted(train: list[Episode]) -> dict[str, Diagnoser]:
+def train_faults() -> list[Episode]:
+    """Labelled faulty training episodes for the diagnosers that isolate (two classes)."""
+    return [
+        inject_step_fault(make_episode(1200, seed=s), onset=600, magnitude=3.0, channel=ch)
+        for ch in ("T_rx", "T_rg1")
+        for s in (11, 12)
+    ]
+
+
+def _training(name: str, train: list[Episode], train_faults: list[Episode]) -> list[Episode]:
+    """What the harness trains ``name`` on: healthy episodes, plus labelled faults if it isolates."""
+    return train + train_faults if diagnosers.diagnoser_class(name).isolates else train
+
+
+@pytest.fixture(scope="module")
+def fitted(train: list[Episode], train_faults: list[Episode]) -> dict[str, Diagnoser]:
     """One fitted instance per diagnoser, shared by the read-only checks."""
-    return {name: _build(name).fit(train) for name in NAMES}
+    return {name: _build(name).fit(_training(name, train, train_faults)) for name in NAMES}
 
 
 def _assert_same(a: Detection, b: Detection, *, atol: float = 1e-9) -> None:
@@ -63,6 +78,13 @@ def _assert_same(a: Detection, b: Detection, *, atol: float = 1e-9) -> None:
         x, y = getattr(a, field), getattr(b, field)
         assert x.shape == y.shape, field
         np.testing.assert_allclose(x, y, rtol=1e-12, atol=atol, err_msg=field)
+    # isolating diagnosers: the same diagnosis on every sample, the same class scores
+    assert a.class_names == b.class_names
+    assert (a.diagnosis is None) == (b.diagnosis is None)
+    if a.diagnosis is not None:
+        np.testing.assert_array_equal(a.diagnosis, b.diagnosis)
+        assert a.class_scores is not None and b.class_scores is not None
+        np.testing.assert_allclose(a.class_scores, b.class_scores, rtol=1e-12, atol=atol)
 
 
 def test_baselines_are_registered() -> None:
@@ -113,15 +135,36 @@ def test_detection_shapes_and_types(
         _assert_alarm_is_outside(bands)
 
 
+@pytest.mark.parametrize("name", NAMES)
+def test_diagnosis_conventions(
+    name: str, fitted: dict[str, Diagnoser], test_episode: Episode
+) -> None:
+    d = fitted[name]
+    det = d.detect(test_episode)
+    n = test_episode.n_samples
+    if not d.isolates:
+        assert det.diagnosis is None and det.class_scores is None and det.class_names == ()
+        return
+    classes = d.classes_  # type: ignore[attr-defined]
+    assert classes == ("step_T_rg1", "step_T_rx")  # the labelled training faults
+    assert det.class_names == classes
+    assert det.diagnosis is not None and det.diagnosis.shape == (n,)
+    np.testing.assert_array_equal(det.diagnosis != "", det.alarm)  # "" exactly when not alarmed
+    assert set(det.diagnosis[det.alarm].tolist()) <= {*classes, diagnosers.UNKNOWN}
+    assert det.class_scores is not None and det.class_scores.shape == (n, len(classes))
+
+
 def _assert_alarm_is_outside(det: Detection) -> None:
     outside = np.any((det.signal < det.lower) | (det.signal > det.upper), axis=1)
     np.testing.assert_array_equal(det.alarm, outside)
 
 
 @pytest.mark.parametrize("name", NAMES)
-def test_deterministic(name: str, train: list[Episode], test_episode: Episode) -> None:
-    a = _build(name).fit(train).detect(test_episode)
-    b = _build(name).fit(train).detect(test_episode)
+def test_deterministic(
+    name: str, train: list[Episode], train_faults: list[Episode], test_episode: Episode
+) -> None:
+    a = _build(name).fit(_training(name, train, train_faults)).detect(test_episode)
+    b = _build(name).fit(_training(name, train, train_faults)).detect(test_episode)
     _assert_same(a, b, atol=0.0)
 
 
@@ -133,12 +176,14 @@ def test_detect_equals_streaming(
     batch = d.detect(test_episode)
     d.reset()
     decisions = [d.update(row) for row in test_episode.y]
-    _assert_same(batch, Detection.from_decisions(decisions, d.signal_names_))
+    classes = d.classes_ if d.isolates else None  # type: ignore[attr-defined]
+    _assert_same(batch, Detection.from_decisions(decisions, d.signal_names_, classes))
     # detect() must leave no streaming state behind, and reset() must really reset.
     d.reset()
     again = [d.update(row) for row in test_episode.y[:50]]
     for k, dec in enumerate(again):
         assert dec.alarm == decisions[k].alarm
+        assert dec.diagnosis == decisions[k].diagnosis
         np.testing.assert_allclose(dec.signal, decisions[k].signal, rtol=1e-12, atol=1e-9)
 
 

@@ -1,0 +1,468 @@
+"""Isolating diagnosers: ``lrgf-mem``'s detection, plus which fault it is.
+
+Both diagnosers here *compose* an inner :class:`diagnosers.lrgf_mem.LRGFMEM` (``detector_``),
+trained on the healthy training episodes exactly as ``lrgf-mem`` is: their alarms are that
+detector's alarms, sample for sample, so isolation cannot cost detection. While alarmed, they
+compare the bank's residuals with what they learned from labelled training faults
+(``Episode.fault_onset`` and ``Episode.scenario``, training seeds only).
+
+**Features** (shared). The bank's normalised remaining errors ``e = (y − y_m − y_e) / v`` of its
+three relations (T_rx, T_rg1, T_rg2) are averaged by EWMAs of the weights
+:data:`FEATURE_LAMBDAS` (exponential windows of about 3 to 100 samples): a 12-vector ``q`` that
+holds the *time course* of the signature as well as its direction (f1, f2 and f4 point nearly
+the same way, see :mod:`evaluation.isolability`; they differ in how the relations respond over
+time). The feature of an alarmed sample is ``q − q_0``, ``q_0`` the value just before the
+alarm began (an alarm begins after ``alarm_gap`` quiet samples): the healthy model error of the
+slow averages cancels. Signatures turn as a fault propagates, so each *age* of the alarm (samples
+since it began, bins :data:`AGE_EDGES`) has its own classifier.
+
+* ``lrgf-iso`` (structured residuals, nearest direction): per age bin and fault, a few prototype
+  directions (spherical k-means of the training samples' unit features); the score of a fault
+  is the best cosine with its prototypes (the GLR of a known direction with unknown size under
+  white noise ranks hypotheses the same way). "unknown" when the best fault's cosine is below its
+  threshold: the ``unknown_quantile`` quantile of its own training cosines, and never an angle
+  tighter than ``min_angle_deg``.
+* ``lrgf-lda`` (data-driven baseline): linear discriminant analysis per age bin (fitted by
+  scikit-learn's :class:`~sklearn.discriminant_analysis.LinearDiscriminantAnalysis`); "unknown"
+  when the Mahalanobis distance (pooled covariance) to the chosen class's mean exceeds the
+  ``1 − unknown_quantile`` quantile of that class's training distances, and never less than the
+  χ² quantile of the Gaussian model. Only the fitted arrays (class means, pooled precision,
+  priors, thresholds) are stored; prediction is computed from them, so loading never unpickles.
+
+**Decision.** Per-sample scores and acceptance flags are smoothed over the samples of one alarm
+by an EWMA of weight ``score_lambda`` (sequential evidence: one odd sample does not flip the
+label); the diagnosis is the best smoothed class, or "unknown" when its smoothed acceptance is
+below one half. Before the alarm, and between alarms, the diagnosis is ``""``.
+
+Thresholds are set on the training faults only (training seeds 1000+); the hyperparameters
+(``score_lambda``, ``min_angle_deg``, ``unknown_quantile``) were chosen on validation seeds
+(5000+) of the paper track (``python -m evaluation.isolation_study --seeds validation``).
+"""
+
+from __future__ import annotations
+
+from abc import abstractmethod
+from pathlib import Path
+from typing import Any, ClassVar
+
+import numpy as np
+from scipy import stats
+
+from diagnosers.alarm import EWMA
+from diagnosers.base import NO_DIAGNOSIS, UNKNOWN, Decision, Detection, Diagnoser, Episode
+from diagnosers.lrgf_mem import LRGFMEM
+from diagnosers.registry import register
+from fcc_env.validation import Integer, Real, check_params, invalid
+
+__all__ = ["AGE_EDGES", "FEATURE_LAMBDAS", "LRGFISO", "LRGFLDA", "spherical_kmeans"]
+
+#: EWMA weights of the exponential windows of the residuals (features of both isolators)
+FEATURE_LAMBDAS: tuple[float, ...] = (0.3, 0.1, 0.03, 0.01)
+#: edges [samples since the alarm began] of the age bins; each bin has its own classifier
+AGE_EDGES: tuple[int, ...] = (0, 10, 30, 100, 300, 1000)
+#: fewest alarmed post-onset training samples a fault class needs
+MIN_CLASS_SAMPLES = 10
+
+
+def spherical_kmeans(u: np.ndarray, k: int, *, seed: int = 0, n_iter: int = 50) -> np.ndarray:
+    """``k`` unit prototype vectors of the unit vectors ``u`` (n, d) (cosine k-means).
+
+    Deterministic in ``seed``; starts from k-means++-style picks by angle.
+    """
+    rng = np.random.default_rng(seed)
+    n = u.shape[0]
+    k = min(k, n)
+    centres = [u[int(rng.integers(n))]]
+    for _ in range(1, k):
+        d = 1.0 - np.max(u @ np.array(centres).T, axis=1)
+        p = np.maximum(d, 0.0)
+        centres.append(u[int(rng.choice(n, p=p / p.sum()))] if p.sum() > 0 else u[0])
+    c = np.array(centres)
+    for _ in range(n_iter):
+        lab = np.argmax(u @ c.T, axis=1)
+        new = np.array([u[lab == j].sum(axis=0) if np.any(lab == j) else c[j] for j in range(k)])
+        new /= np.maximum(np.linalg.norm(new, axis=1, keepdims=True), 1e-12)
+        if np.allclose(new, c):
+            break
+        c = new
+    return c
+
+
+class _IsolatingLRGF(Diagnoser):
+    """Shared implementation: inner ``lrgf-mem``, alarm-relative features, per-age classifiers."""
+
+    isolates: ClassVar[bool] = True
+    #: hyperparameter constraints checked in ``fit`` (besides ``detector``)
+    CONSTRAINTS: ClassVar[dict[str, Any]] = {
+        "unknown_quantile": Real(0, 0.5, closed="neither"),
+        "alarm_gap": Integer(1, 100_000),
+        "score_lambda": Real(0, 1, closed="right"),
+        "seed": Integer(0),
+    }
+
+    @classmethod
+    def fast_params(cls) -> dict[str, Any]:
+        return {"detector": LRGFMEM.fast_params()}
+
+    def _validate_params(self) -> None:
+        check_params(
+            {k: v for k, v in self.get_params().items() if k in self.CONSTRAINTS}, self.CONSTRAINTS
+        )
+        if self.detector is not None and not isinstance(self.detector, dict):
+            raise invalid("detector", self.detector, "a dict of lrgf-mem hyperparameters or None")
+        LRGFMEM(**(self.detector or {}))._validate_params()
+
+    # ---- features ------------------------------------------------------------------------------
+    def _n_features_in(self) -> int:
+        return len(self.detector_.out_idx_) * len(FEATURE_LAMBDAS)
+
+    def _normalised(self, residual: np.ndarray, k0: int) -> np.ndarray:
+        """Normalised remaining error; zero during the detector's warm-up (as its EWMA sees it)."""
+        e = residual / self.detector_.v_residual_
+        if k0 < self.detector_.steady_window:
+            e = np.array(e, copy=True)
+            e[: self.detector_.steady_window - k0] = 0.0
+        return e
+
+    def _start_feature_state(self) -> None:
+        self._q_prev = np.zeros(self._n_features_in())
+        self._base = np.zeros(self._n_features_in())
+        self._start = -1
+        self._last = -1
+        self._smooth: np.ndarray | None = None
+        self._smooth_ok: np.ndarray | None = None
+
+    def _step_features(self, k: int, q: np.ndarray, alarm: bool) -> tuple[np.ndarray, int, bool]:
+        """``(q − q before the alarm began, age bin, a new alarm began)`` of sample ``k``; bin −1
+        when not alarmed. An alarm begins after ``alarm_gap`` quiet samples.
+
+        One place for the recursion, used by streaming and batch alike.
+        """
+        out, b, new = np.zeros_like(q), -1, False
+        if alarm:
+            if self._start < 0 or k - self._last > self.alarm_gap:
+                self._start, self._base, new = k, self._q_prev, True
+            self._last = k
+            out = q - self._base
+            b = int(np.searchsorted(AGE_EDGES, k - self._start, side="right")) - 1
+        self._q_prev = q
+        return out, b, new
+
+    def _batch_features(
+        self, residual: np.ndarray, alarm: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Features, age bins and new-alarm flags of a whole record (from a fresh start)."""
+        e = self._normalised(residual, 0)
+        Q = np.concatenate([EWMA(lam).filter(e) for lam in FEATURE_LAMBDAS], axis=1)
+        D, bins, new = np.zeros_like(Q), np.full(len(Q), -1), np.zeros(len(Q), dtype=bool)
+        self._start_feature_state()
+        for k in range(len(Q)):
+            D[k], bins[k], new[k] = self._step_features(k, Q[k], bool(alarm[k]))
+        return D, bins, new
+
+    def diagnose_detection(self, det: Detection) -> Detection:
+        """The isolator's detection from its inner detector's detection of the same record
+        (what :meth:`detect` computes; lets a study reuse one lrgf-mem run for several
+        isolators)."""
+        D, bins, new = self._batch_features(det.residual, det.alarm)
+        diag, scores = self._diagnose(D, bins, new)
+        self._start_feature_state()
+        return Detection(
+            alarm=det.alarm,
+            signal=det.signal,
+            lower=det.lower,
+            upper=det.upper,
+            residual=det.residual,
+            signal_names=det.signal_names,
+            diagnosis=diag,
+            class_scores=scores,
+            class_names=self.classes_,
+        )
+
+    # ---- fitting -------------------------------------------------------------------------------
+    def _fit(self, episodes: list[Episode]) -> None:
+        healthy = [e for e in episodes if e.fault_onset is None]
+        self.detector_ = LRGFMEM(**(self.detector or {})).fit(healthy)
+        self.fit_isolation([e for e in episodes if e.fault_onset is not None])
+
+    def fit_isolation(
+        self, faulty: list[Episode], detections: list[Detection] | None = None
+    ) -> None:
+        """Learn the fault classes from labelled faulty episodes (``detector_`` already fitted).
+
+        Public so that a trained ``lrgf-mem`` can be reused: set ``detector_``, call this
+        (``detections``: the inner detector's detections of ``faulty``, if already computed).
+        """
+        per: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
+        for i, ep in enumerate(faulty):
+            det = self.detector_.detect(ep) if detections is None else detections[i]
+            D, bins, _ = self._batch_features(det.residual, det.alarm)
+            keep = bins >= 0
+            keep[: ep.fault_onset] = False
+            per.setdefault(ep.scenario, []).append((D[keep], bins[keep]))
+        self.classes_ = tuple(sorted(per))
+        data = {
+            c: (np.concatenate([d for d, _ in per[c]]), np.concatenate([b for _, b in per[c]]))
+            for c in self.classes_
+        }
+        for c, (x, _) in data.items():
+            if x.shape[0] < MIN_CLASS_SAMPLES:
+                raise ValueError(
+                    f"fault class {c!r} has {x.shape[0]} alarmed post-onset training samples; at "
+                    f"least {MIN_CLASS_SAMPLES} are needed (larger or more training faults)"
+                )
+        # per age bin and class: that bin's samples, or all of the class's when too few
+        binned = {
+            b: {
+                c: x[bins == b] if np.count_nonzero(bins == b) >= MIN_CLASS_SAMPLES else x
+                for c, (x, bins) in data.items()
+            }
+            for b in range(len(AGE_EDGES))
+        }
+        self._fit_classes(binned)
+        self.channels_ = self.detector_.channels_
+        self._finish_iso()
+
+    @abstractmethod
+    def _fit_classes(self, binned: dict[int, dict[str, np.ndarray]]) -> None:
+        """Fit the classifier of every age bin and its unknown thresholds."""
+
+    @abstractmethod
+    def _scores(self, D: np.ndarray, b: int) -> tuple[np.ndarray, np.ndarray]:
+        """``(class scores (n, C), accepted (n, C) bool)`` of features ``D`` (n, d) in age bin
+        ``b``, row by row (no row's result depends on another's: streaming equals batch)."""
+
+    def _finish_iso(self) -> None:
+        self.signal_names_ = self.detector_.signal_names_
+
+    def _diagnose(
+        self, D: np.ndarray, bins: np.ndarray, new: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Per sample: the best accepted class, "unknown", or "" while not alarmed (bin −1).
+
+        The class scores and acceptance flags are smoothed over the alarmed samples of one alarm
+        (an EWMA of weight ``score_lambda``, restarted where ``new`` marks a new alarm): the
+        evidence of several samples decides, and one odd sample does not flip the label.
+        """
+        names = np.array([*self.classes_, UNKNOWN])
+        diag = np.full(len(D), NO_DIAGNOSIS, dtype=f"<U{max(len(n) for n in names)}")
+        C = len(self.classes_)
+        scores = np.full((len(D), C), np.nan)
+        accepted = np.zeros((len(D), C))
+        for b in np.unique(bins[bins >= 0]):
+            rows = bins == b
+            if C:
+                s, acc = self._scores(D[rows], int(b))
+                scores[rows], accepted[rows] = s, acc
+        lam = self.score_lambda
+        for k in np.flatnonzero(bins >= 0):
+            if not C:  # trained on no fault: every alarm is unknown
+                diag[k] = UNKNOWN
+                continue
+            if new[k] or self._smooth is None or self._smooth_ok is None:
+                self._smooth, self._smooth_ok = scores[k].copy(), accepted[k].copy()
+            else:
+                self._smooth = lam * scores[k] + (1.0 - lam) * self._smooth
+                self._smooth_ok = lam * accepted[k] + (1.0 - lam) * self._smooth_ok
+            best = int(np.argmax(self._smooth))
+            diag[k] = names[best] if self._smooth_ok[best] >= 0.5 else UNKNOWN
+            scores[k] = self._smooth
+        return diag, scores
+
+    # ---- detection -----------------------------------------------------------------------------
+    def _reset(self) -> None:
+        self.detector_.reset()
+        self._filters = [EWMA(lam) for lam in FEATURE_LAMBDAS]
+        self._start_feature_state()
+        self._k = 0
+
+    def _update(self, y: np.ndarray) -> Decision:
+        d = self.detector_._update(y)
+        e = self._normalised(d.residual[None, :], self._k)[0]
+        q = np.concatenate([f.update(e) for f in self._filters])
+        D, b, new = self._step_features(self._k, q, d.alarm)
+        self._k += 1
+        diag, scores = self._diagnose(D[None, :], np.array([b]), np.array([new]))
+        return Decision(d.alarm, d.signal, d.lower, d.upper, d.residual, str(diag[0]), scores[0])
+
+    def _detect(self, y: np.ndarray) -> Detection:
+        return self.diagnose_detection(self.detector_._detect(y))
+
+    def band_view(self, episode: Episode) -> Detection | None:
+        self._check_episode(episode)
+        return self.detector_.band_view(episode)
+
+    # ---- persistence ---------------------------------------------------------------------------
+    def _get_state(self) -> dict[str, np.ndarray]:
+        return {"classes": np.array(self.classes_, dtype=str), **self._class_state()}
+
+    def _set_state(self, state: dict[str, np.ndarray]) -> None:
+        self.classes_ = tuple(str(c) for c in state["classes"])
+        self._set_class_state(state)
+
+    @abstractmethod
+    def _class_state(self) -> dict[str, np.ndarray]: ...
+
+    @abstractmethod
+    def _set_class_state(self, state: dict[str, np.ndarray]) -> None: ...
+
+    def _save_extra(self, directory: Path) -> None:
+        self.detector_.save(directory / "detector")
+
+    def _load_extra(self, directory: Path) -> None:
+        inner = Diagnoser.load(directory / "detector")
+        if not isinstance(inner, LRGFMEM):
+            raise ValueError(f"{directory / 'detector'} holds a {inner.name!r}, not an lrgf-mem")
+        if inner.channels_ != self.channels_:
+            raise ValueError(
+                f"{directory / 'detector'} was trained on channels {inner.channels_}, the "
+                f"isolator on {self.channels_}; the directory is inconsistent"
+            )
+        self.detector_ = inner
+        n_bins = len(AGE_EDGES)
+        for key, arr in self._class_state().items():
+            if arr.ndim < 1 or arr.shape[0] != n_bins:
+                raise ValueError(
+                    f"{directory / 'state.npz'}: array {key!r} has shape {arr.shape}; its first "
+                    f"axis must hold the {n_bins} age bins"
+                )
+        self._finish_iso()
+
+
+@register("lrgf-iso")
+class LRGFISO(_IsolatingLRGF):
+    """``lrgf-mem`` + nearest signature direction of the bank's residuals (module docstring)."""
+
+    CONSTRAINTS: ClassVar[dict[str, Any]] = {
+        **_IsolatingLRGF.CONSTRAINTS,
+        "n_prototypes": Integer(1, MIN_CLASS_SAMPLES),
+        "min_angle_deg": Real(0, 90),
+    }
+
+    def __init__(
+        self,
+        *,
+        detector: dict[str, Any] | None = None,
+        n_prototypes: int = 2,
+        unknown_quantile: float = 0.02,
+        min_angle_deg: float = 20.0,
+        alarm_gap: int = 100,
+        score_lambda: float = 0.1,
+        seed: int = 0,
+    ) -> None:
+        self.detector = detector
+        self.n_prototypes = n_prototypes
+        self.unknown_quantile = unknown_quantile
+        self.min_angle_deg = min_angle_deg
+        self.alarm_gap = alarm_gap
+        self.score_lambda = score_lambda
+        self.seed = seed
+
+    @staticmethod
+    def _unit(F: np.ndarray) -> np.ndarray:
+        norm = np.sqrt(np.sum(F * F, axis=1, keepdims=True))
+        return F / np.maximum(norm, 1e-12)
+
+    def _fit_classes(self, binned: dict[int, dict[str, np.ndarray]]) -> None:
+        B, C, P, d = len(AGE_EDGES), len(self.classes_), self.n_prototypes, self._n_features_in()
+        self.prototypes_ = np.zeros((B, C, P, d))
+        self.threshold_ = np.zeros((B, C))
+        for b in range(B):
+            for j, c in enumerate(self.classes_):
+                u = self._unit(binned[b][c])
+                p = spherical_kmeans(u, P, seed=self.seed + 97 * b + j)
+                self.prototypes_[b, j] = p[np.arange(P) % len(p)]  # repeat when fewer found
+            floor = float(np.cos(np.radians(self.min_angle_deg)))
+            for j, c in enumerate(self.classes_):
+                own = self._scores(binned[b][c], b)[0][:, j]
+                self.threshold_[b, j] = min(float(np.quantile(own, self.unknown_quantile)), floor)
+
+    def _scores(self, D: np.ndarray, b: int) -> tuple[np.ndarray, np.ndarray]:
+        u = self._unit(D)
+        protos = self.prototypes_[b]  # (C, P, d)
+        cos = np.sum(u[:, None, None, :] * protos[None], axis=3)  # (n, C, P)
+        scores = np.max(cos, axis=2)
+        return scores, scores >= self.threshold_[b][None, :]
+
+    def _class_state(self) -> dict[str, np.ndarray]:
+        return {"prototypes": self.prototypes_, "threshold": self.threshold_}
+
+    def _set_class_state(self, state: dict[str, np.ndarray]) -> None:
+        self.prototypes_ = np.asarray(state["prototypes"], dtype=np.float64)
+        self.threshold_ = np.asarray(state["threshold"], dtype=np.float64)
+
+
+@register("lrgf-lda")
+class LRGFLDA(_IsolatingLRGF):
+    """``lrgf-mem`` + linear discriminant analysis of exponential residual windows (baseline)."""
+
+    def __init__(
+        self,
+        *,
+        detector: dict[str, Any] | None = None,
+        unknown_quantile: float = 0.01,
+        alarm_gap: int = 100,
+        score_lambda: float = 0.03,
+        seed: int = 0,
+    ) -> None:
+        self.detector = detector
+        self.unknown_quantile = unknown_quantile
+        self.alarm_gap = alarm_gap
+        self.score_lambda = score_lambda
+        self.seed = seed
+
+    def _fit_classes(self, binned: dict[int, dict[str, np.ndarray]]) -> None:
+        # scikit-learn fits; only its arrays are kept (see the module docstring)
+        from sklearn.discriminant_analysis import LinearDiscriminantAnalysis
+
+        B, C, d = len(AGE_EDGES), len(self.classes_), self._n_features_in()
+        self.means_ = np.zeros((B, C, d))
+        self.precision_ = np.tile(np.eye(d), (B, 1, 1))
+        self.log_priors_ = np.zeros((B, C))
+        self.threshold_ = np.zeros((B, C))
+        if not C:
+            return
+        for b in range(B):
+            X = np.concatenate([binned[b][c] for c in self.classes_])
+            y = np.concatenate([np.full(len(binned[b][c]), j) for j, c in enumerate(self.classes_)])
+            if C >= 2:
+                lda = LinearDiscriminantAnalysis(solver="lsqr", store_covariance=True).fit(X, y)
+                self.means_[b], cov = lda.means_, lda.covariance_
+                self.log_priors_[b] = np.log(lda.priors_)
+            else:  # one class: nothing to discriminate, the unknown region only
+                self.means_[b], cov = X.mean(axis=0, keepdims=True), np.cov(X, rowvar=False)
+            cov = cov + 1e-6 * np.trace(cov) / d * np.eye(d)
+            self.precision_[b] = np.linalg.inv(cov)
+            d2 = self._mahalanobis(X, b)
+            # never tighter than the Gaussian model's own quantile (χ² with d degrees of freedom)
+            floor = float(stats.chi2.ppf(1.0 - self.unknown_quantile, d))
+            self.threshold_[b] = [
+                max(float(np.quantile(d2[y == j, j], 1.0 - self.unknown_quantile)), floor)
+                for j in range(C)
+            ]
+
+    def _mahalanobis(self, F: np.ndarray, b: int) -> np.ndarray:
+        diff = F[:, None, :] - self.means_[b][None, :, :]  # (n, C, d)
+        # elementwise products and sums, no BLAS: each row's result is the same in a batch of
+        # one (streaming) and of n (batch), to the bit
+        m = np.sum(diff[:, :, :, None] * self.precision_[b][None, None, :, :], axis=2)
+        return np.sum(m * diff, axis=2)
+
+    def _scores(self, D: np.ndarray, b: int) -> tuple[np.ndarray, np.ndarray]:
+        # LDA's discriminant with a pooled covariance: -d²/2 + log prior (same argmax as sklearn)
+        d2 = self._mahalanobis(D, b)
+        return -0.5 * d2 + self.log_priors_[b][None, :], d2 <= self.threshold_[b][None, :]
+
+    def _class_state(self) -> dict[str, np.ndarray]:
+        return {
+            "means": self.means_,
+            "precision": self.precision_,
+            "log_priors": self.log_priors_,
+            "threshold": self.threshold_,
+        }
+
+    def _set_class_state(self, state: dict[str, np.ndarray]) -> None:
+        self.means_ = np.asarray(state["means"], dtype=np.float64)
+        self.precision_ = np.asarray(state["precision"], dtype=np.float64)
+        self.log_priors_ = np.asarray(state["log_priors"], dtype=np.float64)
+        self.threshold_ = np.asarray(state["threshold"], dtype=np.float64)
