@@ -248,8 +248,11 @@ def test_figure_and_packed_detection_carry_the_diagnosis(fitted: dict[str, Diagn
     assert back.diagnosis is not None
     np.testing.assert_array_equal(back.diagnosis, det.diagnosis)
     fig = detection_figure(ep, det)
-    texts = [t.get_text() for t in fig.axes[-1].get_legend().get_texts()]
+    # one figure legend below the panels (evaluation.plots), and a named row in the strip
+    texts = [t.get_text() for leg in fig.legends for t in leg.get_texts()]
     assert "diagnosis: step_T_rg1" in texts
+    ticks = [t.get_text() for t in fig.axes[-1].get_yticklabels()]
+    assert "diagnosis: step_T_rg1" in ticks
 
 
 def test_simulated_data_labels_its_training_faults() -> None:
