@@ -12,6 +12,7 @@ from diagnosers.registry import available, diagnoser_class, make, register
 # Importing the model modules registers their diagnosers (after the registry exists).
 from diagnosers import (
     baselines,  # noqa: F401  (registers limits, pca, arx-band)
+    lrgf_glr,  # noqa: F401  (registers lrgf-glr)
     lrgf_mem,  # noqa: F401  (registers lrgf-mem-paper, lrgf-mem)
 )
 
