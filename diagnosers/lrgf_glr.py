@@ -113,7 +113,7 @@ class LRGFGLR(LRGFMEM):
         calibration: str = "cross-fit",
         n_folds: int = 3,
         detector: str = "directional",
-        omnibus_share: float = 0.5,
+        omnibus_share: float = 0.2,
         glr_window: int = 200,
         cusum_drift: float = 0.5,
         fault_scenarios: list[str] | None = None,
@@ -131,7 +131,7 @@ class LRGFGLR(LRGFMEM):
         band_definition: str = "residual",
         alarm_filter: str = "ewma-t2",
         ewma_lambda: float = 0.3,
-        false_alarm_target: float = 0.002,
+        false_alarm_target: float = 0.02,
         threshold_margin: float = 1.0,
         limit_method: str = "chi2-tail",
         method: str = "adam",
@@ -333,6 +333,8 @@ class LRGFGLR(LRGFMEM):
         self._proj = DirectionalProjection()
         self._proj.set_state({"weights": self.dir_weights_})
         self.upper_ = np.concatenate([self.h_, self.h_dir_])
+        self._lower = np.full(len(self.upper_), -np.inf)
+        self._no_limit = np.full(len(self.upper_), np.inf)
 
     def _signal_names(self) -> tuple[str, ...]:
         return ("T2[ewma]", *(f"{self.detector}[{f}]" for f in self._faults()[: len(self.h_dir_)]))
@@ -356,9 +358,8 @@ class LRGFGLR(LRGFMEM):
         return np.concatenate([t2, d])
 
     def _decision(self, resid: np.ndarray, signal: np.ndarray, warm: bool) -> Decision:
-        upper = np.full_like(signal, np.inf) if warm else self.upper_
-        lower = np.full_like(signal, -np.inf)
-        return Decision(bool(np.any(signal > upper)), signal, lower, upper, resid)
+        upper = self._no_limit if warm else self.upper_
+        return Decision(bool((signal > upper).any()), signal, self._lower, upper, resid)
 
     def _update(self, y: np.ndarray) -> Decision:
         centre = self._bank.step(y)
@@ -369,10 +370,15 @@ class LRGFGLR(LRGFMEM):
         self._k += 1
         e = np.zeros(len(centre)) if warm else (y_out - centre) / self.v_residual_
         z = self._ewma.update(e)
-        seq = None
-        if self._seq is not None and self.detector != DirectionalDetector.DIRECTIONAL:
-            seq = self._seq.update(self._proj.score(e))
-        return self._decision(y_out - centre, self._scores(e, z, seq), warm)
+        signal = np.empty(len(self.upper_))
+        signal[0] = z @ self.s_inv_ @ z
+        if self._seq is None:
+            pass
+        elif self.detector == DirectionalDetector.DIRECTIONAL:
+            signal[1:] = self.dir_weights_ @ z
+        else:
+            signal[1:] = self._seq.update(self.dir_weights_ @ e)
+        return self._decision(y_out - centre, signal, warm)
 
     def _detect(self, y: np.ndarray) -> Detection:
         centre = self._centre(y)
