@@ -14,6 +14,7 @@ from fcc_env import __version__  # the project's one version
 from diagnosers import (
     baselines,  # noqa: F401  (registers limits, pca, arx-band)
     isolation,  # noqa: F401  (registers lrgf-iso, lrgf-lda)
+    lrgf_glr,  # noqa: F401  (registers lrgf-glr)
     lrgf_mem,  # noqa: F401  (registers lrgf-mem-paper, lrgf-mem)
 )
 

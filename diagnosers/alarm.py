@@ -9,7 +9,9 @@ and the evaluation's oracle rows compose the same code.
 Every streaming part follows :class:`ResidualEvaluator`: ``reset()`` starts a sequence,
 ``update(x)`` consumes one sample, ``filter(X)`` evaluates a whole sequence (time on axis 0) and
 equals ``reset()`` then ``update`` on every row, and ``get_state``/``set_state`` carry what a
-saved detector needs. Sequential tests (CUSUM, GLR) are meant to slot in beside :class:`EWMA`.
+saved detector needs. The sequential tests :class:`CUSUM` and :class:`DirectionalGLR` slot in
+beside :class:`EWMA`; :class:`DirectionalProjection` turns a residual vector into one
+standardised score per known fault direction (the matched filter those tests run on).
 
 >>> import numpy as np
 >>> ewma = EWMA(0.5)
@@ -33,17 +35,21 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 from scipy import stats
 
-from fcc_env.validation import Options, Real, check
+from fcc_env.validation import Integer, Options, Real, check
 
 __all__ = [
+    "CUSUM",
     "EWMA",
     "TAIL_FIT_QUANTILE",
+    "DirectionalGLR",
+    "DirectionalProjection",
     "HotellingT2",
     "LimitMethod",
     "ResidualEvaluator",
     "calibrate_limit",
     "chi2_tail_limit",
     "empirical_limit",
+    "normal_tail_limit",
     "two_sided_normal_quantile",
 ]
 
@@ -234,3 +240,167 @@ def calibrate_limit(
     inflation, ref_target = _chi2_tail_parts(stat, target, dof, tail_quantile)
     # (margin * inflation) * reference: the order the saved limits were computed in
     return margin * inflation * ref_target
+
+
+class CUSUM:
+    """One-sided CUSUM per column ``g(k) = max(0, g(k-1) + x(k) - drift)``, ``g(-1) = 0``.
+
+    Page's test for an increase of the mean of ``x``: tuned to a shift ``δ`` (in units of the
+    standard deviation of a white ``x``) with ``drift = δ / 2``. For a decrease pass ``-x``.
+
+    Args:
+        drift: reference value subtracted from every sample, ``>= 0``.
+
+    Shape: ``update`` ``(k,) -> (k,)``; ``filter`` ``(T, k) -> (T, k)``.
+
+    >>> CUSUM(0.5).filter(np.array([[1.0], [1.0], [-2.0], [3.0]]))[:, 0].tolist()
+    [0.5, 1.0, 0.0, 2.5]
+    """
+
+    def __init__(self, drift: float) -> None:
+        self.drift = check("drift", drift, Real(0))
+        self.reset()
+
+    def reset(self) -> None:
+        self._g: np.ndarray | None = None
+
+    def _step(self, x: np.ndarray, g: np.ndarray) -> np.ndarray:
+        return np.maximum(0.0, g + x - self.drift)
+
+    def update(self, x: np.ndarray) -> np.ndarray:
+        x = np.asarray(x, dtype=np.float64)
+        self._g = self._step(x, np.zeros_like(x) if self._g is None else self._g)
+        return self._g
+
+    def filter(self, X: np.ndarray) -> np.ndarray:
+        X = np.asarray(X, dtype=np.float64)
+        out = np.empty_like(X)
+        g = np.zeros(X.shape[1:])
+        for k in range(X.shape[0]):
+            g = self._step(X[k], g)
+            out[k] = g
+        return out
+
+    def get_state(self) -> dict[str, np.ndarray]:
+        return {}
+
+    def set_state(self, state: dict[str, np.ndarray]) -> None:
+        pass  # nothing learned: the drift is a hyperparameter
+
+
+class DirectionalProjection:
+    """Matched filter: one standardised score per known fault direction.
+
+    For a residual ``x`` with healthy covariance ``Σ`` and fault directions ``d_i`` (a fault adds
+    ``μ d_i``, ``μ > 0``), the score ``p_i = d_iᵀ Σ⁻¹ x / sqrt(d_iᵀ Σ⁻¹ d_i)`` is the
+    log-likelihood-ratio direction for that fault: unit variance on healthy data, and of all
+    linear scores the one a shift along ``d_i`` moves most. One-sided: the sign of ``d_i`` is the
+    fault's.
+
+    Attributes:
+        weights_: rows ``Σ⁻¹ d_i / sqrt(d_iᵀ Σ⁻¹ d_i)``, shape ``(m, k)``.
+
+    >>> proj = DirectionalProjection().fit(np.array([[1.0, 0.0]]), np.diag([4.0, 1.0]))
+    >>> proj.weights_.tolist(), float(proj.score(np.array([2.0, 5.0]))[0])
+    ([[0.5, 0.0]], 1.0)
+    """
+
+    def fit(self, directions: np.ndarray, covariance: np.ndarray) -> DirectionalProjection:
+        """Learn ``weights_`` from directions ``(m, k)`` and the healthy covariance ``(k, k)``."""
+        d = np.atleast_2d(np.asarray(directions, dtype=np.float64))
+        prec = np.linalg.pinv(np.atleast_2d(np.asarray(covariance, dtype=np.float64)))
+        w = d @ prec
+        norm = np.sqrt(np.einsum("ij,ij->i", w, d))
+        if np.any(norm <= 0):
+            raise ValueError("every fault direction must be non-zero in the residual space")
+        self.weights_ = w / norm[:, None]
+        return self
+
+    def score(self, X: np.ndarray) -> np.ndarray:
+        """Scores of one vector ``(k,) -> (m,)`` or of each row ``(T, k) -> (T, m)``."""
+        return np.asarray(X, dtype=np.float64) @ self.weights_.T
+
+    def get_state(self) -> dict[str, np.ndarray]:
+        return {"weights": self.weights_}
+
+    def set_state(self, state: dict[str, np.ndarray]) -> None:
+        self.weights_ = np.asarray(state["weights"], dtype=np.float64)
+
+
+class DirectionalGLR:
+    """Generalised likelihood ratio for a step of unknown size ``μ >= 0`` and unknown onset.
+
+    On a unit-variance white score ``p`` per column (e.g. :class:`DirectionalProjection`
+    scores), the log-likelihood ratio of "the mean rose by the best ``μ >= 0`` over the last
+    ``n`` samples" against "no change", maximised over ``n = 1..window`` (Willsky & Jones;
+    Basseville & Nikiforov, sec. 2.4), times two:
+
+        G(k) = max_{1 <= n <= min(window, k+1)} max(0, S_n(k))² / n,
+        S_n(k) = p(k-n+1) + ... + p(k)
+
+    A limited window keeps the cost per sample fixed and forgets changes long past.
+
+    Args:
+        window: longest onset delay searched, in samples.
+
+    Shape: ``update`` ``(m,) -> (m,)``; ``filter`` ``(T, m) -> (T, m)``.
+
+    >>> DirectionalGLR(2).filter(np.array([[1.0], [3.0], [-5.0]]))[:, 0].tolist()
+    [1.0, 9.0, 0.0]
+    """
+
+    def __init__(self, window: int) -> None:
+        self.window = int(check("window", window, Integer(1)))
+        self.reset()
+
+    def reset(self) -> None:
+        self._buf: np.ndarray | None = None  # newest sample first
+        self._n = 0
+
+    def update(self, x: np.ndarray) -> np.ndarray:
+        x = np.asarray(x, dtype=np.float64)
+        if self._buf is None:
+            self._buf = np.zeros((self.window, *x.shape))
+        self._buf = np.roll(self._buf, 1, axis=0)
+        self._buf[0] = x
+        self._n = min(self._n + 1, self.window)
+        s = np.cumsum(self._buf[: self._n], axis=0)  # S_1, S_2, ..., S_n
+        n = np.arange(1, self._n + 1).reshape(-1, *([1] * x.ndim))
+        return np.max(np.maximum(s, 0.0) ** 2 / n, axis=0)
+
+    def filter(self, X: np.ndarray) -> np.ndarray:
+        X = np.asarray(X, dtype=np.float64)
+        T = X.shape[0]
+        c = np.concatenate([np.zeros((1, *X.shape[1:])), np.cumsum(X, axis=0)])  # c[k] = sum_<k
+        out = np.zeros_like(X)
+        for n in range(1, self.window + 1):
+            if n > T:
+                break
+            s = c[n:] - c[:-n]  # S_n(k) for k = n-1 .. T-1
+            np.maximum(out[n - 1 :], np.maximum(s, 0.0) ** 2 / n, out=out[n - 1 :])
+        return out
+
+    def get_state(self) -> dict[str, np.ndarray]:
+        return {}
+
+    def set_state(self, state: dict[str, np.ndarray]) -> None:
+        pass  # nothing learned: the window is a hyperparameter
+
+
+def normal_tail_limit(
+    stat: np.ndarray, target: float, *, tail_quantile: float = TAIL_FIT_QUANTILE
+) -> np.ndarray:
+    """One-sided limit of each column of a signed, zero-mean statistic ``(T, c) -> (c,)``.
+
+    The normal reference with each column's RMS as its scale, at ``1 - target``, scaled by the
+    calibration's tail inflation at ``tail_quantile`` (as :func:`chi2_tail_limit` does for T²).
+
+    >>> rng = np.random.default_rng(0)
+    >>> float(normal_tail_limit(rng.standard_normal((200_000, 1)), 0.002)[0].round(1))
+    2.9
+    """
+    stat = np.asarray(stat, dtype=np.float64)
+    sd = np.sqrt(np.mean(stat**2, axis=0))
+    ref_fit = sd * stats.norm.ppf(tail_quantile)
+    inflation = np.maximum(1.0, np.quantile(stat, tail_quantile, axis=0) / ref_fit)
+    return inflation * sd * stats.norm.ppf(1.0 - target)

@@ -9,8 +9,12 @@ Prints, measured on this machine:
 * the nominal T_rx model's quality on held-out healthy episodes (free-run fit %, RMSE in °C) when
   trained on the leaderboard's 6 training episodes: the ``arx-band`` baseline's linear ARX model
   against the LRGF in the paper's configuration and in ``lrgf-mem``'s;
-* streaming ``update`` throughput and whole-episode ``detect`` throughput of ``lrgf-mem-paper``
-  and ``lrgf-mem``.
+* streaming ``update`` throughput and whole-episode ``detect`` throughput of ``lrgf-mem-paper``,
+  ``lrgf-mem`` and ``lrgf-glr``;
+* with ``--bank N``: the wall time of training ``lrgf-mem`` and ``lrgf-glr`` (its cross-fitted
+  calibration trains the bank ``n_folds + 1`` times) on N healthy episodes (the tracks' 20 by
+  default), and each relation's held-out free-run fit against a linear ARX model of the same
+  relation (``arx-band`` with that output and inputs) trained on the same episodes.
 
 Figures, not assertions: tests check correctness, this script reports speed.
 """
@@ -73,7 +77,12 @@ def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(prog="python -m diagnosers.benchmark", description=__doc__)
     parser.add_argument("--epochs", type=int, default=1500, help="Adam epochs (1500)")
     parser.add_argument("--spsa-iterations", type=int, default=3000, help="SPSA iterations (3000)")
+    parser.add_argument(
+        "--bank", type=int, default=0, help="train the banks on N episodes and compare (0: skip)"
+    )
     args = parser.parse_args(argv)
+    if args.bank:
+        return _bank_report(args.bank)
 
     train = _episodes([1000])
     held_out = _episodes([6000, 6001, 6002])
@@ -143,6 +152,44 @@ def main(argv: list[str] | None = None) -> int:
     update, detect = _throughput(bank, held_out[0], detect_repeats=1)
     print(f"lrgf-mem streaming update ({len(bank.lrgf_)} relations): {update:,.0f} samples/s")
     print(f"lrgf-mem detect on a whole episode: {detect:,.0f} samples/s")
+    glr = diagnosers.make("lrgf-glr", max_epochs=100, mem_max_epochs=20).fit(three)
+    update, detect = _throughput(glr, held_out[0], detect_repeats=1)
+    print(f"lrgf-glr streaming update ({glr.detector}): {update:,.0f} samples/s")
+    print(f"lrgf-glr detect on a whole episode: {detect:,.0f} samples/s")
+    return 0
+
+
+def _bank_report(n: int) -> int:
+    """Training wall time of the banks on ``n`` episodes and per-relation held-out fit vs ARX."""
+    from diagnosers.lrgf_mem import BANK_RELATIONS
+
+    train = _episodes(list(range(1000, 1000 + n)))
+    held_out = _episodes(list(range(6000, 6005)))
+    fitted = {}
+    for name in ("lrgf-mem", "lrgf-glr"):
+        t0 = time.perf_counter()
+        fitted[name] = diagnosers.make(name).fit(train)
+        print(f"{name}: trained on {n} episodes in {time.perf_counter() - t0:.0f} s")
+    glr = fitted["lrgf-glr"]
+    for j, (out, ins) in enumerate(BANK_RELATIONS):
+        yi = CH.index(out)
+        ui = [CH.index(c) for c in ins]
+        arx = diagnosers.make("arx-band", output=out, inputs=list(ins)).fit(train)
+        rows = []
+        for ep in held_out:
+            y = ep.y[WARM_UP:, yi]
+            y_arx = arx.simulate(ep.y[:, ui], ep.y[: arx.n_warmup_, yi])[WARM_UP:]
+            y_nn = glr.lrgf_[j].predict(ep.y[:, ui])[WARM_UP:, 0]
+            rows.append(
+                (fit_percent(y, y_arx), np.mean((y - y_arx) ** 2), fit_percent(y, y_nn),
+                 np.mean((y - y_nn) ** 2))
+            )  # fmt: skip
+        f_a, m_a, f_n, m_n = np.mean(rows, axis=0)
+        print(
+            f"{out} <- {', '.join(ins)}: held-out free run, ARX fit {f_a:.1f} % (RMSE "
+            f"{np.sqrt(m_a):.3f}), LRGF ({glr.n_hidden} neurons) fit {f_n:.1f} % (RMSE "
+            f"{np.sqrt(m_n):.3f})"
+        )
     return 0
 
 

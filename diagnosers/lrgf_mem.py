@@ -360,10 +360,55 @@ class _LRGFMEMBase(Diagnoser):
         train, cal, cal_from = self._split(episodes)
         self.in_idx_ = [np.array([idx[c] for c in ins]) for _, ins in relations]
         self.out_idx_ = np.array([idx[o] for o, _ in relations])
-        self.lrgf_: list[LRGF] = []
-        self.mem_: list[NNARXErrorModel] = []
+        self.lrgf_, self.mem_, v_paper, fits = self._train_models(train)
+        self.v_paper_ = np.array(v_paper)
+        self.train_fit_loss_ = np.array([f.best_val_loss for f in fits])
+        # held-out healthy calibration
+        self.use_mem_ = np.ones(len(relations), dtype=bool)
+        # the warm-up samples are not calibrated on: the detector is silent there
+        cal_from = max(cal_from, self.steady_window)
+        n_cal = sum(max(0, y.shape[0] - cal_from) for y in cal)
+        if n_cal < MIN_CALIBRATION_SAMPLES:
+            raise ValueError(
+                f"{n_cal} calibration samples after the warm-up (steady_window="
+                f"{self.steady_window}); at least {MIN_CALIBRATION_SAMPLES} are needed: pass longer "
+                "or more episodes, or a smaller steady_window"
+            )
+        rem = [self._remaining(y)[cal_from:] for y in cal]  # (T, k) each
+        if self.mem_select == MemSelect.IF_BETTER:
+            # An error model that does not reduce the held-out error only adds its own: drop it.
+            self.use_mem_[:] = False
+            rem_off = np.concatenate([self._remaining(y)[cal_from:] for y in cal])
+            rms_on = np.sqrt(np.mean(np.concatenate(rem) ** 2, axis=0))
+            rms_off = np.sqrt(np.mean(rem_off**2, axis=0))
+            self.use_mem_ = rms_on < rms_off
+            rem = [self._remaining(y)[cal_from:] for y in cal]
+        rem_all = np.concatenate(rem)
+        self.v_residual_ = np.sqrt(np.mean(rem_all**2, axis=0))
+        ewma = EWMA(self.ewma_lambda)
+        stats = np.concatenate([ewma.filter(r / self.v_residual_) for r in rem])
+        if AlarmFilter(self.alarm_filter) is AlarmFilter.EWMA_T2:
+            # The EWMA of a healthy normalised error is zero-mean by construction: T² about 0.
+            t2 = HotellingT2(centered=False).fit(stats)
+            self.s_inv_ = t2.precision_
+            self.h_ = np.array([self._limit(t2.score(stats)[:, None], len(relations))[0]])
+        else:
+            self.s_inv_ = np.eye(len(relations))
+            self.h_ = self._limit(np.abs(stats), 0)
+        self._finish()
+
+    def _train_models(
+        self, train: list[np.ndarray]
+    ) -> tuple[list[LRGF], list[NNARXErrorModel], list[float], list[Any]]:
+        """Train every relation's nominal and error model on the records ``train``.
+
+        Returns (LRGF networks, error models, std of each y_e on ``train`` (the paper's v),
+        each network's :class:`diagnosers.training.FitResult`). Needs ``in_idx_``/``out_idx_``.
+        """
+        nets: list[LRGF] = []
+        mems: list[NNARXErrorModel] = []
         v_paper, fits = [], []
-        for j, (_out, ins) in enumerate(relations):
+        for j, (_out, ins) in enumerate(self._relations()):
             seed = self.seed + 101 * j
             u_tr = [y[:, self.in_idx_[j]] for y in train]
             y_tr = [y[:, [self.out_idx_[j]]] for y in train]
@@ -412,43 +457,9 @@ class _LRGFMEMBase(Diagnoser):
             mem.eval()
             ye_tr = np.concatenate([mem.predict(ut) for ut in u_tr])
             v_paper.append(float(ye_tr.std(ddof=1)))
-            self.lrgf_.append(net)
-            self.mem_.append(mem)
-        self.v_paper_ = np.array(v_paper)
-        self.train_fit_loss_ = np.array([f.best_val_loss for f in fits])
-        # held-out healthy calibration
-        self.use_mem_ = np.ones(len(relations), dtype=bool)
-        # the warm-up samples are not calibrated on: the detector is silent there
-        cal_from = max(cal_from, self.steady_window)
-        n_cal = sum(max(0, y.shape[0] - cal_from) for y in cal)
-        if n_cal < MIN_CALIBRATION_SAMPLES:
-            raise ValueError(
-                f"{n_cal} calibration samples after the warm-up (steady_window="
-                f"{self.steady_window}); at least {MIN_CALIBRATION_SAMPLES} are needed: pass longer "
-                "or more episodes, or a smaller steady_window"
-            )
-        rem = [self._remaining(y)[cal_from:] for y in cal]  # (T, k) each
-        if self.mem_select == MemSelect.IF_BETTER:
-            # An error model that does not reduce the held-out error only adds its own: drop it.
-            self.use_mem_[:] = False
-            rem_off = np.concatenate([self._remaining(y)[cal_from:] for y in cal])
-            rms_on = np.sqrt(np.mean(np.concatenate(rem) ** 2, axis=0))
-            rms_off = np.sqrt(np.mean(rem_off**2, axis=0))
-            self.use_mem_ = rms_on < rms_off
-            rem = [self._remaining(y)[cal_from:] for y in cal]
-        rem_all = np.concatenate(rem)
-        self.v_residual_ = np.sqrt(np.mean(rem_all**2, axis=0))
-        ewma = EWMA(self.ewma_lambda)
-        stats = np.concatenate([ewma.filter(r / self.v_residual_) for r in rem])
-        if AlarmFilter(self.alarm_filter) is AlarmFilter.EWMA_T2:
-            # The EWMA of a healthy normalised error is zero-mean by construction: T² about 0.
-            t2 = HotellingT2(centered=False).fit(stats)
-            self.s_inv_ = t2.precision_
-            self.h_ = np.array([self._limit(t2.score(stats)[:, None], len(relations))[0]])
-        else:
-            self.s_inv_ = np.eye(len(relations))
-            self.h_ = self._limit(np.abs(stats), 0)
-        self._finish()
+            nets.append(net)
+            mems.append(mem)
+        return nets, mems, v_paper, fits
 
     def _finish(self) -> None:
         """Derived state shared by ``_fit`` and ``_set_state``."""

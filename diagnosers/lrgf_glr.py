@@ -1,0 +1,415 @@
+"""``lrgf-glr``: the ``lrgf-mem`` bank with a cross-fitted limit and tests along fault directions.
+
+The models are ``lrgf-mem``'s (a bank of LRGF relations, error models kept where they help, the
+band scale from held-out remaining error); what changes is the residual evaluation and how its
+limit is calibrated:
+
+* **Cross-fitted calibration** (``calibration="cross-fit"``). The healthy episodes are split into
+  ``n_folds`` folds; for each fold the bank is trained on the other folds and its remaining
+  error on the fold is kept (out-of-fold residuals). The error-model choice, the band scale, the
+  covariances and every alarm limit come from the out-of-fold residuals of *all* episodes, and
+  the detector's models are then trained on all episodes. ``lrgf-mem`` trains on two thirds and
+  calibrates on the last third (three episodes by default), so its limit rests on a few
+  autocorrelated excursions; here it rests on every episode, and the models see every episode
+  too. ``calibration="holdout"`` is ``lrgf-mem``'s split.
+* **Fault directions** (``fault_scenarios``). A fault moves the normalised remaining errors of
+  the relations in its own direction (f2 and f4 pull T_rx down and T_rg2 up; f3 cools the
+  regenerator). In ``fit`` the trained bank is run on training faults simulated with the
+  training seeds ``fault_seeds`` (never test or validation seeds), each paired with the
+  healthy episode of the same seed, so the difference of their remaining errors is the fault's
+  signature without noise. Its mean over the first ``direction_window`` samples after the onset,
+  made a unit vector, is the fault's direction ``d_f``.
+* **Residual evaluation** (``detector``):
+
+  - ``"directional"``: the EWMA vector ``z`` (weight ``ewma_lambda``) is projected on each
+    direction with :class:`diagnosers.alarm.DirectionalProjection`, the one-sided score
+    ``d_fᵀ S⁻¹ z / sqrt(d_fᵀ S⁻¹ d_f)`` of a mean shift along ``d_f`` (S the healthy covariance
+    of ``z``): a 1-dof test per fault instead of the T²'s k dof.
+  - ``"glr"``: :class:`diagnosers.alarm.DirectionalGLR` on the projections of the normalised
+    remaining error itself, onset searched over ``glr_window`` samples.
+  - ``"cusum"``: :class:`diagnosers.alarm.CUSUM` on the same projections, drift
+    ``cusum_drift``.
+
+  Beside the directional tests an omnibus Hotelling T² of ``z`` (as in ``lrgf-mem``) keeps
+  faults outside the learned directions detectable; it gets ``omnibus_share`` of the false-alarm
+  target and the directional tests share the rest equally (a union bound, so the realised rate
+  stays at or below the target). ``detector="t2"`` is ``lrgf-mem``'s stage alone.
+
+Limits: T² ``chi2-tail`` as in ``lrgf-mem``; the directional scores
+:func:`diagnosers.alarm.normal_tail_limit`; GLR and CUSUM statistics the empirical quantile of
+the out-of-fold calibration statistic (no reference distribution fits an autocorrelated input).
+``false_alarm_target`` is the declared share of healthy samples in alarm.
+
+``signal`` is ``[T², score_f1, ...]`` with ``upper`` their limits; alarm when any exceeds its
+limit after the silent warm-up.
+"""
+
+from __future__ import annotations
+
+from enum import StrEnum
+from typing import Any
+
+import numpy as np
+
+from diagnosers.alarm import (
+    CUSUM,
+    EWMA,
+    DirectionalGLR,
+    DirectionalProjection,
+    HotellingT2,
+    calibrate_limit,
+    normal_tail_limit,
+)
+from diagnosers.base import Decision, Detection, Episode
+from diagnosers.lrgf_mem import (
+    LRGFMEM,
+    MIN_CALIBRATION_SAMPLES,
+    PARAMETER_CONSTRAINTS,
+    MemSelect,
+)
+from diagnosers.registry import register
+from fcc_env.validation import Integer, Options, Real, check_params
+
+__all__ = ["LRGFGLR", "Calibration", "DirectionalDetector"]
+
+
+class Calibration(StrEnum):
+    """Where the limits are calibrated (see the module docstring)."""
+
+    CROSS_FIT = "cross-fit"
+    HOLDOUT = "holdout"
+
+
+class DirectionalDetector(StrEnum):
+    """Residual evaluation of ``lrgf-glr`` (see the module docstring)."""
+
+    T2 = "t2"
+    DIRECTIONAL = "directional"
+    GLR = "glr"
+    CUSUM = "cusum"
+
+
+GLR_CONSTRAINTS: dict[str, Any] = {
+    "calibration": Options(Calibration),
+    "n_folds": Integer(2, 20),
+    "detector": Options(DirectionalDetector),
+    "omnibus_share": Real(0, 1, closed="right"),
+    "glr_window": Integer(1, 5000),
+    "cusum_drift": Real(0),
+    "direction_window": Integer(1, 2000),
+}
+
+#: the FCC-v0 faults whose directions are learned by default
+DEFAULT_FAULTS = ("f1", "f2", "f3", "f4")
+
+
+@register("lrgf-glr")
+class LRGFGLR(LRGFMEM):
+    """``lrgf-mem``'s bank, a cross-fitted limit and tests along learned fault directions."""
+
+    def __init__(
+        self,
+        *,
+        calibration: str = "cross-fit",
+        n_folds: int = 3,
+        detector: str = "directional",
+        omnibus_share: float = 0.2,
+        glr_window: int = 200,
+        cusum_drift: float = 0.5,
+        fault_scenarios: list[str] | None = None,
+        fault_seeds: list[int] | None = None,
+        direction_window: int = 300,
+        relations: list[list[Any]] | None = None,
+        n_hidden: int = 5,
+        order: int = 2,
+        steady_window: int = 100,
+        mem_hidden: int = 5,
+        mem_input_delays: int = 15,
+        mem_output_delays: int = 15,
+        mem_output_activation: str = "linear",
+        alpha: float = 0.01,
+        band_definition: str = "residual",
+        alarm_filter: str = "ewma-t2",
+        ewma_lambda: float = 0.3,
+        false_alarm_target: float = 0.02,
+        threshold_margin: float = 1.0,
+        limit_method: str = "chi2-tail",
+        method: str = "adam",
+        lr: float = 0.03,
+        max_epochs: int = 3000,
+        mem_max_epochs: int = 200,
+        mem_select: str = "if_better",
+        seed: int = 0,
+        progress: bool = False,
+    ) -> None:
+        super().__init__(
+            relations=relations,
+            n_hidden=n_hidden,
+            order=order,
+            steady_window=steady_window,
+            mem_hidden=mem_hidden,
+            mem_input_delays=mem_input_delays,
+            mem_output_delays=mem_output_delays,
+            mem_output_activation=mem_output_activation,
+            alpha=alpha,
+            band_definition=band_definition,
+            alarm_filter=alarm_filter,
+            ewma_lambda=ewma_lambda,
+            false_alarm_target=false_alarm_target,
+            threshold_margin=threshold_margin,
+            limit_method=limit_method,
+            method=method,
+            lr=lr,
+            max_epochs=max_epochs,
+            mem_max_epochs=mem_max_epochs,
+            mem_select=mem_select,
+            seed=seed,
+            progress=progress,
+        )
+        self.calibration = calibration
+        self.n_folds = n_folds
+        self.detector = detector
+        self.omnibus_share = omnibus_share
+        self.glr_window = glr_window
+        self.cusum_drift = cusum_drift
+        self.fault_scenarios = fault_scenarios
+        self.fault_seeds = fault_seeds
+        self.direction_window = direction_window
+
+    @classmethod
+    def fast_params(cls) -> dict[str, Any]:
+        return {**super().fast_params(), "n_folds": 2, "fault_seeds": [1000]}
+
+    def _validate_params(self) -> None:
+        params = self.get_params()
+        check_params({k: params[k] for k in PARAMETER_CONSTRAINTS}, PARAMETER_CONSTRAINTS)
+        check_params({k: params[k] for k in GLR_CONSTRAINTS}, GLR_CONSTRAINTS)
+        self._relations()
+        known = {"f1", "f2", "f3", "f4"}
+        if not set(self._faults()) <= known:
+            raise ValueError(f"fault_scenarios must be among {sorted(known)}, got {self._faults()}")
+        for s in self._fault_seeds():
+            if not (isinstance(s, int | np.integer) and 1000 <= s < 5000):
+                raise ValueError(f"fault_seeds must be training seeds in 1000..4999, got {s!r}")
+
+    def _faults(self) -> tuple[str, ...]:
+        return DEFAULT_FAULTS if self.fault_scenarios is None else tuple(self.fault_scenarios)
+
+    def _fault_seeds(self) -> list[int]:
+        return [1000, 1001, 1002] if self.fault_seeds is None else list(self.fault_seeds)
+
+    # ---- fitting -------------------------------------------------------------------------------
+    def _parts(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(y_out − y_m, y_e) of every relation over a record, with the current models."""
+        ym, ye = [], []
+        for j in range(len(self.lrgf_)):
+            u = y[:, self.in_idx_[j]]
+            ym.append(self.lrgf_[j].predict(u)[:, 0])
+            ye.append(self.mem_[j].predict(u)[:, 0])
+        return y[:, self.out_idx_] - np.column_stack(ym), np.column_stack(ye)
+
+    def _fit(self, episodes: list[Episode]) -> None:
+        self._bank = None
+        relations = self._relations()
+        idx = {c: i for i, c in enumerate(self.channels_)}
+        for out, ins in relations:
+            for c in (out, *ins):
+                if c not in idx:
+                    raise ValueError(
+                        f"relation channel {c!r} is not in the episodes' channels {list(idx)}"
+                    )
+        self.in_idx_ = [np.array([idx[c] for c in ins]) for _, ins in relations]
+        self.out_idx_ = np.array([idx[o] for o, _ in relations])
+        w = self.steady_window
+        ys = [e.y for e in episodes]
+        cal_parts: list[tuple[np.ndarray, np.ndarray]] = []
+        if self.calibration == Calibration.CROSS_FIT and len(ys) >= self.n_folds:
+            for fold in np.array_split(np.arange(len(ys)), self.n_folds):
+                rest = [ys[i] for i in range(len(ys)) if i not in set(fold.tolist())]
+                self.lrgf_, self.mem_, _, _ = self._train_models(rest)
+                cal_parts += [self._parts(ys[i]) for i in fold]
+            self.lrgf_, self.mem_, v_paper, fits = self._train_models(ys)
+        else:  # lrgf-mem's split (also when there are fewer episodes than folds)
+            train, cal, cal_from = self._split(episodes)
+            self.lrgf_, self.mem_, v_paper, fits = self._train_models(train)
+            w = max(w, cal_from)
+            cal_parts = [self._parts(y) for y in cal]
+        self.v_paper_ = np.array(v_paper)
+        self.train_fit_loss_ = np.array([f.best_val_loss for f in fits])
+        n_cal = sum(max(0, r.shape[0] - w) for r, _ in cal_parts)
+        if n_cal < MIN_CALIBRATION_SAMPLES:
+            raise ValueError(
+                f"{n_cal} calibration samples after the warm-up (steady_window="
+                f"{self.steady_window}); at least {MIN_CALIBRATION_SAMPLES} are needed"
+            )
+        on = np.concatenate([(r - e)[w:] for r, e in cal_parts])
+        off = np.concatenate([r[w:] for r, _ in cal_parts])
+        if self.mem_select == MemSelect.IF_BETTER:
+            self.use_mem_ = np.sqrt(np.mean(on**2, axis=0)) < np.sqrt(np.mean(off**2, axis=0))
+        else:
+            self.use_mem_ = np.ones(len(relations), dtype=bool)
+        rem = [(r - e * self.use_mem_)[w:] for r, e in cal_parts]
+        self.v_residual_ = np.maximum(np.sqrt(np.mean(np.concatenate(rem) ** 2, axis=0)), 1e-9)
+        norm = [r / self.v_residual_ for r in rem]
+        z = np.concatenate([EWMA(self.ewma_lambda).filter(e) for e in norm])
+        t2 = HotellingT2(centered=False).fit(z)
+        self.s_inv_ = t2.precision_
+        self.directions_ = self._learn_directions()
+        k, m = len(relations), len(self.directions_)
+        det = DirectionalDetector(self.detector)
+        share = 1.0 if m == 0 or det is DirectionalDetector.T2 else self.omnibus_share
+        self.h_ = calibrate_limit(
+            np.asarray(t2.score(z))[:, None],
+            self.false_alarm_target * share,
+            method=self.limit_method,
+            dof=k,
+            margin=self.threshold_margin,
+        )
+        self.dir_weights_ = np.zeros((0, k))
+        self.h_dir_ = np.zeros(0)
+        if m and det is not DirectionalDetector.T2:
+            t_dir = self.false_alarm_target * (1.0 - share) / m
+            if det is DirectionalDetector.DIRECTIONAL:
+                proj = DirectionalProjection().fit(self.directions_, np.cov(z.T))
+                self.dir_weights_ = proj.weights_
+                self.h_dir_ = self.threshold_margin * normal_tail_limit(proj.score(z), t_dir)
+            else:
+                proj = DirectionalProjection().fit(self.directions_, np.cov(np.concatenate(norm).T))
+                self.dir_weights_ = proj.weights_
+                seq = np.concatenate([self._sequential().filter(proj.score(e)) for e in norm])
+                self.h_dir_ = self.threshold_margin * np.full(
+                    m, np.quantile(seq.max(axis=1), 1.0 - t_dir * m)
+                )
+        self._finish()
+
+    def _sequential(self) -> DirectionalGLR | CUSUM:
+        if self.detector == DirectionalDetector.GLR:
+            return DirectionalGLR(self.glr_window)
+        return CUSUM(self.cusum_drift)
+
+    def _learn_directions(self) -> np.ndarray:
+        """Unit fault directions ``(m, k)`` in the normalised remaining-error space.
+
+        Each fault of ``fault_scenarios`` is simulated (paper magnitude and onset) on the training
+        seeds ``fault_seeds`` together with the healthy episode of each seed; the direction is
+        the mean difference of their normalised remaining errors over ``direction_window``
+        samples after the onset. Empty when the episodes are not FCC-v0's channels.
+        """
+        import fcc_env
+        from fcc_env.scenarios import FaultSpec
+
+        if tuple(self.channels_) != tuple(fcc_env.MEASUREMENT_NAMES) or not self._faults():
+            return np.zeros((0, len(self.out_idx_)))
+        seeds = self._fault_seeds()
+        healthy = fcc_env.simulate_episodes(seeds, fcc_env.DEFAULT_N_SAMPLES)
+        out = []
+        for f in self._faults():
+            res = fcc_env.simulate_episodes(
+                seeds, fcc_env.DEFAULT_N_SAMPLES, fault=FaultSpec(scenario=f)
+            )
+            diffs = []
+            for b in range(len(seeds)):
+                onset = res.fault_onsets[b]
+                end = onset + self.direction_window
+                stop = res.terminated_at[b]
+                if onset is None or (0 <= stop < end):
+                    continue
+                d = self._normalised(res.observations[b][:end].astype(np.float64))
+                d -= self._normalised(healthy.observations[b][:end].astype(np.float64))
+                diffs.append(d[onset:].mean(axis=0))
+            if not diffs:
+                raise ValueError(f"no training episode of fault {f} lasted through its window")
+            mean = np.mean(diffs, axis=0)
+            out.append(mean / np.linalg.norm(mean))
+        return np.array(out)
+
+    def _normalised(self, y: np.ndarray) -> np.ndarray:
+        r, e = self._parts(y)
+        return (r - e * self.use_mem_) / self.v_residual_
+
+    def _finish(self) -> None:
+        super()._finish()
+        self.v_ = np.maximum(self.v_residual_, 1e-9)
+        self._proj = DirectionalProjection()
+        self._proj.set_state({"weights": self.dir_weights_})
+        self.upper_ = np.concatenate([self.h_, self.h_dir_])
+        self._lower = np.full(len(self.upper_), -np.inf)
+        self._no_limit = np.full(len(self.upper_), np.inf)
+
+    def _signal_names(self) -> tuple[str, ...]:
+        return ("T2[ewma]", *(f"{self.detector}[{f}]" for f in self._faults()[: len(self.h_dir_)]))
+
+    # ---- detection -----------------------------------------------------------------------------
+    def _reset(self) -> None:
+        super()._reset()
+        self._seq = self._sequential() if len(self.h_dir_) else None
+
+    def _scores(self, e: np.ndarray, z: np.ndarray, seq: np.ndarray | None) -> np.ndarray:
+        t2 = np.atleast_1d(self.t2_.score(z))
+        if not len(self.h_dir_):
+            return t2[..., None] if z.ndim == 2 else t2
+        if self.detector == DirectionalDetector.DIRECTIONAL:
+            d = self._proj.score(z)
+        else:
+            assert seq is not None
+            d = seq
+        if z.ndim == 2:
+            return np.column_stack([t2, d])
+        return np.concatenate([t2, d])
+
+    def _decision(self, resid: np.ndarray, signal: np.ndarray, warm: bool) -> Decision:
+        upper = self._no_limit if warm else self.upper_
+        return Decision(bool((signal > upper).any()), signal, self._lower, upper, resid)
+
+    def _update(self, y: np.ndarray) -> Decision:
+        centre = self._bank.step(y)
+        for j in np.flatnonzero(self.use_mem_):
+            centre[j] += self._mem_steppers[j].step(y[self.in_idx_[j]])[0]
+        y_out = y[self.out_idx_]
+        warm = self._k < self.steady_window
+        self._k += 1
+        e = np.zeros(len(centre)) if warm else (y_out - centre) / self.v_residual_
+        z = self._ewma.update(e)
+        signal = np.empty(len(self.upper_))
+        signal[0] = z @ self.s_inv_ @ z
+        if self._seq is None:
+            pass
+        elif self.detector == DirectionalDetector.DIRECTIONAL:
+            signal[1:] = self.dir_weights_ @ z
+        else:
+            signal[1:] = self._seq.update(self.dir_weights_ @ e)
+        return self._decision(y_out - centre, signal, warm)
+
+    def _detect(self, y: np.ndarray) -> Detection:
+        centre = self._centre(y)
+        resid = y[:, self.out_idx_] - centre
+        w = self.steady_window
+        e = resid / self.v_residual_
+        e[:w] = 0.0
+        z = EWMA(self.ewma_lambda).filter(e)
+        seq = None
+        if len(self.h_dir_) and self.detector != DirectionalDetector.DIRECTIONAL:
+            seq = self._sequential().filter(self._proj.score(e))
+        sig = self._scores(e, z, seq)
+        return Detection.from_decisions(
+            [self._decision(resid[k], sig[k], k < w) for k in range(y.shape[0])],
+            self.signal_names_,
+        )
+
+    # ---- persistence ---------------------------------------------------------------------------
+    def _get_state(self) -> dict[str, np.ndarray]:
+        return {
+            **super()._get_state(),
+            "directions": self.directions_,
+            "dir_weights": self.dir_weights_,
+            "h_dir": self.h_dir_,
+        }
+
+    def _set_state(self, state: dict[str, np.ndarray]) -> None:
+        try:
+            self.directions_ = state["directions"]
+            self.dir_weights_ = state["dir_weights"]
+            self.h_dir_ = state["h_dir"]
+        except KeyError as e:
+            raise ValueError(f"saved state lacks array {e.args[0]!r}") from None
+        super()._set_state(state)

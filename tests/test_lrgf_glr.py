@@ -1,0 +1,182 @@
+"""The sequential tests of the alarm stage against hand-computed oracles, and ``lrgf-glr``'s
+cross-fitted calibration and its detectors' stream == batch."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy import stats
+from synthetic import inject_step_fault, make_episode
+
+import diagnosers
+from diagnosers.alarm import CUSUM, DirectionalGLR, DirectionalProjection, normal_tail_limit
+from diagnosers.lrgf_glr import LRGFGLR
+
+
+def _cusum_oracle(x: np.ndarray, drift: float) -> np.ndarray:
+    out, g = [], 0.0
+    for v in x:
+        g = max(0.0, g + v - drift)
+        out.append(g)
+    return np.array(out)
+
+
+def _glr_oracle(x: np.ndarray, window: int) -> np.ndarray:
+    out = []
+    for k in range(len(x)):
+        best = 0.0
+        for n in range(1, min(window, k + 1) + 1):
+            s = float(np.sum(x[k - n + 1 : k + 1]))
+            best = max(best, max(0.0, s) ** 2 / n)
+        out.append(best)
+    return np.array(out)
+
+
+def test_cusum_matches_hand_recursion_stream_and_batch() -> None:
+    x = np.random.default_rng(0).normal(0.3, 1.0, size=(300, 2))
+    c = CUSUM(0.5)
+    batch = c.filter(x)
+    for j in range(2):
+        np.testing.assert_allclose(batch[:, j], _cusum_oracle(x[:, j], 0.5), rtol=0, atol=1e-12)
+    c.reset()
+    stream = np.array([c.update(row).copy() for row in x])
+    np.testing.assert_array_equal(stream, batch)
+
+
+def test_cusum_hand_values() -> None:
+    # 1 - .5 = .5; .5 + 1 - .5 = 1; max(0, 1 - 2 - .5) = 0; 0 + 3 - .5 = 2.5
+    assert CUSUM(0.5).filter(np.array([[1.0], [1.0], [-2.0], [3.0]]))[:, 0].tolist() == [
+        0.5,
+        1.0,
+        0.0,
+        2.5,
+    ]
+    with pytest.raises(ValueError, match="drift"):
+        CUSUM(-1.0)
+
+
+@pytest.mark.parametrize("window", [1, 3, 17, 400])
+def test_glr_matches_brute_force_stream_and_batch(window: int) -> None:
+    x = np.random.default_rng(window).normal(0.2, 1.0, size=(120, 3))
+    g = DirectionalGLR(window)
+    batch = g.filter(x)
+    for j in range(3):
+        np.testing.assert_allclose(batch[:, j], _glr_oracle(x[:, j], window), rtol=1e-12)
+    g.reset()
+    stream = np.array([g.update(row).copy() for row in x])
+    np.testing.assert_allclose(stream, batch, rtol=1e-12, atol=1e-12)
+
+
+def test_glr_hand_values() -> None:
+    # k=0: 1²/1; k=1: max(3²/1, (1+3)²/2) = 9; k=2: max(0, (3-5)→0, ...) = 0 with window 2
+    assert DirectionalGLR(2).filter(np.array([[1.0], [3.0], [-5.0]]))[:, 0].tolist() == [
+        1.0,
+        9.0,
+        0.0,
+    ]
+    # a step of size mu after a long healthy stretch: the statistic grows like n mu²
+    x = np.r_[np.zeros(50), np.full(20, 0.5)][:, None]
+    assert DirectionalGLR(100).filter(x)[-1, 0] == pytest.approx(20 * 0.25)
+
+
+def test_directional_projection_is_the_standardised_matched_filter() -> None:
+    rng = np.random.default_rng(1)
+    cov = np.array([[2.0, 0.8], [0.8, 1.0]])
+    X = rng.multivariate_normal([0, 0], cov, size=200_000)
+    d = np.array([[1.0, -1.0], [0.0, 1.0]])
+    proj = DirectionalProjection().fit(d, cov)
+    p = proj.score(X)
+    np.testing.assert_allclose(p.std(axis=0), 1.0, atol=0.01)  # unit variance when healthy
+    # a shift mu*d moves score i by mu*sqrt(d_i' S^-1 d_i): the Mahalanobis length of d_i
+    prec = np.linalg.inv(cov)
+    for i in range(2):
+        shift = proj.score(3.0 * d[i])[i]
+        assert shift == pytest.approx(3.0 * np.sqrt(d[i] @ prec @ d[i]))
+    proj2 = DirectionalProjection()
+    proj2.set_state(proj.get_state())
+    np.testing.assert_array_equal(proj2.score(X[:5]), proj.score(X[:5]))
+    with pytest.raises(ValueError, match="non-zero"):
+        DirectionalProjection().fit(np.zeros((1, 2)), cov)
+
+
+def test_normal_tail_limit_normal_and_heavy_tail() -> None:
+    rng = np.random.default_rng(2)
+    x = rng.standard_normal((400_000, 1))
+    assert normal_tail_limit(x, 0.002)[0] == pytest.approx(stats.norm.ppf(0.998), rel=0.02)
+    heavy = rng.standard_t(3, size=(400_000, 1))
+    sd = np.sqrt(np.mean(heavy**2))
+    # inflated above the plain normal reference, never below it
+    assert normal_tail_limit(heavy, 0.002)[0] > sd * stats.norm.ppf(0.998)
+
+
+# ---- lrgf-glr ------------------------------------------------------------------------------------
+FAST = {**LRGFGLR.fast_params(), "fault_scenarios": ["f3"]}
+
+
+@pytest.fixture(scope="module")
+def train() -> list:
+    return [make_episode(1500, seed=s) for s in (1, 2, 3)]
+
+
+def test_cross_fit_calibrates_on_out_of_fold_residuals(train, monkeypatch) -> None:
+    calls: list[list[int]] = []
+    real = LRGFGLR._train_models
+
+    def spy(self, records):
+        calls.append([next(i for i, e in enumerate(train) if e.y is r) for r in records])
+        return real(self, records)
+
+    monkeypatch.setattr(LRGFGLR, "_train_models", spy)
+    parts: list[int] = []
+    real_parts = LRGFGLR._parts
+
+    def spy_parts(self, y):
+        hit = [i for i, e in enumerate(train) if e.y is y]
+        if hit:
+            parts.append((hit[0], len(calls)))
+        return real_parts(self, y)
+
+    monkeypatch.setattr(LRGFGLR, "_parts", spy_parts)
+    det = LRGFGLR(**{**FAST, "n_folds": 3}).fit(train)
+    # one bank per fold without that fold's episodes, then the final bank on all of them
+    assert calls == [[1, 2], [0, 2], [0, 1], [0, 1, 2]]
+    # each episode's calibration residual comes from the bank that never saw it
+    assert sorted(parts) == [(0, 1), (1, 2), (2, 3)]
+    assert det.h_.shape == (1,) and det.h_dir_.shape == (1,)
+
+
+def test_holdout_calibration_is_lrgf_mem_split(train, monkeypatch) -> None:
+    calls: list[int] = []
+    real = LRGFGLR._train_models
+    monkeypatch.setattr(
+        LRGFGLR, "_train_models", lambda self, r: (calls.append(len(r)), real(self, r))[1]
+    )
+    LRGFGLR(**{**FAST, "calibration": "holdout"}).fit(train)
+    assert calls == [2]  # trained once, on the first two thirds
+
+
+@pytest.mark.parametrize("detector", ["t2", "directional", "glr", "cusum"])
+def test_detectors_stream_equals_batch_and_roundtrip(train, detector, tmp_path) -> None:
+    det = LRGFGLR(**{**FAST, "n_folds": 2, "detector": detector, "glr_window": 30}).fit(train)
+    ep = inject_step_fault(make_episode(900, seed=9), onset=500, magnitude=3.0)
+    batch = det.detect(ep)
+    det.reset()
+    stream = [det.update(row) for row in ep.y]
+    np.testing.assert_array_equal(batch.alarm, [d.alarm for d in stream])
+    np.testing.assert_allclose(batch.signal, [d.signal for d in stream], rtol=1e-9, atol=1e-9)
+    n_dir = 0 if detector == "t2" else 1
+    assert batch.signal.shape == (900, 1 + n_dir)
+    assert not batch.alarm[: det.steady_window].any()
+    det.save(tmp_path / "m")
+    again = diagnosers.Diagnoser.load(tmp_path / "m").detect(ep)
+    np.testing.assert_array_equal(again.alarm, batch.alarm)
+
+
+def test_directions_are_unit_vectors_from_training_seeds_only(train) -> None:
+    det = LRGFGLR(**FAST).fit(train)
+    assert det.directions_.shape == (1, 3)  # f3 over the three relations
+    np.testing.assert_allclose(np.linalg.norm(det.directions_, axis=1), 1.0)
+    with pytest.raises(ValueError, match="training seeds"):
+        LRGFGLR(fault_seeds=[5000]).fit(train)
+    with pytest.raises(ValueError, match="fault_scenarios"):
+        LRGFGLR(fault_scenarios=["f9"]).fit(train)
