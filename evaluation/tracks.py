@@ -524,9 +524,9 @@ def _paper_scaled(low: float, high: float) -> dict[str, Distribution]:
 
 #: Near-detectability magnitudes of the ``small`` track: the sizes at which the physical-limit
 #: row's r_td is about 0.85-0.93, measured on 12 episodes with seeds 7000+ (never test seeds):
-#: f1 0.005 → 0.93, f2 0.03 → 0.88, f3 0.012 → 0.92, f4 0.01 → 0.87 (``/tmp`` calibration
-#: script recorded in the closing note of the benchmark-v2 issue). About 1.1-1.5 noise stds of the
-#: most affected temperature 50-200 samples after onset.
+#: f1 0.005 → 0.93, f2 0.03 → 0.88, f3 0.012 → 0.92, f4 0.01 → 0.87
+#: (``python scripts/small_track_calibration.py``). About 1.1-1.5 noise stds of the most affected
+#: temperature 50-200 samples after onset.
 SMALL_MAGNITUDES: dict[str, float] = {"f1": 0.005, "f2": 0.03, "f3": 0.012, "f4": 0.01}
 
 _TRACK_LIST = (
