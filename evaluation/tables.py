@@ -149,6 +149,26 @@ def reference_row(config: SweepConfig) -> dict[str, Any] | None:
     return PAPER_TABLE2 if config.data.describe().paper_setup else None
 
 
+#: The metrics' definitions, worded once for every table's legend.
+R_FD_TEXT = (
+    "r_fd: false detection rate, the share of a healthy episode's samples in alarm "
+    "[0-1, lower is better]"
+)
+R_TD_TEXT = (
+    "r_td: true detection rate, the share of the samples from the fault onset on in alarm "
+    "[0-1, higher is better]"
+)
+
+
+def t_dt_text(sample_time_s: float | None) -> str:
+    """The definition of t_dt, with what a sample is in seconds when known."""
+    ts = f" (1 sample = {sample_time_s:g} s)" if sample_time_s else ""
+    return (
+        f"t_dt: detection time, from the onset to the first alarm [samples]{ts}, mean over the "
+        "detected faults"
+    )
+
+
 def table_legend(sample_time_s: float | None = None) -> str:
     """What the table's columns, units and signs mean (one paragraph, Markdown).
 
@@ -156,12 +176,8 @@ def table_legend(sample_time_s: float | None = None) -> str:
         sample_time_s: the data's sample time, to say what a sample of ``t_dt`` is in seconds
             (``None``: not said).
     """
-    ts = f" (1 sample = {sample_time_s:g} s)" if sample_time_s else ""
     return (
-        "Legend: r_fd: false detection rate, the share of a healthy episode's samples in alarm "
-        "[0-1, lower is better]; r_td: true detection rate, the share of the samples from the "
-        "fault onset on in alarm [0-1, higher is better]; t_dt: detection time, from the onset "
-        f"to the first alarm [samples]{ts}, mean over the detected faults, '(k/n missed)': k of "
+        f"Legend: {R_FD_TEXT}; {R_TD_TEXT}; {t_dt_text(sample_time_s)}, '(k/n missed)': k of "
         "n faulty episodes never alarmed after the onset. a ± b: mean ± standard deviation over "
         "the test seeds (the spread of single episodes, not an interval for the mean); no ±: "
         "one seed, or the paper's published values; –: no value (e.g. no seed detected the "

@@ -45,6 +45,7 @@ from evaluation.records import CellResult
 from evaluation.sources import TrackData
 from evaluation.store import ResultStore, canonical_hash
 from evaluation.sweep import DiagnoserSpec, SweepConfig, default_specs, dir_files, run_sweep
+from evaluation.tables import R_FD_TEXT, R_TD_TEXT, t_dt_text
 from evaluation.tracks import Track
 from fcc_env.io import atomic_open, atomic_write, atomic_write_json
 
@@ -193,18 +194,15 @@ def track_legend(sample_time_s: float | None = None) -> str:
         sample_time_s: the data's sample time, to say what a sample of ``t_dt`` is in seconds
             (``None``: not said).
     """
-    ts = f" (1 sample = {sample_time_s:g} s)" if sample_time_s else ""
     return (
-        "Legend: r_fd: false detection rate, the share of a healthy episode's samples in alarm "
-        "[0-1, lower is better]; healthy eps. alarmed: the share of healthy episodes with any "
+        f"Legend: {R_FD_TEXT}; healthy eps. alarmed: the share of healthy episodes with any "
         "alarm [0-1]; worst r_fd (seed): the largest r_fd of one healthy episode and its seed; "
-        "r_td: true detection rate, the share of the samples from the fault onset on in alarm "
-        "[0-1, higher is better], (rank) on r_td with '=' where intervals overlap; t_dt: "
-        f"detection time, from the onset to the first alarm [samples]{ts}, mean over the "
-        "detected faults; t_dt/oracle: (t_dt + 1) / (oracle t_dt + 1) [-] over the seeds both "
-        "detected, 1 = as fast as the physical limit; missed/ended: faulty episodes never "
-        "alarmed after the onset / episodes the plant ended early, with the reasons (well_empty, afterburn, extinguished; scored on their samples before the end). a [lo, hi]: estimate and 95 % BCa "
-        "bootstrap interval over the seeds; –: no value."
+        f"{R_TD_TEXT}, (rank) on r_td with '=' where intervals overlap; "
+        f"{t_dt_text(sample_time_s)}; t_dt/oracle: (t_dt + 1) / (oracle t_dt + 1) [-] over the "
+        "seeds both detected, 1 = as fast as the physical limit; missed/ended: faulty episodes "
+        "never alarmed after the onset / episodes the plant ended early, with the reasons "
+        "(well_empty, afterburn, extinguished; scored on their samples before the end). "
+        "a [lo, hi]: estimate and 95 % BCa bootstrap interval over the seeds; –: no value."
     )
 
 
