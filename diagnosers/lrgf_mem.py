@@ -101,7 +101,8 @@ from diagnosers.alarm import (
     calibrate_limit,
 )
 from diagnosers.base import Decision, Detection, Diagnoser, Episode, require_varying
-from diagnosers.lrgf import LRGF, InitialState, LRGFStepper, NeuronFilters, lrgf_activation
+from diagnosers.lrgf import LRGF
+from diagnosers.lrgf_stepper import BankStepper
 from diagnosers.mem import BandScale, MEMStepper, NNARXErrorModel, OutputActivation, band, t_alpha
 from diagnosers.registry import register
 from diagnosers.training import Method, build_module, export_module, fit_lrgf, fit_mem
@@ -185,50 +186,6 @@ DILUTE_RELATIONS: list[list[Any]] = [
     ["T_d1", ["T_rg1", "R_ar"]],
     ["T_dg", ["T_d1", "T_rg2"]],
 ]
-
-
-class _BankStepper:
-    """All relations' LRGF networks stepped together in one set of numpy arrays.
-
-    Mathematically :class:`diagnosers.lrgf.LRGFStepper` per relation (same transposed direct form
-    II filters, same steady-state start), with the neurons of every relation stacked so that one
-    sample costs one pass of small matrix products instead of one pass per relation.
-    """
-
-    def __init__(self, nets: list[LRGF], in_idx: list[np.ndarray], n_channels: int) -> None:
-        steppers = [LRGFStepper(net) for net in nets]
-        v = [st.w.shape[0] for st in steppers]
-        self.w = np.zeros((sum(v), n_channels))
-        self.b = np.zeros(sum(v))
-        self.c = np.zeros((len(nets), sum(v)))
-        self.d = np.zeros(len(nets))
-        rows = np.cumsum([0, *v])
-        for j, st in enumerate(steppers):
-            sl = slice(rows[j], rows[j + 1])
-            self.w[sl][:, in_idx[j]] = st.w / st.in_scale
-            self.b[sl] = -st.w @ (st.in_mean / st.in_scale)
-            self.c[j, sl] = st.c[0] * st.out_scale[0]
-            self.d[j] = st.c0[0] * st.out_scale[0] + st.out_mean[0]
-        self.g1 = np.concatenate([st.g1 for st in steppers])
-        self.g2 = np.concatenate([st.g2 for st in steppers])
-        starts = {(net.initial_state, net.steady_window) for net in nets}
-        if len(starts) != 1:
-            raise ValueError("all relations must share one initial-state convention")
-        ((initial_state, window),) = starts
-        self.filters = NeuronFilters(
-            np.concatenate([st.num for st in steppers]),
-            np.concatenate([st.den for st in steppers]),
-            initial_state is InitialState.STEADY,
-            window,
-        )
-
-    def reset(self) -> None:
-        self.filters.reset()
-
-    def step(self, y: np.ndarray) -> np.ndarray:
-        """Nominal-model outputs y_m of every relation for one measurement vector."""
-        z = self.filters.step(self.w @ y + self.b)
-        return self.c @ lrgf_activation(z, self.g1, self.g2) + self.d
 
 
 class _LRGFMEMBase(Diagnoser):
@@ -505,7 +462,7 @@ class _LRGFMEMBase(Diagnoser):
     # ---- detection -----------------------------------------------------------------------------
     def _reset(self) -> None:
         if getattr(self, "_bank", None) is None:
-            self._bank = _BankStepper(self.lrgf_, self.in_idx_, len(self.channels_))
+            self._bank = BankStepper(self.lrgf_, self.in_idx_, len(self.channels_))
             self._mem_steppers = [MEMStepper(m) for m in self.mem_]
         self._bank.reset()
         for st in self._mem_steppers:
