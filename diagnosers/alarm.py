@@ -45,6 +45,7 @@ __all__ = [
     "DirectionalProjection",
     "HotellingT2",
     "LimitMethod",
+    "RecursiveStatistic",
     "ResidualEvaluator",
     "calibrate_limit",
     "chi2_tail_limit",
@@ -93,7 +94,41 @@ class ResidualEvaluator(Protocol):
         """Inverse of :meth:`get_state`."""
 
 
-class EWMA:
+class RecursiveStatistic:
+    """A statistic defined by one recursion ``s(k) = step(x(k), s(k-1))``, ``s(-1) = 0``.
+
+    Subclasses write only :meth:`_step`; streaming :meth:`update` and batch :meth:`filter` both
+    call it, so the two agree to the bit. Nothing is learned (``get_state`` is empty).
+    """
+
+    def reset(self) -> None:
+        self._s: np.ndarray | None = None
+
+    def _step(self, x: np.ndarray, s: np.ndarray) -> np.ndarray:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def update(self, x: np.ndarray) -> np.ndarray:
+        x = np.asarray(x, dtype=np.float64)
+        self._s = self._step(x, np.zeros_like(x) if self._s is None else self._s)
+        return self._s
+
+    def filter(self, X: np.ndarray) -> np.ndarray:
+        X = np.asarray(X, dtype=np.float64)
+        out = np.empty_like(X)
+        s = np.zeros(X.shape[1:])
+        for k in range(X.shape[0]):
+            s = self._step(X[k], s)
+            out[k] = s
+        return out
+
+    def get_state(self) -> dict[str, np.ndarray]:
+        return {}
+
+    def set_state(self, state: dict[str, np.ndarray]) -> None:
+        pass  # nothing learned: the recursion's constants are hyperparameters
+
+
+class EWMA(RecursiveStatistic):
     """Exponentially weighted moving average ``z(k) = λ x(k) + (1 - λ) z(k-1)``, ``z(-1) = 0``.
 
     Args:
@@ -106,32 +141,9 @@ class EWMA:
         self.lam = check("lam", lam, Real(0, 1, closed="right"))
         self.reset()
 
-    def reset(self) -> None:
-        self._z: np.ndarray | None = None
-
     def _step(self, x: np.ndarray, z: np.ndarray) -> np.ndarray:
         # The one place the recursion is written: streaming and batch must agree to the bit.
         return self.lam * x + (1.0 - self.lam) * z
-
-    def update(self, x: np.ndarray) -> np.ndarray:
-        x = np.asarray(x, dtype=np.float64)
-        self._z = self._step(x, np.zeros_like(x) if self._z is None else self._z)
-        return self._z
-
-    def filter(self, X: np.ndarray) -> np.ndarray:
-        X = np.asarray(X, dtype=np.float64)
-        out = np.empty_like(X)
-        z = np.zeros(X.shape[1:])
-        for k in range(X.shape[0]):
-            z = self._step(X[k], z)
-            out[k] = z
-        return out
-
-    def get_state(self) -> dict[str, np.ndarray]:
-        return {}
-
-    def set_state(self, state: dict[str, np.ndarray]) -> None:
-        pass  # nothing learned: λ is a hyperparameter
 
 
 class HotellingT2:
@@ -242,7 +254,7 @@ def calibrate_limit(
     return margin * inflation * ref_target
 
 
-class CUSUM:
+class CUSUM(RecursiveStatistic):
     """One-sided CUSUM per column ``g(k) = max(0, g(k-1) + x(k) - drift)``, ``g(-1) = 0``.
 
     Page's test for an increase of the mean of ``x``: tuned to a shift ``δ`` (in units of the
@@ -261,31 +273,8 @@ class CUSUM:
         self.drift = check("drift", drift, Real(0))
         self.reset()
 
-    def reset(self) -> None:
-        self._g: np.ndarray | None = None
-
     def _step(self, x: np.ndarray, g: np.ndarray) -> np.ndarray:
         return np.maximum(0.0, g + x - self.drift)
-
-    def update(self, x: np.ndarray) -> np.ndarray:
-        x = np.asarray(x, dtype=np.float64)
-        self._g = self._step(x, np.zeros_like(x) if self._g is None else self._g)
-        return self._g
-
-    def filter(self, X: np.ndarray) -> np.ndarray:
-        X = np.asarray(X, dtype=np.float64)
-        out = np.empty_like(X)
-        g = np.zeros(X.shape[1:])
-        for k in range(X.shape[0]):
-            g = self._step(X[k], g)
-            out[k] = g
-        return out
-
-    def get_state(self) -> dict[str, np.ndarray]:
-        return {}
-
-    def set_state(self, state: dict[str, np.ndarray]) -> None:
-        pass  # nothing learned: the drift is a hyperparameter
 
 
 class DirectionalProjection:
