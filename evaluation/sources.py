@@ -384,7 +384,7 @@ class TrackData:
         """
         out = []
         for fault in self.track.faults:
-            for seed in self.track.train_seeds:
+            for seed in self.track.train_fault_seeds:
                 ep = self._simulate([seed], self.track.fault_spec(fault, seed))[0].episode
                 if ep.fault_onset is not None and ep.n_samples - ep.fault_onset >= 2:
                     out.append(ep)

@@ -234,6 +234,8 @@ class Track:
         n_train: healthy training episodes (default 9: the protocol on which ``lrgf-mem`` and
             ``lrgf-glr`` were validated, 6 to train and 3 to calibrate, or 3 cross-fitted folds;
             it also keeps a run of every track within the benchmark's time budget).
+        n_train_faults: labelled faulty training episodes per fault, for diagnosers that isolate
+            (seeds from ``train_seed_start``; 20: the setting the isolators were validated on).
         n_validation: validation episodes (per scenario, healthy and each fault).
         test_seed_start, train_seed_start, validation_seed_start: first seed of each range.
     """
@@ -252,6 +254,7 @@ class Track:
     n_healthy: int = MIN_HEALTHY
     n_faulty: int = 20
     n_train: int = 9
+    n_train_faults: int = 20
     n_validation: int = 20
     test_seed_start: int = TEST_SEED_START
     train_seed_start: int = TRAIN_SEED_START
@@ -275,6 +278,7 @@ class Track:
             ("n_healthy", 1),
             ("n_faulty", 1),
             ("n_train", 1),
+            ("n_train_faults", 1),
             ("n_validation", 1),
             ("test_seed_start", 0),
             ("train_seed_start", 0),
@@ -376,6 +380,11 @@ class Track:
         return range(self.train_seed_start, self.train_seed_start + self.n_train)
 
     @property
+    def train_fault_seeds(self) -> range:
+        """Seeds of the labelled faulty training episodes (training seeds too)."""
+        return range(self.train_seed_start, self.train_seed_start + self.n_train_faults)
+
+    @property
     def validation_seeds(self) -> range:
         n = self.n_validation * (len(self.faults) if self.draw_fault else 1)
         return range(self.validation_seed_start, self.validation_seed_start + n)
@@ -383,7 +392,10 @@ class Track:
     def _check_seed_ranges(self) -> None:
         ranges = {
             "test": self.test_seeds,
-            "train": self.train_seeds,
+            "train": range(
+                self.train_seed_start,
+                self.train_seed_start + max(self.n_train, self.n_train_faults),
+            ),
             "validation": self.validation_seeds,
         }
         names = list(ranges)
@@ -501,6 +513,7 @@ class Track:
             "n_healthy": self.n_healthy,
             "n_faulty": self.n_faulty,
             "n_train": self.n_train,
+            "n_train_faults": self.n_train_faults,
             "n_validation": self.n_validation,
             "test_seed_start": self.test_seed_start,
             "train_seed_start": self.train_seed_start,

@@ -155,12 +155,13 @@ def test_spherical_kmeans_finds_separate_directions() -> None:
 
 # ---- harness data -------------------------------------------------------------------------------
 def test_train_fault_episodes_use_training_seeds_and_track_draws() -> None:
-    track = TRACKS["paper"].replace(n_train=2, n_samples=2400)
+    track = TRACKS["paper"].replace(n_train=2, n_train_faults=3, n_samples=2400)
     data = TrackData(track=track)
     eps = data.train_fault_episodes()
     assert [(e.scenario, e.seed) for e in eps] == [
-        (f, s) for f in track.faults for s in track.train_seeds
+        (f, s) for f in track.faults for s in track.train_fault_seeds
     ]
+    assert list(track.train_fault_seeds) == [1000, 1001, 1002]  # training seeds too
     for e in eps:
         assert e.seed is not None and e.seed >= 1000
         assert e.fault_onset == track.fault_spec(e.scenario, e.seed).onset

@@ -230,8 +230,8 @@ def test_bad_values_rejected_with_value_and_allowed_range(changes: dict, match: 
 def test_overlapping_seed_ranges_name_the_overlap() -> None:
     with pytest.raises(
         ValueError,
-        match=r"train_seed_start=40 is outside the allowed range: a start whose seeds 40\.\.48 "
-        r"avoid the test seeds 0\.\.49 \(seeds 40\.\.48 would be both test and train seeds\)",
+        match=r"train_seed_start=40 is outside the allowed range: a start whose seeds 40\.\.59 "
+        r"avoid the test seeds 0\.\.49 \(seeds 40\.\.49 would be both test and train seeds\)",
     ):
         make(train_seed_start=40)
     with pytest.raises(ValueError, match=r"seeds 5000\.\.5019 would be both test and validation"):
