@@ -145,30 +145,34 @@ def bootstrap_ci(
     if n == 1 or np.all(x == x[0]):
         # every resample is the sample itself: the bootstrap distribution is a point
         return Interval(mean, mean, mean, n)
+    low, high = _scipy_interval((x,), np.mean, False, confidence, n_resamples, method, gen)
+    return Interval(mean, low, high, n)
+
+
+def _scipy_interval(
+    data: tuple[np.ndarray, ...],
+    statistic: Any,
+    paired: bool,
+    confidence: float,
+    n_resamples: int,
+    method: str,
+    gen: np.random.Generator,
+) -> tuple[float, float]:
+    """``scipy.stats.bootstrap``'s interval; where BCa is undefined (NaN), the percentile
+    interval of the same resamples."""
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", stats.DegenerateDataWarning)
+        kw = {"paired": paired, "vectorized": True, "confidence_level": confidence}
         res = stats.bootstrap(
-            (x,),
-            np.mean,
-            n_resamples=n_resamples,
-            confidence_level=confidence,
-            method=method,
-            rng=gen,
-            vectorized=True,
+            data, statistic, n_resamples=n_resamples, method=method, rng=gen, **kw
         )
         low, high = float(res.confidence_interval.low), float(res.confidence_interval.high)
         if math.isnan(low) or math.isnan(high):
             res = stats.bootstrap(
-                (x,),
-                np.mean,
-                n_resamples=0,
-                confidence_level=confidence,
-                method="percentile",
-                bootstrap_result=res,
-                vectorized=True,
+                data, statistic, n_resamples=0, method="percentile", bootstrap_result=res, **kw
             )
             low, high = float(res.confidence_interval.low), float(res.confidence_interval.high)
-    return Interval(mean, low, high, n)
+    return low, high
 
 
 # ---- r_fd extras -------------------------------------------------------------------------------
@@ -334,29 +338,5 @@ def limit_ratio_ci(
     def ratio_of_means(a: np.ndarray, b: np.ndarray, axis: int = -1) -> np.ndarray:
         return np.mean(a, axis=axis) / np.mean(b, axis=axis)
 
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", stats.DegenerateDataWarning)
-        res = stats.bootstrap(
-            (t, o),
-            ratio_of_means,
-            paired=True,
-            vectorized=True,
-            n_resamples=n_resamples,
-            confidence_level=confidence,
-            method=method,
-            rng=gen,
-        )
-        low, high = float(res.confidence_interval.low), float(res.confidence_interval.high)
-        if math.isnan(low) or math.isnan(high):
-            res = stats.bootstrap(
-                (t, o),
-                ratio_of_means,
-                paired=True,
-                vectorized=True,
-                n_resamples=0,
-                confidence_level=confidence,
-                method="percentile",
-                bootstrap_result=res,
-            )
-            low, high = float(res.confidence_interval.low), float(res.confidence_interval.high)
+    low, high = _scipy_interval((t, o), ratio_of_means, True, confidence, n_resamples, method, gen)
     return Interval(estimate, low, high, n)
