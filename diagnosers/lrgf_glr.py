@@ -97,6 +97,9 @@ GLR_CONSTRAINTS: dict[str, Any] = {
     "glr_window": Integer(1, 5000),
     "cusum_drift": Real(0),
     "direction_window": Integer(1, 2000),
+    "baseline_lambda": Real(0, 1, closed="left"),
+    "baseline_hold": Real(0, 1, closed="right"),
+    "baseline_settle": Integer(0, 100_000),
 }
 
 #: the FCC-v0 faults whose directions are learned by default
@@ -119,6 +122,9 @@ class LRGFGLR(LRGFMEM):
         fault_scenarios: list[str] | None = None,
         fault_seeds: list[int] | None = None,
         direction_window: int = 300,
+        baseline_lambda: float = 0.0,
+        baseline_hold: float = 0.5,
+        baseline_settle: int = 200,
         relations: list[list[Any]] | None = None,
         n_hidden: int = 5,
         order: int = 2,
@@ -175,6 +181,9 @@ class LRGFGLR(LRGFMEM):
         self.fault_scenarios = fault_scenarios
         self.fault_seeds = fault_seeds
         self.direction_window = direction_window
+        self.baseline_lambda = baseline_lambda
+        self.baseline_hold = baseline_hold
+        self.baseline_settle = baseline_settle
 
     @classmethod
     def fast_params(cls) -> dict[str, Any]:
@@ -236,6 +245,12 @@ class LRGFGLR(LRGFMEM):
             cal_parts = [self._parts(y) for y in cal]
         self.v_paper_ = np.array(v_paper)
         self.train_fit_loss_ = np.array([f.best_val_loss for f in fits])
+        self._calibrate(cal_parts, w)
+
+    def _calibrate(self, cal_parts: list[tuple[np.ndarray, np.ndarray]], w: int) -> None:
+        """Error-model choice, scale, fault directions and limits from healthy calibration
+        records ``cal_parts`` (``(y_out − y_m, y_e)`` each; the first ``w`` samples skipped)."""
+        relations = self._relations()
         n_cal = sum(max(0, r.shape[0] - w) for r, _ in cal_parts)
         if n_cal < MIN_CALIBRATION_SAMPLES:
             raise ValueError(
@@ -251,11 +266,21 @@ class LRGFGLR(LRGFMEM):
         rem = [(r - e * self.use_mem_)[w:] for r, e in cal_parts]
         self.v_residual_ = np.maximum(np.sqrt(np.mean(np.concatenate(rem) ** 2, axis=0)), 1e-9)
         norm = [r / self.v_residual_ for r in rem]
+        self.directions_ = self._learn_directions()
+        # Without a baseline the statistics are fixed filters of the error: one fit. With one,
+        # what the baseline absorbs depends on when it holds, which depends on the limits: fit
+        # on an always-adapting baseline, then once more on the baseline held by those limits.
+        self._fit_alarm_stage([self._track(e, hold=False) for e in norm])
+        if self.baseline_lambda > 0:
+            self._fit_alarm_stage([self._track(e, hold=True) for e in norm])
+
+    def _fit_alarm_stage(self, norm: list[np.ndarray]) -> None:
+        """Covariances and limits of the alarm stage on healthy (baseline-removed) normalised
+        errors ``norm``; then the derived state (:meth:`_finish`)."""
+        k, m = len(self.out_idx_), len(self.directions_)
         z = np.concatenate([EWMA(self.ewma_lambda).filter(e) for e in norm])
         t2 = HotellingT2(centered=False).fit(z)
         self.s_inv_ = t2.precision_
-        self.directions_ = self._learn_directions()
-        k, m = len(relations), len(self.directions_)
         det = DirectionalDetector(self.detector)
         share = 1.0 if m == 0 or det is DirectionalDetector.T2 else self.omnibus_share
         self.h_ = calibrate_limit(
@@ -335,6 +360,7 @@ class LRGFGLR(LRGFMEM):
         self.upper_ = np.concatenate([self.h_, self.h_dir_])
         self._lower = np.full(len(self.upper_), -np.inf)
         self._no_limit = np.full(len(self.upper_), np.inf)
+        self._hold_limits = self.baseline_hold * self.upper_
 
     def _signal_names(self) -> tuple[str, ...]:
         return ("T2[ewma]", *(f"{self.detector}[{f}]" for f in self._faults()[: len(self.h_dir_)]))
@@ -342,7 +368,68 @@ class LRGFGLR(LRGFMEM):
     # ---- detection -----------------------------------------------------------------------------
     def _reset(self) -> None:
         super()._reset()
+        self._reset_stage()
+
+    def _reset_stage(self) -> None:
+        """Fresh alarm-stage state: EWMA, sequential test and baseline."""
+        self._ewma = EWMA(self.ewma_lambda)
         self._seq = self._sequential() if len(self.h_dir_) else None
+        self._reset_baseline()
+
+    def _reset_baseline(self) -> None:
+        self._b = np.zeros(len(self.out_idx_)) if self.baseline_lambda > 0 else None
+        self._n_seen = self._n_adapted = 0
+
+    def _track(self, e: np.ndarray, *, hold: bool) -> np.ndarray:
+        """The baseline-removed error of a normalised error record ``e`` (T, k) past its warm-up.
+        ``hold=False`` adapts the baseline at every sample (no limits needed); ``hold=True``
+        runs the detector's own recursion with the current limits."""
+        if self.baseline_lambda == 0:
+            return e
+        out = np.empty_like(e)
+        if hold:
+            self._reset_stage()
+            for k in range(e.shape[0]):
+                out[k] = self._stage_step(e[k], warm=False)[0]
+        else:
+            self._reset_baseline()
+            for k in range(e.shape[0]):
+                out[k] = e[k] - self._b
+                self._baseline_step(e[k], inside_hold=True)
+        return out
+
+    def _baseline_step(self, e: np.ndarray, *, inside_hold: bool) -> None:
+        """Adapt the baseline to the normalised error ``e`` of one sample past the warm-up.
+
+        Settling: the first ``baseline_settle`` samples always adapt (the plant is taken as
+        healthy when monitoring starts, as in training), with the running mean's gain 1/n until
+        λ takes over. Later the baseline follows the slow healthy error only while every
+        statistic is well inside its limit (``inside_hold``), so a fault's growing error is not
+        absorbed into it.
+        """
+        assert self._b is not None
+        settling = self._n_seen < self.baseline_settle
+        self._n_seen += 1
+        if settling or inside_hold:
+            self._n_adapted += 1
+            self._b += max(self.baseline_lambda, 1.0 / self._n_adapted) * (e - self._b)
+
+    def _stage_step(self, e: np.ndarray, *, warm: bool) -> tuple[np.ndarray, np.ndarray]:
+        """One sample of the alarm stage: (baseline-removed error, signal). The one place the
+        recursion is written; streaming ``update`` and batch ``detect`` both call it."""
+        et = e if self._b is None else e - self._b
+        z = self._ewma.update(et)
+        signal = np.empty(len(self.upper_))
+        signal[0] = z @ self.s_inv_ @ z
+        if self._seq is None:
+            pass
+        elif self.detector == DirectionalDetector.DIRECTIONAL:
+            signal[1:] = self.dir_weights_ @ z
+        else:
+            signal[1:] = self._seq.update(self.dir_weights_ @ et)
+        if self._b is not None and not warm:
+            self._baseline_step(e, inside_hold=bool((signal <= self._hold_limits).all()))
+        return et, signal
 
     def _scores(self, e: np.ndarray, z: np.ndarray, seq: np.ndarray | None) -> np.ndarray:
         t2 = np.atleast_1d(self.t2_.score(z))
@@ -369,15 +456,7 @@ class LRGFGLR(LRGFMEM):
         warm = self._k < self.steady_window
         self._k += 1
         e = np.zeros(len(centre)) if warm else (y_out - centre) / self.v_residual_
-        z = self._ewma.update(e)
-        signal = np.empty(len(self.upper_))
-        signal[0] = z @ self.s_inv_ @ z
-        if self._seq is None:
-            pass
-        elif self.detector == DirectionalDetector.DIRECTIONAL:
-            signal[1:] = self.dir_weights_ @ z
-        else:
-            signal[1:] = self._seq.update(self.dir_weights_ @ e)
+        _, signal = self._stage_step(e, warm=warm)
         return self._decision(y_out - centre, signal, warm)
 
     def _detect(self, y: np.ndarray) -> Detection:
@@ -386,11 +465,15 @@ class LRGFGLR(LRGFMEM):
         w = self.steady_window
         e = resid / self.v_residual_
         e[:w] = 0.0
-        z = EWMA(self.ewma_lambda).filter(e)
-        seq = None
-        if len(self.h_dir_) and self.detector != DirectionalDetector.DIRECTIONAL:
-            seq = self._sequential().filter(self._proj.score(e))
-        sig = self._scores(e, z, seq)
+        if self.baseline_lambda > 0:  # the baseline's hold makes the stage a recursion
+            self._reset_stage()
+            sig = np.array([self._stage_step(e[k], warm=k < w)[1] for k in range(y.shape[0])])
+        else:
+            z = EWMA(self.ewma_lambda).filter(e)
+            seq = None
+            if len(self.h_dir_) and self.detector != DirectionalDetector.DIRECTIONAL:
+                seq = self._sequential().filter(self._proj.score(e))
+            sig = self._scores(e, z, seq)
         return Detection.from_decisions(
             [self._decision(resid[k], sig[k], k < w) for k in range(y.shape[0])],
             self.signal_names_,

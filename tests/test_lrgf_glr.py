@@ -180,3 +180,69 @@ def test_directions_are_unit_vectors_from_training_seeds_only(train) -> None:
         LRGFGLR(fault_seeds=[5000]).fit(train)
     with pytest.raises(ValueError, match="fault_scenarios"):
         LRGFGLR(fault_scenarios=["f9"]).fit(train)
+
+
+# ---- the held baseline ---------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def baseline_det(train) -> LRGFGLR:
+    return LRGFGLR(**{**FAST, "n_folds": 2, "baseline_lambda": 0.02, "baseline_settle": 50}).fit(
+        train
+    )
+
+
+@pytest.mark.parametrize("detector", ["directional", "cusum"])
+def test_baseline_stream_equals_batch_and_roundtrip(baseline_det, detector, tmp_path) -> None:
+    det = baseline_det
+    if detector != det.detector:
+        det = LRGFGLR(**{**det.get_params(), "detector": detector})
+        det.fit([make_episode(1500, seed=s) for s in (1, 2, 3)])
+    ep = inject_step_fault(make_episode(900, seed=9), onset=500, magnitude=3.0)
+    batch = det.detect(ep)
+    det.reset()
+    stream = [det.update(row) for row in ep.y]
+    np.testing.assert_array_equal(batch.alarm, [d.alarm for d in stream])
+    np.testing.assert_allclose(batch.signal, [d.signal for d in stream], rtol=1e-9, atol=1e-9)
+    det.save(tmp_path / "m")
+    again = diagnosers.Diagnoser.load(tmp_path / "m")
+    assert again.baseline_lambda == 0.02 and again.baseline_settle == 50
+    np.testing.assert_array_equal(again.detect(ep).alarm, batch.alarm)
+
+
+def _offset(ep, column: str, value: float, onset: int = 0):
+    y = ep.y.copy()
+    y[onset:, ep.channels.index(column)] += value
+    return diagnosers.Episode(y, ep.channels, ep.sample_time_s, fault_onset=ep.fault_onset)
+
+
+def test_baseline_absorbs_an_offset_present_from_the_start(baseline_det) -> None:
+    # a plant that sits 4 residual scales off the model from the start (another unit, another
+    # catalyst): without the baseline the detector alarms throughout, with it only while settling
+    col = baseline_det.channels_[baseline_det.out_idx_[1]]
+    ep = _offset(make_episode(1500, seed=11), col, 4.0 * baseline_det.v_residual_[1])
+    w = baseline_det.steady_window + baseline_det.baseline_settle
+    with_baseline = baseline_det.detect(ep).alarm[w:]
+    plain = LRGFGLR(**{**baseline_det.get_params(), "baseline_lambda": 0.0})
+    plain.fit([make_episode(1500, seed=s) for s in (1, 2, 3)])
+    without = plain.detect(ep).alarm[w:]
+    assert without.mean() > 0.9
+    assert with_baseline.mean() < 0.05
+
+
+def test_baseline_holds_on_a_fault(baseline_det) -> None:
+    # a step that appears later is not absorbed: the baseline holds while the statistic is high,
+    # so the alarm lasts as long as the fault
+    col = baseline_det.channels_[baseline_det.out_idx_[1]]
+    ep = _offset(make_episode(1500, seed=12), col, 8.0 * baseline_det.v_residual_[1], onset=800)
+    alarm = baseline_det.detect(ep).alarm
+    assert alarm[800:810].any()
+    assert alarm[820:].mean() > 0.95
+
+
+@pytest.mark.parametrize(
+    ("name", "value"),
+    [("baseline_lambda", 1.0), ("baseline_lambda", -0.1), ("baseline_hold", 0.0),
+     ("baseline_settle", -1)],
+)  # fmt: skip
+def test_baseline_parameters_are_checked(train, name, value) -> None:
+    with pytest.raises(ValueError, match=f"{name}={value}"):
+        LRGFGLR(**{**FAST, name: value}).fit(train)

@@ -1,0 +1,164 @@
+"""Baseline lab: ``lrgf-glr``'s alarm stage with and without the held baseline, against the
+physical-limit row, on validation seeds only (5000+ for episodes, 9000+ for the oracle's
+calibration). The bank is trained once per track (training seeds 1000+) and cached with its
+out-of-fold calibration records; the alarm-stage variants are re-calibrated from them.
+
+    python scripts/baseline_lab.py train --track paper
+    python scripts/baseline_lab.py eval --track paper --lambdas 0,0.005,0.01,0.02 --holds 0.5,1
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+import diagnosers
+from diagnosers.lrgf_glr import LRGFGLR
+from evaluation.metrics import episode_scores
+from evaluation.oracle import PhysicalLimit
+from evaluation.sources import TrackData
+from evaluation.tracks import TRACKS
+
+OUT = Path("results/baseline_lab")
+FAULTS = ("f1", "f2", "f3", "f4")
+
+
+def val_track(name: str, n_healthy: int, n_faulty: int):
+    return (
+        TRACKS[name]
+        .with_seeds(test=5000, validation=9000)
+        .replace(n_healthy=n_healthy, n_faulty=n_faulty)
+    )
+
+
+class _Stash(LRGFGLR):
+    """lrgf-glr that keeps its out-of-fold calibration records."""
+
+    def _calibrate(self, cal_parts, w):
+        self.stash_ = (cal_parts, w)
+        super()._calibrate(cal_parts, w)
+
+
+def train(track: str, epochs: int) -> None:
+    data = TrackData(track=val_track(track, 1, 1))
+    det = _Stash(max_epochs=epochs)
+    t0 = time.perf_counter()
+    det.fit(data.train_episodes())
+    print(f"{track}: trained in {time.perf_counter() - t0:.0f} s", flush=True)
+    d = OUT / track
+    d.mkdir(parents=True, exist_ok=True)
+    cal_parts, w = det.stash_
+    np.savez(d / "cal.npz", **{f"r{i}": r for i, (r, _) in enumerate(cal_parts)},
+             **{f"e{i}": e for i, (_, e) in enumerate(cal_parts)}, w=w)  # fmt: skip
+    det.save(d / "model")
+
+
+def load(track: str):
+    d = OUT / track
+    det = diagnosers.load(d / "model")
+    z = np.load(d / "cal.npz")
+    n = sum(1 for k in z.files if k.startswith("r"))
+    return det, [(z[f"r{i}"], z[f"e{i}"]) for i in range(n)], int(z["w"])
+
+
+def episodes(track: str, n_healthy: int, n_faulty: int, eval_track: str | None = None):
+    name = eval_track or track
+    path = OUT / f"episodes-{name}-{n_healthy}-{n_faulty}.npz"
+    if path.exists():
+        z = np.load(path)
+        return {k: z[k] for k in z.files}
+    data = TrackData(track=val_track(name, n_healthy, n_faulty))
+    oracle = PhysicalLimit(data).fit()
+    arrays = {}
+    for sc, seed in data.cells():
+        ep = data.load_test(sc, seed).episode
+        key = f"{sc}/{seed}"
+        arrays[f"y:{key}"] = ep.y
+        arrays[f"onset:{key}"] = np.array(-1 if ep.fault_onset is None else ep.fault_onset)
+        s = episode_scores(oracle.detect(ep).alarm, ep.fault_onset)
+        arrays[f"oracle:{key}"] = np.array([s["r_fd"], s["r_td"], s["t_dt"]])
+    np.savez(path, **arrays)
+    return arrays
+
+
+def evaluate(det, eps) -> dict:
+    rows: dict[str, list] = {}
+    for k in eps:
+        if not k.startswith("y:"):
+            continue
+        key = k[2:]
+        sc = key.split("/")[0]
+        onset = int(eps[f"onset:{key}"])
+        ep = diagnosers.Episode(eps[k], det.channels_, 10.0, fault_onset=None if onset < 0 else onset)
+        s = episode_scores(det.detect(ep).alarm, ep.fault_onset)
+        rows.setdefault(sc, []).append((s["r_fd"], s["r_td"], s["t_dt"], *eps[f"oracle:{key}"]))
+    out = {}
+    for sc, r in rows.items():
+        a = np.array(r, dtype=float)
+        if sc == "nominal":
+            per = a[:, 0]
+            out[sc] = {
+                "r_fd": float(per.mean()),
+                "r_fd_max": float(per.max()),
+                "oracle_r_fd": float(np.nanmean(a[:, 3])),
+            }
+        else:
+            out[sc] = {
+                "r_td": float(np.nanmean(a[:, 1])),
+                "t_dt": float(np.nanmean(a[:, 2])),
+                "oracle_r_td": float(np.nanmean(a[:, 4])),
+                "oracle_t_dt": float(np.nanmean(a[:, 5])),
+                "r_fd_pre": float(np.nanmean(a[:, 0])),
+            }
+    return out
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    t = sub.add_parser("train")
+    t.add_argument("--track", default="paper")
+    t.add_argument("--epochs", type=int, default=800)
+    e = sub.add_parser("eval")
+    e.add_argument("--track", default="paper", help="the trained bank's track")
+    e.add_argument("--eval-tracks", default=None, help="tracks whose episodes to score")
+    e.add_argument("--lambdas", default="0,0.01")
+    e.add_argument("--holds", default="0.5")
+    e.add_argument("--n-healthy", type=int, default=60)
+    e.add_argument("--n-faulty", type=int, default=10)
+    e.add_argument("--set", default="", help="extra hyperparameters k=v,k=v (floats)")
+    a = ap.parse_args()
+    if a.cmd == "train":
+        train(a.track, a.epochs)
+        return
+    det, cal, w = load(a.track)
+    extra = {kv.split("=")[0]: float(kv.split("=")[1]) for kv in a.set.split(",") if kv}
+    tracks = (a.eval_tracks or a.track).split(",")
+    eps = {tr: episodes(a.track, a.n_healthy, a.n_faulty, tr) for tr in tracks}
+    results = []
+    for lam in [float(x) for x in a.lambdas.split(",")]:
+        for hold in [float(x) for x in a.holds.split(",")]:
+            det.set_params(baseline_lambda=lam, baseline_hold=hold, **extra)
+            det._calibrate(cal, w)
+            for tr in tracks:
+                res = evaluate(det, eps[tr])
+                nom = res.get("nominal", {})
+                line = f"{tr:9s} lam={lam:<6} hold={hold:<4}"
+                if nom:
+                    line += f" r_fd {nom['r_fd']:.4f} (max {nom['r_fd_max']:.3f}; oracle {nom['oracle_r_fd']:.4f})"
+                for f in FAULTS:
+                    if f in res:
+                        r = res[f]
+                        line += (f" | {f} {r['r_td']:.3f}/{r['t_dt']:.0f} "
+                                 f"(o {r['oracle_r_td']:.3f}/{r['oracle_t_dt']:.0f})")  # fmt: skip
+                print(line, flush=True)
+                results.append({"track": tr, "lambda": lam, "hold": hold, **extra, "res": res})
+    (OUT / f"eval-{a.track}-{int(time.time())}.json").write_text(json.dumps(results, indent=1))
+
+
+if __name__ == "__main__":
+    main()
