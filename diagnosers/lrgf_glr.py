@@ -46,8 +46,9 @@ limit after the silent warm-up.
 
 from __future__ import annotations
 
+import inspect
 from enum import StrEnum
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -70,7 +71,7 @@ from diagnosers.lrgf_mem import (
 from diagnosers.registry import register
 from fcc_env.validation import Integer, Options, Real, check_params
 
-__all__ = ["LRGFGLR", "Calibration", "DirectionalDetector"]
+__all__ = ["LRGFGLR", "Calibration", "DirectionalDetector", "LRGFGLRAdaptive"]
 
 
 class Calibration(StrEnum):
@@ -496,3 +497,32 @@ class LRGFGLR(LRGFMEM):
         except KeyError as e:
             raise ValueError(f"saved state lacks array {e.args[0]!r}") from None
         super()._set_state(state)
+
+
+def _init_with_defaults(init: Any, defaults: dict[str, Any]) -> Any:
+    """``init``'s keyword signature with some defaults changed, for a registered variant whose
+    only difference is its defaults (``get_params`` and ``make`` read the signature)."""
+    sig = inspect.signature(init)
+    params = [
+        p.replace(default=defaults[p.name]) if p.name in defaults else p
+        for p in sig.parameters.values()
+    ]
+    return sig.replace(parameters=params)
+
+
+@register("lrgf-glr-adaptive")
+class LRGFGLRAdaptive(LRGFGLR):
+    """``lrgf-glr`` with the held baseline on (``baseline_lambda=0.005``, ``baseline_hold=0.5``).
+
+    For a plant that differs from the plants it was trained on (the ``uncertain`` track): the
+    baseline learns the unit's own slow offset from the model while the plant is healthy. It
+    pays on small and slow faults, which stay under the hold level and are learned as baseline.
+    The setting was chosen on validation seeds (``scripts/baseline_lab.py``; see the README).
+    """
+
+    DEFAULTS: ClassVar[dict[str, Any]] = {"baseline_lambda": 0.005, "baseline_hold": 0.5}
+
+    def __init__(self, **params: Any) -> None:
+        super().__init__(**{**self.DEFAULTS, **params})
+
+    __init__.__signature__ = _init_with_defaults(LRGFGLR.__init__, DEFAULTS)  # type: ignore[attr-defined]

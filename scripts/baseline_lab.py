@@ -59,7 +59,7 @@ def train(track: str, epochs: int) -> None:
 
 def load(track: str):
     d = OUT / track
-    det = diagnosers.load(d / "model")
+    det = diagnosers.Diagnoser.load(d / "model")
     z = np.load(d / "cal.npz")
     n = sum(1 for k in z.files if k.startswith("r"))
     return det, [(z[f"r{i}"], z[f"e{i}"]) for i in range(n)], int(z["w"])
@@ -144,6 +144,7 @@ def main() -> None:
         for hold in [float(x) for x in a.holds.split(",")]:
             det.set_params(baseline_lambda=lam, baseline_hold=hold, **extra)
             det._calibrate(cal, w)
+            det._fitted_ = True  # the lab re-calibrates the stored bank in place
             for tr in tracks:
                 res = evaluate(det, eps[tr])
                 nom = res.get("nominal", {})
