@@ -67,6 +67,7 @@ from diagnosers.lrgf_mem import (
     PARAMETER_CONSTRAINTS,
     MemSelect,
 )
+from diagnosers.parallel import TrainedBank
 from diagnosers.registry import register
 from fcc_env.validation import Integer, Options, Real, check_params
 
@@ -141,6 +142,7 @@ class LRGFGLR(LRGFMEM):
         mem_select: str = "if_better",
         seed: int = 0,
         progress: bool = False,
+        n_jobs: int | None = None,
     ) -> None:
         super().__init__(
             relations=relations,
@@ -165,6 +167,7 @@ class LRGFGLR(LRGFMEM):
             mem_select=mem_select,
             seed=seed,
             progress=progress,
+            n_jobs=n_jobs,
         )
         self.calibration = calibration
         self.n_folds = n_folds
@@ -224,11 +227,7 @@ class LRGFGLR(LRGFMEM):
         ys = [e.y for e in episodes]
         cal_parts: list[tuple[np.ndarray, np.ndarray]] = []
         if self.calibration == Calibration.CROSS_FIT and len(ys) >= self.n_folds:
-            for fold in np.array_split(np.arange(len(ys)), self.n_folds):
-                rest = [ys[i] for i in range(len(ys)) if i not in set(fold.tolist())]
-                self.lrgf_, self.mem_, _, _ = self._train_models(rest)
-                cal_parts += [self._parts(ys[i]) for i in fold]
-            self.lrgf_, self.mem_, v_paper, fits = self._train_models(ys)
+            cal_parts, (self.lrgf_, self.mem_, v_paper, fits) = self._cross_fit_models(ys)
         else:  # lrgf-mem's split (also when there are fewer episodes than folds)
             train, cal, cal_from = self._split(episodes)
             self.lrgf_, self.mem_, v_paper, fits = self._train_models(train)
@@ -281,6 +280,23 @@ class LRGFGLR(LRGFMEM):
                     m, np.quantile(seq.max(axis=1), 1.0 - t_dir * m)
                 )
         self._finish()
+
+    def _cross_fit_models(
+        self, ys: list[np.ndarray]
+    ) -> tuple[list[tuple[np.ndarray, np.ndarray]], TrainedBank]:
+        """Out-of-fold :meth:`_parts` of every record of ``ys``, and the bank trained on all.
+
+        The ``n_folds`` banks without a fold and the bank on all records are trained in one call,
+        so that ``n_jobs`` processes share all of their (relation, training set) jobs.
+        """
+        folds = np.array_split(np.arange(len(ys)), self.n_folds)
+        sets = [[ys[i] for i in range(len(ys)) if i not in set(f.tolist())] for f in folds]
+        *fold_banks, final = self._train_banks([*sets, ys])
+        cal_parts = []
+        for fold, bank in zip(folds, fold_banks, strict=True):
+            self.lrgf_, self.mem_ = bank.lrgf, bank.mem  # _parts runs the current models
+            cal_parts += [self._parts(ys[i]) for i in fold]
+        return cal_parts, final
 
     def _sequential(self) -> DirectionalGLR | CUSUM:
         if self.detector == DirectionalDetector.GLR:
