@@ -378,9 +378,7 @@ class LRGFGLR(LRGFMEM):
         return Decision(bool((signal > upper).any()), signal, self._lower, upper, resid)
 
     def _update(self, y: np.ndarray) -> Decision:
-        centre = self._bank.step(y)
-        for j in np.flatnonzero(self.use_mem_):
-            centre[j] += self._mem_steppers[j].step(y[self.in_idx_[j]])[0]
+        centre = self._step_centre(y)
         y_out = y[self.out_idx_]
         warm = self._k < self.steady_window
         self._k += 1

@@ -111,7 +111,7 @@ from diagnosers.alarm import (
 )
 from diagnosers.base import Decision, Detection, Diagnoser, Episode, require_varying
 from diagnosers.lrgf_stepper import BankStepper
-from diagnosers.mem import BandScale, MEMStepper, OutputActivation, band, t_alpha
+from diagnosers.mem import BandScale, MEMBankStepper, OutputActivation, band, t_alpha
 from diagnosers.parallel import BankSettings, TrainedBank, train_banks
 from diagnosers.registry import register
 from diagnosers.training import Method, build_module, export_module
@@ -391,6 +391,12 @@ class _LRGFMEMBase(Diagnoser):
         self.t2_ = HotellingT2(centered=False)
         self.t2_.set_state({"mean": np.zeros(len(self.s_inv_)), "precision": self.s_inv_})
         self.signal_names_ = self._signal_names()
+        # the per-sample constants of _decide
+        self._half_band = self.t_alpha_ * np.asarray(self.v_, dtype=np.float64)  # as band()
+        ewma = self.alarm_filter == AlarmFilter.EWMA
+        self._limit_lower = -self.h_ if ewma else np.array([-np.inf])
+        k = len(self.signal_names_)
+        self._warm_lower, self._warm_upper = np.full(k, -np.inf), np.full(k, np.inf)
 
     def _limit(self, stat: np.ndarray, dof: int) -> np.ndarray:
         """Alarm limit per column of the healthy calibration statistic ``stat`` (T, c).
@@ -428,32 +434,45 @@ class _LRGFMEMBase(Diagnoser):
     def _reset(self) -> None:
         if getattr(self, "_bank", None) is None:
             self._bank = BankStepper(self.lrgf_, self.in_idx_, len(self.channels_))
-            self._mem_steppers = [MEMStepper(m) for m in self.mem_]
+            self._mem_used = None
+        used = np.flatnonzero(self.use_mem_)
+        if self._mem_used is None or not np.array_equal(used, self._mem_used):
+            # only the error models in use are stepped, all of them in one stacked pass
+            self._mem_used = used
+            self._mem_bank = MEMBankStepper(
+                [self.mem_[j] for j in used], [self.in_idx_[j] for j in used]
+            )
         self._bank.reset()
-        for st in self._mem_steppers:
-            st.reset()
+        self._mem_bank.reset()
         self._ewma = EWMA(self.ewma_lambda)
         self._k = 0
 
+    def _step_centre(self, y: np.ndarray) -> np.ndarray:
+        """y_m + y_e of every relation for one measurement ``y``: :meth:`_centre`, streaming."""
+        centre = self._bank.step(y)
+        if len(self._mem_used):
+            centre[self._mem_used] += self._mem_bank.step(y)
+        return centre
+
     def _decide(self, y_out: np.ndarray, centre: np.ndarray, z: np.ndarray, warm: bool) -> Decision:
+        # called for every sample by _update and _detect alike: the limits come precomputed
+        # from _finish, and the arrays the decisions share are never written to
         resid = y_out - centre
         if self.alarm_filter == AlarmFilter.EWMA:
-            signal, lower, upper = z, -self.h_, self.h_
+            signal, lower, upper = z, self._limit_lower, self.h_
         elif self.alarm_filter == AlarmFilter.EWMA_T2:
             signal = np.array([self.t2_.score(z)])
-            lower, upper = np.array([-np.inf]), self.h_
+            lower, upper = self._limit_lower, self.h_
         else:
             signal = y_out
-            lower, upper = band(centre, 0.0, self.v_, self.alpha)
+            lower, upper = centre - self._half_band, centre + self._half_band  # as band()
         if warm:  # no limit while the models settle (alarm stays "outside the limits")
-            lower, upper = np.full_like(signal, -np.inf), np.full_like(signal, np.inf)
-        alarm = bool(np.any((signal < lower) | (signal > upper)))
+            lower, upper = self._warm_lower, self._warm_upper
+        alarm = bool(((signal < lower) | (signal > upper)).any())
         return Decision(alarm, signal, lower, upper, resid)
 
     def _update(self, y: np.ndarray) -> Decision:
-        centre = self._bank.step(y)
-        for j in np.flatnonzero(self.use_mem_):
-            centre[j] += self._mem_steppers[j].step(y[self.in_idx_[j]])[0]
+        centre = self._step_centre(y)
         y_out = y[self.out_idx_]
         warm = self._k < self.steady_window
         self._k += 1
