@@ -225,6 +225,10 @@ class Diagnoser(ABC):
     #: whether the diagnoser also isolates: it is then trained on healthy *and* labelled faulty
     #: episodes (``fault_onset`` and ``scenario`` set) and its decisions carry a diagnosis
     isolates: ClassVar[bool] = False
+    #: hyperparameters that say how to compute, never what: the fitted model is the same for
+    #: every value (a progress bar, the number of worker processes). :meth:`result_params` leaves
+    #: them out, so the result store's hashes do not change with them.
+    execution_params: ClassVar[tuple[str, ...]] = ()
 
     # ---- scikit-learn style parameter handling -------------------------------------------------
     @classmethod
@@ -262,6 +266,10 @@ class Diagnoser(ABC):
     def get_params(self) -> dict[str, Any]:
         """Hyperparameters as passed to ``__init__`` (JSON-serialisable by convention)."""
         return {k: getattr(self, k) for k in self._param_names()}
+
+    def result_params(self) -> dict[str, Any]:
+        """:meth:`get_params` without :attr:`execution_params`: what the fitted model depends on."""
+        return {k: v for k, v in self.get_params().items() if k not in self.execution_params}
 
     def set_params(self, **params: Any) -> Self:
         """Set hyperparameters (scikit-learn style) and return ``self``.

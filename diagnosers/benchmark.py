@@ -12,9 +12,11 @@ Prints, measured on this machine:
 * streaming ``update`` throughput and whole-episode ``detect`` throughput of ``lrgf-mem-paper``,
   ``lrgf-mem`` and ``lrgf-glr``;
 * with ``--bank N``: the wall time of training ``lrgf-mem`` and ``lrgf-glr`` (its cross-fitted
-  calibration trains the bank ``n_folds + 1`` times) on N healthy episodes (the tracks' 20 by
-  default), and each relation's held-out free-run fit against a linear ARX model of the same
-  relation (``arx-band`` with that output and inputs) trained on the same episodes.
+  calibration trains the bank ``n_folds + 1`` times) on N healthy episodes (the tracks train on
+  9), with ``--n-jobs`` worker processes (default 2: here a bank trains alone; the diagnosers'
+  own default is 1, see :mod:`diagnosers.lrgf_mem`), and each relation's held-out free-run fit
+  against a linear ARX model of the same relation (``arx-band`` with that output and inputs)
+  trained on the same episodes.
 
 Figures, not assertions: tests check correctness, this script reports speed.
 """
@@ -80,9 +82,12 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--bank", type=int, default=0, help="train the banks on N episodes and compare (0: skip)"
     )
+    parser.add_argument(
+        "--n-jobs", type=int, default=2, help="worker processes that train a bank (--bank; 2)"
+    )
     args = parser.parse_args(argv)
     if args.bank:
-        return _bank_report(args.bank)
+        return _bank_report(args.bank, args.n_jobs)
 
     train = _episodes([1000])
     held_out = _episodes([6000, 6001, 6002])
@@ -159,7 +164,7 @@ def main(argv: list[str] | None = None) -> int:
     return 0
 
 
-def _bank_report(n: int) -> int:
+def _bank_report(n: int, n_jobs: int) -> int:
     """Training wall time of the banks on ``n`` episodes and per-relation held-out fit vs ARX."""
     from diagnosers.lrgf_mem import BANK_RELATIONS
 
@@ -168,8 +173,10 @@ def _bank_report(n: int) -> int:
     fitted = {}
     for name in ("lrgf-mem", "lrgf-glr"):
         t0 = time.perf_counter()
-        fitted[name] = diagnosers.make(name).fit(train)
-        print(f"{name}: trained on {n} episodes in {time.perf_counter() - t0:.0f} s")
+        fitted[name] = diagnosers.make(name, n_jobs=n_jobs).fit(train)
+        print(
+            f"{name}: trained on {n} episodes in {time.perf_counter() - t0:.0f} s (n_jobs={n_jobs})"
+        )
     glr = fitted["lrgf-glr"]
     for j, (out, ins) in enumerate(BANK_RELATIONS):
         yi = CH.index(out)

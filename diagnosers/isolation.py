@@ -104,6 +104,16 @@ class _IsolatingLRGF(Diagnoser):
     def fast_params(cls) -> dict[str, Any]:
         return {"detector": LRGFMEM.fast_params()}
 
+    def result_params(self) -> dict[str, Any]:
+        # the inner lrgf-mem's execution parameters (n_jobs, progress) do not change the fit
+        # either; without them an empty dict is the default detector, as in _fit
+        params = super().result_params()
+        if isinstance(self.detector, dict):
+            skip = LRGFMEM.execution_params
+            inner = {k: v for k, v in self.detector.items() if k not in skip}
+            params["detector"] = inner or None
+        return params
+
     def _validate_params(self) -> None:
         check_params(
             {k: v for k, v in self.get_params().items() if k in self.CONSTRAINTS}, self.CONSTRAINTS

@@ -68,6 +68,7 @@ from diagnosers.lrgf_mem import (
     PARAMETER_CONSTRAINTS,
     MemSelect,
 )
+from diagnosers.parallel import TrainedBank
 from diagnosers.registry import register
 from fcc_env.validation import Integer, Options, Real, check_params
 
@@ -148,6 +149,7 @@ class LRGFGLR(LRGFMEM):
         mem_select: str = "if_better",
         seed: int = 0,
         progress: bool = False,
+        n_jobs: int | None = None,
     ) -> None:
         super().__init__(
             relations=relations,
@@ -172,6 +174,7 @@ class LRGFGLR(LRGFMEM):
             mem_select=mem_select,
             seed=seed,
             progress=progress,
+            n_jobs=n_jobs,
         )
         self.calibration = calibration
         self.n_folds = n_folds
@@ -234,11 +237,7 @@ class LRGFGLR(LRGFMEM):
         ys = [e.y for e in episodes]
         cal_parts: list[tuple[np.ndarray, np.ndarray]] = []
         if self.calibration == Calibration.CROSS_FIT and len(ys) >= self.n_folds:
-            for fold in np.array_split(np.arange(len(ys)), self.n_folds):
-                rest = [ys[i] for i in range(len(ys)) if i not in set(fold.tolist())]
-                self.lrgf_, self.mem_, _, _ = self._train_models(rest)
-                cal_parts += [self._parts(ys[i]) for i in fold]
-            self.lrgf_, self.mem_, v_paper, fits = self._train_models(ys)
+            cal_parts, (self.lrgf_, self.mem_, v_paper, fits) = self._cross_fit_models(ys)
         else:  # lrgf-mem's split (also when there are fewer episodes than folds)
             train, cal, cal_from = self._split(episodes)
             self.lrgf_, self.mem_, v_paper, fits = self._train_models(train)
@@ -307,6 +306,23 @@ class LRGFGLR(LRGFMEM):
                     m, np.quantile(seq.max(axis=1), 1.0 - t_dir * m)
                 )
         self._finish()
+
+    def _cross_fit_models(
+        self, ys: list[np.ndarray]
+    ) -> tuple[list[tuple[np.ndarray, np.ndarray]], TrainedBank]:
+        """Out-of-fold :meth:`_parts` of every record of ``ys``, and the bank trained on all.
+
+        The ``n_folds`` banks without a fold and the bank on all records are trained in one call,
+        so that ``n_jobs`` processes share all of their (relation, training set) jobs.
+        """
+        folds = np.array_split(np.arange(len(ys)), self.n_folds)
+        sets = [[ys[i] for i in range(len(ys)) if i not in set(f.tolist())] for f in folds]
+        *fold_banks, final = self._train_banks([*sets, ys])
+        cal_parts = []
+        for fold, bank in zip(folds, fold_banks, strict=True):
+            self.lrgf_, self.mem_ = bank.lrgf, bank.mem  # _parts runs the current models
+            cal_parts += [self._parts(ys[i]) for i in fold]
+        return cal_parts, final
 
     def _sequential(self) -> DirectionalGLR | CUSUM:
         if self.detector == DirectionalDetector.GLR:
@@ -450,9 +466,7 @@ class LRGFGLR(LRGFMEM):
         return Decision(bool((signal > upper).any()), signal, self._lower, upper, resid)
 
     def _update(self, y: np.ndarray) -> Decision:
-        centre = self._bank.step(y)
-        for j in np.flatnonzero(self.use_mem_):
-            centre[j] += self._mem_steppers[j].step(y[self.in_idx_[j]])[0]
+        centre = self._step_centre(y)
         y_out = y[self.out_idx_]
         warm = self._k < self.steady_window
         self._k += 1

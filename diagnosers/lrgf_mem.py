@@ -81,6 +81,15 @@ first 70 % and calibrated on the remaining 30 % (simulated over the whole episod
 ``progress`` (default ``None``): a tqdm bar over the training epochs when run interactively
 (standard error is a terminal, in the main process; :func:`diagnosers.base.auto_progress`),
 ``True``/``False`` to force it. It does not change the fit.
+
+``n_jobs`` (default ``None``, meaning 1, as in scikit-learn): worker processes that train the
+relations (and ``lrgf-glr``'s cross-fit folds) at once, :mod:`diagnosers.parallel`. Each relation
+trains with its own seed and one thread, so the models are the same bits for every ``n_jobs``.
+The default is 1 because the leaderboard's sweep already trains the diagnosers in parallel
+worker processes, one core each: a pool inside each would oversubscribe the cores. Pass it where
+a bank trains alone (``python -m diagnosers.benchmark --bank`` uses 2). Like ``progress`` it is
+an execution parameter (:attr:`diagnosers.base.Diagnoser.execution_params`): the result store's
+model hash leaves both out, so changing them reuses a stored model.
 """
 
 from __future__ import annotations
@@ -101,11 +110,11 @@ from diagnosers.alarm import (
     calibrate_limit,
 )
 from diagnosers.base import Decision, Detection, Diagnoser, Episode, require_varying
-from diagnosers.lrgf import LRGF
 from diagnosers.lrgf_stepper import BankStepper
-from diagnosers.mem import BandScale, MEMStepper, NNARXErrorModel, OutputActivation, band, t_alpha
+from diagnosers.mem import BandScale, MEMBankStepper, OutputActivation, band, t_alpha
+from diagnosers.parallel import BankSettings, TrainedBank, train_banks
 from diagnosers.registry import register
-from diagnosers.training import Method, build_module, export_module, fit_lrgf, fit_mem
+from diagnosers.training import Method, build_module, export_module
 from fcc_env.io import atomic_open, atomic_write
 from fcc_env.validation import Boolean, Integer, Options, Real, check_params, invalid
 
@@ -166,6 +175,7 @@ PARAMETER_CONSTRAINTS: dict[str, Any] = {
     "mem_select": Options(MemSelect),
     "seed": Integer(0),
     "progress": (Boolean(), None),
+    "n_jobs": (Integer(1), None),
 }
 
 #: The bank of ``lrgf-mem``: the paper's (14)–(16) with the inputs the model's physics needs.
@@ -193,6 +203,7 @@ class _LRGFMEMBase(Diagnoser):
 
     #: relations used when ``relations`` is None
     DEFAULT_RELATIONS: list[list[Any]] = PAPER_RELATIONS
+    execution_params = ("progress", "n_jobs")
 
     def __init__(
         self,
@@ -219,6 +230,7 @@ class _LRGFMEMBase(Diagnoser):
         mem_select: str = "always",
         seed: int = 0,
         progress: bool | None = None,
+        n_jobs: int | None = None,
     ) -> None:
         self.relations = relations
         self.n_hidden = n_hidden
@@ -242,6 +254,7 @@ class _LRGFMEMBase(Diagnoser):
         self.mem_select = mem_select
         self.seed = seed
         self.progress = progress
+        self.n_jobs = n_jobs
 
     @classmethod
     def fast_params(cls) -> dict[str, Any]:
@@ -354,69 +367,21 @@ class _LRGFMEMBase(Diagnoser):
             self.h_ = self._limit(np.abs(stats), 0)
         self._finish()
 
-    def _train_models(
-        self, train: list[np.ndarray]
-    ) -> tuple[list[LRGF], list[NNARXErrorModel], list[float], list[Any]]:
+    def _train_models(self, train: list[np.ndarray]) -> TrainedBank:
         """Train every relation's nominal and error model on the records ``train``.
 
-        Returns (LRGF networks, error models, std of each y_e on ``train`` (the paper's v),
-        each network's :class:`diagnosers.training.FitResult`). Needs ``in_idx_``/``out_idx_``.
+        Returns a :class:`diagnosers.parallel.TrainedBank`: (LRGF networks, error models, std of
+        each y_e on ``train`` (the paper's v), each network's
+        :class:`diagnosers.training.FitResult`). Needs ``in_idx_``/``out_idx_``.
         """
-        nets: list[LRGF] = []
-        mems: list[NNARXErrorModel] = []
-        v_paper, fits = [], []
-        for j, (_out, ins) in enumerate(self._relations()):
-            seed = self.seed + 101 * j
-            u_tr = [y[:, self.in_idx_[j]] for y in train]
-            y_tr = [y[:, [self.out_idx_[j]]] for y in train]
-            net = LRGF(
-                len(ins),
-                self.n_hidden,
-                self.order,
-                1,
-                initial_state="steady",
-                steady_window=self.steady_window,
-                seed=seed,
-            ).double()
-            fits.append(
-                fit_lrgf(
-                    net,
-                    u_tr,
-                    y_tr,
-                    method=self.method,
-                    lr=self.lr,
-                    max_epochs=self.max_epochs,
-                    patience=max(50, self.max_epochs // 5),
-                    seed=seed,
-                    progress=self.progress,
-                )
-            )
-            net.eval()
-            r_tr = [yt - net.predict(ut) for ut, yt in zip(u_tr, y_tr, strict=True)]
-            mem = NNARXErrorModel(
-                len(ins),
-                1,
-                n_hidden=self.mem_hidden,
-                input_delays=self.mem_input_delays,
-                output_delays=self.mem_output_delays,
-                output_activation=self.mem_output_activation,
-                seed=seed,
-            ).double()
-            fit_mem(
-                mem,
-                u_tr,
-                r_tr,
-                max_epochs=self.mem_max_epochs,
-                pretrain_epochs=min(300, 3 * self.mem_max_epochs),
-                seed=seed,
-                progress=self.progress,
-            )
-            mem.eval()
-            ye_tr = np.concatenate([mem.predict(ut) for ut in u_tr])
-            v_paper.append(float(ye_tr.std(ddof=1)))
-            nets.append(net)
-            mems.append(mem)
-        return nets, mems, v_paper, fits
+        return self._train_banks([train])[0]
+
+    def _train_banks(self, sets: list[list[np.ndarray]]) -> list[TrainedBank]:
+        """:meth:`_train_models` on each training set of ``sets``, all relations and sets sharing
+        the ``n_jobs`` processes (:func:`diagnosers.parallel.train_banks`)."""
+        settings = BankSettings.from_params(self.get_params())
+        n_jobs = 1 if self.n_jobs is None else self.n_jobs
+        return train_banks(settings, sets, self.in_idx_, self.out_idx_, self.seed, n_jobs)
 
     def _finish(self) -> None:
         """Derived state shared by ``_fit`` and ``_set_state``."""
@@ -426,6 +391,12 @@ class _LRGFMEMBase(Diagnoser):
         self.t2_ = HotellingT2(centered=False)
         self.t2_.set_state({"mean": np.zeros(len(self.s_inv_)), "precision": self.s_inv_})
         self.signal_names_ = self._signal_names()
+        # the per-sample constants of _decide
+        self._half_band = self.t_alpha_ * np.asarray(self.v_, dtype=np.float64)  # as band()
+        ewma = self.alarm_filter == AlarmFilter.EWMA
+        self._limit_lower = -self.h_ if ewma else np.array([-np.inf])
+        k = len(self.signal_names_)
+        self._warm_lower, self._warm_upper = np.full(k, -np.inf), np.full(k, np.inf)
 
     def _limit(self, stat: np.ndarray, dof: int) -> np.ndarray:
         """Alarm limit per column of the healthy calibration statistic ``stat`` (T, c).
@@ -463,32 +434,45 @@ class _LRGFMEMBase(Diagnoser):
     def _reset(self) -> None:
         if getattr(self, "_bank", None) is None:
             self._bank = BankStepper(self.lrgf_, self.in_idx_, len(self.channels_))
-            self._mem_steppers = [MEMStepper(m) for m in self.mem_]
+            self._mem_used = None
+        used = np.flatnonzero(self.use_mem_)
+        if self._mem_used is None or not np.array_equal(used, self._mem_used):
+            # only the error models in use are stepped, all of them in one stacked pass
+            self._mem_used = used
+            self._mem_bank = MEMBankStepper(
+                [self.mem_[j] for j in used], [self.in_idx_[j] for j in used]
+            )
         self._bank.reset()
-        for st in self._mem_steppers:
-            st.reset()
+        self._mem_bank.reset()
         self._ewma = EWMA(self.ewma_lambda)
         self._k = 0
 
+    def _step_centre(self, y: np.ndarray) -> np.ndarray:
+        """y_m + y_e of every relation for one measurement ``y``: :meth:`_centre`, streaming."""
+        centre = self._bank.step(y)
+        if len(self._mem_used):
+            centre[self._mem_used] += self._mem_bank.step(y)
+        return centre
+
     def _decide(self, y_out: np.ndarray, centre: np.ndarray, z: np.ndarray, warm: bool) -> Decision:
+        # called for every sample by _update and _detect alike: the limits come precomputed
+        # from _finish, and the arrays the decisions share are never written to
         resid = y_out - centre
         if self.alarm_filter == AlarmFilter.EWMA:
-            signal, lower, upper = z, -self.h_, self.h_
+            signal, lower, upper = z, self._limit_lower, self.h_
         elif self.alarm_filter == AlarmFilter.EWMA_T2:
             signal = np.array([self.t2_.score(z)])
-            lower, upper = np.array([-np.inf]), self.h_
+            lower, upper = self._limit_lower, self.h_
         else:
             signal = y_out
-            lower, upper = band(centre, 0.0, self.v_, self.alpha)
+            lower, upper = centre - self._half_band, centre + self._half_band  # as band()
         if warm:  # no limit while the models settle (alarm stays "outside the limits")
-            lower, upper = np.full_like(signal, -np.inf), np.full_like(signal, np.inf)
-        alarm = bool(np.any((signal < lower) | (signal > upper)))
+            lower, upper = self._warm_lower, self._warm_upper
+        alarm = bool(((signal < lower) | (signal > upper)).any())
         return Decision(alarm, signal, lower, upper, resid)
 
     def _update(self, y: np.ndarray) -> Decision:
-        centre = self._bank.step(y)
-        for j in np.flatnonzero(self.use_mem_):
-            centre[j] += self._mem_steppers[j].step(y[self.in_idx_[j]])[0]
+        centre = self._step_centre(y)
         y_out = y[self.out_idx_]
         warm = self._k < self.steady_window
         self._k += 1
@@ -645,6 +629,7 @@ class LRGFMEM(_LRGFMEMBase):
         mem_select: str = "if_better",
         seed: int = 0,
         progress: bool | None = None,
+        n_jobs: int | None = None,
     ) -> None:
         super().__init__(
             relations=relations,
@@ -669,4 +654,5 @@ class LRGFMEM(_LRGFMEMBase):
             mem_select=mem_select,
             seed=seed,
             progress=progress,
+            n_jobs=n_jobs,
         )

@@ -33,6 +33,7 @@ from diagnosers.lrgf import set_scaler_buffers
 
 __all__ = [
     "BandScale",
+    "MEMBankStepper",
     "MEMStepper",
     "NNARXErrorModel",
     "OutputActivation",
@@ -355,6 +356,83 @@ class MEMStepper:
             self._y_buf[m:] = self._y_buf[:-m]
             self._y_buf[:m] = y
         return y * self.out_scale + self.out_mean
+
+
+class MEMBankStepper:
+    """Several single-output error models, each on its own channels, stepped as one.
+
+    Mathematically :class:`MEMStepper` per model (same delay lines, same start), with the models'
+    weights zero-padded to common sizes and stacked, so that one sample costs one batched matrix
+    product instead of one pass per model. ``in_idx[j]`` are the channels of a measurement vector
+    that model ``j`` reads (its inputs, in order). Weights are copied at construction.
+
+    Example:
+        >>> import numpy as np
+        >>> mems = [NNARXErrorModel(n, input_delays=2, output_delays=3, seed=n).double() for n in (1, 2)]
+        >>> idx = [np.array([0]), np.array([2, 1])]
+        >>> bank, y = MEMBankStepper(mems, idx), np.random.default_rng(0).normal(size=(20, 3))
+        >>> ye = np.stack([bank.step(row) for row in y])
+        >>> bool(np.allclose(ye, np.column_stack([m.predict(y[:, i])[:, 0] for m, i in zip(mems, idx)])))
+        True
+    """
+
+    def __init__(self, models: list[NNARXErrorModel], in_idx: list[np.ndarray]) -> None:
+        if any(m.n_outputs != 1 for m in models):
+            raise ValueError("MEMBankStepper steps single-output error models")
+        steppers = [MEMStepper(m) for m in models]
+        k = len(steppers)
+        n = max((st.n_inputs for st in steppers), default=1)
+        nb = max((st.input_delays for st in steppers), default=1)
+        na = max((st.output_delays for st in steppers), default=0)
+        h = max((st.w_u.shape[0] for st in steppers), default=1)
+        self._n, self._d = n, nb * n  # inputs per delay, width of the input delay line
+        # padded entries: channel 0, mean 0, scale 1, weight 0 (they add exact zeros)
+        self.idx = np.zeros((k, n), dtype=int)
+        self.in_mean, self.in_scale = np.zeros((k, n)), np.ones((k, n))
+        self.w = np.zeros((k, h, nb * n + na))  # [input delay line | output delay line]
+        self.c1, self.w2 = np.zeros((k, h)), np.zeros((k, h))
+        self.c2, self.out_mean, self.out_scale = np.zeros(k), np.zeros(k), np.ones(k)
+        for j, st in enumerate(steppers):
+            nj, hj, dj = st.n_inputs, st.w_u.shape[0], st.input_delays
+            self.idx[j, :nj] = np.asarray(in_idx[j])
+            self.in_mean[j, :nj], self.in_scale[j, :nj] = st.in_mean, st.in_scale
+            w_u = self.w[j, :hj, : nb * n].reshape(hj, nb, n)
+            w_u[:, :dj, :nj] = st.w_u.reshape(hj, dj, nj)
+            self.w[j, :hj, nb * n : nb * n + st.output_delays] = st.w_y
+            self.c1[j, :hj], self.w2[j, :hj] = st.c1, st.w2[0]
+            self.c2[j], self.out_mean[j], self.out_scale[j] = (
+                st.c2[0],
+                st.out_mean[0],
+                st.out_scale[0],
+            )
+        self.tanh_out = np.array([st.tanh_out for st in steppers], dtype=bool)
+        self._any_tanh = bool(self.tanh_out.any())
+        self.reset()
+
+    def reset(self) -> None:
+        """Start a new sequence (the next :meth:`step` is ``k = 0``)."""
+        # per model, most recent first: [u(k-1) channels..., u(k-2) ..., | y_e(k-1), y_e(k-2) ...]
+        self._x = np.zeros(self.w.shape[::2])
+        self._started = False
+
+    def step(self, y: np.ndarray) -> np.ndarray:
+        """Consume a measurement vector (physical, indexed by ``in_idx``); ``y_e(k)`` of each model."""
+        u_n = (y[self.idx] - self.in_mean) / self.in_scale  # (k, n)
+        x, n, d = self._x, self._n, self._d
+        if not self._started:  # the inputs' past is the first input (as MEMStepper)
+            x[:, :d] = np.tile(u_n, (1, d // n))
+            self._started = True
+        h = np.tanh(np.matmul(self.w, x[:, :, None])[:, :, 0] + self.c1)
+        ye = (self.w2 * h).sum(axis=1) + self.c2
+        if self._any_tanh:
+            ye[self.tanh_out] = np.tanh(ye[self.tanh_out])
+        # shift the delay lines (numpy copies overlapping slices safely)
+        x[:, n:d] = x[:, : d - n]
+        x[:, :n] = u_n
+        if x.shape[1] > d:
+            x[:, d + 1 :] = x[:, d:-1]
+            x[:, d] = ye
+        return ye * self.out_scale + self.out_mean
 
 
 # ---- bands (10)-(11) ---------------------------------------------------------------------------

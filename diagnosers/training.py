@@ -50,6 +50,7 @@ __all__ = [
     "fit_mem",
     "paper_lrgf",
     "paper_mem",
+    "torch_threads",
 ]
 
 ArrayLike = np.ndarray | Sequence[np.ndarray]
@@ -118,17 +119,23 @@ class FitResult:
 
 # ---- shared plumbing ---------------------------------------------------------------------------
 @contextmanager
+def torch_threads(num_threads: int | None) -> Iterator[None]:
+    """Set torch's intra-op thread count for the block (``None``: leave it), then restore it."""
+    prev = torch.get_num_threads()
+    if num_threads is not None:
+        torch.set_num_threads(num_threads)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(prev)
+
+
+@contextmanager
 def _training_context(seed: int, num_threads: int | None) -> Iterator[None]:
     """Fork the global torch RNG and set the thread count, restoring both afterwards."""
-    prev = torch.get_num_threads()
-    with torch.random.fork_rng(devices=[]):
+    with torch.random.fork_rng(devices=[]), torch_threads(num_threads):
         torch.manual_seed(seed)
-        if num_threads is not None:
-            torch.set_num_threads(num_threads)
-        try:
-            yield
-        finally:
-            torch.set_num_threads(prev)
+        yield
 
 
 def _episodes(x: ArrayLike, n_channels: int, name: str) -> list[np.ndarray]:

@@ -12,67 +12,22 @@ which alone writes the store, so remote Ray nodes need no shared file system.
 from __future__ import annotations
 
 import os
-import sys
 from collections.abc import Callable, Iterator
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from pathlib import Path
 from typing import Any, Protocol
 
+# the worker set-up is shared with diagnosers.parallel (fcc_env.workers); re-exported here
+from fcc_env.workers import (  # noqa: F401
+    PARENT_POLL_S,
+    cpu_count,
+    exit_with_parent,
+    init_worker,
+    limit_threads,
+)
+
 #: Execution backends accepted by :func:`evaluation.sweep.run_sweep`.
 BACKENDS: tuple[str, ...] = ("local", "ray")
-
-
-def limit_threads() -> None:
-    """One compute thread per worker: the parallelism comes from the worker processes."""
-    if "torch" in sys.modules:
-        sys.modules["torch"].set_num_threads(1)
-    if "numba" in sys.modules:
-        sys.modules["numba"].set_num_threads(1)
-
-
-#: Seconds between a worker's checks that the driver process is still alive.
-PARENT_POLL_S = 0.5
-
-
-def _exit_with_parent(parent_pid: int, poll_s: float = PARENT_POLL_S) -> None:
-    """Make this worker exit when ``parent_pid`` dies, even when the parent is SIGKILLed.
-
-    On Linux the kernel signals it (``prctl(PR_SET_PDEATHSIG, SIGKILL)``); everywhere a daemon
-    thread also polls ``os.getppid()`` (re-parenting means the parent is gone) and calls
-    ``os._exit``. Without this a killed leaderboard leaves its spawn workers running forever.
-    """
-    import threading
-    import time
-
-    if sys.platform.startswith("linux"):
-        try:
-            import ctypes
-            import signal
-
-            libc = ctypes.CDLL(None, use_errno=True)
-            pr_set_pdeathsig = 1
-            libc.prctl(pr_set_pdeathsig, int(signal.SIGKILL), 0, 0, 0)
-        except (OSError, AttributeError):  # no libc prctl: the thread below suffices
-            pass
-
-    def watch() -> None:
-        while os.getppid() == parent_pid:
-            time.sleep(poll_s)
-        os._exit(1)
-
-    if os.getppid() != parent_pid:  # already orphaned between spawn and here
-        os._exit(1)
-    threading.Thread(target=watch, name="fcc-parent-watch", daemon=True).start()
-
-
-def init_worker(parent_pid: int | None = None) -> None:
-    if parent_pid is not None:
-        _exit_with_parent(parent_pid)
-    os.environ.setdefault("OMP_NUM_THREADS", "1")
-    import numba
-
-    numba.set_num_threads(1)
-    limit_threads()
 
 
 class Backend(Protocol):
@@ -196,13 +151,6 @@ class SerialBackend:
 
     def close(self, cancel: bool) -> None:
         pass
-
-
-def cpu_count() -> int:
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:  # not on Linux
-        return os.cpu_count() or 1
 
 
 def make_backend(

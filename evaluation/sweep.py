@@ -159,7 +159,9 @@ class SweepConfig:
 
         The hyperparameters are the *resolved* ones (defaults included) and the package version
         is part of the hash, so a changed default or a new release never reuses stale models or
-        cells: the store then says so instead of mixing old and new results.
+        cells: the store then says so instead of mixing old and new results. Hyperparameters
+        that do not change the fit (:attr:`Diagnoser.execution_params`: ``progress``,
+        ``n_jobs``) are left out, so changing them reuses the stored model.
         """
         from fcc_env import MODEL_VERSION, __version__
 
@@ -169,7 +171,7 @@ class SweepConfig:
                 "package": f"{__version__} ({MODEL_VERSION})",
                 "data": data_hash,
                 "name": spec.name,
-                "params": spec.build().get_params(),
+                "params": spec.build().result_params(),
             }
         )
 

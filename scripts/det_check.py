@@ -1,5 +1,5 @@
 """Check the registered ``lrgf-glr`` against the lab: its ``fit`` with the lab's cached banks
-(fold 0, 1, 2, then all) injected for ``_train_models``, scored on the lab's validation episodes."""
+(fold 0, 1, 2, then all) injected for ``_train_banks``, scored on the lab's validation episodes."""
 
 from __future__ import annotations
 
@@ -11,6 +11,7 @@ sys.path.insert(0, ".")
 import diagnosers
 from diagnosers import Episode
 from diagnosers.lrgf_glr import LRGFGLR
+from diagnosers.parallel import TrainedBank
 from evaluation.intervals import bootstrap_ci
 from evaluation.metrics import episode_scores
 from evaluation.sources import TrackData
@@ -19,12 +20,16 @@ from scripts.det_lab import N_TRAIN, TRACK_NAMES, _episode_cache, load_models, v
 banks = iter(["0", "1", "2", "all"])
 
 
-def injected(self, records):
-    nets, mems = load_models(next(banks))
-    return nets, mems, [0.0] * len(nets), [type("F", (), {"best_val_loss": 0.0})()] * len(nets)
+def injected(self, sets):
+    out = []
+    for _ in sets:  # the folds' banks, then the bank on all: one call (diagnosers.parallel)
+        nets, mems = load_models(next(banks))
+        fit = type("F", (), {"best_val_loss": 0.0})()
+        out.append(TrainedBank(nets, mems, [0.0] * len(nets), [fit] * len(nets)))
+    return out
 
 
-LRGFGLR._train_models = injected
+LRGFGLR._train_banks = injected
 train = TrackData(track=val_track("paper").replace(n_train=N_TRAIN)).train_episodes()
 det = diagnosers.make("lrgf-glr").fit(train)
 print("h", det.h_, "h_dir", det.h_dir_, "use_mem", det.use_mem_)

@@ -377,3 +377,18 @@ def test_model_hash_uses_resolved_hyperparameters():
     other = CONFIG.model_hash(DiagnoserSpec("limits", {"alpha": 0.05}), "d")
     assert implicit == explicit != other
     assert CONFIG.model_hash(DiagnoserSpec("limits", {}), "e") != implicit
+
+
+@pytest.mark.parametrize(
+    ("name", "execution", "result"),
+    [
+        ("lrgf-mem", {"n_jobs": 2, "progress": True}, {"max_epochs": 10}),
+        ("lrgf-glr", {"n_jobs": 2, "progress": True}, {"n_folds": 4}),
+        ("lrgf-iso", {"detector": {"n_jobs": 2}}, {"detector": {"max_epochs": 10}}),
+    ],
+)
+def test_model_hash_leaves_out_execution_parameters(name, execution, result):
+    """n_jobs and progress do not change the fit: changing them must not retrain a stored model."""
+    default = CONFIG.model_hash(DiagnoserSpec(name, {}), "d")
+    assert CONFIG.model_hash(DiagnoserSpec(name, execution), "d") == default
+    assert CONFIG.model_hash(DiagnoserSpec(name, result), "d") != default

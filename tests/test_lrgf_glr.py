@@ -119,40 +119,47 @@ def train() -> list:
 
 
 def test_cross_fit_calibrates_on_out_of_fold_residuals(train, monkeypatch) -> None:
-    calls: list[list[int]] = []
-    real = LRGFGLR._train_models
+    calls: list[list[list[int]]] = []
+    banks: list = []
+    real = LRGFGLR._train_banks
 
-    def spy(self, records):
-        calls.append([next(i for i, e in enumerate(train) if e.y is r) for r in records])
-        return real(self, records)
+    def spy(self, sets):
+        calls.append([[next(i for i, e in enumerate(train) if e.y is r) for r in s] for s in sets])
+        banks[:] = real(self, sets)
+        return banks
 
-    monkeypatch.setattr(LRGFGLR, "_train_models", spy)
-    parts: list[int] = []
+    monkeypatch.setattr(LRGFGLR, "_train_banks", spy)
+    parts: list[tuple[int, int]] = []
     real_parts = LRGFGLR._parts
 
     def spy_parts(self, y):
         hit = [i for i, e in enumerate(train) if e.y is y]
         if hit:
-            parts.append((hit[0], len(calls)))
+            bank = next(b for b, bank in enumerate(banks) if bank.lrgf is self.lrgf_)
+            parts.append((hit[0], bank))
         return real_parts(self, y)
 
     monkeypatch.setattr(LRGFGLR, "_parts", spy_parts)
     det = LRGFGLR(**{**FAST, "n_folds": 3}).fit(train)
-    # one bank per fold without that fold's episodes, then the final bank on all of them
-    assert calls == [[1, 2], [0, 2], [0, 1], [0, 1, 2]]
-    # each episode's calibration residual comes from the bank that never saw it
-    assert sorted(parts) == [(0, 1), (1, 2), (2, 3)]
+    # one bank per fold without that fold's episodes, then the final bank on all of them, all
+    # trained in one call (so that n_jobs processes share every job)
+    assert calls == [[[1, 2], [0, 2], [0, 1], [0, 1, 2]]]
+    # each episode's out-of-fold calibration residual comes from the bank that never saw it
+    assert sorted(parts) == [(0, 0), (1, 1), (2, 2)]
+    assert det.lrgf_ is banks[3].lrgf  # the detector keeps the bank trained on all
     assert det.h_.shape == (1,) and det.h_dir_.shape == (1,)
 
 
 def test_holdout_calibration_is_lrgf_mem_split(train, monkeypatch) -> None:
-    calls: list[int] = []
-    real = LRGFGLR._train_models
+    calls: list[list[int]] = []
+    real = LRGFGLR._train_banks
     monkeypatch.setattr(
-        LRGFGLR, "_train_models", lambda self, r: (calls.append(len(r)), real(self, r))[1]
+        LRGFGLR,
+        "_train_banks",
+        lambda self, s: (calls.append([len(r) for r in s]), real(self, s))[1],
     )
     LRGFGLR(**{**FAST, "calibration": "holdout"}).fit(train)
-    assert calls == [2]  # trained once, on the first two thirds
+    assert calls == [[2]]  # trained once, on the first two thirds
 
 
 @pytest.mark.parametrize("detector", ["t2", "directional", "glr", "cusum"])

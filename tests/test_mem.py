@@ -10,7 +10,7 @@ import pytest
 import torch
 from scipy import signal as sps
 
-from diagnosers.mem import MEMStepper, NNARXErrorModel, band, band_scale, t_alpha
+from diagnosers.mem import MEMBankStepper, MEMStepper, NNARXErrorModel, band, band_scale, t_alpha
 from diagnosers.training import build_module, export_module, fit_mem, paper_mem
 
 
@@ -58,6 +58,30 @@ def test_streaming_equals_batch_simulation(n: int, m: int, nb: int, na: int, act
     np.testing.assert_allclose(
         np.stack([st.step(row) for row in u[:10]]), ye[:10], rtol=0, atol=1e-9
     )
+
+
+def test_bank_stepper_equals_each_models_stepper() -> None:
+    """Models of different sizes, delays and output activations, stacked with zero padding."""
+    shapes = [(2, 4, 15, 15, "linear"), (1, 3, 3, 0, "tanh"), (3, 6, 2, 4, "linear")]
+    mems, idx = [], [np.array([3, 0]), np.array([2]), np.array([1, 4, 0])]
+    for j, (n, h, nb, na, act) in enumerate(shapes):
+        mem = NNARXErrorModel(
+            n, n_hidden=h, input_delays=nb, output_delays=na, output_activation=act, seed=j
+        ).double()
+        with torch.no_grad():
+            mem.hidden.weight.mul_(3.0)  # strong feedback, so the recursion matters
+        mem.set_scaler(np.arange(n) + 1.0, np.full(n, 2.0), np.full(1, -4.0), np.full(1, 0.5))
+        mems.append(mem)
+    y = 1.0 + 2.0 * np.random.default_rng(0).normal(size=(300, 5))
+    bank = MEMBankStepper(mems, idx)
+    stepped = np.stack([bank.step(row) for row in y])
+    for j, (mem, i) in enumerate(zip(mems, idx, strict=True)):
+        st = MEMStepper(mem)
+        one = np.stack([st.step(row) for row in y[:, i]])[:, 0]
+        np.testing.assert_allclose(stepped[:, j], one, rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(stepped[:, j], mem.predict(y[:, i])[:, 0], rtol=0, atol=1e-9)
+    bank.reset()
+    np.testing.assert_array_equal(np.stack([bank.step(row) for row in y[:20]]), stepped[:20])
 
 
 def test_start_convention_and_causality() -> None:
