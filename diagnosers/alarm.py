@@ -343,19 +343,24 @@ class DirectionalGLR:
         self.reset()
 
     def reset(self) -> None:
-        self._buf: np.ndarray | None = None  # newest sample first
+        self._buf: np.ndarray | None = None
+        self._pos = 0  # the newest sample is _buf[_pos], the ones before it follow
         self._n = 0
 
     def update(self, x: np.ndarray) -> np.ndarray:
         x = np.asarray(x, dtype=np.float64)
+        w = self.window
         if self._buf is None:
-            self._buf = np.zeros((self.window, *x.shape))
-        self._buf = np.roll(self._buf, 1, axis=0)
-        self._buf[0] = x
-        self._n = min(self._n + 1, self.window)
-        s = np.cumsum(self._buf[: self._n], axis=0)  # S_1, S_2, ..., S_n
-        n = np.arange(1, self._n + 1).reshape(-1, *([1] * x.ndim))
-        return np.max(np.maximum(s, 0.0) ** 2 / n, axis=0)
+            # Each sample is written twice, at p and p + w, with p stepping down modulo w: then
+            # _buf[p : p + w] always holds the last w samples newest first, without a copy.
+            self._buf = np.zeros((2 * w, *x.shape))
+            self._count = np.arange(1.0, w + 1.0).reshape(-1, *([1] * x.ndim))
+            self._pos = w
+        self._pos = (self._pos - 1) % w
+        self._buf[self._pos] = self._buf[self._pos + w] = x
+        self._n = min(self._n + 1, w)
+        s = np.cumsum(self._buf[self._pos : self._pos + self._n], axis=0)  # S_1, ..., S_n
+        return np.max(np.maximum(s, 0.0) ** 2 / self._count[: self._n], axis=0)
 
     def filter(self, X: np.ndarray) -> np.ndarray:
         X = np.asarray(X, dtype=np.float64)

@@ -86,10 +86,12 @@ first 70 % and calibrated on the remaining 30 % (simulated over the whole episod
 relations (and ``lrgf-glr``'s cross-fit folds) at once, :mod:`diagnosers.parallel`. Each relation
 trains with its own seed and one thread, so the models are the same bits for every ``n_jobs``.
 The default is 1 because the leaderboard's sweep already trains the diagnosers in parallel
-worker processes, one core each: a pool inside each would oversubscribe the cores. Pass it where
-a bank trains alone (``python -m diagnosers.benchmark --bank`` uses 2). Like ``progress`` it is
-an execution parameter (:attr:`diagnosers.base.Diagnoser.execution_params`): the result store's
-model hash leaves both out, so changing them reuses a stored model.
+worker processes, one core each: a pool inside each would oversubscribe the cores. Where a bank
+trains alone it pays: the sweep gives the banks it trains the cores between them
+(:func:`evaluation.sweep.training_jobs`: all of them to a bank that trains alone), and
+``python -m diagnosers.benchmark --bank`` uses 2. Like ``progress`` it is an execution parameter
+(:attr:`diagnosers.base.Diagnoser.execution_params`): the result store's model hash leaves both
+out, so changing them reuses a stored model.
 """
 
 from __future__ import annotations

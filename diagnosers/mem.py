@@ -361,10 +361,12 @@ class MEMStepper:
 class MEMBankStepper:
     """Several single-output error models, each on its own channels, stepped as one.
 
-    Mathematically :class:`MEMStepper` per model (same delay lines, same start), with the models'
-    weights zero-padded to common sizes and stacked, so that one sample costs one batched matrix
-    product instead of one pass per model. ``in_idx[j]`` are the channels of a measurement vector
-    that model ``j`` reads (its inputs, in order). Weights are copied at construction.
+    Mathematically :class:`MEMStepper` per model (same delay lines, same start), with the models
+    stacked: one delay line holds every model's past inputs and outputs, and one block-diagonal
+    matrix (zero-padded to the largest model) maps it to every hidden neuron, so that one sample
+    costs two matrix-vector products instead of one pass per model. ``in_idx[j]`` are the
+    channels of a measurement vector that model ``j`` reads (its inputs, in order). Weights are
+    copied at construction.
 
     Example:
         >>> import numpy as np
@@ -382,56 +384,54 @@ class MEMBankStepper:
         steppers = [MEMStepper(m) for m in models]
         k = len(steppers)
         n = max((st.n_inputs for st in steppers), default=1)
-        nb = max((st.input_delays for st in steppers), default=1)
-        na = max((st.output_delays for st in steppers), default=0)
-        h = max((st.w_u.shape[0] for st in steppers), default=1)
-        self._n, self._d = n, nb * n  # inputs per delay, width of the input delay line
-        # padded entries: channel 0, mean 0, scale 1, weight 0 (they add exact zeros)
-        self.idx = np.zeros((k, n), dtype=int)
-        self.in_mean, self.in_scale = np.zeros((k, n)), np.ones((k, n))
-        self.w = np.zeros((k, h, nb * n + na))  # [input delay line | output delay line]
-        self.c1, self.w2 = np.zeros((k, h)), np.zeros((k, h))
+        lags = max((max(st.input_delays, st.output_delays) for st in steppers), default=1)
+        hs = np.cumsum([0, *(st.c1.shape[0] for st in steppers)])  # hidden rows of each model
+        # delay line (lags, k n + k): row d = [u(t-1-d) of every model | y_e(t-1-d) of every
+        # model], model j's inputs in columns j n .. j n + n_j; padded entries: channel 0, mean 0,
+        # scale 1, weight 0 (they add exact zeros)
+        self._kn, width = k * n, k * n + k
+        self.idx = np.zeros(k * n, dtype=int)
+        self.in_mean, self.in_scale = np.zeros(k * n), np.ones(k * n)
+        w1 = np.zeros((hs[-1], lags, width))
+        self.c1, self.w2 = np.zeros(hs[-1]), np.zeros((k, hs[-1]))
         self.c2, self.out_mean, self.out_scale = np.zeros(k), np.zeros(k), np.ones(k)
         for j, st in enumerate(steppers):
-            nj, hj, dj = st.n_inputs, st.w_u.shape[0], st.input_delays
-            self.idx[j, :nj] = np.asarray(in_idx[j])
-            self.in_mean[j, :nj], self.in_scale[j, :nj] = st.in_mean, st.in_scale
-            w_u = self.w[j, :hj, : nb * n].reshape(hj, nb, n)
-            w_u[:, :dj, :nj] = st.w_u.reshape(hj, dj, nj)
-            self.w[j, :hj, nb * n : nb * n + st.output_delays] = st.w_y
-            self.c1[j, :hj], self.w2[j, :hj] = st.c1, st.w2[0]
+            rows, cols = slice(hs[j], hs[j + 1]), slice(j * n, j * n + st.n_inputs)
+            self.idx[cols] = np.asarray(in_idx[j])
+            self.in_mean[cols], self.in_scale[cols] = st.in_mean, st.in_scale
+            w1[rows, : st.input_delays, cols] = st.w_u.reshape(-1, st.input_delays, st.n_inputs)
+            w1[rows, : st.output_delays, self._kn + j] = st.w_y
+            self.c1[rows], self.w2[j, rows] = st.c1, st.w2[0]
             self.c2[j], self.out_mean[j], self.out_scale[j] = (
                 st.c2[0],
                 st.out_mean[0],
                 st.out_scale[0],
             )
+        self.w1 = w1.reshape(hs[-1], lags * width)
         self.tanh_out = np.array([st.tanh_out for st in steppers], dtype=bool)
         self._any_tanh = bool(self.tanh_out.any())
+        self._shape = (lags, width)
         self.reset()
 
     def reset(self) -> None:
         """Start a new sequence (the next :meth:`step` is ``k = 0``)."""
-        # per model, most recent first: [u(k-1) channels..., u(k-2) ..., | y_e(k-1), y_e(k-2) ...]
-        self._x = np.zeros(self.w.shape[::2])
+        self._x = np.zeros(self._shape)
+        self._flat = self._x.reshape(-1)  # a view: the regressor of every hidden neuron
         self._started = False
 
     def step(self, y: np.ndarray) -> np.ndarray:
         """Consume a measurement vector (physical, indexed by ``in_idx``); ``y_e(k)`` of each model."""
-        u_n = (y[self.idx] - self.in_mean) / self.in_scale  # (k, n)
-        x, n, d = self._x, self._n, self._d
+        u_n = (y[self.idx] - self.in_mean) / self.in_scale
+        x, kn = self._x, self._kn
         if not self._started:  # the inputs' past is the first input (as MEMStepper)
-            x[:, :d] = np.tile(u_n, (1, d // n))
+            x[:, :kn] = u_n
             self._started = True
-        h = np.tanh(np.matmul(self.w, x[:, :, None])[:, :, 0] + self.c1)
-        ye = (self.w2 * h).sum(axis=1) + self.c2
+        ye = self.w2 @ np.tanh(self.w1 @ self._flat + self.c1) + self.c2
         if self._any_tanh:
             ye[self.tanh_out] = np.tanh(ye[self.tanh_out])
-        # shift the delay lines (numpy copies overlapping slices safely)
-        x[:, n:d] = x[:, : d - n]
-        x[:, :n] = u_n
-        if x.shape[1] > d:
-            x[:, d + 1 :] = x[:, d:-1]
-            x[:, d] = ye
+        x[1:] = x[:-1]  # shift the delay line (numpy copies overlapping slices safely)
+        x[0, :kn] = u_n
+        x[0, kn:] = ye
         return ye * self.out_scale + self.out_mean
 
 

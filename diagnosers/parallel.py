@@ -9,10 +9,10 @@ this process (``n_jobs=1``) or in a pool of ``n_jobs`` worker processes, and bot
 bits.
 
 Every job goes through the same path, :func:`_train_relation`, which returns the trained modules
-in their exported form (config + state dict as numpy arrays, :func:`diagnosers.training.
-export_module`); the caller rebuilds them with :func:`diagnosers.training.build_module`. Torch
-modules never cross a process boundary as pickles, and the in-process path is the pooled one
-without the pool.
+in their exported form (config + state dict as numpy arrays, from
+:func:`diagnosers.training.export_module`); the caller rebuilds them with
+:func:`diagnosers.training.build_module`. Torch modules never cross a process boundary as
+pickles, and the in-process path is the pooled one without the pool.
 
 The pool uses the ``spawn`` start method with :func:`fcc_env.workers.init_worker` (one thread per
 worker, exit when the parent dies), as the sweep's local backend does. As with any ``spawn``

@@ -37,7 +37,7 @@ from typing import Any
 
 from diagnosers.base import Detection, Diagnoser
 from diagnosers.registry import available, diagnoser_class, import_modules, make
-from evaluation.backends import BACKENDS, Backend, limit_threads, make_backend
+from evaluation.backends import BACKENDS, Backend, cpu_count, limit_threads, make_backend
 from evaluation.records import (
     CellResult,
     CellSummary,
@@ -241,10 +241,33 @@ def _load_model(model_hash: str, source: str | Mapping[str, bytes]) -> Diagnoser
     return diag
 
 
+def training_jobs(to_train: Sequence[DiagnoserSpec], cores: int) -> dict[str, int]:
+    """``n_jobs`` for each diagnoser of ``to_train`` that has the parameter and leaves it unset.
+
+    The cores are shared among those trainings (the ones with worker processes of their own, the
+    long ones): a bank that trains alone gets them all, and several never get more than the
+    cores between them. Baselines train in seconds beside them. ``n_jobs`` is an execution
+    parameter: it changes no model hash.
+    """
+    own = [
+        s.key
+        for s in to_train
+        if "n_jobs" in diagnoser_class(s.name)._param_names() and s.params.get("n_jobs") is None
+    ]
+    return {key: max(1, cores // len(own)) for key in own}
+
+
 def _train_task(
-    spec: DiagnoserSpec, data: DataSource, imports: tuple[str, ...] = (), _serial: bool = False
+    spec: DiagnoserSpec,
+    data: DataSource,
+    imports: tuple[str, ...] = (),
+    n_jobs: int | None = None,
+    _serial: bool = False,
 ) -> tuple[dict[str, bytes], dict[str, Any]]:
-    """Fit one diagnoser on the healthy training episodes; return its saved files and facts."""
+    """Fit one diagnoser on the healthy training episodes; return its saved files and facts.
+
+    ``n_jobs``: set on the diagnoser (see :func:`training_jobs`) unless ``None``.
+    """
     if not _serial:
         limit_threads()
     import_modules(imports)  # a fresh worker has not seen the user's registrations
@@ -259,8 +282,11 @@ def _train_task(
                 f"{type(data).__name__} has no labelled training faults (train_fault_episodes)"
             )
         episodes = episodes + faulty()
+    diag = spec.build()
+    if n_jobs is not None:
+        diag.set_params(n_jobs=n_jobs)
     try:
-        diag = spec.build().fit(episodes)
+        diag.fit(episodes)
     except Exception as e:
         raise RuntimeError(f"training {spec.key}: {type(e).__name__}: {e}") from e
     wall = time.perf_counter() - t0
@@ -405,9 +431,12 @@ def run_sweep(
 
     if to_train or missing:
         runner = make_backend(backend, n_workers, max(len(to_train), len(missing)), ray_address)
+        # worker processes of the trainings' own on this machine's cores (local backend only:
+        # a Ray task holds one CPU of a node)
+        cores = (n_workers or cpu_count()) if backend == "local" and n_workers != 0 else 1
         cancel = True
         try:
-            _train_all(runner, store, config, to_train, mhash, progress)
+            _train_all(runner, store, config, to_train, mhash, progress, cores)
             _score_all(runner, store, config, missing, mhash, chash, n_missing, progress)
             cancel = False
         finally:
@@ -455,10 +484,15 @@ def _train_all(
     to_train: list[DiagnoserSpec],
     mhash: Mapping[str, str],
     progress: bool,
+    cores: int = 1,
 ) -> None:
     if not to_train:
         return
-    handles = {runner.submit(_train_task, s, config.data, config.imports): s for s in to_train}
+    jobs = training_jobs(to_train, cores) if cores > 1 else {}
+    handles = {
+        runner.submit(_train_task, s, config.data, config.imports, jobs.get(s.key)): s
+        for s in to_train
+    }
     with _progress_bar(len(to_train), "training", progress) as bar:
         it = runner.completed(list(handles))
         while True:
