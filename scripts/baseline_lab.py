@@ -93,7 +93,9 @@ def evaluate(det, eps) -> dict:
         key = k[2:]
         sc = key.split("/")[0]
         onset = int(eps[f"onset:{key}"])
-        ep = diagnosers.Episode(eps[k], det.channels_, 10.0, fault_onset=None if onset < 0 else onset)
+        ep = diagnosers.Episode(
+            eps[k], det.channels_, 10.0, fault_onset=None if onset < 0 else onset
+        )
         s = episode_scores(det.detect(ep).alarm, ep.fault_onset)
         rows.setdefault(sc, []).append((s["r_fd"], s["r_td"], s["t_dt"], *eps[f"oracle:{key}"]))
     out = {}

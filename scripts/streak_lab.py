@@ -10,8 +10,8 @@ from __future__ import annotations
 import argparse
 
 import numpy as np
-
 from baseline_lab import episodes, load
+
 from diagnosers import Episode
 from evaluation.sources import TrackData
 from evaluation.tracks import TRACKS
@@ -60,7 +60,9 @@ def main() -> None:
             + ", ".join(f"{c} {v:.2f}" for c, v in zip(ch, r[5], strict=True) if v > 0.05)
             + f"; max T_d1-T_rg1 {r[6]:.1f} °C"
         )
-    print(f"training T_d1 - T_rg1 99th percentile {np.percentile(ytr[:, ab[0]] - ytr[:, ab[1]], 99):.1f}")
+    print(
+        f"training T_d1 - T_rg1 99th percentile {np.percentile(ytr[:, ab[0]] - ytr[:, ab[1]], 99):.1f}"
+    )
 
 
 if __name__ == "__main__":
