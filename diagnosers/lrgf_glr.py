@@ -40,6 +40,14 @@ Limits: T² ``chi2-tail`` as in ``lrgf-mem``; the directional scores
 the out-of-fold calibration statistic (no reference distribution fits an autocorrelated input).
 ``false_alarm_target`` is the declared share of healthy samples in alarm.
 
+**Held baseline** (``baseline_lambda > 0``; ``lrgf-glr-adaptive``). A running estimate ``b``
+of each relation's normalised remaining error is subtracted before the EWMA. ``b`` follows the
+error with gain λ (the running mean's 1/n at first), always during the ``baseline_settle``
+samples after the warm-up, later only while every statistic stays below ``baseline_hold`` × its
+limit, so a growing fault is not learned. The limits are calibrated on the out-of-fold records
+run through the same recursion. It learns a unit's own offset from the model (a plant unlike the
+training plants) and loses small, slow faults that stay under the hold level.
+
 ``signal`` is ``[T², score_f1, ...]`` with ``upper`` their limits; alarm when any exceeds its
 limit after the silent warm-up.
 """
@@ -481,8 +489,8 @@ class LRGFGLR(LRGFMEM):
         e = resid / self.v_residual_
         e[:w] = 0.0
         if self.baseline_lambda > 0:  # the baseline's hold makes the stage a recursion
-            self._reset_stage()
-            sig = np.array([self._stage_step(e[k], warm=k < w)[1] for k in range(y.shape[0])])
+            # detect() has just reset the stage (base contract), so it starts fresh
+            sig = np.array([self._stage_step(e[k], warm=k < w)[1] for k in range(len(e))])
         else:
             z = EWMA(self.ewma_lambda).filter(e)
             seq = None

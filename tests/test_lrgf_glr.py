@@ -162,15 +162,21 @@ def test_holdout_calibration_is_lrgf_mem_split(train, monkeypatch) -> None:
     assert calls == [[2]]  # trained once, on the first two thirds
 
 
-@pytest.mark.parametrize("detector", ["t2", "directional", "glr", "cusum"])
-def test_detectors_stream_equals_batch_and_roundtrip(train, detector, tmp_path) -> None:
-    det = LRGFGLR(**{**FAST, "n_folds": 2, "detector": detector, "glr_window": 30}).fit(train)
-    ep = inject_step_fault(make_episode(900, seed=9), onset=500, magnitude=3.0)
+def _stream_equals_batch(det: LRGFGLR, ep) -> diagnosers.Detection:
+    """Assert streaming ``update`` reproduces batch ``detect``; return the batch detection."""
     batch = det.detect(ep)
     det.reset()
     stream = [det.update(row) for row in ep.y]
     np.testing.assert_array_equal(batch.alarm, [d.alarm for d in stream])
     np.testing.assert_allclose(batch.signal, [d.signal for d in stream], rtol=1e-9, atol=1e-9)
+    return batch
+
+
+@pytest.mark.parametrize("detector", ["t2", "directional", "glr", "cusum"])
+def test_detectors_stream_equals_batch_and_roundtrip(train, detector, tmp_path) -> None:
+    det = LRGFGLR(**{**FAST, "n_folds": 2, "detector": detector, "glr_window": 30}).fit(train)
+    ep = inject_step_fault(make_episode(900, seed=9), onset=500, magnitude=3.0)
+    batch = _stream_equals_batch(det, ep)
     n_dir = 0 if detector == "t2" else 1
     assert batch.signal.shape == (900, 1 + n_dir)
     assert not batch.alarm[: det.steady_window].any()
@@ -204,11 +210,7 @@ def test_baseline_stream_equals_batch_and_roundtrip(baseline_det, detector, tmp_
         det = LRGFGLR(**{**det.get_params(), "detector": detector})
         det.fit([make_episode(1500, seed=s) for s in (1, 2, 3)])
     ep = inject_step_fault(make_episode(900, seed=9), onset=500, magnitude=3.0)
-    batch = det.detect(ep)
-    det.reset()
-    stream = [det.update(row) for row in ep.y]
-    np.testing.assert_array_equal(batch.alarm, [d.alarm for d in stream])
-    np.testing.assert_allclose(batch.signal, [d.signal for d in stream], rtol=1e-9, atol=1e-9)
+    batch = _stream_equals_batch(det, ep)
     det.save(tmp_path / "m")
     again = diagnosers.Diagnoser.load(tmp_path / "m")
     assert again.baseline_lambda == 0.02 and again.baseline_settle == 50
