@@ -194,7 +194,7 @@ def _bank_report(n: int, n_jobs: int) -> int:
         f_a, m_a, f_n, m_n = np.mean(rows, axis=0)
         print(
             f"{out} <- {', '.join(ins)}: held-out free run, ARX fit {f_a:.1f} % (RMSE "
-            f"{np.sqrt(m_a):.3f}), LRGF ({glr.n_hidden} neurons) fit {f_n:.1f} % (RMSE "
+            f"{np.sqrt(m_a):.3f}), LRGF ({glr.lrgf_[j].n_hidden} neurons) fit {f_n:.1f} % (RMSE "
             f"{np.sqrt(m_n):.3f})"
         )
     return 0

@@ -30,6 +30,12 @@ limit is calibrated:
   - ``"cusum"``: :class:`diagnosers.alarm.CUSUM` on the same projections, drift
     ``cusum_drift``.
 
+  ``slow_ewma_lambda > 0`` adds a second EWMA (that weight, e.g. 0.03) beside ``z`` with its
+  own covariance and its own projections on the same directions: a small or slow fault whose
+  shift stays under the fast EWMA's noise builds up in the slow one, which averages the white
+  part of the remaining error away (its low-frequency model error stays). The directional
+  target is split equally over both scales.
+
   Beside the directional tests an omnibus Hotelling T² of ``z`` (as in ``lrgf-mem``) keeps
   faults outside the learned directions detectable; it gets ``omnibus_share`` of the false-alarm
   target and the directional tests share the rest equally (a union bound, so the realised rate
@@ -59,6 +65,7 @@ from enum import StrEnum
 from typing import Any, ClassVar
 
 import numpy as np
+from scipy.linalg import block_diag
 
 from diagnosers.alarm import (
     CUSUM,
@@ -78,7 +85,7 @@ from diagnosers.lrgf_mem import (
 )
 from diagnosers.parallel import TrainedBank
 from diagnosers.registry import register
-from fcc_env.validation import Integer, Options, Real, check_params
+from fcc_env.validation import Integer, Options, Real, check_params, invalid
 
 __all__ = ["LRGFGLR", "Calibration", "DirectionalDetector", "LRGFGLRAdaptive"]
 
@@ -110,6 +117,7 @@ GLR_CONSTRAINTS: dict[str, Any] = {
     "baseline_lambda": Real(0, 1, closed="left"),
     "baseline_hold": Real(0, 1, closed="right"),
     "baseline_settle": Integer(0, 100_000),
+    "slow_ewma_lambda": Real(0, 1, closed="left"),
 }
 
 #: the FCC-v0 faults whose directions are learned by default
@@ -135,8 +143,9 @@ class LRGFGLR(LRGFMEM):
         baseline_lambda: float = 0.0,
         baseline_hold: float = 0.5,
         baseline_settle: int = 200,
+        slow_ewma_lambda: float = 0.0,
         relations: list[list[Any]] | None = None,
-        n_hidden: int = 5,
+        n_hidden: int | list[int] = 5,
         order: int = 2,
         steady_window: int = 100,
         mem_hidden: int = 5,
@@ -196,6 +205,7 @@ class LRGFGLR(LRGFMEM):
         self.baseline_lambda = baseline_lambda
         self.baseline_hold = baseline_hold
         self.baseline_settle = baseline_settle
+        self.slow_ewma_lambda = slow_ewma_lambda
 
     @classmethod
     def fast_params(cls) -> dict[str, Any]:
@@ -205,10 +215,17 @@ class LRGFGLR(LRGFMEM):
         params = self.get_params()
         check_params({k: params[k] for k in PARAMETER_CONSTRAINTS}, PARAMETER_CONSTRAINTS)
         check_params({k: params[k] for k in GLR_CONSTRAINTS}, GLR_CONSTRAINTS)
-        self._relations()
+        self._hidden_sizes()  # checks the relations too
         known = {"f1", "f2", "f3", "f4"}
         if not set(self._faults()) <= known:
             raise ValueError(f"fault_scenarios must be among {sorted(known)}, got {self._faults()}")
+        if self.slow_ewma_lambda > 0 and self.detector != DirectionalDetector.DIRECTIONAL:
+            raise invalid(
+                "slow_ewma_lambda",
+                self.slow_ewma_lambda,
+                "0 unless detector='directional'",
+                f"detector={self.detector!r} has no EWMA projections",
+            )
         for s in self._fault_seeds():
             if not (isinstance(s, int | np.integer) and 1000 <= s < 5000):
                 raise ValueError(f"fault_seeds must be training seeds in 1000..4999, got {s!r}")
@@ -303,9 +320,17 @@ class LRGFGLR(LRGFMEM):
         if m and det is not DirectionalDetector.T2:
             t_dir = self.false_alarm_target * (1.0 - share) / m
             if det is DirectionalDetector.DIRECTIONAL:
-                proj = DirectionalProjection().fit(self.directions_, np.cov(z.T))
-                self.dir_weights_ = proj.weights_
-                self.h_dir_ = self.threshold_margin * normal_tail_limit(proj.score(z), t_dir)
+                zz = self._scales(z, norm)
+                t_dir /= zz.shape[1] // k
+                # one block of projections per EWMA scale, each with its own healthy covariance
+                blocks = [
+                    DirectionalProjection().fit(self.directions_, np.cov(zz[:, i : i + k].T))
+                    for i in range(0, zz.shape[1], k)
+                ]
+                self.dir_weights_ = block_diag(*[b.weights_ for b in blocks])
+                self.h_dir_ = self.threshold_margin * normal_tail_limit(
+                    zz @ self.dir_weights_.T, t_dir
+                )
             else:
                 proj = DirectionalProjection().fit(self.directions_, np.cov(np.concatenate(norm).T))
                 self.dir_weights_ = proj.weights_
@@ -314,6 +339,14 @@ class LRGFGLR(LRGFMEM):
                     m, np.quantile(seq.max(axis=1), 1.0 - t_dir * m)
                 )
         self._finish()
+
+    def _scales(self, z: np.ndarray, norm: list[np.ndarray]) -> np.ndarray:
+        """The EWMAs the directional tests project: ``z`` (weight ``ewma_lambda``), beside it
+        the slow EWMA of every record of ``norm`` when ``slow_ewma_lambda > 0``."""
+        if self.slow_ewma_lambda <= 0:
+            return z
+        slow = np.concatenate([EWMA(self.slow_ewma_lambda).filter(e) for e in norm])
+        return np.column_stack([z, slow])
 
     def _cross_fit_models(
         self, ys: list[np.ndarray]
@@ -388,7 +421,11 @@ class LRGFGLR(LRGFMEM):
         self._hold_limits = self.baseline_hold * self.upper_
 
     def _signal_names(self) -> tuple[str, ...]:
-        return ("T2[ewma]", *(f"{self.detector}[{f}]" for f in self._faults()[: len(self.h_dir_)]))
+        m = len(self.directions_) if len(self.h_dir_) else 0
+        names = [f"{self.detector}[{f}]" for f in self._faults()[:m]]
+        if len(self.h_dir_) > m:
+            names += [f"{self.detector}-slow[{f}]" for f in self._faults()[:m]]
+        return ("T2[ewma]", *names)
 
     # ---- detection -----------------------------------------------------------------------------
     def _reset(self) -> None:
@@ -398,6 +435,8 @@ class LRGFGLR(LRGFMEM):
     def _reset_stage(self) -> None:
         """Fresh alarm-stage state: EWMA, sequential test and baseline."""
         self._ewma = EWMA(self.ewma_lambda)
+        slow = self.slow_ewma_lambda > 0 and len(self.h_dir_)
+        self._ewma_slow = EWMA(self.slow_ewma_lambda) if slow else None
         self._seq = self._sequential() if len(self.h_dir_) else None
         self._reset_baseline()
 
@@ -449,6 +488,8 @@ class LRGFGLR(LRGFMEM):
         if self._seq is None:
             pass
         elif self.detector == DirectionalDetector.DIRECTIONAL:
+            if self._ewma_slow is not None:
+                z = np.concatenate([z, self._ewma_slow.update(et)])
             signal[1:] = self.dir_weights_ @ z
         else:
             signal[1:] = self._seq.update(self.dir_weights_ @ et)
@@ -457,7 +498,9 @@ class LRGFGLR(LRGFMEM):
         return et, signal
 
     def _scores(self, e: np.ndarray, z: np.ndarray, seq: np.ndarray | None) -> np.ndarray:
-        t2 = np.atleast_1d(self.t2_.score(z))
+        """T² of the fast EWMA (the first k columns of ``z``) and the directional scores of all
+        of ``z`` (or the sequential statistics ``seq``)."""
+        t2 = np.atleast_1d(self.t2_.score(z[..., : len(self.out_idx_)]))
         if not len(self.h_dir_):
             return t2[..., None] if z.ndim == 2 else t2
         if self.detector == DirectionalDetector.DIRECTIONAL:
@@ -493,6 +536,8 @@ class LRGFGLR(LRGFMEM):
             sig = np.array([self._stage_step(e[k], warm=k < w)[1] for k in range(len(e))])
         else:
             z = EWMA(self.ewma_lambda).filter(e)
+            if self.slow_ewma_lambda > 0 and self.detector == DirectionalDetector.DIRECTIONAL:
+                z = self._scales(z, [e])
             seq = None
             if len(self.h_dir_) and self.detector != DirectionalDetector.DIRECTIONAL:
                 seq = self._sequential().filter(self._proj.score(e))

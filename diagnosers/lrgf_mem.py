@@ -97,6 +97,7 @@ out, so changing them reuses a stored model.
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 from enum import StrEnum
 from pathlib import Path
 from typing import Any
@@ -118,7 +119,16 @@ from diagnosers.parallel import BankSettings, TrainedBank, train_banks
 from diagnosers.registry import register
 from diagnosers.training import Method, build_module, export_module
 from fcc_env.io import atomic_open, atomic_write
-from fcc_env.validation import Boolean, Integer, Options, Real, check_params, invalid
+from fcc_env.validation import (
+    Boolean,
+    Integer,
+    IntegerSequence,
+    Options,
+    Real,
+    check,
+    check_params,
+    invalid,
+)
 
 __all__ = [
     "BANK_RELATIONS",
@@ -156,7 +166,7 @@ MIN_CALIBRATION_SAMPLES = 50
 
 #: declarative hyperparameter constraints of :class:`_LRGFMEMBase`, checked in ``fit``
 PARAMETER_CONSTRAINTS: dict[str, Any] = {
-    "n_hidden": Integer(1, 64),
+    "n_hidden": (Integer(1, 64), IntegerSequence(1, 64, unique=False)),
     "order": Integer(1, 8),
     "steady_window": Integer(1, 100_000),
     "mem_hidden": Integer(1, 256),
@@ -211,7 +221,7 @@ class _LRGFMEMBase(Diagnoser):
         self,
         *,
         relations: list[list[Any]] | None = None,
-        n_hidden: int = 3,
+        n_hidden: int | list[int] = 3,
         order: int = 2,
         steady_window: int = 100,
         mem_hidden: int = 5,
@@ -298,9 +308,26 @@ class _LRGFMEMBase(Diagnoser):
             raise invalid("relations", rel, "a non-empty list of [output, [inputs...]]")
         return out
 
+    def _hidden_sizes(self) -> tuple[int, ...]:
+        """Neurons of each relation's network: ``n_hidden`` for every relation, or one per
+        relation when it is a sequence (a slow, high-gain relation such as T_rg1 can take a
+        larger network than the others without making them slower to train)."""
+        k = len(self._relations())
+        sizes = check("n_hidden", self.n_hidden, *PARAMETER_CONSTRAINTS["n_hidden"])
+        if isinstance(sizes, int):
+            return (sizes,) * k
+        if len(sizes) != k:
+            raise invalid(
+                "n_hidden",
+                self.n_hidden,
+                f"an integer in [1, 64] or {k} of them, one per relation",
+                f"there are {k} relations",
+            )
+        return sizes
+
     def _validate_params(self) -> None:
         check_params(self.get_params(), PARAMETER_CONSTRAINTS)
-        self._relations()
+        self._hidden_sizes()
 
     # ---- fitting -------------------------------------------------------------------------------
     def _split(self, episodes: list[Episode]) -> tuple[list[np.ndarray], list[np.ndarray], int]:
@@ -381,7 +408,8 @@ class _LRGFMEMBase(Diagnoser):
     def _train_banks(self, sets: list[list[np.ndarray]]) -> list[TrainedBank]:
         """:meth:`_train_models` on each training set of ``sets``, all relations and sets sharing
         the ``n_jobs`` processes (:func:`diagnosers.parallel.train_banks`)."""
-        settings = BankSettings.from_params(self.get_params())
+        base = BankSettings.from_params({**self.get_params(), "n_hidden": 1})
+        settings = [replace(base, n_hidden=h) for h in self._hidden_sizes()]
         n_jobs = 1 if self.n_jobs is None else self.n_jobs
         return train_banks(settings, sets, self.in_idx_, self.out_idx_, self.seed, n_jobs)
 
@@ -610,7 +638,7 @@ class LRGFMEM(_LRGFMEMBase):
         self,
         *,
         relations: list[list[Any]] | None = None,
-        n_hidden: int = 5,
+        n_hidden: int | list[int] = 5,
         order: int = 2,
         steady_window: int = 100,
         mem_hidden: int = 5,

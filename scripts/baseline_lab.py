@@ -4,6 +4,7 @@ calibration). The bank is trained once per track (training seeds 1000+) and cach
 out-of-fold calibration records; the alarm-stage variants are re-calibrated from them.
 
     python scripts/baseline_lab.py train --track paper
+    python scripts/baseline_lab.py train --track paper --tag -rg1x10 --params '{"n_hidden": [5, 10, 5]}'
     python scripts/baseline_lab.py eval --track paper --lambdas 0,0.005,0.01,0.02 --holds 0.5,1
 """
 
@@ -43,13 +44,14 @@ class _Stash(LRGFGLR):
         super()._calibrate(cal_parts, w)
 
 
-def train(track: str, epochs: int) -> None:
-    data = TrackData(track=val_track(track, 1, 1))
-    det = _Stash(max_epochs=epochs)
+def train(track: str, epochs: int, tag: str, n_train: int | None, params: dict) -> None:
+    tr = val_track(track, 1, 1)
+    data = TrackData(track=tr if n_train is None else tr.replace(n_train=n_train))
+    det = _Stash(max_epochs=epochs, n_jobs=2, **params)
     t0 = time.perf_counter()
     det.fit(data.train_episodes())
-    print(f"{track}: trained in {time.perf_counter() - t0:.0f} s", flush=True)
-    d = OUT / track
+    print(f"{track}{tag}: trained in {time.perf_counter() - t0:.0f} s", flush=True)
+    d = OUT / f"{track}{tag}"
     d.mkdir(parents=True, exist_ok=True)
     cal_parts, w = det.stash_
     np.savez(d / "cal.npz", **{f"r{i}": r for i, (r, _) in enumerate(cal_parts)},
@@ -57,8 +59,8 @@ def train(track: str, epochs: int) -> None:
     det.save(d / "model")
 
 
-def load(track: str):
-    d = OUT / track
+def load(track: str, tag: str = ""):
+    d = OUT / f"{track}{tag}"
     det = diagnosers.Diagnoser.load(d / "model")
     z = np.load(d / "cal.npz")
     n = sum(1 for k in z.files if k.startswith("r"))
@@ -125,7 +127,11 @@ def main() -> None:
     t = sub.add_parser("train")
     t.add_argument("--track", default="paper")
     t.add_argument("--epochs", type=int, default=800)
-    e = sub.add_parser("eval")
+    t.add_argument("--n-train", type=int, default=None, help="healthy training episodes")
+    t.add_argument("--params", default="{}", help="hyperparameters as JSON, e.g. "
+                   '\'{"n_hidden": [5, 10, 5]}\'')  # fmt: skip
+    for p in (t, e := sub.add_parser("eval")):
+        p.add_argument("--tag", default="", help="the bank's name suffix")
     e.add_argument("--track", default="paper", help="the trained bank's track")
     e.add_argument("--eval-tracks", default=None, help="tracks whose episodes to score")
     e.add_argument("--lambdas", default="0,0.01")
@@ -135,9 +141,9 @@ def main() -> None:
     e.add_argument("--set", default="", help="extra hyperparameters k=v,k=v (floats)")
     a = ap.parse_args()
     if a.cmd == "train":
-        train(a.track, a.epochs)
+        train(a.track, a.epochs, a.tag, a.n_train, json.loads(a.params))
         return
-    det, cal, w = load(a.track)
+    det, cal, w = load(a.track, a.tag)
     extra = {kv.split("=")[0]: float(kv.split("=")[1]) for kv in a.set.split(",") if kv}
     tracks = (a.eval_tracks or a.track).split(",")
     eps = {tr: episodes(a.track, a.n_healthy, a.n_faulty, tr) for tr in tracks}
@@ -160,7 +166,9 @@ def main() -> None:
                                  f"(o {r['oracle_r_td']:.3f}/{r['oracle_t_dt']:.0f})")  # fmt: skip
                 print(line, flush=True)
                 results.append({"track": tr, "lambda": lam, "hold": hold, **extra, "res": res})
-    (OUT / f"eval-{a.track}-{int(time.time())}.json").write_text(json.dumps(results, indent=1))
+    (OUT / f"eval-{a.track}{a.tag}-{int(time.time())}.json").write_text(
+        json.dumps(results, indent=1)
+    )
 
 
 if __name__ == "__main__":

@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from scipy import stats
+from scipy import signal, stats
 from synthetic import inject_step_fault, make_episode
 
 import diagnosers
@@ -255,3 +255,64 @@ def test_baseline_holds_on_a_fault(baseline_det) -> None:
 def test_baseline_parameters_are_checked(train, name, value) -> None:
     with pytest.raises(ValueError, match=f"{name}={value}"):
         LRGFGLR(**{**FAST, name: value}).fit(train)
+
+
+# ---- the slow EWMA scale -------------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def slow_det(train) -> LRGFGLR:
+    return LRGFGLR(**{**FAST, "n_folds": 2, "slow_ewma_lambda": 0.03}).fit(train)
+
+
+@pytest.mark.parametrize("baseline_lambda", [0.0, 0.02])
+def test_slow_scale_stream_equals_batch_and_roundtrip(
+    slow_det, train, baseline_lambda, tmp_path
+) -> None:
+    det = slow_det
+    if baseline_lambda:
+        det = LRGFGLR(**{**det.get_params(), "baseline_lambda": baseline_lambda}).fit(train)
+    ep = inject_step_fault(make_episode(900, seed=9), onset=500, magnitude=3.0)
+    batch = _stream_equals_batch(det, ep)
+    # T², then the fast and the slow projection on the one learned direction (f3)
+    assert batch.signal.shape == (900, 3)
+    assert det.signal_names_ == ("T2[ewma]", "directional[f3]", "directional-slow[f3]")
+    assert det.dir_weights_.shape == (2, 6)  # block-diagonal over [fast EWMA, slow EWMA]
+    np.testing.assert_array_equal(det.dir_weights_[0, 3:], 0.0)
+    np.testing.assert_array_equal(det.dir_weights_[1, :3], 0.0)
+    det.save(tmp_path / "m")
+    again = diagnosers.Diagnoser.load(tmp_path / "m")
+    assert again.slow_ewma_lambda == 0.03
+    np.testing.assert_array_equal(again.detect(ep).signal, batch.signal)
+
+
+def test_slow_scale_limits_hold_the_split_target(slow_det, train) -> None:
+    # the slow scale takes half of the directional target and none of the omnibus T²'s: the T²
+    # limit is the plain detector's, the fast projection's is the plain one's at half the target
+    params = {**slow_det.get_params(), "slow_ewma_lambda": 0.0}
+    plain = LRGFGLR(**params).fit(train)
+    half = LRGFGLR(**{**params, "false_alarm_target": params["false_alarm_target"] / 2}).fit(train)
+    assert slow_det.h_ == pytest.approx(plain.h_)
+    assert slow_det.h_dir_[0] == pytest.approx(half.h_dir_[0])
+    assert slow_det.h_dir_[0] > plain.h_dir_[0]
+
+
+def test_slow_score_is_the_projected_slow_ewma(slow_det) -> None:
+    # oracle: the slow EWMA as scipy's first-order filter of the normalised remaining error
+    # (zero through the warm-up), projected on the slow block's weights
+    ep = inject_step_fault(make_episode(900, seed=9), onset=500, magnitude=1.0)
+    r, e = slow_det._parts(ep.y)
+    norm = (r - e * slow_det.use_mem_) / slow_det.v_residual_
+    norm[: slow_det.steady_window] = 0.0
+    lam = slow_det.slow_ewma_lambda
+    z_slow = signal.lfilter([lam], [1.0, lam - 1.0], norm, axis=0)
+    k = len(slow_det.out_idx_)
+    expected = z_slow @ slow_det.dir_weights_[1, k:]
+    got = slow_det.detect(ep).signal[:, 2]
+    w = slow_det.steady_window
+    np.testing.assert_allclose(got[w:], expected[w:], rtol=1e-9, atol=1e-9)
+
+
+def test_slow_scale_needs_the_directional_detector(train) -> None:
+    with pytest.raises(ValueError, match="slow_ewma_lambda=0.03 is outside the allowed range"):
+        LRGFGLR(**{**FAST, "detector": "cusum", "slow_ewma_lambda": 0.03}).fit(train)
+    with pytest.raises(ValueError, match="slow_ewma_lambda=1.0"):
+        LRGFGLR(**{**FAST, "slow_ewma_lambda": 1.0}).fit(train)

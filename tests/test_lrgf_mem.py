@@ -144,11 +144,32 @@ def test_learning_rate_reaches_the_trainer():
     assert fits[0.001] != fits[0.05]
 
 
+def test_per_relation_network_sizes_reach_the_networks_and_survive_save_load(tmp_path):
+    eps = _episodes([1000, 1001], n=400)
+    kw = {"max_epochs": 5, "mem_max_epochs": 2, "mem_input_delays": 2, "mem_output_delays": 2}
+    det = diagnosers.make("lrgf-mem", n_hidden=[2, 4, 3], **kw).fit(eps)
+    assert [net.n_hidden for net in det.lrgf_] == [2, 4, 3]
+    # one size for all is the same as that size repeated: same seeds, same networks
+    same = diagnosers.make("lrgf-mem", n_hidden=[3, 3, 3], **kw).fit(eps)
+    ref = diagnosers.make("lrgf-mem", n_hidden=3, **kw).fit(eps)
+    np.testing.assert_array_equal(same.detect(eps[0]).signal, ref.detect(eps[0]).signal)
+    det.save(tmp_path / "m")
+    back = diagnosers.Diagnoser.load(tmp_path / "m")
+    assert list(back.get_params()["n_hidden"]) == [2, 4, 3]
+    np.testing.assert_array_equal(back.detect(eps[1]).signal, det.detect(eps[1]).signal)
+
+
 @pytest.mark.parametrize(
     ("kwargs", "match"),
     [
         ({"alpha": 0.7}, r"alpha=0.7 is outside the allowed range: a number in \(0, 0.5\)"),
         ({"n_hidden": 0}, r"n_hidden=0 is outside the allowed range: an integer in \[1, 64\]"),
+        (
+            {"n_hidden": [5, 10]},
+            r"n_hidden=\[5, 10\] is outside the allowed range: an integer in \[1, 64\] or 3 of "
+            r"them, one per relation \(there are 3 relations\)",
+        ),
+        ({"n_hidden": [5, 0, 5]}, r"n_hidden=\[5, 0, 5\] is outside the allowed range"),
         (
             {"band_definition": "wide"},
             r"band_definition='wide' is outside the allowed range: one of \['paper', 'residual'\]",
