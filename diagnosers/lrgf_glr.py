@@ -33,8 +33,8 @@ limit is calibrated:
   ``slow_ewma_lambda > 0`` adds a second EWMA (that weight, e.g. 0.03) beside ``z`` with its
   own covariance and its own projections on the same directions: a small or slow fault whose
   shift stays under the fast EWMA's noise builds up in the slow one, which averages the white
-  part of the remaining error away (its low-frequency model error stays). The directional
-  target is split equally over both scales.
+  part of the remaining error away (its low-frequency model error stays). The slow scale gets
+  ``slow_share`` of the directional target, the fast one the rest.
 
   Beside the directional tests an omnibus Hotelling T² of ``z`` (as in ``lrgf-mem``) keeps
   faults outside the learned directions detectable; it gets ``omnibus_share`` of the false-alarm
@@ -118,6 +118,7 @@ GLR_CONSTRAINTS: dict[str, Any] = {
     "baseline_hold": Real(0, 1, closed="right"),
     "baseline_settle": Integer(0, 100_000),
     "slow_ewma_lambda": Real(0, 1, closed="left"),
+    "slow_share": Real(0, 1, closed="neither"),
 }
 
 #: the FCC-v0 faults whose directions are learned by default
@@ -144,6 +145,7 @@ class LRGFGLR(LRGFMEM):
         baseline_hold: float = 0.5,
         baseline_settle: int = 200,
         slow_ewma_lambda: float = 0.0,
+        slow_share: float = 0.5,
         relations: list[list[Any]] | None = None,
         n_hidden: int | list[int] = 5,
         order: int = 2,
@@ -206,6 +208,7 @@ class LRGFGLR(LRGFMEM):
         self.baseline_hold = baseline_hold
         self.baseline_settle = baseline_settle
         self.slow_ewma_lambda = slow_ewma_lambda
+        self.slow_share = slow_share
 
     @classmethod
     def fast_params(cls) -> dict[str, Any]:
@@ -321,15 +324,19 @@ class LRGFGLR(LRGFMEM):
             t_dir = self.false_alarm_target * (1.0 - share) / m
             if det is DirectionalDetector.DIRECTIONAL:
                 zz = self._scales(z, norm)
-                t_dir /= zz.shape[1] // k
                 # one block of projections per EWMA scale, each with its own healthy covariance
                 blocks = [
                     DirectionalProjection().fit(self.directions_, np.cov(zz[:, i : i + k].T))
                     for i in range(0, zz.shape[1], k)
                 ]
                 self.dir_weights_ = block_diag(*[b.weights_ for b in blocks])
-                self.h_dir_ = self.threshold_margin * normal_tail_limit(
-                    zz @ self.dir_weights_.T, t_dir
+                shares = [1.0] if len(blocks) == 1 else [1 - self.slow_share, self.slow_share]
+                t_each = np.repeat([t_dir * sh for sh in shares], m)
+                self.h_dir_ = self.threshold_margin * np.concatenate(
+                    [
+                        normal_tail_limit(zz @ w[:, None], t)
+                        for w, t in zip(self.dir_weights_, t_each, strict=True)
+                    ]
                 )
             else:
                 proj = DirectionalProjection().fit(self.directions_, np.cov(np.concatenate(norm).T))

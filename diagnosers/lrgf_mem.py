@@ -69,6 +69,11 @@ Two registered configurations:
   after an EWMA of 0.05, against 0.05 °C for its white noise), so long averaging removes little
   error and only delays the alarm.
 
+``n_hidden`` is one network size for every relation, or a list with one size per relation
+(e.g. ``[5, 10, 5]`` for :data:`BANK_RELATIONS`): the slow, high-gain regenerator relation T_rg1
+gains from a larger network more than the others do, and a per-relation size keeps the others'
+training time. One size and that size repeated give the same networks.
+
 ``mem_select="if_better"`` (``lrgf-mem``) keeps a relation's error model only when it lowers the
 RMS of the remaining error on the calibration episodes: an NNARX that does not generalise adds its
 own error to the band centre (seen on this plant for several relations).

@@ -4,7 +4,7 @@ calibration). The bank is trained once per track (training seeds 1000+) and cach
 out-of-fold calibration records; the alarm-stage variants are re-calibrated from them.
 
     python scripts/baseline_lab.py train --track paper
-    python scripts/baseline_lab.py train --track paper --tag -rg1x10 --params '{"n_hidden": [5, 10, 5]}'
+    python scripts/baseline_lab.py train --track paper --tag=_rg1x10 --params '{"n_hidden": [5, 10, 5]}'
     python scripts/baseline_lab.py eval --track paper --lambdas 0,0.005,0.01,0.02 --holds 0.5,1
 """
 
@@ -54,6 +54,7 @@ def train(track: str, epochs: int, tag: str, n_train: int | None, params: dict) 
     d = OUT / f"{track}{tag}"
     d.mkdir(parents=True, exist_ok=True)
     cal_parts, w = det.stash_
+    det.__class__ = LRGFGLR  # saved as the registered diagnoser, so that it loads
     np.savez(d / "cal.npz", **{f"r{i}": r for i, (r, _) in enumerate(cal_parts)},
              **{f"e{i}": e for i, (_, e) in enumerate(cal_parts)}, w=w)  # fmt: skip
     det.save(d / "model")

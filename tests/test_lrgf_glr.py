@@ -316,3 +316,5 @@ def test_slow_scale_needs_the_directional_detector(train) -> None:
         LRGFGLR(**{**FAST, "detector": "cusum", "slow_ewma_lambda": 0.03}).fit(train)
     with pytest.raises(ValueError, match="slow_ewma_lambda=1.0"):
         LRGFGLR(**{**FAST, "slow_ewma_lambda": 1.0}).fit(train)
+    with pytest.raises(ValueError, match=r"slow_share=1.0 is outside the allowed range: .*\(0, 1\)"):
+        LRGFGLR(**{**FAST, "slow_ewma_lambda": 0.03, "slow_share": 1.0}).fit(train)
