@@ -72,7 +72,9 @@ Two registered configurations:
 ``n_hidden`` is one network size for every relation, or a list with one size per relation
 (e.g. ``[5, 10, 5]`` for :data:`BANK_RELATIONS`): the slow, high-gain regenerator relation T_rg1
 gains from a larger network more than the others do, and a per-relation size keeps the others'
-training time. One size and that size repeated give the same networks.
+training time. One size and that size repeated give the same networks. ``None`` takes the diagnoser's sizes by
+output (``lrgf-glr``: 10 neurons for a relation whose output is T_rg1, 5 for the others), so it
+follows a user's own ``relations``.
 
 ``mem_select="if_better"`` (``lrgf-mem``) keeps a relation's error model only when it lowers the
 RMS of the remaining error on the calibration episodes: an NNARX that does not generalise adds its
@@ -105,7 +107,7 @@ import json
 from dataclasses import replace
 from enum import StrEnum
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 import torch
@@ -171,7 +173,7 @@ MIN_CALIBRATION_SAMPLES = 50
 
 #: declarative hyperparameter constraints of :class:`_LRGFMEMBase`, checked in ``fit``
 PARAMETER_CONSTRAINTS: dict[str, Any] = {
-    "n_hidden": (Integer(1, 64), IntegerSequence(1, 64, unique=False)),
+    "n_hidden": (Integer(1, 64), IntegerSequence(1, 64, unique=False), None),
     "order": Integer(1, 8),
     "steady_window": Integer(1, 100_000),
     "mem_hidden": Integer(1, 256),
@@ -220,13 +222,16 @@ class _LRGFMEMBase(Diagnoser):
 
     #: relations used when ``relations`` is None
     DEFAULT_RELATIONS: list[list[Any]] = PAPER_RELATIONS
+    #: network sizes when ``n_hidden`` is None: by the relation's output, else the default
+    HIDDEN_BY_OUTPUT: ClassVar[dict[str, int]] = {}
+    DEFAULT_HIDDEN: ClassVar[int] = 5
     execution_params = ("progress", "n_jobs")
 
     def __init__(
         self,
         *,
         relations: list[list[Any]] | None = None,
-        n_hidden: int | list[int] = 3,
+        n_hidden: int | list[int] | None = 3,
         order: int = 2,
         steady_window: int = 100,
         mem_hidden: int = 5,
@@ -314,11 +319,17 @@ class _LRGFMEMBase(Diagnoser):
         return out
 
     def _hidden_sizes(self) -> tuple[int, ...]:
-        """Neurons of each relation's network: ``n_hidden`` for every relation, or one per
-        relation when it is a sequence (a slow, high-gain relation such as T_rg1 can take a
-        larger network than the others without making them slower to train)."""
-        k = len(self._relations())
+        """Neurons of each relation's network: ``n_hidden`` for every relation, one per relation
+        when it is a sequence (a slow, high-gain relation such as T_rg1 can take a larger network
+        than the others without making them slower to train), or, when it is None, the class's
+        size for the relation's output (:attr:`HIDDEN_BY_OUTPUT`, else :attr:`DEFAULT_HIDDEN`)."""
+        relations = self._relations()
+        k = len(relations)
         sizes = check("n_hidden", self.n_hidden, *PARAMETER_CONSTRAINTS["n_hidden"])
+        if sizes is None:
+            return tuple(
+                self.HIDDEN_BY_OUTPUT.get(out, self.DEFAULT_HIDDEN) for out, _ in relations
+            )
         if isinstance(sizes, int):
             return (sizes,) * k
         if len(sizes) != k:
