@@ -163,7 +163,7 @@ class LRGFGLR(LRGFMEM):
         band_definition: str = "residual",
         alarm_filter: str = "ewma-t2",
         ewma_lambda: float = 0.3,
-        false_alarm_target: float = 0.04,
+        false_alarm_target: float = 0.03,
         threshold_margin: float = 1.0,
         limit_method: str = "chi2-tail",
         method: str = "adam",
