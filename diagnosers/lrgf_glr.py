@@ -30,11 +30,12 @@ limit is calibrated:
   - ``"cusum"``: :class:`diagnosers.alarm.CUSUM` on the same projections, drift
     ``cusum_drift``.
 
-  ``slow_ewma_lambda > 0`` (default 0.02; ``detector="directional"`` only) adds a second EWMA (that weight, e.g. 0.03) beside ``z`` with its
-  own covariance and its own projections on the same directions: a small or slow fault whose
-  shift stays under the fast EWMA's noise builds up in the slow one, which averages the white
-  part of the remaining error away (its low-frequency model error stays). The slow scale gets
-  ``slow_share`` of the directional target, the fast one the rest.
+  ``slow_ewma_lambda > 0`` (default 0.02; ``detector="directional"`` only) adds a second EWMA
+  of that weight beside ``z``, with its own covariance and its own projections on the same
+  directions: a small or slow fault whose shift stays under the fast EWMA's noise builds up in
+  the slow one, which averages the white part of the remaining error away (its low-frequency
+  model error stays). The slow scale gets ``slow_share`` of the directional target, the fast
+  one the rest.
 
   Beside the directional tests an omnibus Hotelling T² of ``z`` (as in ``lrgf-mem``) keeps
   faults outside the learned directions detectable; it gets ``omnibus_share`` of the false-alarm
@@ -53,8 +54,8 @@ samples after the warm-up, later only while every statistic stays below ``baseli
 limit, so a growing fault is not learned. The limits are calibrated on the out-of-fold records
 run through the same recursion. The slow scale sees the baseline-removed error too, but it
 integrates the baseline's settling transient for a few of its time constants (1/λ samples), so
-``lrgf-glr-adaptive`` runs without it. It learns a unit's own offset from the model (a plant unlike the
-training plants) and loses small, slow faults that stay under the hold level.
+``lrgf-glr-adaptive`` runs without it. It learns a unit's own offset from the model (a plant
+unlike the training plants) and loses small, slow faults that stay under the hold level.
 
 ``signal`` is ``[T², score_f1, ...]`` with ``upper`` their limits; alarm when any exceeds its
 limit after the silent warm-up.
@@ -329,11 +330,11 @@ class LRGFGLR(LRGFMEM):
                 ]
                 self.dir_weights_ = block_diag(*[b.weights_ for b in blocks])
                 shares = [1.0] if len(blocks) == 1 else [1 - self.slow_share, self.slow_share]
-                t_each = np.repeat([t_dir * sh for sh in shares], m)
+                scores = zz @ self.dir_weights_.T  # m columns per scale
                 self.h_dir_ = self.threshold_margin * np.concatenate(
                     [
-                        normal_tail_limit(zz @ w[:, None], t)
-                        for w, t in zip(self.dir_weights_, t_each, strict=True)
+                        normal_tail_limit(scores[:, i * m : (i + 1) * m], t_dir * sh)
+                        for i, sh in enumerate(shares)
                     ]
                 )
             else:
@@ -425,10 +426,15 @@ class LRGFGLR(LRGFMEM):
         self._no_limit = np.full(len(self.upper_), np.inf)
         self._hold_limits = self.baseline_hold * self.upper_
 
+    @property
+    def _has_slow_scale(self) -> bool:
+        """Whether the fitted directional tests carry the slow scale (two limits a direction)."""
+        return len(self.h_dir_) > len(self.directions_)
+
     def _signal_names(self) -> tuple[str, ...]:
         m = len(self.directions_) if len(self.h_dir_) else 0
         names = [f"{self.detector}[{f}]" for f in self._faults()[:m]]
-        if len(self.h_dir_) > m:
+        if self._has_slow_scale:
             names += [f"{self.detector}-slow[{f}]" for f in self._faults()[:m]]
         return ("T2[ewma]", *names)
 
@@ -440,8 +446,7 @@ class LRGFGLR(LRGFMEM):
     def _reset_stage(self) -> None:
         """Fresh alarm-stage state: EWMA, sequential test and baseline."""
         self._ewma = EWMA(self.ewma_lambda)
-        slow = len(self.h_dir_) > len(self.directions_)  # the directional tests' slow scale
-        self._ewma_slow = EWMA(self.slow_ewma_lambda) if slow else None
+        self._ewma_slow = EWMA(self.slow_ewma_lambda) if self._has_slow_scale else None
         self._seq = self._sequential() if len(self.h_dir_) else None
         self._reset_baseline()
 
@@ -541,7 +546,7 @@ class LRGFGLR(LRGFMEM):
             sig = np.array([self._stage_step(e[k], warm=k < w)[1] for k in range(len(e))])
         else:
             z = EWMA(self.ewma_lambda).filter(e)
-            if self.slow_ewma_lambda > 0 and self.detector == DirectionalDetector.DIRECTIONAL:
+            if self._has_slow_scale:
                 z = self._scales(z, [e])
             seq = None
             if len(self.h_dir_) and self.detector != DirectionalDetector.DIRECTIONAL:

@@ -72,9 +72,9 @@ Two registered configurations:
 ``n_hidden`` is one network size for every relation, or a list with one size per relation
 (e.g. ``[5, 10, 5]`` for :data:`BANK_RELATIONS`): the slow, high-gain regenerator relation T_rg1
 gains from a larger network more than the others do, and a per-relation size keeps the others'
-training time. One size and that size repeated give the same networks. ``None`` takes the diagnoser's sizes by
-output (``lrgf-glr``: 10 neurons for a relation whose output is T_rg1, 5 for the others), so it
-follows a user's own ``relations``.
+training time. One size and that size repeated give the same networks. ``None`` takes the
+diagnoser's sizes by output (``lrgf-glr``: 10 neurons for a relation whose output is T_rg1, 5
+for the others), so it follows a user's own ``relations``.
 
 ``mem_select="if_better"`` (``lrgf-mem``) keeps a relation's error model only when it lowers the
 RMS of the remaining error on the calibration episodes: an NNARX that does not generalise adds its
@@ -104,7 +104,6 @@ out, so changing them reuses a stored model.
 from __future__ import annotations
 
 import json
-from dataclasses import replace
 from enum import StrEnum
 from pathlib import Path
 from typing import Any, ClassVar
@@ -424,8 +423,10 @@ class _LRGFMEMBase(Diagnoser):
     def _train_banks(self, sets: list[list[np.ndarray]]) -> list[TrainedBank]:
         """:meth:`_train_models` on each training set of ``sets``, all relations and sets sharing
         the ``n_jobs`` processes (:func:`diagnosers.parallel.train_banks`)."""
-        base = BankSettings.from_params({**self.get_params(), "n_hidden": 1})
-        settings = [replace(base, n_hidden=h) for h in self._hidden_sizes()]
+        params = self.get_params()
+        settings = [
+            BankSettings.from_params({**params, "n_hidden": h}) for h in self._hidden_sizes()
+        ]
         n_jobs = 1 if self.n_jobs is None else self.n_jobs
         return train_banks(settings, sets, self.in_idx_, self.out_idx_, self.seed, n_jobs)
 
