@@ -420,15 +420,25 @@ class _LRGFMEMBase(Diagnoser):
         """
         return self._train_banks([train])[0]
 
-    def _train_banks(self, sets: list[list[np.ndarray]]) -> list[TrainedBank]:
+    def _train_banks(
+        self,
+        sets: list[list[np.ndarray]],
+        init: list[TrainedBank | None] | None = None,
+        max_epochs: int | None = None,
+    ) -> list[TrainedBank]:
         """:meth:`_train_models` on each training set of ``sets``, all relations and sets sharing
-        the ``n_jobs`` processes (:func:`diagnosers.parallel.train_banks`)."""
+        the ``n_jobs`` processes (:func:`diagnosers.parallel.train_banks`); ``init`` warm-starts
+        the networks of a set from a trained bank, ``max_epochs`` replaces the hyperparameter."""
         params = self.get_params()
+        if max_epochs is not None:
+            params["max_epochs"] = max_epochs
         settings = [
             BankSettings.from_params({**params, "n_hidden": h}) for h in self._hidden_sizes()
         ]
         n_jobs = 1 if self.n_jobs is None else self.n_jobs
-        return train_banks(settings, sets, self.in_idx_, self.out_idx_, self.seed, n_jobs)
+        return train_banks(
+            settings, sets, self.in_idx_, self.out_idx_, self.seed, n_jobs, init=init
+        )
 
     def _finish(self) -> None:
         """Derived state shared by ``_fit`` and ``_set_state``."""

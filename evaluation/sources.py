@@ -23,6 +23,7 @@ import numpy as np
 
 from diagnosers.base import Episode
 from evaluation.tracks import Track
+from fcc_env.params import INPUT_NAMES, MEASUREMENT_NAMES
 from fcc_env.scenarios import (
     DEFAULT_N_SAMPLES,
     DEFAULT_RAMP_SAMPLES,
@@ -277,6 +278,38 @@ class SimulatedData:
         return self._simulate([seed], scenario)[0]
 
 
+#: the tracks' sample time [s] (the env's default)
+TRACK_SAMPLE_TIME_S = 10.0
+
+#: the plant inputs that are also measured (Table 1), as (input index, measurement index)
+_MEASURED_INPUTS = tuple(
+    (INPUT_NAMES.index(c), MEASUREMENT_NAMES.index(c))
+    for c in INPUT_NAMES
+    if c in MEASUREMENT_NAMES
+)
+
+
+class MeasuredInputs:
+    """Plant effect (``transform_inputs``): the process sees the measured inputs of ``y``.
+
+    ``y`` holds an episode's measurements ``(T, 8)``; at sample ``k`` the inputs that Table 1
+    measures (R_ar, T_ar, T_fp) are replaced by ``y[k]``'s values, the others are left alone.
+    Replaying an episode's noise-free measurements reproduces it exactly (tested).
+    """
+
+    def __init__(self, y: np.ndarray, sample_time_s: float) -> None:
+        self.y = np.asarray(y, dtype=np.float64)
+        self.sample_time_s = float(sample_time_s)
+
+    def transform_inputs(self, t_s: np.ndarray, u: np.ndarray) -> np.ndarray:
+        k = np.rint(np.asarray(t_s) / self.sample_time_s).astype(np.int64)
+        k = np.clip(k, 0, self.y.shape[0] - 1)
+        out = np.array(u, dtype=np.float64, copy=True)
+        for i_in, i_meas in _MEASURED_INPUTS:
+            out[..., i_in] = self.y[k, i_meas]
+        return out
+
+
 def simulate_loaded(
     seeds: Sequence[int],
     n_samples: int,
@@ -284,7 +317,7 @@ def simulate_loaded(
     *,
     excitation: bool = True,
     noise_scale: float = 1.0,
-    sample_time_s: float = 10.0,
+    sample_time_s: float = TRACK_SAMPLE_TIME_S,
     plant_uncertainty: PlantUncertainty | None = None,
 ) -> list[LoadedEpisode]:
     """Simulate ``seeds`` with the fault ``spec`` and cut each at its termination sample."""
@@ -401,12 +434,31 @@ class TrackData:
     def load_test(self, scenario: str, seed: int) -> LoadedEpisode:
         return self._simulate([seed], self.track.fault_spec(scenario, seed))[0]
 
-    def reference(self, seed: int) -> np.ndarray:
-        """The healthy plant's noise-free measurements of ``seed`` (same inputs, same plant):
-        what the physical-limit row compares with (no diagnoser may read it)."""
-        ep = self._simulate([seed], FaultSpec())[0].episode
-        assert ep.y_clean is not None
-        return ep.y_clean
+    def reference(self, seed: int, measured: np.ndarray | None = None) -> np.ndarray:
+        """The healthy plant's noise-free measurements of ``seed`` (same plant): what the
+        physical-limit rows compare with (no diagnoser may read it).
+
+        Without ``measured`` the plant sees its true inputs. With ``measured`` (an episode's
+        measurements, ``(T, 8)``) it sees, sample by sample, the *measured* values of the
+        inputs that are measured (R_ar, T_ar, T_fp; noise included) in place of the true ones:
+        the output of a perfect model driven by what a detector reads. Returns ``(T', 8)``.
+        """
+        if measured is None:
+            ep = self._simulate([seed], FaultSpec())[0].episode
+            assert ep.y_clean is not None
+            return ep.y_clean
+        import fcc_env
+
+        measured = np.asarray(measured, dtype=np.float64)
+        res = fcc_env.simulate_episodes(
+            [seed],
+            measured.shape[0],
+            plant_effects=[MeasuredInputs(measured, TRACK_SAMPLE_TIME_S)],
+            noise_scale=self.track.noise_scale,
+            sample_time_s=TRACK_SAMPLE_TIME_S,
+            plant_uncertainty=PlantUncertainty() if self.track.plant_variation else None,
+        )
+        return np.asarray(res.y_clean[0], dtype=np.float64)
 
     def describe(self) -> DataDescription:
         import fcc_env

@@ -5,7 +5,8 @@ track of :mod:`evaluation.tracks`, a sweep of the chosen diagnosers over the tra
 (:class:`evaluation.sources.TrackData`), scores the physical-limit observer
 (:mod:`evaluation.oracle`) on the same cells, and writes into ``<out>/<track>/``:
 
-* ``leaderboard.md`` / ``.csv`` / ``.json`` — one row per diagnoser plus the ``oracle`` row:
+* ``leaderboard.md`` / ``.csv`` / ``.json`` — one row per diagnoser plus two reference rows,
+  the ``oracle`` (physical limit) and the ``perfect model (measured inputs)``:
   r_fd with its 95 % bootstrap interval over healthy episodes, the share of healthy episodes
   with any alarm and the worst one; per fault r_td and t_dt with intervals, the ratio
   ``(t_dt + 1) / (oracle t_dt + 1)`` with its paired interval, misses and early terminations;
@@ -40,7 +41,7 @@ from evaluation.intervals import (
     share_with_alarm,
     worst,
 )
-from evaluation.oracle import ORACLE_LABEL, oracle_records
+from evaluation.oracle import MEASURED_INPUTS_LABEL, ORACLE_LABEL, OracleConfig, oracle_records
 from evaluation.records import CellResult
 from evaluation.sources import TrackData
 from evaluation.store import ResultStore, canonical_hash
@@ -147,7 +148,11 @@ def track_rows(
 ) -> list[TrackRow]:
     """The rows of a track table from per-seed records (pure; intervals seeded, reproducible)."""
     rows = []
-    for label in [*labels, ORACLE_LABEL]:
+    # the reference rows present in the records (the physical limit, the measured-input model)
+    refs = [
+        r for r in (ORACLE_LABEL, MEASURED_INPUTS_LABEL) if any(x.diagnoser == r for x in records)
+    ]
+    for label in [*labels, *refs]:
         healthy = _by(records, label, "nominal")
         w = worst(healthy)
         cells = {}
@@ -284,7 +289,11 @@ def run_track(
     )
     if model_cache is not None:
         _models_to_cache(config, store, model_cache)
-    records = (*results.records, *oracle_records(data))
+    records = (
+        *results.records,
+        *oracle_records(data),
+        *oracle_records(data, OracleConfig(inputs="measured")),
+    )
     rows = track_rows(records, [s.key for s in config.diagnosers], track.faults)
     if figures:
         write_figures(results, out / "figures")

@@ -123,10 +123,11 @@ def test_cross_fit_calibrates_on_out_of_fold_residuals(train, monkeypatch) -> No
     banks: list = []
     real = LRGFGLR._train_banks
 
-    def spy(self, sets):
+    def spy(self, sets, init=None, max_epochs=None):
         calls.append([[next(i for i, e in enumerate(train) if e.y is r) for r in s] for s in sets])
-        banks[:] = real(self, sets)
-        return banks
+        out = real(self, sets, init=init, max_epochs=max_epochs)
+        banks.extend(out)
+        return out
 
     monkeypatch.setattr(LRGFGLR, "_train_banks", spy)
     parts: list[tuple[int, int]] = []
@@ -156,7 +157,7 @@ def test_holdout_calibration_is_lrgf_mem_split(train, monkeypatch) -> None:
     monkeypatch.setattr(
         LRGFGLR,
         "_train_banks",
-        lambda self, s: (calls.append([len(r) for r in s]), real(self, s))[1],
+        lambda self, s, **kw: (calls.append([len(r) for r in s]), real(self, s, **kw))[1],
     )
     LRGFGLR(**{**FAST, "calibration": "holdout"}).fit(train)
     assert calls == [[2]]  # trained once, on the first two thirds

@@ -10,7 +10,13 @@ import pytest
 from diagnosers.alarm import EWMA
 from diagnosers.base import Episode
 from evaluation.intervals import limit_ratio
-from evaluation.oracle import ORACLE_LABEL, OracleConfig, PhysicalLimit, oracle_records
+from evaluation.oracle import (
+    MEASURED_INPUTS_LABEL,
+    ORACLE_LABEL,
+    OracleConfig,
+    PhysicalLimit,
+    oracle_records,
+)
 from evaluation.records import CellResult, summarize
 from evaluation.sources import TrackData, simulate_loaded
 from evaluation.trackboard import run_track, track_rows, track_table, write_track
@@ -72,6 +78,34 @@ def test_oracle_config_rejects_bad_values() -> None:
         OracleConfig(ewma_lambda=0)
     with pytest.raises(ValueError, match=r"target=0.7 is outside the allowed range"):
         OracleConfig(target=0.7)
+    with pytest.raises(ValueError, match=r"inputs='exact'.*measured"):
+        OracleConfig(inputs="exact")
+
+
+@pytest.mark.parametrize("track", ["paper", "uncertain"])
+def test_replaying_the_true_inputs_reproduces_the_reference(track) -> None:
+    """The measured-input reference with noise-free 'measurements' is the true-input one, to
+    the bit: the replay is aligned sample by sample and keeps the seed's plant."""
+    data = TrackData(track=TRACKS[track].replace(n_healthy=1, n_faulty=1))
+    ref = data.reference(5)
+    np.testing.assert_array_equal(data.reference(5, measured=ref), ref)
+
+
+def test_the_measured_input_row_sees_the_input_noise() -> None:
+    """On a healthy episode the true-input residual is measurement noise alone; with the
+    measured inputs the regenerator temperatures carry the input noise through the plant."""
+    data = TrackData(track=TINY)
+    y = data.load_test("nominal", 0).episode.y
+    i = MEASUREMENT_NAMES.index("T_rg1")
+    true_res = y[:, i] - data.reference(0)[: len(y), i]
+    meas_res = y[:, i] - data.reference(0, measured=y)[: len(y), i]
+    assert abs(true_res.std() - 0.3) < 0.03  # the channel's noise std, 0.3 °C
+    assert meas_res.std() > 1.05 * true_res.std()
+    orc = PhysicalLimit(data, OracleConfig(inputs="measured")).fit()
+    assert orc.name == MEASURED_INPUTS_LABEL
+    recs = oracle_records(data, OracleConfig(inputs="measured"))
+    assert {r.diagnoser for r in recs} == {MEASURED_INPUTS_LABEL}
+    assert all(r.t_dt <= 60 for r in recs if r.scenario == "f1")
 
 
 def test_uncertain_track_shares_the_plant_and_hides_the_draw() -> None:
@@ -137,7 +171,7 @@ def test_track_rows_ratio_and_ranks() -> None:
 def test_run_track_end_to_end(tmp_path) -> None:
     run = run_track(TINY, ["limits"], tmp_path / "paper", workers=0, progress=False)
     labels = [r.label for r in run.rows]
-    assert labels == ["limits", ORACLE_LABEL]
+    assert labels == ["limits", ORACLE_LABEL, MEASURED_INPUTS_LABEL]
     summary = {(s.diagnoser, s.scenario): s for s in summarize(run.records)}
     assert summary[(ORACLE_LABEL, "f1")].t_dt <= 2
     paths = write_track(run, tmp_path / "paper")

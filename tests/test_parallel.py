@@ -10,7 +10,7 @@ from synthetic import inject_step_fault, make_episode
 
 import diagnosers
 from diagnosers.lrgf_glr import LRGFGLR
-from diagnosers.parallel import run_jobs
+from diagnosers.parallel import BankSettings, run_jobs, train_banks
 from diagnosers.training import export_module
 
 LRGF_NAMES = ("lrgf-mem-paper", "lrgf-mem", "lrgf-glr")
@@ -56,3 +56,61 @@ def test_run_jobs_keeps_the_order_and_raises_a_jobs_error() -> None:
     assert run_jobs(math.sqrt, jobs, 1) == [2.0, 3.0, 4.0, 5.0]
     with pytest.raises(ValueError, match="math domain error"):
         run_jobs(math.sqrt, [4.0, -1.0], 2)
+
+
+def _settings(max_epochs: int) -> BankSettings:
+    return BankSettings.from_params(
+        {**LRGFGLR(**LRGFGLR.fast_params()).get_params(), "n_hidden": 3, "max_epochs": max_epochs}
+    )
+
+
+@pytest.mark.parametrize("n_jobs", [1, 2])
+def test_a_warm_start_begins_at_the_given_bank(train, n_jobs) -> None:
+    """One epoch evaluates the starting point and keeps it (the best loss so far), so a bank
+    warm-started on its own training set with one epoch has the starting networks' weights;
+    from scratch it has the seed's initialisation instead."""
+    records = [e.y for e in train]
+    in_idx, out_idx = [np.array([0, 1]), np.array([1, 2])], np.array([2, 3])
+    start = train_banks(_settings(20), [records], in_idx, out_idx, seed=3, n_jobs=1)[0]
+    warm = train_banks(
+        _settings(1), [records], in_idx, out_idx, seed=3, n_jobs=n_jobs, init=[start]
+    )[0]
+    cold = train_banks(_settings(1), [records], in_idx, out_idx, seed=3, n_jobs=n_jobs)[0]
+    for s, w, c in zip(start.lrgf, warm.lrgf, cold.lrgf, strict=True):
+        sw, ww, cw = (export_module(m)[1] for m in (s, w, c))
+        for k in sw:
+            np.testing.assert_array_equal(ww[k].numpy(), sw[k].numpy(), err_msg=k)
+        assert not np.array_equal(cw["weight_out"].numpy(), sw["weight_out"].numpy())
+
+
+def test_initial_banks_must_match_the_sets_and_relations(train) -> None:
+    records = [e.y for e in train]
+    in_idx, out_idx = [np.array([0, 1])], np.array([2])
+    start = train_banks(_settings(2), [records], in_idx, out_idx, seed=0, n_jobs=1)[0]
+    with pytest.raises(ValueError, match="1 initial banks for 2 training sets"):
+        train_banks(_settings(2), [records, records], in_idx, out_idx, 0, 1, init=[start])
+    two = [np.array([0, 1]), np.array([1, 2])]
+    with pytest.raises(ValueError, match="an initial bank has 1 networks for 2 relations"):
+        train_banks(_settings(2), [records], two, np.array([2, 3]), 0, 1, init=[start])
+
+
+def test_the_detectors_bank_refits_from_the_first_fold(train, monkeypatch) -> None:
+    """``refit_epochs``: the fold banks train first, then the bank on every record starts from
+    the first fold's for min(refit_epochs, max_epochs) epochs; ``None`` is one joint call."""
+    calls = []
+    real = LRGFGLR._train_banks
+
+    def spy(self, sets, init=None, max_epochs=None):
+        banks = real(self, sets, init=init, max_epochs=max_epochs)
+        calls.append((len(sets), init, max_epochs, banks))
+        return banks
+
+    monkeypatch.setattr(LRGFGLR, "_train_banks", spy)
+    params = {**LRGFGLR.fast_params(), "fault_scenarios": ["f3"], "n_folds": 3}
+    diagnosers.make("lrgf-glr", **{**params, "refit_epochs": 10_000}).fit(train)
+    (n_folds, init0, ep0, folds), (n_final, init1, ep1, _) = calls
+    assert (n_folds, init0, ep0) == (3, None, None)
+    assert n_final == 1 and init1[0] is folds[0] and ep1 == params["max_epochs"]
+    calls.clear()
+    diagnosers.make("lrgf-glr", **{**params, "refit_epochs": None}).fit(train)
+    assert [(n, i, e) for n, i, e, _ in calls] == [(4, None, None)]

@@ -1,0 +1,58 @@
+"""How much of the physical limit comes from knowing the true inputs? Validation seeds only.
+
+Scores the two reference rows of :mod:`evaluation.oracle` on a track's *validation* protocol
+(episodes from seed 5000, calibration from seed 9000): the physical limit (the healthy plant for
+the true inputs) and the perfect model driven by the measured inputs (what any
+simulation-residual detector reads). ``--channels`` restricts both observers to some
+temperatures (e.g. ``T_rg1``: a perfect model of the T_rg1 relation alone).
+
+    python scripts/input_noise_limit.py --track paper --n-healthy 30 --n-faulty 10
+
+Prints per fault r_td and mean t_dt [samples] of both rows, and their healthy residual std [°C].
+"""
+
+from __future__ import annotations
+
+import argparse
+
+from evaluation.oracle import OracleConfig, oracle_records
+from evaluation.records import summarize
+from evaluation.sources import TrackData
+from evaluation.tracks import TRACKS
+from fcc_env.params import MEASUREMENT_NAMES
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--track", default="paper")
+    ap.add_argument("--n-healthy", type=int, default=30)
+    ap.add_argument("--n-faulty", type=int, default=10)
+    ap.add_argument("--channels", default="T_rx,T_rg1,T_rg2,T_d1,T_dg")
+    a = ap.parse_args()
+    track = (
+        TRACKS[a.track]
+        .with_seeds(test=5000, validation=9000)
+        .replace(n_healthy=a.n_healthy, n_faulty=a.n_faulty)
+    )
+    data = TrackData(track=track)
+    channels = tuple(a.channels.split(","))
+    print(f"track {a.track} (validation seeds), channels {', '.join(channels)}")
+    for inputs in ("true", "measured"):
+        cfg = OracleConfig(channels=channels, inputs=inputs)
+        seed = track.validation_seeds[0]
+        y = data.load_test("nominal", seed).episode.y
+        ref = data.reference(seed, y if inputs == "measured" else None)[: len(y)]
+        idx = [MEASUREMENT_NAMES.index(c) for c in channels]
+        std = (y[:, idx] - ref[:, idx]).std(axis=0)
+        stats = {s.scenario: s for s in summarize(oracle_records(data, cfg))}
+        line = f"{cfg.label:33s} r_fd {stats['nominal'].r_fd:.4f}"
+        for f in ("f1", "f2", "f3", "f4"):
+            if f in stats:
+                line += f" | {f} {stats[f].r_td:.3f}/{stats[f].t_dt:.0f}"
+        print(line)
+        print(f"{'':33s} healthy residual std [°C]: " + ", ".join(
+            f"{c} {v:.3f}" for c, v in zip(channels, std, strict=True)))  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()
