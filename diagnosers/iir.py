@@ -110,42 +110,22 @@ def numerator_from_state_space(a: torch.Tensor, b: torch.Tensor, b0: torch.Tenso
 
 
 # ---- differentiable lfilter --------------------------------------------------------------------
-def _channels_first(x: torch.Tensor) -> np.ndarray:
-    """(B, T, C) tensor -> contiguous float64 (C, B, T) array: each channel's filter then runs
-    over contiguous memory."""
-    return np.ascontiguousarray(x.detach().cpu().numpy().astype(np.float64).transpose(2, 0, 1))
-
-
-def _to_tensor(a: np.ndarray, like: torch.Tensor) -> torch.Tensor:
-    """(C, B, T) array -> (B, T, C) tensor in ``like``'s dtype and device."""
-    return torch.from_numpy(np.ascontiguousarray(a.transpose(1, 2, 0))).to(like)
-
-
 def _lfilter_channels(num: np.ndarray, den_full: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """``lfilter`` along the last axis of ``x`` (C, B, T) with per-channel coefficients (C, .)."""
+    """``lfilter`` along axis 1 of ``x`` (B, T, C) with per-channel coefficients (C, .)."""
     out = np.empty_like(x)
-    for c in range(x.shape[0]):
-        out[c] = sps.lfilter(num[c], den_full[c], x[c], axis=-1)
+    for c in range(x.shape[2]):
+        out[:, :, c] = sps.lfilter(num[c], den_full[c], x[:, :, c], axis=1)
     return out
 
 
 def _lagged_sums(g: np.ndarray, x: np.ndarray, n_lags: int, first_lag: int) -> np.ndarray:
-    """``out[c, j] = sum_{b,t} g[c, b, t] x[c, b, t - (first_lag + j)]`` for ``j < n_lags``."""
-    t_len = x.shape[2]
-    out = np.zeros((x.shape[0], n_lags))
+    """``out[c, j] = sum_{b,t} g[b, t, c] x[b, t - (first_lag + j), c]`` for ``j < n_lags``."""
+    t_len = x.shape[1]
+    out = np.zeros((x.shape[2], n_lags))
     for j in range(n_lags):
         lag = first_lag + j
         if lag < t_len:
-            out[:, j] = np.einsum("cbt,cbt->c", g[:, :, lag:], x[:, :, : t_len - lag])
-    return out
-
-
-def _anticausal_fir(num: np.ndarray, g: np.ndarray) -> np.ndarray:
-    """``out[c, b, t] = sum_j num[c, j] g[c, b, t + j]`` (zero past the end), ``g`` (C, B, T)."""
-    out = num[:, 0, None, None] * g
-    t_len = g.shape[2]
-    for j in range(1, min(num.shape[1], t_len)):
-        out[:, :, : t_len - j] += num[:, j, None, None] * g[:, :, j:]
+            out[:, j] = np.einsum("btc,btc->c", g[:, lag:], x[:, : t_len - lag])
     return out
 
 
@@ -156,24 +136,22 @@ class IIRFilterFunction(torch.autograd.Function):
     ``[a_1..a_na]`` (``a_0 = 1`` implied). Output ``y`` (B, T, C) in ``x``'s dtype.
 
     Backward (zero initial state, so the adjoint of a causal filter is the same filter run
-    backwards in time). With ``gA = flip(lfilter(1, A, flip(g)))``, the adjoint of ``1/A``
-    applied to the output gradient ``g`` (one recursive pass per channel):
+    backwards in time):
 
-    * ``dL/dx(t) = sum_j n_j gA(t + j)``: the adjoint of ``N/A`` is that of ``1/A`` followed by
-      the adjoint of the FIR ``N``;
-    * ``dy(t)/dn_j = (x/A)(t - j)``, so ``dL/dn_j = sum_t gA(t) x(t - j)``;
+    * ``dL/dx = flip(lfilter(N, A, flip(g)))``;
+    * ``dy(t)/dn_j = (x/A)(t - j)``, so ``dL/dn_j = sum_t gA(t) x(t - j)`` where
+      ``gA = flip(lfilter(1, A, flip(g)))`` is the adjoint of ``1/A`` applied to ``g``;
     * ``dy(t)/da_i = -(y/A)(t - i)``, so ``dL/da_i = -sum_t gA(t) y(t - i)``.
-
-    The arrays are laid out channel-first, (C, B, T), so every recursive pass runs over
-    contiguous memory.
     """
 
     @staticmethod
     def forward(x: torch.Tensor, num: torch.Tensor, den: torch.Tensor) -> torch.Tensor:  # type: ignore[override]
+        xn = x.detach().cpu().numpy().astype(np.float64, copy=False)
         nn_ = num.detach().cpu().numpy().astype(np.float64, copy=False)
         dn = den.detach().cpu().numpy().astype(np.float64, copy=False)
         den_full = np.concatenate([np.ones((dn.shape[0], 1)), dn], axis=1)
-        return _to_tensor(_lfilter_channels(nn_, den_full, _channels_first(x)), x)
+        y = _lfilter_channels(nn_, den_full, xn)
+        return torch.from_numpy(y).to(dtype=x.dtype, device=x.device)
 
     @staticmethod
     def setup_context(ctx: Any, inputs: tuple, output: torch.Tensor) -> None:
@@ -184,23 +162,25 @@ class IIRFilterFunction(torch.autograd.Function):
     def backward(ctx: Any, grad_y: torch.Tensor) -> tuple:  # type: ignore[override]
         x, num, den, y = ctx.saved_tensors
         need_x, need_num, need_den = ctx.needs_input_grad
-        if not (need_x or need_num or need_den):
-            return None, None, None
         nn_ = num.detach().cpu().numpy().astype(np.float64)
         dn = den.detach().cpu().numpy().astype(np.float64)
         den_full = np.concatenate([np.ones((dn.shape[0], 1)), dn], axis=1)
-        g_rev = np.ascontiguousarray(_channels_first(grad_y)[:, :, ::-1])
-        ones = np.ones((dn.shape[0], 1))
-        g_a = _lfilter_channels(ones, den_full, g_rev)[:, :, ::-1]
+        g_rev = grad_y.detach().cpu().numpy().astype(np.float64)[:, ::-1]
         grad_x = grad_num = grad_den = None
         if need_x:
-            grad_x = _to_tensor(_anticausal_fir(nn_, g_a), x)
-        if need_num:
-            gn = _lagged_sums(g_a, _channels_first(x), nn_.shape[1], first_lag=0)
-            grad_num = torch.from_numpy(gn).to(num)
-        if need_den:
-            gd = -_lagged_sums(g_a, _channels_first(y), dn.shape[1], first_lag=1)
-            grad_den = torch.from_numpy(gd).to(den)
+            gx = _lfilter_channels(nn_, den_full, np.ascontiguousarray(g_rev))[:, ::-1]
+            grad_x = torch.from_numpy(gx.copy()).to(dtype=x.dtype, device=x.device)
+        if need_num or need_den:
+            ones = np.ones((dn.shape[0], 1))
+            g_a = _lfilter_channels(ones, den_full, np.ascontiguousarray(g_rev))[:, ::-1]
+            if need_num:
+                xn = x.detach().cpu().numpy().astype(np.float64)
+                gn = _lagged_sums(g_a, xn, nn_.shape[1], first_lag=0)
+                grad_num = torch.from_numpy(gn).to(dtype=num.dtype, device=num.device)
+            if need_den:
+                yn = y.detach().cpu().numpy().astype(np.float64)
+                gd = -_lagged_sums(g_a, yn, dn.shape[1], first_lag=1)
+                grad_den = torch.from_numpy(gd).to(dtype=den.dtype, device=den.device)
         return grad_x, grad_num, grad_den
 
 
