@@ -430,9 +430,10 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="NAME[,NAME...]",
         help=(
             "benchmark v2: run the named tracks (paper, small, incipient, noisy, uncertain, "
-            "random, or all) with the physical-limit row and 95%% bootstrap intervals; writes "
-            "<out>/<track>/ and <out>/summary.md (default --out results/tracks). With --quick: "
-            "the baselines on 6 healthy and 3 faulty episodes per fault"
+            "random, or all) with the physical-limit and measured-input reference rows and 95%% "
+            "bootstrap intervals; writes <out>/<track>/ and <out>/summary.md (default --out "
+            "results/tracks). With --quick: the baselines on 6 healthy and 3 faulty episodes per "
+            "fault"
         ),
     )
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
