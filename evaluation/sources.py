@@ -298,7 +298,16 @@ class MeasuredInputs:
     """
 
     def __init__(self, y: np.ndarray, sample_time_s: float) -> None:
-        self.y = np.asarray(y, dtype=np.float64)
+        y = np.asarray(y, dtype=np.float64)
+        n_meas = len(MEASUREMENT_NAMES)
+        if y.ndim != 2 or y.shape[0] < 1 or y.shape[1] != n_meas:
+            raise ValueError(
+                f"measured has shape {y.shape}; allowed: (T, {n_meas}) with T >= 1, the columns "
+                f"{', '.join(MEASUREMENT_NAMES)}"
+            )
+        if not np.isfinite(y).all():
+            raise ValueError("measured contains NaN or inf; allowed: finite values")
+        self.y = y
         self.sample_time_s = float(sample_time_s)
 
     def transform_inputs(self, t_s: np.ndarray, u: np.ndarray) -> np.ndarray:
@@ -449,11 +458,11 @@ class TrackData:
             return ep.y_clean
         import fcc_env
 
-        measured = np.asarray(measured, dtype=np.float64)
+        replay = MeasuredInputs(measured, TRACK_SAMPLE_TIME_S)  # checks the shape and values
         res = fcc_env.simulate_episodes(
             [seed],
-            measured.shape[0],
-            plant_effects=[MeasuredInputs(measured, TRACK_SAMPLE_TIME_S)],
+            replay.y.shape[0],
+            plant_effects=[replay],
             noise_scale=self.track.noise_scale,
             sample_time_s=TRACK_SAMPLE_TIME_S,
             plant_uncertainty=PlantUncertainty() if self.track.plant_variation else None,

@@ -321,3 +321,9 @@ def test_slow_scale_parameters_are_checked(train) -> None:
         ValueError, match=r"slow_share=1.0 is outside the allowed range: .*\(0, 1\)"
     ):
         LRGFGLR(**{**FAST, "slow_ewma_lambda": 0.03, "slow_share": 1.0}).fit(train)
+
+
+@pytest.mark.parametrize("bad", [0, -5, 2.5, "100", True])
+def test_refit_epochs_outside_its_range_is_refused_by_name(train, bad) -> None:
+    with pytest.raises(ValueError, match=r"refit_epochs=.* is outside the allowed range"):
+        LRGFGLR(**{**FAST, "refit_epochs": bad}).fit(train)

@@ -91,6 +91,20 @@ def test_replaying_the_true_inputs_reproduces_the_reference(track) -> None:
     np.testing.assert_array_equal(data.reference(5, measured=ref), ref)
 
 
+@pytest.mark.parametrize(
+    ("bad", "match"),
+    [
+        (np.zeros((10, 5)), r"measured has shape \(10, 5\); allowed: \(T, 8\)"),
+        (np.zeros(8), r"measured has shape \(8,\); allowed"),
+        (np.full((10, 8), np.nan), r"measured contains NaN or inf"),
+    ],
+)
+def test_a_bad_measured_episode_is_refused_by_name(bad, match) -> None:
+    data = TrackData(track=TINY)
+    with pytest.raises(ValueError, match=match):
+        data.reference(0, measured=bad)
+
+
 def test_the_measured_input_row_sees_the_input_noise() -> None:
     """On a healthy episode the true-input residual is measurement noise alone; with the
     measured inputs the regenerator temperatures carry the input noise through the plant."""
