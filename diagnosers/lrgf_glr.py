@@ -371,9 +371,9 @@ class LRGFGLR(LRGFMEM):
         records are trained from scratch in one call, so that ``n_jobs`` processes share all of
         their (relation, training set) jobs. Otherwise the fold banks train first, and the bank
         on all records starts from the first fold's networks for ``refit_epochs`` epochs (at
-        most ``max_epochs``): it
-        only has to take in one more fold, and the out-of-fold residuals stay out of fold
-        (the warm start flows from a fold bank into the final bank, never back).
+        most ``max_epochs``): it only has to take in one more fold, and the out-of-fold
+        residuals stay out of fold (the warm start flows from a fold bank into the final bank,
+        never back).
         """
         folds = np.array_split(np.arange(len(ys)), self.n_folds)
         sets = [[ys[i] for i in range(len(ys)) if i not in set(f.tolist())] for f in folds]

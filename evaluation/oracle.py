@@ -52,6 +52,7 @@ __all__ = [
     "OracleInputs",
     "PhysicalLimit",
     "oracle_records",
+    "reference_records",
 ]
 
 #: The row's label in tables (never a registry name).
@@ -158,10 +159,18 @@ def oracle_records(
     """A reference row's records on every test cell of ``data`` (pure computation): the
     physical limit's, or with ``config.inputs="measured"`` the perfect model's on measured
     inputs."""
-    oracle = PhysicalLimit(data, config).fit()
+    return reference_records(data, [config or OracleConfig()], t_on=t_on)
+
+
+def reference_records(
+    data: TrackData, configs: Sequence[OracleConfig], *, t_on: int = 0
+) -> list[CellResult]:
+    """The records of several reference rows (one per config), each test cell simulated once."""
+    observers = [PhysicalLimit(data, c).fit() for c in configs]
     out = []
     for sc, seed in data.cells():
         loaded: LoadedEpisode = data.load_test(sc, seed)
-        # score_episode only calls .detect and reads .name, which the observer has.
-        out.append(score_episode(oracle, loaded, label=oracle.name, t_on=t_on))  # type: ignore[arg-type]
+        for obs in observers:
+            # score_episode only calls .detect and reads .name, which the observer has.
+            out.append(score_episode(obs, loaded, label=obs.name, t_on=t_on))  # type: ignore[arg-type]
     return out

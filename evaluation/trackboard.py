@@ -41,7 +41,13 @@ from evaluation.intervals import (
     share_with_alarm,
     worst,
 )
-from evaluation.oracle import MEASURED_INPUTS_LABEL, ORACLE_LABEL, OracleConfig, oracle_records
+from evaluation.oracle import (
+    ORACLE_LABEL,
+    REFERENCE_LABELS,
+    OracleConfig,
+    OracleInputs,
+    reference_records,
+)
 from evaluation.records import CellResult
 from evaluation.sources import TrackData
 from evaluation.store import ResultStore, canonical_hash
@@ -149,9 +155,8 @@ def track_rows(
     """The rows of a track table from per-seed records (pure; intervals seeded, reproducible)."""
     rows = []
     # the reference rows present in the records (the physical limit, the measured-input model)
-    refs = [
-        r for r in (ORACLE_LABEL, MEASURED_INPUTS_LABEL) if any(x.diagnoser == r for x in records)
-    ]
+    present = {x.diagnoser for x in records}
+    refs = [r for r in REFERENCE_LABELS.values() if r in present]
     for label in [*labels, *refs]:
         healthy = _by(records, label, "nominal")
         w = worst(healthy)
@@ -289,11 +294,8 @@ def run_track(
     )
     if model_cache is not None:
         _models_to_cache(config, store, model_cache)
-    records = (
-        *results.records,
-        *oracle_records(data),
-        *oracle_records(data, OracleConfig(inputs="measured")),
-    )
+    references = [OracleConfig(inputs=i) for i in OracleInputs]
+    records = (*results.records, *reference_records(data, references))
     rows = track_rows(records, [s.key for s in config.diagnosers], track.faults)
     if figures:
         write_figures(results, out / "figures")
