@@ -21,9 +21,9 @@ by the episode's *measured* inputs (R_ar with 0.5 % noise, T_ar and T_fp with 0.
 :meth:`evaluation.sources.TrackData.reference`), which is all a simulation-residual detector can
 read. The gap between the two rows is what knowing the true inputs is worth; the gap between a
 diagnoser and the second row is its model error (and its alarm stage). On `paper` (validation
-seeds) the measured inputs add 0.19 °C to the T_rg1 residual and move f3 from 12 to 20
-samples. Both rows use the same stage, which is not the best possible one: a detector with a
-better stage can beat either on slow or small faults (it is a reference, not a bound).
+seeds) the measured inputs add an independent 0.17 °C to the T_rg1 residual and move f3 from 12
+to 20 samples. Both rows use the same stage, which is not the best possible one: a detector
+with a better stage can beat either on slow or small faults (it is a reference, not a bound).
 
 >>> OracleConfig().channels
 ('T_rx', 'T_rg1', 'T_rg2', 'T_d1', 'T_dg')
