@@ -112,9 +112,12 @@ def numerator_from_state_space(a: torch.Tensor, b: torch.Tensor, b0: torch.Tenso
 # ---- differentiable lfilter --------------------------------------------------------------------
 def _lfilter_channels(num: np.ndarray, den_full: np.ndarray, x: np.ndarray) -> np.ndarray:
     """``lfilter`` along axis 1 of ``x`` (B, T, C) with per-channel coefficients (C, .)."""
-    out = np.empty_like(x)
-    for c in range(x.shape[2]):
-        out[:, :, c] = sps.lfilter(num[c], den_full[c], x[:, :, c], axis=1)
+    # each channel's (B, T) block contiguous for lfilter; the output keeps x's layout, on which
+    # the einsum order of the gradients (and so their last bits) depends
+    x_cbt = np.ascontiguousarray(np.moveaxis(x, 2, 0))
+    out = np.empty(x.shape)
+    for c in range(x_cbt.shape[0]):
+        out[:, :, c] = sps.lfilter(num[c], den_full[c], x_cbt[c], axis=1)
     return out
 
 
@@ -165,20 +168,20 @@ class IIRFilterFunction(torch.autograd.Function):
         nn_ = num.detach().cpu().numpy().astype(np.float64)
         dn = den.detach().cpu().numpy().astype(np.float64)
         den_full = np.concatenate([np.ones((dn.shape[0], 1)), dn], axis=1)
-        g_rev = grad_y.detach().cpu().numpy().astype(np.float64)[:, ::-1]
+        g_rev = grad_y.detach().cpu().numpy().astype(np.float64, copy=False)[:, ::-1]
         grad_x = grad_num = grad_den = None
         if need_x:
-            gx = _lfilter_channels(nn_, den_full, np.ascontiguousarray(g_rev))[:, ::-1]
+            gx = _lfilter_channels(nn_, den_full, g_rev)[:, ::-1]
             grad_x = torch.from_numpy(gx.copy()).to(dtype=x.dtype, device=x.device)
         if need_num or need_den:
             ones = np.ones((dn.shape[0], 1))
-            g_a = _lfilter_channels(ones, den_full, np.ascontiguousarray(g_rev))[:, ::-1]
+            g_a = _lfilter_channels(ones, den_full, g_rev)[:, ::-1]
             if need_num:
-                xn = x.detach().cpu().numpy().astype(np.float64)
+                xn = x.detach().cpu().numpy().astype(np.float64, copy=False)
                 gn = _lagged_sums(g_a, xn, nn_.shape[1], first_lag=0)
                 grad_num = torch.from_numpy(gn).to(dtype=num.dtype, device=num.device)
             if need_den:
-                yn = y.detach().cpu().numpy().astype(np.float64)
+                yn = y.detach().cpu().numpy().astype(np.float64, copy=False)
                 gd = -_lagged_sums(g_a, yn, dn.shape[1], first_lag=1)
                 grad_den = torch.from_numpy(gd).to(dtype=den.dtype, device=den.device)
         return grad_x, grad_num, grad_den

@@ -170,18 +170,29 @@ class NNARXErrorModel(nn.Module):
         self.out.bias.zero_()
 
     # -- simulation ------------------------------------------------------------------------------
-    def input_drive(self, u_n: torch.Tensor) -> torch.Tensor:
-        """Input part of the hidden pre-activation, ``W_1u [u(k-1)..u(k-n_b)] + c_1``.
+    def lagged_inputs(self, u_n: torch.Tensor) -> torch.Tensor:
+        """The input regressor ``[u(k-1)..u(k-n_b)]`` for every ``k`` (``u(<0) = u(0)``).
 
-        The inputs are known in advance, so this is computed for all ``k`` at once; only the
-        output feedback has to be stepped. Shape: ``(B, T, n) -> (B, T, n_hidden)``.
+        It does not depend on the parameters, so training builds it once per episode group and
+        passes it to :meth:`input_drive`. Shape: ``(B, T, n) -> (B, T, n_b n)``.
         """
         nb, t_len = self.input_delays, u_n.shape[1]
         pad = u_n[:, :1].expand(-1, nb, -1)
         u_pad = torch.cat([pad, u_n], dim=1)  # u_pad[:, j] = u(j - nb), u(<0) = u(0)
         lagged = torch.stack([u_pad[:, nb - d : nb - d + t_len] for d in range(1, nb + 1)], dim=2)
-        w_u = self.hidden.weight[:, : nb * self.n_inputs]
-        return lagged.flatten(2) @ w_u.T + self.hidden.bias
+        return lagged.flatten(2)
+
+    def input_drive(self, u_n: torch.Tensor, lagged: torch.Tensor | None = None) -> torch.Tensor:
+        """Input part of the hidden pre-activation, ``W_1u [u(k-1)..u(k-n_b)] + c_1``.
+
+        The inputs are known in advance, so this is computed for all ``k`` at once; only the
+        output feedback has to be stepped. ``lagged`` is :meth:`lagged_inputs` of ``u_n`` when
+        the caller has it already. Shape: ``(B, T, n) -> (B, T, n_hidden)``.
+        """
+        if lagged is None:
+            lagged = self.lagged_inputs(u_n)
+        w_u = self.hidden.weight[:, : self.input_delays * self.n_inputs]
+        return lagged @ w_u.T + self.hidden.bias
 
     def run_normalized(
         self, drive: torch.Tensor, y_past: torch.Tensor | None = None
@@ -217,22 +228,30 @@ class NNARXErrorModel(nn.Module):
             buf = torch.cat([y, buf[:, : (na - 1) * m]], dim=1)
         return torch.stack(outs, dim=1)
 
-    def one_step_normalized(self, drive: torch.Tensor, y_meas: torch.Tensor) -> torch.Tensor:
+    def lagged_outputs(self, y_meas: torch.Tensor) -> torch.Tensor:
+        """The measured output regressor ``[y(k-1)..y(k-n_a)]`` (``y(<0) = 0``) of
+        :meth:`one_step_normalized`. Shape: ``(B, T, m) -> (B, T, n_a m)``."""
+        na, t_len = self.output_delays, y_meas.shape[1]
+        y_pad = torch.cat([y_meas.new_zeros((y_meas.shape[0], na, self.n_outputs)), y_meas], 1)
+        return torch.stack(
+            [y_pad[:, na - d : na - d + t_len] for d in range(1, na + 1)], 2
+        ).flatten(2)
+
+    def one_step_normalized(
+        self, drive: torch.Tensor, y_meas: torch.Tensor, lagged: torch.Tensor | None = None
+    ) -> torch.Tensor:
         """One-step-ahead (series-parallel) prediction from *measured* past outputs.
 
         For training warm-starts only: with measured residuals in the regressor a fault would leak
         into the prediction, so detection never uses this. Past outputs before ``k = 0`` are 0.
+        ``lagged`` is :meth:`lagged_outputs` of ``y_meas`` when the caller has it already.
         Shape: ``drive`` ``(B, T, n_hidden)``, ``y_meas`` ``(B, T, m)`` -> ``(B, T, m)``.
         """
-        na, t_len = self.output_delays, drive.shape[1]
         pre = drive
-        if na:
-            y_pad = torch.cat([y_meas.new_zeros((y_meas.shape[0], na, self.n_outputs)), y_meas], 1)
-            lagged = torch.stack([y_pad[:, na - d : na - d + t_len] for d in range(1, na + 1)], 2)
-            pre = (
-                pre
-                + lagged.flatten(2) @ self.hidden.weight[:, self.input_delays * self.n_inputs :].T
-            )
+        if self.output_delays:
+            if lagged is None:
+                lagged = self.lagged_outputs(y_meas)
+            pre = pre + lagged @ self.hidden.weight[:, self.input_delays * self.n_inputs :].T
         y = self.out(torch.tanh(pre))
         return torch.tanh(y) if self.output_activation is OutputActivation.TANH else y
 

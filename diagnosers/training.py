@@ -575,6 +575,9 @@ def fit_mem(
         )
     win = min(window, *(g.train.stop - g.train.start for g in groups))
     na, m = mem.output_delays, mem.n_outputs
+    # the regressors do not depend on the parameters: built once, not in every epoch
+    lagged_u = [mem.lagged_inputs(g.u) for g in groups]
+    lagged_val = [mem.lagged_inputs(g.u) for g in val_groups]
 
     def windows(
         offset: int,
@@ -598,8 +601,8 @@ def fit_mem(
     def val_loss() -> float:
         sse, cnt = 0.0, 0
         with torch.no_grad():
-            for g in val_groups:
-                pred = mem.run_normalized(mem.input_drive(g.u))
+            for g, lagged in zip(val_groups, lagged_val, strict=True):
+                pred = mem.run_normalized(mem.input_drive(g.u, lagged))
                 s, n = _sse(pred, g.y, g.val)
                 sse, cnt = sse + float(s), cnt + n
         return sse / cnt if cnt else float("nan")
@@ -611,11 +614,12 @@ def fit_mem(
         opt = torch.optim.Adam(mem.parameters(), lr=lr)
         if pretrain_epochs:
             pre_opt = torch.optim.Adam(mem.parameters(), lr=lr)
+            lagged_y = [mem.lagged_outputs(g.y) if na else None for g in groups]
             for _ in range(pretrain_epochs):
                 pre_opt.zero_grad(set_to_none=True)
                 sse, cnt = 0.0, 0
-                for g in groups:
-                    pred = mem.one_step_normalized(mem.input_drive(g.u), g.y)
+                for g, lu, ly in zip(groups, lagged_u, lagged_y, strict=True):
+                    pred = mem.one_step_normalized(mem.input_drive(g.u, lu), g.y, ly)
                     s, n = _sse(pred, g.y, g.train)
                     sse, cnt = sse + s, cnt + n
                 (sse / cnt).backward()
@@ -629,7 +633,7 @@ def fit_mem(
                     vl = val_loss()
                 else:
                     with torch.no_grad():
-                        vl = float(_window_loss(mem, groups, windows, win, 0))
+                        vl = float(_window_loss(mem, groups, windows, win, 0, lagged_u))
                 res.val_loss.append(vl)
                 if best.update(vl, epoch):
                     res.stopped_early = True
@@ -638,14 +642,18 @@ def fit_mem(
                     bar.set_postfix(val=f"{vl:.4g}")
             offset = int(torch.randint(0, win, (1,), generator=gen))
             opt.zero_grad(set_to_none=True)
-            loss = _window_loss(mem, groups, windows, win, offset)
+            loss = _window_loss(mem, groups, windows, win, offset, lagged_u)
             loss.backward()
             opt.step()
             res.train_loss.append(float(loss.detach()))
             res.n_epochs = epoch + 1
         else:
             # judge the parameters of the last step too
-            vl = val_loss() if val_groups else float(_window_loss(mem, groups, windows, win, 0))
+            if val_groups:
+                vl = val_loss()
+            else:
+                with torch.no_grad():
+                    vl = float(_window_loss(mem, groups, windows, win, 0, lagged_u))
             res.val_loss.append(vl)
             best.update(vl, max_epochs)
         bar.close()
@@ -661,11 +669,13 @@ def _window_loss(
     windows: Callable[[int], tuple[list[torch.Tensor], torch.Tensor, torch.Tensor]],
     win: int,
     offset: int,
+    lagged_u: list[torch.Tensor],
 ) -> torch.Tensor:
     starts_all, past, target = windows(offset)
     drives = []
-    for g, starts in zip(groups, starts_all, strict=True):
-        drive = mem.input_drive(g.u)  # whole episodes: the input delays need no window padding
+    for g, lagged, starts in zip(groups, lagged_u, starts_all, strict=True):
+        # whole episodes: the input delays need no window padding
+        drive = mem.input_drive(g.u, lagged)
         for s in starts.tolist():
             drives.append(drive[:, s : s + win])
     pred = mem.run_normalized(torch.cat(drives), past)

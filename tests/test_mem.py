@@ -60,6 +60,31 @@ def test_streaming_equals_batch_simulation(n: int, m: int, nb: int, na: int, act
     )
 
 
+def test_regressors_by_their_definition() -> None:
+    """``lagged_inputs``/``lagged_outputs`` against an index-by-index build, and the cached
+    regressors give the drive and the one-step prediction to the bit."""
+    n, m, nb, na, t_len = 2, 1, 4, 3, 30
+    mem = NNARXErrorModel(n, m, n_hidden=3, input_delays=nb, output_delays=na, seed=1).double()
+    rng = np.random.default_rng(2)
+    u = torch.as_tensor(rng.normal(size=(2, t_len, n)))
+    y = torch.as_tensor(rng.normal(size=(2, t_len, m)))
+    lu, ly = mem.lagged_inputs(u).numpy(), mem.lagged_outputs(y).numpy()
+    assert lu.shape == (2, t_len, nb * n) and ly.shape == (2, t_len, na * m)
+    for k in range(t_len):
+        for d in range(1, nb + 1):  # u(k - d), held at u(0) before the start
+            np.testing.assert_array_equal(lu[:, k, (d - 1) * n : d * n], u[:, max(k - d, 0)])
+        for d in range(1, na + 1):  # y(k - d), zero before the start
+            want = y[:, k - d] if k - d >= 0 else np.zeros((2, m))
+            np.testing.assert_array_equal(ly[:, k, (d - 1) * m : d * m], want)
+    with torch.no_grad():
+        drive = mem.input_drive(u)
+        assert torch.equal(mem.input_drive(u, mem.lagged_inputs(u)), drive)
+        assert torch.equal(
+            mem.one_step_normalized(drive, y, mem.lagged_outputs(y)),
+            mem.one_step_normalized(drive, y),
+        )
+
+
 def test_bank_stepper_equals_each_models_stepper() -> None:
     """Models of different sizes, delays and output activations, stacked with zero padding."""
     shapes = [(2, 4, 15, 15, "linear"), (1, 3, 3, 0, "tanh"), (3, 6, 2, 4, "linear")]
