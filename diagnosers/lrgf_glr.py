@@ -63,7 +63,10 @@ integrates the baseline's settling transient for a few of its time constants (1/
 unlike the training plants) and loses small, slow faults that stay under the hold level.
 
 ``signal`` is ``[T², score_f1, ...]`` with ``upper`` their limits; alarm when any exceeds its
-limit after the silent warm-up.
+limit after the silent warm-up, for ``on_delay`` samples in a row (an alarm system's on-delay,
+as in ISA-18.2; the same or different statistics). The limits stay per sample: an on-delay of
+d removes exceedances shorter than d samples (most healthy ones are single samples) and
+delays every alarm by d − 1 samples, so it is chosen together with ``false_alarm_target``.
 """
 
 from __future__ import annotations
@@ -128,6 +131,7 @@ GLR_CONSTRAINTS: dict[str, Any] = {
     "baseline_settle": Integer(0, 100_000),
     "slow_ewma_lambda": Real(0, 1, closed="left"),
     "slow_share": Real(0, 1, closed="neither"),
+    "on_delay": Integer(1, 1000),
 }
 
 #: the FCC-v0 faults whose directions are learned by default
@@ -159,6 +163,7 @@ class LRGFGLR(LRGFMEM):
         baseline_settle: int = 200,
         slow_ewma_lambda: float = 0.02,
         slow_share: float = 0.5,
+        on_delay: int = 1,
         relations: list[list[Any]] | None = None,
         n_hidden: int | list[int] | None = None,
         order: int = 2,
@@ -223,6 +228,7 @@ class LRGFGLR(LRGFMEM):
         self.baseline_settle = baseline_settle
         self.slow_ewma_lambda = slow_ewma_lambda
         self.slow_share = slow_share
+        self.on_delay = on_delay
 
     @classmethod
     def fast_params(cls) -> dict[str, Any]:
@@ -467,6 +473,7 @@ class LRGFGLR(LRGFMEM):
         self._ewma = EWMA(self.ewma_lambda)
         self._ewma_slow = EWMA(self.slow_ewma_lambda) if self._has_slow_scale else None
         self._seq = self._sequential() if len(self.h_dir_) else None
+        self._over_run = 0  # samples in a row with a statistic over its limit
         self._reset_baseline()
 
     def _reset_baseline(self) -> None:
@@ -543,7 +550,8 @@ class LRGFGLR(LRGFMEM):
 
     def _decision(self, resid: np.ndarray, signal: np.ndarray, warm: bool) -> Decision:
         upper = self._no_limit if warm else self.upper_
-        return Decision(bool((signal > upper).any()), signal, self._lower, upper, resid)
+        self._over_run = self._over_run + 1 if (signal > upper).any() else 0
+        return Decision(self._over_run >= self.on_delay, signal, self._lower, upper, resid)
 
     def _update(self, y: np.ndarray) -> Decision:
         centre = self._step_centre(y)

@@ -139,13 +139,13 @@ def main() -> None:
     e.add_argument("--holds", default="0.5")
     e.add_argument("--n-healthy", type=int, default=60)
     e.add_argument("--n-faulty", type=int, default=10)
-    e.add_argument("--set", default="", help="extra hyperparameters k=v,k=v (floats)")
+    e.add_argument("--set", default="", help="extra hyperparameters k=v,k=v (JSON values)")
     a = ap.parse_args()
     if a.cmd == "train":
         train(a.track, a.epochs, a.tag, a.n_train, json.loads(a.params))
         return
     det, cal, w = load(a.track, a.tag)
-    extra = {kv.split("=")[0]: float(kv.split("=")[1]) for kv in a.set.split(",") if kv}
+    extra = {kv.split("=")[0]: json.loads(kv.split("=")[1]) for kv in a.set.split(",") if kv}
     tracks = (a.eval_tracks or a.track).split(",")
     eps = {tr: episodes(a.track, a.n_healthy, a.n_faulty, tr) for tr in tracks}
     results = []

@@ -327,3 +327,34 @@ def test_slow_scale_parameters_are_checked(train) -> None:
 def test_refit_epochs_outside_its_range_is_refused_by_name(train, bad) -> None:
     with pytest.raises(ValueError, match=r"refit_epochs=.* is outside the allowed range"):
         LRGFGLR(**{**FAST, "refit_epochs": bad}).fit(train)
+
+
+# ---- the on-delay --------------------------------------------------------------------------------
+@pytest.mark.parametrize("on_delay", [2, 5])
+def test_on_delay_alarms_after_that_many_exceedances_in_a_row(
+    slow_det, train, on_delay, tmp_path
+) -> None:
+    det = LRGFGLR(**{**slow_det.get_params(), "on_delay": on_delay}).fit(train)
+    ep = inject_step_fault(make_episode(900, seed=9), onset=500, magnitude=1.5)
+    batch = _stream_equals_batch(det, ep)
+    # oracle: the run length of "some statistic over its limit", from the signal itself
+    over = (batch.signal > batch.upper).any(axis=1)
+    run = np.zeros(len(over), dtype=int)
+    for k, o in enumerate(over):
+        run[k] = run[k - 1] + 1 if o and k else int(o)
+    np.testing.assert_array_equal(batch.alarm, run >= on_delay)
+    assert over[det.steady_window :].any() and not over.all()  # the test has teeth
+    assert batch.alarm.sum() < over.sum()
+    # the limits stay per sample: without the on-delay the same fit alarms on every exceedance
+    np.testing.assert_array_equal(det.upper_, slow_det.upper_)
+    np.testing.assert_array_equal(slow_det.detect(ep).alarm, over)
+    det.save(tmp_path / "m")
+    again = diagnosers.Diagnoser.load(tmp_path / "m")
+    assert again.on_delay == on_delay
+    np.testing.assert_array_equal(again.detect(ep).alarm, batch.alarm)
+
+
+@pytest.mark.parametrize("bad", [0, -1, 2.5, "3", 1001])
+def test_on_delay_outside_its_range_is_refused_by_name(train, bad) -> None:
+    with pytest.raises(ValueError, match=r"on_delay=.* is outside the allowed range"):
+        LRGFGLR(**{**FAST, "on_delay": bad}).fit(train)
