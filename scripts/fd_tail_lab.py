@@ -29,6 +29,7 @@ import diagnosers
 from evaluation.intervals import bootstrap_ci
 from evaluation.metrics import episode_scores
 from evaluation.sources import TrackData
+from fcc_env.simulation import AFTERBURN_WARNING_C
 
 
 def healthy_episodes(track: str, n_healthy: int) -> np.ndarray:
@@ -52,33 +53,45 @@ def alarm_runs(alarm: np.ndarray) -> list[tuple[int, int]]:
 
 def streak_report(det, ys: np.ndarray, train: np.ndarray, min_length: int) -> None:
     """The run-length profile of the healthy alarms and, per run of ``min_length`` samples or
-    more, the statistic furthest over its limit and how far each channel was outside its range
-    in the training episodes (in training standard deviations, over the run and the 200 samples
-    before it)."""
+    more, the statistic furthest over its limit, how far each channel was outside its range in
+    the training episodes (in training standard deviations, over the run and the 200 samples
+    before it) and the share of the run in the afterburn warning region (measured T_d1 − T_rg1
+    above ``fcc_env.simulation.AFTERBURN_WARNING_C``)."""
     lo, hi, sd = train.min(axis=0), train.max(axis=0), train.std(axis=0)
-    lengths, long_runs = [], []
+    names = list(det.channels_)
+    d1, rg1 = names.index("T_d1"), names.index("T_rg1")
+    lengths, long_runs, warn_all, warn_alarm = [], [], [], []
     for i, y in enumerate(ys):
         d = det.detect(diagnosers.Episode(y, det.channels_, 10.0))
         outside = np.maximum((y - hi) / sd, (lo - y) / sd).clip(0.0)
+        warning = y[:, d1] - y[:, rg1] > AFTERBURN_WARNING_C
+        warn_all.append(warning)
+        warn_alarm.append(warning[d.alarm])
         for start, n in alarm_runs(d.alarm):
             lengths.append(n)
             if n >= min_length:
                 sl = slice(start, start + n)
                 worst = int(np.argmax((d.signal[sl] / d.upper[sl]).max(axis=0)))
                 beyond = outside[max(0, start - 200) : start + n].max(axis=0)
-                long_runs.append((i, start, n, det.signal_names_[worst], beyond))
+                long_runs.append(
+                    (i, start, n, det.signal_names_[worst], beyond, warning[sl].mean())
+                )
     n_runs = np.array(lengths)
     total = n_runs.sum()
     print(
         f"{len(n_runs)} alarm runs, {total} samples: {np.sum(n_runs == 1)} single samples "
         f"({n_runs[n_runs == 1].sum() / total:.0%} of the alarm samples); "
         f"{np.sum(n_runs >= min_length)} runs of {min_length} or more "
-        f"({n_runs[n_runs >= min_length].sum() / total:.0%})"
+        f"({n_runs[n_runs >= min_length].sum() / total:.0%}); afterburn warning region: "
+        f"{np.concatenate(warn_all).mean():.2%} of healthy samples, "
+        f"{np.concatenate(warn_alarm).mean():.2%} of alarm samples"
     )
-    names = list(det.channels_)
-    for i, start, n, stat, beyond in long_runs:
+    for i, start, n, stat, beyond, warn in long_runs:
         out = ", ".join(f"{c} {b:.2f}" for c, b in zip(names, beyond, strict=True) if b > 0)
-        print(f"  episode {i} from sample {start}: {n} samples, {stat}; outside training: {out}")
+        print(
+            f"  episode {i} from sample {start}: {n} samples, {stat}; afterburn warning "
+            f"{warn:.0%}; outside training: {out}"
+        )
 
 
 def main() -> None:
