@@ -51,7 +51,9 @@ def alarm_runs(alarm: np.ndarray) -> list[tuple[int, int]]:
     return [(int(s), int(e - s)) for s, e in zip(starts, ends, strict=True)]
 
 
-def streak_report(det, ys: np.ndarray, train: np.ndarray, min_length: int) -> None:
+def streak_report(
+    det, ys: np.ndarray, detections: list, train: np.ndarray, min_length: int
+) -> None:
     """The run-length profile of the healthy alarms and, per run of ``min_length`` samples or
     more, the statistic furthest over its limit, how far each channel was outside its range in
     the training episodes (in training standard deviations, over the run and the 200 samples
@@ -61,8 +63,7 @@ def streak_report(det, ys: np.ndarray, train: np.ndarray, min_length: int) -> No
     names = list(det.channels_)
     d1, rg1 = names.index("T_d1"), names.index("T_rg1")
     lengths, long_runs, warn_all, warn_alarm = [], [], [], []
-    for i, y in enumerate(ys):
-        d = det.detect(diagnosers.Episode(y, det.channels_, 10.0))
+    for i, (y, d) in enumerate(zip(ys, detections, strict=True)):
         outside = np.maximum((y - hi) / sd, (lo - y) / sd).clip(0.0)
         warning = y[:, d1] - y[:, rg1] > AFTERBURN_WARNING_C
         warn_all.append(warning)
@@ -94,34 +95,58 @@ def streak_report(det, ys: np.ndarray, train: np.ndarray, min_length: int) -> No
         )
 
 
+def _at_least(low: int):
+    """An argparse type: an integer >= ``low``, refused by value and range otherwise."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            value = None
+        if value is None or value < low:
+            raise argparse.ArgumentTypeError(f"{text!r}; allowed: an integer >= {low}")
+        return value
+
+    return parse
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--track", default="paper")
     ap.add_argument("--tag", default="", help="the lab bank's name suffix")
     ap.add_argument("--targets", default="0.03", help="false_alarm_target values, comma-separated")
-    ap.add_argument("--n-healthy", type=int, default=200)
-    ap.add_argument("--block", type=int, default=50, help="episodes per block (a track's 50)")
+    ap.add_argument("--n-healthy", type=_at_least(1), default=200)
+    ap.add_argument(
+        "--block", type=_at_least(2), default=50, help="episodes per block (a track's 50)"
+    )
     ap.add_argument("--set", default="", help="extra hyperparameters k=v,k=v (JSON values)")
     ap.add_argument(
-        "--streaks", type=int, default=0, help="report alarm runs of this many samples or more"
+        "--streaks",
+        type=_at_least(0),
+        default=0,
+        help="report alarm runs of this many samples or more (0: no report)",
     )
     a = ap.parse_args()
+    if a.block > a.n_healthy:
+        ap.error(f"--block {a.block}; allowed: at most --n-healthy ({a.n_healthy})")
     det, cal, w = load(a.track, a.tag)
     extra = {kv.split("=")[0]: json.loads(kv.split("=")[1]) for kv in a.set.split(",") if kv}
     ys = healthy_episodes(a.track, a.n_healthy)
+    train = (
+        np.concatenate([e.y for e in TrackData(track=val_track(a.track, 1, 1)).train_episodes()])
+        if a.streaks
+        else None
+    )
     out = []
     for target in [float(t) for t in a.targets.split(",")]:
         det.set_params(false_alarm_target=target, **extra)
         det._calibrate(cal, w)
         det._fitted_ = True  # the lab re-calibrates the stored bank in place
-        r_fd = np.array(
-            [
-                episode_scores(det.detect(diagnosers.Episode(y, det.channels_, 10.0)).alarm, None)[
-                    "r_fd"
-                ]
-                for y in tqdm(ys, f"target {target}", leave=False)
-            ]
-        )
+        detections = [
+            det.detect(diagnosers.Episode(y, det.channels_, 10.0))
+            for y in tqdm(ys, f"target {target}", leave=False)
+        ]
+        r_fd = np.array([episode_scores(d.alarm, None)["r_fd"] for d in detections])
         ci = bootstrap_ci(r_fd, method="BCa", rng=0)
         blocks = [r_fd[i : i + a.block] for i in range(0, len(r_fd) - a.block + 1, a.block)]
         block_ci = [bootstrap_ci(b, method="BCa", rng=0) for b in blocks]
@@ -134,10 +159,7 @@ def main() -> None:
         )
         out.append({"target": target, **extra, "r_fd": r_fd.tolist()})
         if a.streaks:
-            train = np.concatenate(
-                [e.y for e in TrackData(track=val_track(a.track, 1, 1)).train_episodes()]
-            )
-            streak_report(det, ys, train, a.streaks)
+            streak_report(det, ys, detections, train, a.streaks)
     (OUT / f"false-alarm-{a.track}{a.tag}-{int(time.time())}.json").write_text(json.dumps(out))
 
 

@@ -5,6 +5,8 @@ from __future__ import annotations
 import builtins
 import json
 import os
+import subprocess
+import sys
 import time
 from pathlib import Path
 
@@ -385,3 +387,26 @@ def test_bad_manifest(tmp_path, changes, match) -> None:
 
     with pytest.raises(ValueError, match=match):
         load_manifest(_manifest(tmp_path, **changes))
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--block", "0"], "'0'; allowed: an integer >= 2"),
+        (["--streaks", "-1"], "'-1'; allowed: an integer >= 0"),
+        (["--n-healthy", "x"], "'x'; allowed: an integer >= 1"),
+        (["--n-healthy", "20", "--block", "50"], "--block 50; allowed: at most --n-healthy (20)"),
+    ],
+)
+def test_fd_tail_lab_refuses_bad_flags_by_value_and_range(args, message) -> None:
+    # the flags are checked before any bank is loaded or episode simulated
+    root = Path(__file__).resolve().parents[1]
+    done = subprocess.run(
+        [sys.executable, str(root / "scripts" / "fd_tail_lab.py"), *args],
+        capture_output=True,
+        text=True,
+        cwd=root,
+        timeout=120,
+    )
+    assert done.returncode == 2
+    assert message in done.stderr
