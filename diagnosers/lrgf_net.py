@@ -24,6 +24,7 @@ from diagnosers.iir import (
     numerator_from_state_space,
     reflection_from_denominator,
 )
+from diagnosers.lrgf_fused import lrgf_free_run
 
 __all__ = ["LRGF", "InitialState", "lrgf_activation", "set_scaler_buffers"]
 
@@ -324,7 +325,20 @@ class LRGF(nn.Module):
         return iir_filter(s, num, den)
 
     def forward_normalized(self, u_n: torch.Tensor) -> torch.Tensor:
-        """Eq. (6) on standardised signals, shape ``(B, T, n) -> (B, T, m)``."""
+        """Eq. (6) on standardised signals, shape ``(B, T, n) -> (B, T, m)``.
+
+        One fused function with a hand-written backward (:func:`diagnosers.lrgf_fused.lrgf_free_run`,
+        about twice as fast to train); :meth:`forward_reference` is the same equation as a chain
+        of torch operations, which the tests hold it to.
+        """
+        num, den = self.filter_coefficients()
+        steady = self.steady_window if self.initial_state is InitialState.STEADY else 0
+        return lrgf_free_run(
+            u_n, self.weight_in, num, den, self.g1, self.g2, self.weight_out, self.bias_out, steady
+        )
+
+    def forward_reference(self, u_n: torch.Tensor) -> torch.Tensor:
+        """:meth:`forward_normalized` through :meth:`linear_part` and torch's autograd (the oracle)."""
         h = lrgf_activation(self.linear_part(u_n), self.g1, self.g2)
         y = h @ self.weight_out.T
         if self.bias_out is not None:

@@ -17,6 +17,7 @@ from diagnosers.lrgf import (
     lrgf_activation,
     reflection_from_denominator,
 )
+from diagnosers.lrgf_fused import lrgf_free_run
 from diagnosers.training import SPSAOptions, build_module, export_module, fit_lrgf
 
 
@@ -370,3 +371,80 @@ def test_persistence_round_trip(tmp_path, dtype: torch.dtype) -> None:
     np.testing.assert_array_equal(net2.predict(u), net.predict(u))
     with pytest.raises(ValueError, match="unknown module kind"):
         build_module({"kind": "gru"}, loaded)
+
+
+# ---- fused free run (diagnosers.lrgf_fused) against the torch-autograd reference ---------------
+@pytest.mark.parametrize(
+    ("initial_state", "steady_window", "t_len"),
+    [("zero", 1, 300), ("steady", 1, 300), ("steady", 50, 300), ("steady", 300, 300),
+     ("steady", 400, 300), ("steady", 7, 8)],
+)  # fmt: skip
+@pytest.mark.parametrize("output_bias", [False, True])
+@pytest.mark.parametrize("order", [1, 2, 3])
+def test_fused_free_run_equals_reference_values_and_gradients(
+    initial_state: str, steady_window: int, t_len: int, output_bias: bool, order: int
+) -> None:
+    net = LRGF(
+        3, 4, order, 2, output_bias=output_bias, initial_state=initial_state,
+        steady_window=steady_window, seed=order,
+    ).double()  # fmt: skip
+    rng = np.random.default_rng(order)
+    u = torch.from_numpy(np.cumsum(rng.normal(size=(2, t_len, 3)), axis=1) * 0.1)
+    u.requires_grad_(True)
+    weights = torch.from_numpy(rng.normal(size=(2, t_len, 2)))
+    leaves = [u, *net.parameters()]
+    ref = net.forward_reference(u)
+    new = net.forward_normalized(u)
+    np.testing.assert_allclose(new.detach().numpy(), ref.detach().numpy(), rtol=0, atol=1e-13)
+    g_ref = torch.autograd.grad((ref * weights).sum(), leaves)
+    g_new = torch.autograd.grad((new * weights).sum(), leaves)
+    for a, b in zip(g_ref, g_new, strict=True):
+        np.testing.assert_allclose(b.numpy(), a.numpy(), rtol=1e-10, atol=1e-12)
+
+
+def test_fused_free_run_float32_matches_reference() -> None:
+    net = LRGF(2, 3, 2, 1, output_bias=True, initial_state="steady", steady_window=20, seed=5)
+    u = torch.randn(3, 200, 2, generator=torch.Generator().manual_seed(1))
+    new, ref = net.forward_normalized(u), net.forward_reference(u)
+    assert new.dtype == torch.float32
+    np.testing.assert_allclose(new.detach().numpy(), ref.detach().numpy(), atol=1e-5)
+    (new.sum()).backward()
+    assert all(p.grad is not None and p.grad.dtype == torch.float32 for p in net.parameters())
+
+
+@pytest.mark.parametrize("steady_window", [0, 1, 5])
+def test_gradcheck_fused_free_run(steady_window: int) -> None:
+    gen = torch.Generator().manual_seed(steady_window)
+
+    def rand(*shape: int) -> torch.Tensor:
+        return torch.randn(*shape, dtype=torch.float64, generator=gen).requires_grad_(True)
+
+    k = 0.8 * torch.tanh(torch.randn(3, 2, dtype=torch.float64, generator=gen))
+    den = denominator_from_reflection(k).detach().requires_grad_(True)
+    args = (
+        rand(2, 11, 2),
+        rand(3, 2),
+        rand(3, 3),
+        den,
+        rand(3),
+        0.5 + torch.rand(3, dtype=torch.float64, generator=gen).requires_grad_(True),
+        rand(2, 3),
+        rand(2),
+    )
+    assert torch.autograd.gradcheck(lambda *a: lrgf_free_run(*a, steady_window=steady_window), args)
+
+
+def test_fused_free_run_refuses_bad_input() -> None:
+    w = torch.zeros(3, 2, dtype=torch.float64)
+    args = (
+        w,
+        torch.zeros(3, 3),
+        torch.zeros(3, 2),
+        torch.zeros(3),
+        torch.ones(3),
+        torch.zeros(1, 3),
+    )
+    with pytest.raises(ValueError, match=r"u_n must have shape \(batch, time, 2\)"):
+        lrgf_free_run(torch.zeros(4, 2), *args)
+    with pytest.raises(ValueError, match="steady_window=-1"):
+        lrgf_free_run(torch.zeros(1, 4, 2), *args, steady_window=-1)
