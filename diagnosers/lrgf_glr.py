@@ -96,7 +96,7 @@ from diagnosers.lrgf_mem import (
 )
 from diagnosers.parallel import TrainedBank
 from diagnosers.registry import register
-from fcc_env.validation import Integer, Options, Real, check_params
+from fcc_env.validation import Integer, Options, Real, RealSequence, check_params
 
 __all__ = ["LRGFGLR", "Calibration", "DirectionalDetector", "LRGFGLRAdaptive"]
 
@@ -129,7 +129,7 @@ GLR_CONSTRAINTS: dict[str, Any] = {
     "baseline_lambda": Real(0, 1, closed="left"),
     "baseline_hold": Real(0, 1, closed="right"),
     "baseline_settle": Integer(0, 100_000),
-    "slow_ewma_lambda": Real(0, 1, closed="left"),
+    "slow_ewma_lambda": (Real(0, 1, closed="left"), RealSequence(0, 1, closed="neither")),
     "slow_share": Real(0, 1, closed="neither"),
     "on_delay": Integer(1, 1000),
 }
@@ -161,7 +161,7 @@ class LRGFGLR(LRGFMEM):
         baseline_lambda: float = 0.0,
         baseline_hold: float = 0.5,
         baseline_settle: int = 200,
-        slow_ewma_lambda: float = 0.02,
+        slow_ewma_lambda: float | list[float] = 0.02,
         slow_share: float = 0.5,
         on_delay: int = 1,
         relations: list[list[Any]] | None = None,
@@ -343,7 +343,10 @@ class LRGFGLR(LRGFMEM):
                     for i in range(0, zz.shape[1], k)
                 ]
                 self.dir_weights_ = block_diag(*[b.weights_ for b in blocks])
-                shares = [1.0] if len(blocks) == 1 else [1 - self.slow_share, self.slow_share]
+                n_slow = len(blocks) - 1
+                # the fast scale keeps 1 - slow_share, the slow scales split slow_share equally
+                shares = [1.0] if not n_slow else [1.0 - self.slow_share]
+                shares += [self.slow_share / max(n_slow, 1)] * n_slow
                 scores = zz @ self.dir_weights_.T  # m columns per scale
                 self.h_dir_ = self.threshold_margin * np.concatenate(
                     [
@@ -360,13 +363,18 @@ class LRGFGLR(LRGFMEM):
                 )
         self._finish()
 
+    def _slow_lambdas(self) -> tuple[float, ...]:
+        """The weights of the slower EWMA scales (``slow_ewma_lambda``; none for 0)."""
+        lam = self.slow_ewma_lambda
+        if isinstance(lam, int | float | np.integer | np.floating):
+            return (float(lam),) if lam > 0 else ()
+        return tuple(float(x) for x in lam)
+
     def _scales(self, z: np.ndarray, norm: list[np.ndarray]) -> np.ndarray:
         """The EWMAs the directional tests project: ``z`` (weight ``ewma_lambda``), beside it
-        the slow EWMA of every record of ``norm`` when ``slow_ewma_lambda > 0``."""
-        if self.slow_ewma_lambda <= 0:
-            return z
-        slow = np.concatenate([EWMA(self.slow_ewma_lambda).filter(e) for e in norm])
-        return np.column_stack([z, slow])
+        one EWMA of every record of ``norm`` per slow scale (``slow_ewma_lambda``)."""
+        slow = [np.concatenate([EWMA(lam).filter(e) for e in norm]) for lam in self._slow_lambdas()]
+        return np.column_stack([z, *slow]) if slow else z
 
     def _cross_fit_models(
         self, ys: list[np.ndarray]
@@ -452,15 +460,23 @@ class LRGFGLR(LRGFMEM):
         self._hold_limits = self.baseline_hold * self.upper_
 
     @property
+    def _n_slow_scales(self) -> int:
+        """How many slow scales the fitted directional tests carry (one limit a direction each)."""
+        m = len(self.directions_)
+        return len(self.h_dir_) // m - 1 if m and len(self.h_dir_) else 0
+
+    @property
     def _has_slow_scale(self) -> bool:
-        """Whether the fitted directional tests carry the slow scale (two limits a direction)."""
-        return len(self.h_dir_) > len(self.directions_)
+        """Whether the fitted directional tests carry a slow scale."""
+        return self._n_slow_scales > 0
 
     def _signal_names(self) -> tuple[str, ...]:
         m = len(self.directions_) if len(self.h_dir_) else 0
         names = [f"{self.detector}[{f}]" for f in self._faults()[:m]]
-        if self._has_slow_scale:
-            names += [f"{self.detector}-slow[{f}]" for f in self._faults()[:m]]
+        n_slow = self._n_slow_scales
+        for j in range(n_slow):
+            tag = "slow" if n_slow == 1 else f"slow{j + 1}"
+            names += [f"{self.detector}-{tag}[{f}]" for f in self._faults()[:m]]
         return ("T2[ewma]", *names)
 
     # ---- detection -----------------------------------------------------------------------------
@@ -471,7 +487,7 @@ class LRGFGLR(LRGFMEM):
     def _reset_stage(self) -> None:
         """Fresh alarm-stage state: EWMA, sequential test and baseline."""
         self._ewma = EWMA(self.ewma_lambda)
-        self._ewma_slow = EWMA(self.slow_ewma_lambda) if self._has_slow_scale else None
+        self._ewma_slow = [EWMA(lam) for lam in self._slow_lambdas()[: self._n_slow_scales]]
         self._seq = self._sequential() if len(self.h_dir_) else None
         self._over_run = 0  # samples in a row with a statistic over its limit
         self._reset_baseline()
@@ -524,8 +540,8 @@ class LRGFGLR(LRGFMEM):
         if self._seq is None:
             pass
         elif self.detector == DirectionalDetector.DIRECTIONAL:
-            if self._ewma_slow is not None:
-                z = np.concatenate([z, self._ewma_slow.update(et)])
+            if self._ewma_slow:
+                z = np.concatenate([z, *(ew.update(et) for ew in self._ewma_slow)])
             signal[1:] = self.dir_weights_ @ z
         else:
             signal[1:] = self._seq.update(self.dir_weights_ @ et)

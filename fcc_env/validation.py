@@ -42,6 +42,7 @@ __all__ = [
     "OptionSequence",
     "Options",
     "Real",
+    "RealSequence",
     "check",
     "check_params",
     "invalid",
@@ -201,6 +202,34 @@ class IntegerSequence(Constraint):
                 raise invalid(name, value, self.describe(), f"{v!r} is not")
             out.append(int(v))
         if self.unique and len(set(out)) != len(out):
+            dup = sorted({v for v in out if out.count(v) > 1})
+            raise invalid(name, value, self.describe(), f"{dup} repeat")
+        return tuple(out)
+
+
+class RealSequence(Constraint):
+    """A non-empty sequence (not a string) of distinct finite reals in an interval; returns a tuple."""
+
+    def __init__(
+        self, low: float, high: float, *, closed: str = "both", why: str | None = None
+    ) -> None:
+        self.item = Real(low, high, closed=closed)
+        self.why = why
+
+    def describe(self) -> str:
+        return f"a non-empty sequence of distinct numbers in {self.item._range()}"
+
+    def coerce(self, name: str, value: Any) -> tuple[float, ...]:
+        if isinstance(value, str | bytes) or not isinstance(value, Sequence | np.ndarray):
+            raise invalid(name, value, self.describe(), self.why)
+        if len(value) == 0:
+            raise invalid(name, value, self.describe(), self.why)
+        out = []
+        for v in value:
+            if not _is_real(v) or not math.isfinite(float(v)) or not self.item._inside(float(v)):
+                raise invalid(name, value, self.describe(), f"{v!r} is not")
+            out.append(float(v))
+        if len(set(out)) != len(out):
             dup = sorted({v for v in out if out.count(v) > 1})
             raise invalid(name, value, self.describe(), f"{dup} repeat")
         return tuple(out)

@@ -323,6 +323,49 @@ def test_slow_scale_parameters_are_checked(train) -> None:
         LRGFGLR(**{**FAST, "slow_ewma_lambda": 0.03, "slow_share": 1.0}).fit(train)
 
 
+# ---- several slow scales ---------------------------------------------------------------------------
+def test_several_slow_scales_stream_equal_batch_and_roundtrip(slow_det, train, tmp_path) -> None:
+    params = {**slow_det.get_params(), "slow_ewma_lambda": [0.1, 0.03]}
+    det = LRGFGLR(**params).fit(train)
+    ep = inject_step_fault(make_episode(900, seed=9), onset=500, magnitude=1.0)
+    batch = _stream_equals_batch(det, ep)
+    assert det.signal_names_ == (
+        "T2[ewma]", "directional[f3]", "directional-slow1[f3]", "directional-slow2[f3]"
+    )  # fmt: skip
+    assert det.dir_weights_.shape == (3, 9)  # block-diagonal over [fast, λ 0.1, λ 0.03]
+    # oracle: each slow score is scipy's first-order filter of the normalised remaining error,
+    # projected on its block's weights
+    r, e = det._parts(ep.y)
+    norm = (r - e * det.use_mem_) / det.v_residual_
+    w, k = det.steady_window, len(det.out_idx_)
+    norm[:w] = 0.0
+    for j, lam in enumerate((0.1, 0.03), start=1):
+        z = signal.lfilter([lam], [1.0, lam - 1.0], norm, axis=0)
+        expected = z @ det.dir_weights_[j, j * k : (j + 1) * k]
+        np.testing.assert_allclose(batch.signal[w:, 1 + j], expected[w:], rtol=1e-9, atol=1e-9)
+    # the λ 0.03 scale's limit is the one-slow-scale detector's at half its share of the target
+    half = LRGFGLR(**{**slow_det.get_params(), "slow_share": 0.25}).fit(train)
+    assert det.h_dir_[2] == pytest.approx(half.h_dir_[1])
+    assert det.h_dir_[0] == pytest.approx(slow_det.h_dir_[0])  # the fast scale keeps its share
+    det.save(tmp_path / "m")
+    again = diagnosers.Diagnoser.load(tmp_path / "m")
+    np.testing.assert_array_equal(again.detect(ep).signal, batch.signal)
+
+
+def test_one_slow_scale_in_a_list_is_the_number(slow_det, train) -> None:
+    det = LRGFGLR(**{**slow_det.get_params(), "slow_ewma_lambda": [0.03]}).fit(train)
+    assert det.signal_names_ == slow_det.signal_names_
+    np.testing.assert_array_equal(det.h_dir_, slow_det.h_dir_)
+
+
+@pytest.mark.parametrize(
+    "bad", [[0.03, 0.03], [0.0], [1.0], [], ["0.1"], "0.1", [0.1, float("nan")]]
+)
+def test_slow_scale_lists_are_refused_by_value(train, bad) -> None:
+    with pytest.raises(ValueError, match=r"slow_ewma_lambda=.*a non-empty sequence of distinct"):
+        LRGFGLR(**{**FAST, "slow_ewma_lambda": bad}).fit(train)
+
+
 @pytest.mark.parametrize("bad", [0, -5, 2.5, "100", True])
 def test_refit_epochs_outside_its_range_is_refused_by_name(train, bad) -> None:
     with pytest.raises(ValueError, match=r"refit_epochs=.* is outside the allowed range"):
