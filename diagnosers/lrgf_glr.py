@@ -40,7 +40,9 @@ limit is calibrated:
   directions: a small or slow fault whose shift stays under the fast EWMA's noise builds up in
   the slow one, which averages the white part of the remaining error away (its low-frequency
   model error stays). The slow scale gets ``slow_share`` of the directional target, the fast
-  one the rest.
+  one the rest. A list of weights adds one scale each (signals ``directional-slow1[f]``, ...),
+  which split ``slow_share`` equally; on validation seeds a middle scale (λ 0.08 or 0.12 beside
+  0.02) never alarmed before the fast one and cost the slow one r_td, so the default is one.
 
   Beside the directional tests an omnibus Hotelling T² of ``z`` (as in ``lrgf-mem``) keeps
   faults outside the learned directions detectable; it gets ``omnibus_share`` of the false-alarm

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import time
 from pathlib import Path
 
@@ -26,6 +27,18 @@ from evaluation.tracks import TRACKS
 
 OUT = Path("results/baseline_lab")
 FAULTS = ("f1", "f2", "f3", "f4")
+
+
+def parse_set(text: str) -> dict:
+    """``--set`` text ``k=v,k=v`` with JSON values; a comma inside a value (a list) stays."""
+    pairs = [kv for kv in re.split(r",(?=[A-Za-z_]\w*=)", text) if kv]
+    out = {}
+    for kv in pairs:
+        key, sep, value = kv.partition("=")
+        if not sep:
+            raise SystemExit(f"--set {kv!r}: expected key=value (JSON value)")
+        out[key] = json.loads(value)
+    return out
 
 
 def val_track(name: str, n_healthy: int, n_faulty: int):
@@ -145,7 +158,7 @@ def main() -> None:
         train(a.track, a.epochs, a.tag, a.n_train, json.loads(a.params))
         return
     det, cal, w = load(a.track, a.tag)
-    extra = {kv.split("=")[0]: json.loads(kv.split("=")[1]) for kv in a.set.split(",") if kv}
+    extra = parse_set(a.set)
     tracks = (a.eval_tracks or a.track).split(",")
     eps = {tr: episodes(a.track, a.n_healthy, a.n_faulty, tr) for tr in tracks}
     results = []

@@ -22,7 +22,7 @@ import json
 import time
 
 import numpy as np
-from baseline_lab import OUT, load, val_track
+from baseline_lab import OUT, load, parse_set, val_track
 from tqdm import tqdm
 
 import diagnosers
@@ -130,7 +130,7 @@ def main() -> None:
     if a.block > a.n_healthy:
         ap.error(f"--block {a.block}; allowed: at most --n-healthy ({a.n_healthy})")
     det, cal, w = load(a.track, a.tag)
-    extra = {kv.split("=")[0]: json.loads(kv.split("=")[1]) for kv in a.set.split(",") if kv}
+    extra = parse_set(a.set)
     ys = healthy_episodes(a.track, a.n_healthy)
     train = (
         np.concatenate([e.y for e in TrackData(track=val_track(a.track, 1, 1)).train_episodes()])
