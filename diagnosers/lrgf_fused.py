@@ -146,7 +146,6 @@ class LRGFFreeRun(torch.autograd.Function):
                 dx[..., :-j] += num_[:, j, None, None] * g_a[..., j:]
         grad_num = _lagged_dots(g_a, x, r + 1, first_lag=0)
         grad_den = -_lagged_dots(g_a, zf, r, first_lag=1)
-        ds = np.empty((v, b_len, t_len))
         if w:
             # z = H(1) s0 on the filtered part and H(1) s_bar on the head; s0 = s_bar[w-1], x = s - s0
             grad_dc = np.einsum("cbt,cb->c", dz_f, s0) + np.einsum("cbt,cbt->c", dz[..., :w], s_bar)
@@ -154,6 +153,7 @@ class LRGFFreeRun(torch.autograd.Function):
             d_sbar = dc[:, None, None] * dz[..., :w]
             d_sbar[..., -1] += d_s0
             d_sbar /= np.arange(1, w + 1, dtype=np.float64)
+            ds = np.empty((v, b_len, t_len))
             ds[..., :w] = np.cumsum(d_sbar[..., ::-1], axis=-1)[..., ::-1]
             ds[..., w:] = dx
             den_sum = 1.0 + den_.sum(1)
