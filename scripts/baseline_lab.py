@@ -30,14 +30,22 @@ FAULTS = ("f1", "f2", "f3", "f4")
 
 
 def parse_set(text: str) -> dict:
-    """``--set`` text ``k=v,k=v`` with JSON values; a comma inside a value (a list) stays."""
-    pairs = [kv for kv in re.split(r",(?=[A-Za-z_]\w*=)", text) if kv]
+    """``--set`` text ``k=v,k=v`` with JSON values; a comma inside a value (a list) stays.
+
+    Raises ValueError naming the piece that is not ``key=<JSON value>``.
+    """
     out = {}
-    for kv in pairs:
+    for kv in (kv for kv in re.split(r",(?=[A-Za-z_]\w*=)", text) if kv):
         key, sep, value = kv.partition("=")
-        if not sep:
-            raise SystemExit(f"--set {kv!r}: expected key=value (JSON value)")
-        out[key] = json.loads(value)
+        try:
+            if not sep or not key.isidentifier():
+                raise ValueError
+            out[key] = json.loads(value)
+        except ValueError:
+            raise ValueError(
+                f"--set {kv!r}; allowed: key=value pairs with JSON values, "
+                "e.g. slow_ewma_lambda=[0.08,0.02],false_alarm_target=0.03"
+            ) from None
     return out
 
 
@@ -157,8 +165,11 @@ def main() -> None:
     if a.cmd == "train":
         train(a.track, a.epochs, a.tag, a.n_train, json.loads(a.params))
         return
+    try:
+        extra = parse_set(a.set)
+    except ValueError as err:
+        ap.error(str(err))
     det, cal, w = load(a.track, a.tag)
-    extra = parse_set(a.set)
     tracks = (a.eval_tracks or a.track).split(",")
     eps = {tr: episodes(a.track, a.n_healthy, a.n_faulty, tr) for tr in tracks}
     results = []

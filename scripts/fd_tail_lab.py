@@ -129,8 +129,11 @@ def main() -> None:
     a = ap.parse_args()
     if a.block > a.n_healthy:
         ap.error(f"--block {a.block}; allowed: at most --n-healthy ({a.n_healthy})")
+    try:
+        extra = parse_set(a.set)
+    except ValueError as err:
+        ap.error(str(err))
     det, cal, w = load(a.track, a.tag)
-    extra = parse_set(a.set)
     ys = healthy_episodes(a.track, a.n_healthy)
     train = (
         np.concatenate([e.y for e in TrackData(track=val_track(a.track, 1, 1)).train_episodes()])

@@ -396,6 +396,8 @@ def test_bad_manifest(tmp_path, changes, match) -> None:
         (["--streaks", "-1"], "'-1'; allowed: an integer >= 0"),
         (["--n-healthy", "x"], "'x'; allowed: an integer >= 1"),
         (["--n-healthy", "20", "--block", "50"], "--block 50; allowed: at most --n-healthy (20)"),
+        (["--set", "slow_ewma_lambda=[0.08"], "--set 'slow_ewma_lambda=[0.08'; allowed: key=value"),
+        (["--set", "on_delay"], "--set 'on_delay'; allowed: key=value pairs with JSON values"),
     ],
 )
 def test_fd_tail_lab_refuses_bad_flags_by_value_and_range(args, message) -> None:
