@@ -110,14 +110,24 @@ def numerator_from_state_space(a: torch.Tensor, b: torch.Tensor, b0: torch.Tenso
 
 
 # ---- differentiable lfilter --------------------------------------------------------------------
+def lfilter_rows(num: np.ndarray, den_full: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """``lfilter`` along the last axis of ``x`` (C, ..., T), row block ``c`` with its own
+    coefficients ``num[c]``, ``den_full[c]`` (``a_0`` included)."""
+    out = np.empty(x.shape)
+    if x.shape[-1] == 0:  # nothing to filter (e.g. a steady window as long as the sequence)
+        return out
+    for c in range(x.shape[0]):
+        out[c] = sps.lfilter(num[c], den_full[c], x[c], axis=-1)
+    return out
+
+
 def _lfilter_channels(num: np.ndarray, den_full: np.ndarray, x: np.ndarray) -> np.ndarray:
     """``lfilter`` along axis 1 of ``x`` (B, T, C) with per-channel coefficients (C, .)."""
     # each channel's (B, T) block contiguous for lfilter; the output keeps x's layout, on which
     # the einsum order of the gradients (and so their last bits) depends
-    x_cbt = np.ascontiguousarray(np.moveaxis(x, 2, 0))
+    rows = lfilter_rows(num, den_full, np.ascontiguousarray(np.moveaxis(x, 2, 0)))
     out = np.empty(x.shape)
-    for c in range(x_cbt.shape[0]):
-        out[:, :, c] = sps.lfilter(num[c], den_full[c], x_cbt[c], axis=1)
+    out[...] = np.moveaxis(rows, 0, 2)
     return out
 
 

@@ -26,24 +26,15 @@ from typing import Any
 
 import numpy as np
 import torch
-from scipy import signal as sps
 from torch.autograd.function import once_differentiable
+
+from diagnosers.iir import lfilter_rows
 
 __all__ = ["LRGFFreeRun", "lrgf_free_run"]
 
 
 def _np64(t: torch.Tensor) -> np.ndarray:
     return t.detach().cpu().numpy().astype(np.float64, copy=False)
-
-
-def _lfilter_rows(num: np.ndarray, den_full: np.ndarray, x: np.ndarray) -> np.ndarray:
-    """``lfilter`` along the last axis of ``x`` (v, B, L), neuron ``c`` with its own coefficients."""
-    out = np.empty(x.shape)
-    if x.shape[-1] == 0:  # a steady window as long as the sequence leaves nothing to filter
-        return out
-    for c in range(x.shape[0]):
-        out[c] = sps.lfilter(num[c], den_full[c], x[c], axis=-1)
-    return out
 
 
 def _lagged_dots(g: np.ndarray, x: np.ndarray, n_lags: int, first_lag: int) -> np.ndarray:
@@ -102,7 +93,7 @@ class LRGFFreeRun(torch.autograd.Function):
             s0 = s_bar[..., -1]  # (v, B)
             z[..., :w] = dc[:, None, None] * s_bar
         x = s[..., w:] - s0[..., None] if w else s  # the filter's input, zero state at t = w
-        zf = _lfilter_rows(num_, den_full, x)
+        zf = lfilter_rows(num_, den_full, x)
         z[..., w:] = zf + dc[:, None, None] * s0[..., None] if w else zf
         centred = z - g1_[:, None, None]
         h = np.tanh((0.5 * g2_)[:, None, None] * centred)
@@ -139,7 +130,7 @@ class LRGFFreeRun(torch.autograd.Function):
         # through the filter (zero state at t = w): gA = anti-causal 1/A applied to dz
         dz_f = dz[..., w:]
         ones = np.ones((v, 1))
-        g_a = _lfilter_rows(ones, den_full, dz_f[..., ::-1])[..., ::-1]
+        g_a = lfilter_rows(ones, den_full, dz_f[..., ::-1])[..., ::-1]
         dx = num_[:, :1, None] * g_a
         for j in range(1, r + 1):
             if j < g_a.shape[-1]:
@@ -198,6 +189,22 @@ def lrgf_free_run(
         raise ValueError(
             f"u_n must have shape (batch, time, {weight_in.shape[1]}); got {tuple(u_n.shape)}"
         )
+    v = weight_in.shape[0]
+    shapes = {
+        "num": (num.shape, (v, num.shape[-1])),  # its length sets the filter order r + 1
+        "den": (den.shape, (v, num.shape[-1] - 1)),
+        "g1": (g1.shape, (v,)),
+        "g2": (g2.shape, (v,)),
+        "weight_out": (weight_out.shape, (weight_out.shape[0], v)),
+    }
+    if bias_out is not None:
+        shapes["bias_out"] = (bias_out.shape, (weight_out.shape[0],))
+    for name, (got, want) in shapes.items():
+        if tuple(got) != want:
+            raise ValueError(
+                f"{name} has shape {tuple(got)}; allowed: {want} for {v} neurons "
+                f"(weight_in {tuple(weight_in.shape)})"
+            )
     if isinstance(steady_window, bool) or not isinstance(steady_window, int) or steady_window < 0:
         raise ValueError(f"steady_window={steady_window!r} must be an integer >= 0")
     return LRGFFreeRun.apply(u_n, weight_in, num, den, g1, g2, weight_out, bias_out, steady_window)

@@ -448,3 +448,9 @@ def test_fused_free_run_refuses_bad_input() -> None:
         lrgf_free_run(torch.zeros(4, 2), *args)
     with pytest.raises(ValueError, match="steady_window=-1"):
         lrgf_free_run(torch.zeros(1, 4, 2), *args, steady_window=-1)
+    with pytest.raises(ValueError, match=r"g1 has shape \(2,\); allowed: \(3,\) for 3 neurons"):
+        lrgf_free_run(torch.zeros(1, 4, 2), *args[:3], torch.zeros(2), *args[4:])
+    with pytest.raises(ValueError, match=r"den has shape \(3, 1\); allowed: \(3, 2\)"):
+        lrgf_free_run(torch.zeros(1, 4, 2), args[0], args[1], torch.zeros(3, 1), *args[3:])
+    with pytest.raises(ValueError, match=r"weight_out has shape \(1, 4\); allowed: \(1, 3\)"):
+        lrgf_free_run(torch.zeros(1, 4, 2), *args[:5], torch.zeros(1, 4))
