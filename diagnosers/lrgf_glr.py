@@ -347,8 +347,11 @@ class LRGFGLR(LRGFMEM):
                 self.dir_weights_ = block_diag(*[b.weights_ for b in blocks])
                 n_slow = len(blocks) - 1
                 # the fast scale keeps 1 - slow_share, the slow scales split slow_share equally
-                shares = [1.0] if not n_slow else [1.0 - self.slow_share]
-                shares += [self.slow_share / max(n_slow, 1)] * n_slow
+                shares = (
+                    [1.0 - self.slow_share] + [self.slow_share / n_slow] * n_slow
+                    if n_slow
+                    else [1.0]
+                )
                 scores = zz @ self.dir_weights_.T  # m columns per scale
                 self.h_dir_ = self.threshold_margin * np.concatenate(
                     [
