@@ -295,3 +295,44 @@ def test_training_failure_exits_cleanly(monkeypatch, capsys, tmp_path):
     assert e.value.code == 1
     err = capsys.readouterr().err
     assert "training failed: lrgf-mem" in err and "re-run to resume" in err
+
+
+def test_track_options_train_episodes_and_quick() -> None:
+    from evaluation.leaderboard import track_options
+    from evaluation.tracks import parse_tracks
+
+    parser = build_parser()
+    tracks = parse_tracks("paper,noisy")
+
+    def n_train(*argv: str) -> list[int]:
+        args = parser.parse_args(["--track", "paper,noisy", *argv])
+        return [t.n_train for t in track_options(args, parser, tracks)]
+
+    assert n_train() == [9, 9]
+    assert n_train("--train-episodes", "20") == [20, 20]
+    assert n_train("--quick") == [3, 3]
+    assert n_train("--quick", "--train-episodes", "5") == [5, 5]  # the explicit flag wins
+    quick = track_options(parser.parse_args(["--track", "paper", "--quick"]), parser, tracks)
+    assert (quick[0].n_healthy, quick[0].n_faulty) == (6, 3)
+
+
+@pytest.mark.parametrize(
+    "flag",
+    [
+        ["--seeds", "5"],
+        ["--scenarios", "f1"],
+        ["--validation"],
+        ["--n-samples", "3000"],
+        ["--fault-time", "100"],
+        ["--fault-profile", "incipient"],
+        ["--external", "x"],
+    ],
+)
+def test_track_refuses_paper_leaderboard_options(tmp_path, capsys, flag: list[str]) -> None:
+    with pytest.raises(SystemExit) as e:
+        main(["--track", "paper", *flag, "--out", str(tmp_path / "o"), "--no-progress"])
+    assert e.value.code == 2
+    err = capsys.readouterr().err
+    assert f"{flag[0]} applies to the paper leaderboard, not to --track" in err
+    assert "allowed with --track: --quick, --train-episodes" in err
+    assert not (tmp_path / "o").exists()
