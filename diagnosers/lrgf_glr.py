@@ -423,13 +423,26 @@ class LRGFGLR(LRGFMEM):
         samples after the onset. Empty when the episodes are not FCC-v0's channels.
         """
         import fcc_env
-        from fcc_env.scenarios import FaultSpec
 
         if tuple(self.channels_) != tuple(fcc_env.MEASUREMENT_NAMES) or not self._faults():
             return np.zeros((0, len(self.out_idx_)))
+        out = []
+        for diffs in self._fault_differences(self.direction_window).values():
+            mean = np.mean([d.mean(axis=0) for d in diffs], axis=0)
+            out.append(mean / np.linalg.norm(mean))
+        return np.array(out)
+
+    def _fault_differences(self, window: int) -> dict[str, list[np.ndarray]]:
+        """Per fault of ``fault_scenarios``, the normalised remaining error of each training
+        fault (seeds ``fault_seeds``, paper magnitude and onset) minus its healthy twin's, over
+        the ``window`` samples from the onset: ``(window, k)`` arrays, the fault's signature
+        without noise. Episodes that end inside the window are left out."""
+        import fcc_env
+        from fcc_env.scenarios import FaultSpec
+
         seeds = self._fault_seeds()
         healthy = fcc_env.simulate_episodes(seeds, fcc_env.DEFAULT_N_SAMPLES)
-        out = []
+        out = {}
         for f in self._faults():
             res = fcc_env.simulate_episodes(
                 seeds, fcc_env.DEFAULT_N_SAMPLES, fault=FaultSpec(scenario=f)
@@ -437,18 +450,17 @@ class LRGFGLR(LRGFMEM):
             diffs = []
             for b in range(len(seeds)):
                 onset = res.fault_onsets[b]
-                end = onset + self.direction_window
+                end = onset + window
                 stop = res.terminated_at[b]
                 if onset is None or (0 <= stop < end):
                     continue
                 d = self._normalised(res.observations[b][:end].astype(np.float64))
                 d -= self._normalised(healthy.observations[b][:end].astype(np.float64))
-                diffs.append(d[onset:].mean(axis=0))
+                diffs.append(d[onset:])
             if not diffs:
                 raise ValueError(f"no training episode of fault {f} lasted through its window")
-            mean = np.mean(diffs, axis=0)
-            out.append(mean / np.linalg.norm(mean))
-        return np.array(out)
+            out[f] = diffs
+        return out
 
     def _normalised(self, y: np.ndarray) -> np.ndarray:
         r, e = self._parts(y)

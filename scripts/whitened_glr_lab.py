@@ -68,9 +68,6 @@ def signature_glr(eps: np.ndarray, g: np.ndarray, energy: np.ndarray) -> np.ndar
 
 
 def main() -> None:
-    import fcc_env
-    from fcc_env.scenarios import FaultSpec
-
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--tag", default="_fused", help="the paper bank's name suffix")
     ap.add_argument("--order", type=int, default=20, help="VAR order of the whitening filter")
@@ -91,21 +88,11 @@ def main() -> None:
     print("variance of the error, of its innovations:",
           np.var(np.concatenate(norm), axis=0).round(3), np.var(innov, axis=0).round(3))  # fmt: skip
 
-    seeds = list(range(1000, 1000 + a.n_seeds))
-    healthy = fcc_env.simulate_episodes(seeds, fcc_env.DEFAULT_N_SAMPLES)
+    det.set_params(fault_seeds=list(range(1000, 1000 + a.n_seeds)))
     g, energy = {}, {}
-    for f in FAULTS:
-        faulty = fcc_env.simulate_episodes(
-            seeds, fcc_env.DEFAULT_N_SAMPLES, fault=FaultSpec(scenario=f)
-        )
-        diffs = []
-        for b in range(len(seeds)):
-            on = faulty.fault_onsets[b]
-            end = on + a.window
-            d = det._normalised(faulty.observations[b][:end].astype(float))
-            d -= det._normalised(healthy.observations[b][:end].astype(float))
-            diffs.append(np.concatenate([np.zeros((a.order, d.shape[1])), d[on:]]))
-        sig = white.innovations(np.mean(diffs, axis=0))[a.order :]
+    for f, diffs in det._fault_differences(a.window).items():
+        pad = np.zeros((a.order, diffs[0].shape[1]))  # the filter starts from a healthy past
+        sig = white.innovations(np.concatenate([pad, np.mean(diffs, axis=0)]))[a.order :]
         g[f] = sig @ s_inv
         energy[f] = np.cumsum(np.einsum("jk,jk->j", g[f], sig))
 
