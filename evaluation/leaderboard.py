@@ -83,6 +83,7 @@ __all__ = [
     "run",
     "summary_rows",
     "table_legend",
+    "track_options",
     "write_outputs",
 ]
 
