@@ -49,6 +49,37 @@ def parse_set(text: str) -> dict:
     return out
 
 
+def at_least(low: int):
+    """An argparse type: an integer >= ``low``, refused by value and range otherwise."""
+
+    def parse(text: str) -> int:
+        try:
+            value = int(text)
+        except ValueError:
+            value = None
+        if value is None or value < low:
+            raise argparse.ArgumentTypeError(f"{text!r}; allowed: an integer >= {low}")
+        return value
+
+    return parse
+
+
+def shares(text: str) -> list[float]:
+    """An argparse type: comma-separated numbers in (0, 1), refused by value and range."""
+    out = []
+    for piece in text.split(","):
+        try:
+            value = float(piece)
+        except ValueError:
+            value = float("nan")
+        if not 0.0 < value < 1.0:
+            raise argparse.ArgumentTypeError(
+                f"{piece!r}; allowed: numbers in (0, 1), comma-separated"
+            )
+        out.append(value)
+    return out
+
+
 def val_track(name: str, n_healthy: int, n_faulty: int):
     return (
         TRACKS[name]

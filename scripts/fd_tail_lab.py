@@ -22,7 +22,7 @@ import json
 import time
 
 import numpy as np
-from baseline_lab import OUT, load, parse_set, val_track
+from baseline_lab import OUT, at_least, load, parse_set, val_track
 from tqdm import tqdm
 
 import diagnosers
@@ -95,34 +95,19 @@ def streak_report(
         )
 
 
-def _at_least(low: int):
-    """An argparse type: an integer >= ``low``, refused by value and range otherwise."""
-
-    def parse(text: str) -> int:
-        try:
-            value = int(text)
-        except ValueError:
-            value = None
-        if value is None or value < low:
-            raise argparse.ArgumentTypeError(f"{text!r}; allowed: an integer >= {low}")
-        return value
-
-    return parse
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--track", default="paper")
     ap.add_argument("--tag", default="", help="the lab bank's name suffix")
     ap.add_argument("--targets", default="0.03", help="false_alarm_target values, comma-separated")
-    ap.add_argument("--n-healthy", type=_at_least(1), default=200)
+    ap.add_argument("--n-healthy", type=at_least(1), default=200)
     ap.add_argument(
-        "--block", type=_at_least(2), default=50, help="episodes per block (a track's 50)"
+        "--block", type=at_least(2), default=50, help="episodes per block (a track's 50)"
     )
     ap.add_argument("--set", default="", help="extra hyperparameters k=v,k=v (JSON values)")
     ap.add_argument(
         "--streaks",
-        type=_at_least(0),
+        type=at_least(0),
         default=0,
         help="report alarm runs of this many samples or more (0: no report)",
     )

@@ -24,10 +24,11 @@ from __future__ import annotations
 import argparse
 
 import numpy as np
-from baseline_lab import FAULTS, episodes, load
+from baseline_lab import FAULTS, at_least, episodes, load, shares
 
 import diagnosers
 from evaluation.metrics import episode_scores
+from evaluation.tracks import TRACKS
 
 
 def lagged(x: np.ndarray, order: int) -> np.ndarray:
@@ -70,15 +71,24 @@ def signature_glr(eps: np.ndarray, g: np.ndarray, energy: np.ndarray) -> np.ndar
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--tag", default="_fused", help="the paper bank's name suffix")
-    ap.add_argument("--order", type=int, default=20, help="VAR order of the whitening filter")
-    ap.add_argument("--window", type=int, default=100, help="signature length and onsets")
-    ap.add_argument("--shares", default="0.001,0.002,0.004,0.008", help="per-fault shares")
+    ap.add_argument(
+        "--order", type=at_least(1), default=20, help="VAR order of the whitening filter"
+    )
+    ap.add_argument("--window", type=at_least(1), default=100, help="signature length, onsets")
+    ap.add_argument(
+        "--shares", type=shares, default=[0.001, 0.002, 0.004, 0.008], help="per-fault shares"
+    )
     ap.add_argument("--eval-tracks", default="paper,small,incipient,random")
-    ap.add_argument("--n-seeds", type=int, default=3, help="training seeds for the signatures")
+    ap.add_argument(
+        "--n-seeds", type=at_least(1), default=3, help="training seeds for the signatures"
+    )
     a = ap.parse_args()
-    if a.order < 1 or a.window < 1:
-        ap.error(f"--order {a.order} and --window {a.window} must be at least 1")
+    unknown = [t for t in a.eval_tracks.split(",") if t not in TRACKS]
+    if unknown:
+        ap.error(f"--eval-tracks {unknown}; allowed: {', '.join(TRACKS)}")
     det, cal, w = load("paper", a.tag)
+    # the lab re-calibrates the stored bank in place, directions from the chosen training seeds
+    det.set_params(fault_seeds=list(range(1000, 1000 + a.n_seeds)))
     det._calibrate(cal, w)
     det._fitted_ = True
     norm = [(r - e * det.use_mem_)[w:] / det.v_residual_ for r, e in cal]
@@ -88,7 +98,6 @@ def main() -> None:
     print("variance of the error, of its innovations:",
           np.var(np.concatenate(norm), axis=0).round(3), np.var(innov, axis=0).round(3))  # fmt: skip
 
-    det.set_params(fault_seeds=list(range(1000, 1000 + a.n_seeds)))
     g, energy = {}, {}
     for f, diffs in det._fault_differences(a.window).items():
         pad = np.zeros((a.order, diffs[0].shape[1]))  # the filter starts from a healthy past
@@ -101,8 +110,7 @@ def main() -> None:
         return np.column_stack([signature_glr(eps, g[f], energy[f]) for f in FAULTS])
 
     cal_stat = np.concatenate([stat(x) for x in norm])
-    shares = [float(q) for q in a.shares.split(",")]
-    limits = {q: np.quantile(cal_stat, 1.0 - q, axis=0) for q in shares}
+    limits = {q: np.quantile(cal_stat, 1.0 - q, axis=0) for q in a.shares}
     print("limits per share:", {q: h.round(1).tolist() for q, h in limits.items()})
     warm = det.steady_window
     slow_cols = [0, *range(1 + len(FAULTS), 1 + 2 * len(FAULTS))]  # T² and the slow scale
@@ -122,7 +130,7 @@ def main() -> None:
             e[:warm] = 0.0
             s = stat(e)
             variants = {"old": over.any(axis=1)}
-            for q in shares:
+            for q in a.shares:
                 new = (s > limits[q]).any(axis=1)
                 new[:warm] = False
                 variants[f"T2+slow+glr{q}"] = over[:, slow_cols].any(axis=1) | new

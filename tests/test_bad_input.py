@@ -412,3 +412,28 @@ def test_fd_tail_lab_refuses_bad_flags_by_value_and_range(args, message) -> None
     )
     assert done.returncode == 2
     assert message in done.stderr
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["--order", "0"], "'0'; allowed: an integer >= 1"),
+        (["--window", "x"], "'x'; allowed: an integer >= 1"),
+        (["--n-seeds", "-3"], "'-3'; allowed: an integer >= 1"),
+        (["--shares", "0.004,1.5"], "'1.5'; allowed: numbers in (0, 1), comma-separated"),
+        (["--shares", "a"], "'a'; allowed: numbers in (0, 1)"),
+        (["--eval-tracks", "paper,tiny"], "--eval-tracks ['tiny']; allowed: paper, small"),
+    ],
+)
+def test_whitened_glr_lab_refuses_bad_flags_by_value_and_range(args, message) -> None:
+    # the flags are checked before any bank is loaded or episode simulated
+    root = Path(__file__).resolve().parents[1]
+    done = subprocess.run(
+        [sys.executable, str(root / "scripts" / "whitened_glr_lab.py"), *args],
+        capture_output=True,
+        text=True,
+        cwd=root,
+        timeout=120,
+    )
+    assert done.returncode == 2
+    assert message in done.stderr

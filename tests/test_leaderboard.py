@@ -316,6 +316,14 @@ def test_track_options_train_episodes_and_quick() -> None:
     assert (quick[0].n_healthy, quick[0].n_faulty) == (6, 3)
 
 
+def test_track_refuses_a_bad_train_episodes_count(tmp_path, capsys) -> None:
+    with pytest.raises(SystemExit) as e:
+        main(["--track", "paper", "--train-episodes", "0", "--out", str(tmp_path / "o")])
+    assert e.value.code == 2
+    assert "--train-episodes: must be >= 1, got 0" in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()
+
+
 @pytest.mark.parametrize(
     "flag",
     [
