@@ -25,13 +25,26 @@ seeds) the measured inputs add an independent 0.17 °C to the T_rg1 residual and
 to 20 samples. Both rows use the same stage, which is not the best possible one: a detector
 with a better stage can beat either on slow or small faults (it is a reference, not a bound).
 
+**A third reference row**, ``perfect model + lrgf-glr stage (measured inputs)``
+(``OracleConfig(inputs="measured", stage="directional")``): the same perfect model on the
+measured inputs, evaluated by ``lrgf-glr``'s alarm stage instead of the T², through
+``lrgf-glr``'s own code (:class:`diagnosers.lrgf_glr.LRGFGLR` with its centre replaced by the
+reference): fault directions from the noise-free signatures of the training faults (seeds
+1000-1002, as the detector's), a fast and a slow EWMA scale projected on them, an omnibus T²,
+calibrated on the track's healthy validation episodes. It is what a detector of that family
+would reach with a perfect model, from what a detector can read: where it misses the
+physical-limit row's bounds, no model improvement can close the gap with that stage. Its
+declared target is :data:`DIRECTIONAL_TARGET` (0.004), chosen so that it realises about what
+``lrgf-glr`` realises on validation seeds (0.002-0.004; the stage's union bound and the
+normal tail keep the realised rate under the declared one).
+
 >>> OracleConfig().channels
 ('T_rx', 'T_rg1', 'T_rg2', 'T_d1', 'T_dg')
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from enum import StrEnum
 
@@ -39,17 +52,22 @@ import numpy as np
 
 from diagnosers.alarm import EWMA, HotellingT2, LimitMethod, calibrate_limit
 from diagnosers.base import Detection, Episode
+from diagnosers.lrgf_glr import LRGFGLR
 from evaluation.records import CellResult, score_episode
 from evaluation.sources import LoadedEpisode, TrackData
 from fcc_env.params import MEASUREMENT_NAMES, MEASUREMENTS
 from fcc_env.validation import Options, Real, check
 
 __all__ = [
+    "DEFAULT_REFERENCES",
+    "DIRECTIONAL_TARGET",
     "MEASURED_INPUTS_LABEL",
     "ORACLE_LABEL",
     "REFERENCE_LABELS",
+    "STAGE_LABEL",
     "OracleConfig",
     "OracleInputs",
+    "OracleStage",
     "PhysicalLimit",
     "oracle_records",
     "reference_records",
@@ -68,8 +86,25 @@ class OracleInputs(StrEnum):
     MEASURED = "measured"
 
 
-#: every reference row's label, by the inputs that drive it
-REFERENCE_LABELS = {OracleInputs.TRUE: ORACLE_LABEL, OracleInputs.MEASURED: MEASURED_INPUTS_LABEL}
+class OracleStage(StrEnum):
+    """Which alarm stage evaluates the reference's residual (see the module docstring)."""
+
+    T2 = "t2"
+    DIRECTIONAL = "directional"
+
+
+#: The label of the perfect model on measured inputs with lrgf-glr's alarm stage.
+STAGE_LABEL = "perfect model + lrgf-glr stage (measured inputs)"
+#: The declared false-alarm target of the directional stage (its T² rows keep ``target``).
+DIRECTIONAL_TARGET = 0.004
+
+#: every reference row's label, by (inputs, stage), in table order
+REFERENCE_LABELS = {
+    (OracleInputs.TRUE, OracleStage.T2): ORACLE_LABEL,
+    (OracleInputs.MEASURED, OracleStage.T2): MEASURED_INPUTS_LABEL,
+    (OracleInputs.MEASURED, OracleStage.DIRECTIONAL): STAGE_LABEL,
+    (OracleInputs.TRUE, OracleStage.DIRECTIONAL): "perfect model + lrgf-glr stage (true inputs)",
+}
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -78,18 +113,37 @@ class OracleConfig:
 
     channels: tuple[str, ...] = ("T_rx", "T_rg1", "T_rg2", "T_d1", "T_dg")
     ewma_lambda: float = 0.3
-    target: float = 0.002
+    #: declared false-alarm target; ``None``: 0.002 for the T², DIRECTIONAL_TARGET otherwise
+    target: float | None = None
     inputs: str = "true"
+    stage: str = "t2"
 
     def __post_init__(self) -> None:
         check("ewma_lambda", self.ewma_lambda, Real(0.0, 1.0, closed="right"))
-        check("target", self.target, Real(0.0, 0.5, closed="neither"))
+        if self.target is not None:
+            check("target", self.target, Real(0.0, 0.5, closed="neither"))
         check("inputs", self.inputs, Options(OracleInputs))
+        check("stage", self.stage, Options(OracleStage))
+
+    @property
+    def false_alarm_target(self) -> float:
+        """The declared target the stage is calibrated to."""
+        if self.target is not None:
+            return self.target
+        return 0.002 if self.stage == OracleStage.T2 else DIRECTIONAL_TARGET
 
     @property
     def label(self) -> str:
         """The row's label in tables."""
-        return REFERENCE_LABELS[OracleInputs(self.inputs)]
+        return REFERENCE_LABELS[OracleInputs(self.inputs), OracleStage(self.stage)]
+
+
+#: the reference rows every track table carries, in order
+DEFAULT_REFERENCES = (
+    OracleConfig(),
+    OracleConfig(inputs="measured"),
+    OracleConfig(inputs="measured", stage="directional"),
+)
 
 
 class PhysicalLimit:
@@ -111,27 +165,36 @@ class PhysicalLimit:
         #: noise std [channel unit] of each monitored channel on this track
         self.noise_std = noise * data.track.noise_scale
 
-    def _statistic(self, y: np.ndarray, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    def _reference(self, y: np.ndarray, seed: int) -> np.ndarray:
         measured = y if self.config.inputs == OracleInputs.MEASURED else None
-        y_ref = self.data.reference(seed, measured)
+        return self.data.reference(seed, measured)
+
+    def _statistic(self, y: np.ndarray, seed: int) -> tuple[np.ndarray, np.ndarray]:
+        y_ref = self._reference(y, seed)
         r = (y[:, self._idx] - y_ref[: y.shape[0], self._idx]) / self.noise_std
         return r, EWMA(self.config.ewma_lambda).filter(r)
 
     def fit(self, seeds: Sequence[int] | None = None) -> PhysicalLimit:
-        """Calibrate T² and its limit on healthy episodes of ``seeds`` (default: the track's
+        """Calibrate the stage on healthy episodes of ``seeds`` (default: the track's
         validation seeds)."""
         seeds = list(self.data.track.validation_seeds if seeds is None else seeds)
-        zs = []
-        for s in seeds:
-            le = self.data.load_test("nominal", s)
-            zs.append(self._statistic(le.episode.y, s)[1])
-        Z = np.concatenate(zs)
+        healthy = [self.data.load_test("nominal", s).episode for s in seeds]
+        if self.config.stage == OracleStage.DIRECTIONAL:
+            self.stage_ = _PerfectModelStage(
+                false_alarm_target=self.config.false_alarm_target,
+                ewma_lambda=self.config.ewma_lambda,
+            )
+            self.stage_.reference_of = self._reference
+            self.stage_.monitored = self.config.channels
+            self.stage_.fit(healthy)
+            return self
+        Z = np.concatenate([self._statistic(ep.y, int(ep.seed))[1] for ep in healthy])  # type: ignore[arg-type]
         self.t2_ = HotellingT2().fit(Z)
         stat = np.asarray(self.t2_.score(Z))
         self.limit_ = float(
             calibrate_limit(
                 stat[:, None],
-                self.config.target,
+                self.config.false_alarm_target,
                 method=LimitMethod.CHI2_TAIL,
                 dof=len(self._idx),
             )[0]
@@ -140,6 +203,8 @@ class PhysicalLimit:
 
     def detect(self, episode: Episode) -> Detection:
         assert episode.seed is not None, "the physical limit needs the episode's seed"
+        if self.config.stage == OracleStage.DIRECTIONAL:
+            return self.stage_.detect(episode)
         r, z = self._statistic(episode.y, episode.seed)
         stat = np.asarray(self.t2_.score(z)).reshape(-1, 1)
         upper = np.full_like(stat, self.limit_)
@@ -151,6 +216,69 @@ class PhysicalLimit:
             residual=np.linalg.norm(r, axis=1, keepdims=True),
             signal_names=("T2[oracle]" if self.name == ORACLE_LABEL else "T2[measured inputs]",),
         )
+
+
+class _PerfectModelStage(LRGFGLR):
+    """``lrgf-glr`` whose centre is a reference trajectory instead of a trained bank.
+
+    Everything after the residual (scale, fault directions, EWMA scales, projections, omnibus
+    T², limits, alarm logic) is the detector's own code, so the row measures that stage on a
+    perfect model. ``reference_of(y, seed)`` gives the reference of a record; ``monitored`` the
+    channels. Not registered: it reads what no diagnoser may.
+    """
+
+    reference_of: Callable[[np.ndarray, int], np.ndarray]
+    monitored: tuple[str, ...]
+
+    def _centre_of(self, y: np.ndarray, seed: int | None) -> np.ndarray:
+        assert seed is not None, "the reference needs the episode's seed"
+        return self.reference_of(y, seed)[: y.shape[0]][:, self.out_idx_]
+
+    def _fit(self, episodes: list[Episode]) -> None:
+        self.out_idx_ = np.array([self.channels_.index(c) for c in self.monitored])
+        self.in_idx_ = [np.zeros(0, dtype=int)] * len(self.monitored)
+        self.lrgf_, self.mem_ = [], []
+        self.v_paper_ = np.ones(len(self.monitored))
+        self.train_fit_loss_ = np.zeros(len(self.monitored))
+        cal = []
+        for ep in episodes:
+            r = ep.y[:, self.out_idx_] - self._centre_of(ep.y, ep.seed)
+            cal.append((r, np.zeros_like(r)))
+        self._calibrate(cal, self.steady_window)
+
+    def detect(self, episode: Episode) -> Detection:  # type: ignore[override]
+        self._episode_centre = self._centre_of(episode.y, episode.seed)
+        return super().detect(episode)
+
+    def _centre(self, y: np.ndarray) -> np.ndarray:
+        return self._episode_centre
+
+    def _reset(self) -> None:
+        self._k = 0
+        self._reset_stage()
+
+    def _fault_differences(self, window: int) -> dict[str, list[np.ndarray]]:
+        """The training faults' noise-free signatures: the faulty plant's clean output minus
+        its healthy twin's, normalised (what a perfect model's residual difference is)."""
+        import fcc_env
+        from fcc_env.scenarios import FaultSpec
+
+        seeds = self._fault_seeds()
+        healthy = fcc_env.simulate_episodes(seeds, fcc_env.DEFAULT_N_SAMPLES)
+        out = {}
+        for f in self._faults():
+            res = fcc_env.simulate_episodes(
+                seeds, fcc_env.DEFAULT_N_SAMPLES, fault=FaultSpec(scenario=f)
+            )
+            diffs = []
+            for b in range(len(seeds)):
+                onset, stop = res.fault_onsets[b], res.terminated_at[b]
+                if onset is None or (0 <= stop < onset + window):
+                    continue
+                d = np.asarray(res.y_clean[b], dtype=np.float64) - healthy.y_clean[b]
+                diffs.append(d[onset : onset + window][:, self.out_idx_] / self.v_residual_)
+            out[f] = diffs
+        return out
 
 
 def oracle_records(

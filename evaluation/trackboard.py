@@ -42,10 +42,9 @@ from evaluation.intervals import (
     worst,
 )
 from evaluation.oracle import (
+    DEFAULT_REFERENCES,
     ORACLE_LABEL,
     REFERENCE_LABELS,
-    OracleConfig,
-    OracleInputs,
     reference_records,
 )
 from evaluation.records import CellResult
@@ -294,8 +293,7 @@ def run_track(
     )
     if model_cache is not None:
         _models_to_cache(config, store, model_cache)
-    references = [OracleConfig(inputs=i) for i in OracleInputs]
-    records = (*results.records, *reference_records(data, references))
+    records = (*results.records, *reference_records(data, DEFAULT_REFERENCES))
     rows = track_rows(records, [s.key for s in config.diagnosers], track.faults)
     if figures:
         write_figures(results, out / "figures")

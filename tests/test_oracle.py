@@ -11,8 +11,10 @@ from diagnosers.alarm import EWMA
 from diagnosers.base import Episode
 from evaluation.intervals import limit_ratio
 from evaluation.oracle import (
+    DIRECTIONAL_TARGET,
     MEASURED_INPUTS_LABEL,
     ORACLE_LABEL,
+    STAGE_LABEL,
     OracleConfig,
     PhysicalLimit,
     oracle_records,
@@ -78,6 +80,8 @@ def test_oracle_config_rejects_bad_values() -> None:
         OracleConfig(ewma_lambda=0)
     with pytest.raises(ValueError, match=r"target=0.7 is outside the allowed range"):
         OracleConfig(target=0.7)
+    with pytest.raises(ValueError, match=r"stage='cusum'.*one of \['t2', 'directional'\]"):
+        OracleConfig(stage="cusum")
     with pytest.raises(ValueError, match=r"inputs='exact'.*measured"):
         OracleConfig(inputs="exact")
 
@@ -185,7 +189,7 @@ def test_track_rows_ratio_and_ranks() -> None:
 def test_run_track_end_to_end(tmp_path) -> None:
     run = run_track(TINY, ["limits"], tmp_path / "paper", workers=0, progress=False)
     labels = [r.label for r in run.rows]
-    assert labels == ["limits", ORACLE_LABEL, MEASURED_INPUTS_LABEL]
+    assert labels == ["limits", ORACLE_LABEL, MEASURED_INPUTS_LABEL, STAGE_LABEL]
     summary = {(s.diagnoser, s.scenario): s for s in summarize(run.records)}
     assert summary[(ORACLE_LABEL, "f1")].t_dt <= 2
     paths = write_track(run, tmp_path / "paper")
@@ -223,3 +227,43 @@ def test_tracks_with_one_training_set_share_their_models(tmp_path) -> None:
         model_cache=cache,
     )  # fmt: skip
     assert (third.n_trained, third.n_reused_models) == (1, 0)  # other noise: trained anew
+
+
+def test_directional_row_is_lrgf_glr_stage_on_a_perfect_model() -> None:
+    """The third reference row: lrgf-glr's alarm stage (same code) on a perfect model's
+    residual. With the true inputs the healthy residual is the measurement noise, so the stage's
+    scale is the noise std; f3 cools the regenerator beds; a noise-free faulty episode alarms
+    only after its onset."""
+    assert OracleConfig().false_alarm_target == 0.002
+    assert OracleConfig(stage="directional").false_alarm_target == DIRECTIONAL_TARGET
+    assert OracleConfig(stage="directional", target=0.01).false_alarm_target == 0.01
+    cfg = OracleConfig(inputs="measured", stage="directional")
+    assert cfg.label == STAGE_LABEL
+    data = TrackData(track=TINY)
+    orc = PhysicalLimit(data, OracleConfig(stage="directional")).fit()
+    stage = orc.stage_
+    assert stage.v_residual_ == pytest.approx(orc.noise_std, rel=0.05)
+    f3 = stage.directions_[list(stage._faults()).index("f3")]
+    assert f3[1] < -0.3 and f3[2] < -0.3  # T_rg1 and T_rg2 fall
+    assert stage.false_alarm_target == DIRECTIONAL_TARGET
+    seed = 0
+    spec = data.track.fault_spec("f2", seed)
+    clean = simulate_loaded([seed], TINY.n_samples, spec)[0].episode.y_clean
+    assert clean is not None and spec.onset is not None
+    ep = Episode(
+        y=clean,
+        channels=tuple(MEASUREMENT_NAMES),
+        sample_time_s=10.0,
+        fault_onset=spec.onset,
+        scenario="f2",
+        seed=seed,
+    )
+    det = orc.detect(ep)
+    assert det.signal_names[0] == "T2[ewma]" and "directional-slow[f3]" in det.signal_names
+    assert not det.alarm[: spec.onset].any()
+    assert np.allclose(det.residual[: spec.onset], 0.0, atol=1e-9)
+    assert det.alarm[spec.onset : spec.onset + 20].any()
+    # the row's records carry its label and its measured-input variant runs end to end
+    recs = oracle_records(data, cfg)
+    assert {r.diagnoser for r in recs} == {STAGE_LABEL}
+    assert all(r.t_dt <= 60 for r in recs if r.scenario == "f1")
