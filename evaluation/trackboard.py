@@ -5,8 +5,10 @@ track of :mod:`evaluation.tracks`, a sweep of the chosen diagnosers over the tra
 (:class:`evaluation.sources.TrackData`), scores the physical-limit observer
 (:mod:`evaluation.oracle`) on the same cells, and writes into ``<out>/<track>/``:
 
-* ``leaderboard.md`` / ``.csv`` / ``.json`` — one row per diagnoser plus two reference rows,
-  the ``oracle`` (physical limit) and the ``perfect model (measured inputs)``:
+* ``leaderboard.md`` / ``.csv`` / ``.json`` — one row per diagnoser plus three reference rows
+  (:data:`evaluation.oracle.DEFAULT_REFERENCES`), the ``oracle`` (physical limit), the
+  ``perfect model (measured inputs)`` and the ``perfect model + lrgf-glr stage (measured
+  inputs)``:
   r_fd with its 95 % bootstrap interval over healthy episodes, the share of healthy episodes
   with any alarm and the worst one; per fault r_td and t_dt with intervals, the ratio
   ``(t_dt + 1) / (oracle t_dt + 1)`` with its paired interval, misses and early terminations;
@@ -153,7 +155,7 @@ def track_rows(
 ) -> list[TrackRow]:
     """The rows of a track table from per-seed records (pure; intervals seeded, reproducible)."""
     rows = []
-    # the reference rows present in the records (the physical limit, the measured-input model)
+    # the reference rows present in the records, in REFERENCE_LABELS order
     present = {x.diagnoser for x in records}
     refs = [r for r in REFERENCE_LABELS.values() if r in present]
     for label in [*labels, *refs]:
