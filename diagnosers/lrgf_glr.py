@@ -449,18 +449,22 @@ class LRGFGLR(LRGFMEM):
             )
             diffs = []
             for b in range(len(seeds)):
-                onset = res.fault_onsets[b]
-                end = onset + window
-                stop = res.terminated_at[b]
-                if onset is None or (0 <= stop < end):
+                onset, stop = res.fault_onsets[b], res.terminated_at[b]
+                if onset is None or (0 <= stop < onset + window):
                     continue
-                d = self._normalised(res.observations[b][:end].astype(np.float64))
-                d -= self._normalised(healthy.observations[b][:end].astype(np.float64))
-                diffs.append(d[onset:])
+                diffs.append(self._pair_difference(res, healthy, b, onset + window)[onset:])
             if not diffs:
                 raise ValueError(f"no training episode of fault {f} lasted through its window")
             out[f] = diffs
         return out
+
+    def _pair_difference(self, faulty: Any, healthy: Any, b: int, end: int) -> np.ndarray:
+        """The normalised remaining error of training fault ``b`` (a
+        :func:`fcc_env.simulate_episodes` result) minus its healthy twin's, first ``end``
+        samples: ``(end, k)``."""
+        d = self._normalised(faulty.observations[b][:end].astype(np.float64))
+        d -= self._normalised(healthy.observations[b][:end].astype(np.float64))
+        return d
 
     def _normalised(self, y: np.ndarray) -> np.ndarray:
         r, e = self._parts(y)

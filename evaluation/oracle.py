@@ -47,6 +47,7 @@ from __future__ import annotations
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from enum import StrEnum
+from typing import Any
 
 import numpy as np
 
@@ -257,28 +258,11 @@ class _PerfectModelStage(LRGFGLR):
         self._k = 0
         self._reset_stage()
 
-    def _fault_differences(self, window: int) -> dict[str, list[np.ndarray]]:
-        """The training faults' noise-free signatures: the faulty plant's clean output minus
-        its healthy twin's, normalised (what a perfect model's residual difference is)."""
-        import fcc_env
-        from fcc_env.scenarios import FaultSpec
-
-        seeds = self._fault_seeds()
-        healthy = fcc_env.simulate_episodes(seeds, fcc_env.DEFAULT_N_SAMPLES)
-        out = {}
-        for f in self._faults():
-            res = fcc_env.simulate_episodes(
-                seeds, fcc_env.DEFAULT_N_SAMPLES, fault=FaultSpec(scenario=f)
-            )
-            diffs = []
-            for b in range(len(seeds)):
-                onset, stop = res.fault_onsets[b], res.terminated_at[b]
-                if onset is None or (0 <= stop < onset + window):
-                    continue
-                d = np.asarray(res.y_clean[b], dtype=np.float64) - healthy.y_clean[b]
-                diffs.append(d[onset : onset + window][:, self.out_idx_] / self.v_residual_)
-            out[f] = diffs
-        return out
+    def _pair_difference(self, faulty: Any, healthy: Any, b: int, end: int) -> np.ndarray:
+        """The training fault's noise-free signature: the faulty plant's clean output minus its
+        healthy twin's, normalised (what a perfect model's residual difference is)."""
+        d = np.asarray(faulty.y_clean[b][:end], dtype=np.float64) - healthy.y_clean[b][:end]
+        return d[:, self.out_idx_] / self.v_residual_
 
 
 def oracle_records(

@@ -29,6 +29,21 @@ from fcc_env.scenarios import FaultSpec
 TINY = TRACKS["paper"].replace(n_healthy=2, n_faulty=1, n_train=2, n_validation=4)
 
 
+def _noise_free_f2(data: TrackData, seed: int) -> Episode:
+    """The track's f2 episode of ``seed`` without measurement noise (its clean output)."""
+    spec = data.track.fault_spec("f2", seed)
+    clean = simulate_loaded([seed], TINY.n_samples, spec)[0].episode.y_clean
+    assert clean is not None
+    return Episode(
+        y=clean,
+        channels=tuple(MEASUREMENT_NAMES),
+        sample_time_s=10.0,
+        fault_onset=spec.onset,
+        scenario="f2",
+        seed=seed,
+    )
+
+
 @pytest.fixture(scope="module")
 def oracle() -> PhysicalLimit:
     return PhysicalLimit(TrackData(track=TINY)).fit()
@@ -37,19 +52,9 @@ def oracle() -> PhysicalLimit:
 def test_oracle_is_exact_on_noise_free_episodes(oracle: PhysicalLimit) -> None:
     data = oracle.data
     seed = 0
-    spec = data.track.fault_spec("f2", seed)
-    clean = simulate_loaded([seed], TINY.n_samples, spec)[0].episode.y_clean
-    assert clean is not None
-    ep = Episode(
-        y=clean,
-        channels=tuple(MEASUREMENT_NAMES),
-        sample_time_s=10.0,
-        fault_onset=spec.onset,
-        scenario="f2",
-        seed=seed,
-    )
+    ep = _noise_free_f2(data, seed)
+    clean, onset = ep.y, ep.fault_onset
     det = oracle.detect(ep)
-    onset = spec.onset
     assert onset is not None
     # Before the onset the healthy plant is known exactly: the residual is zero, no alarm.
     assert not det.alarm[:onset].any()
@@ -246,23 +251,14 @@ def test_directional_row_is_lrgf_glr_stage_on_a_perfect_model() -> None:
     f3 = stage.directions_[list(stage._faults()).index("f3")]
     assert f3[1] < -0.3 and f3[2] < -0.3  # T_rg1 and T_rg2 fall
     assert stage.false_alarm_target == DIRECTIONAL_TARGET
-    seed = 0
-    spec = data.track.fault_spec("f2", seed)
-    clean = simulate_loaded([seed], TINY.n_samples, spec)[0].episode.y_clean
-    assert clean is not None and spec.onset is not None
-    ep = Episode(
-        y=clean,
-        channels=tuple(MEASUREMENT_NAMES),
-        sample_time_s=10.0,
-        fault_onset=spec.onset,
-        scenario="f2",
-        seed=seed,
-    )
+    ep = _noise_free_f2(data, 0)
+    onset = ep.fault_onset
+    assert onset is not None
     det = orc.detect(ep)
     assert det.signal_names[0] == "T2[ewma]" and "directional-slow[f3]" in det.signal_names
-    assert not det.alarm[: spec.onset].any()
-    assert np.allclose(det.residual[: spec.onset], 0.0, atol=1e-9)
-    assert det.alarm[spec.onset : spec.onset + 20].any()
+    assert not det.alarm[:onset].any()
+    assert np.allclose(det.residual[:onset], 0.0, atol=1e-9)
+    assert det.alarm[onset : onset + 20].any()
     # the row's records carry its label and its measured-input variant runs end to end
     recs = oracle_records(data, cfg)
     assert {r.diagnoser for r in recs} == {STAGE_LABEL}
