@@ -19,6 +19,8 @@ from __future__ import annotations
 
 import argparse
 
+from baseline_lab import at_least
+
 from evaluation.oracle import OracleConfig, OracleStage, oracle_records
 from evaluation.records import summarize
 from evaluation.sources import TrackData
@@ -29,8 +31,8 @@ from fcc_env.params import MEASUREMENT_NAMES
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--track", default="paper")
-    ap.add_argument("--n-healthy", type=int, default=30)
-    ap.add_argument("--n-faulty", type=int, default=10)
+    ap.add_argument("--n-healthy", type=at_least(1), default=30)
+    ap.add_argument("--n-faulty", type=at_least(1), default=10)
     ap.add_argument("--channels", default="T_rx,T_rg1,T_rg2,T_d1,T_dg")
     ap.add_argument("--stages", default="t2", help="t2, directional or both, comma-separated")
     ap.add_argument("--target", type=float, default=None, help="the directional stage's target")

@@ -401,10 +401,15 @@ def test_bad_manifest(tmp_path, changes, match) -> None:
     ],
 )
 def test_fd_tail_lab_refuses_bad_flags_by_value_and_range(args, message) -> None:
-    # the flags are checked before any bank is loaded or episode simulated
+    _lab_refuses("fd_tail_lab.py", args, message)
+
+
+def _lab_refuses(script: str, args: list[str], message: str) -> None:
+    """The lab script exits with argparse's code 2 and ``message`` on stderr; the flags are
+    checked before any bank is loaded or episode simulated."""
     root = Path(__file__).resolve().parents[1]
     done = subprocess.run(
-        [sys.executable, str(root / "scripts" / "fd_tail_lab.py"), *args],
+        [sys.executable, str(root / "scripts" / script), *args],
         capture_output=True,
         text=True,
         cwd=root,
@@ -426,14 +431,20 @@ def test_fd_tail_lab_refuses_bad_flags_by_value_and_range(args, message) -> None
     ],
 )
 def test_whitened_glr_lab_refuses_bad_flags_by_value_and_range(args, message) -> None:
-    # the flags are checked before any bank is loaded or episode simulated
-    root = Path(__file__).resolve().parents[1]
-    done = subprocess.run(
-        [sys.executable, str(root / "scripts" / "whitened_glr_lab.py"), *args],
-        capture_output=True,
-        text=True,
-        cwd=root,
-        timeout=120,
-    )
-    assert done.returncode == 2
-    assert message in done.stderr
+    _lab_refuses("whitened_glr_lab.py", args, message)
+
+
+@pytest.mark.parametrize(
+    ("script", "args", "message"),
+    [
+        ("input_noise_limit.py", ["--stages", "t2,cusum"], "--stages 'cusum'; allowed: ['t2'"),
+        ("input_noise_limit.py", ["--target", "0.7"], "--target 0.7; allowed: a false-alarm"),
+        ("input_noise_limit.py", ["--n-healthy", "0"], "'0'; allowed: an integer >= 1"),
+        ("optimizer_lab.py", ["--variants", "adam:3000,sgd:5"], "'sgd:5'; allowed: adam:N or"),
+        ("optimizer_lab.py", ["--variants", "lbfgs:0"], "'lbfgs:0'; allowed: adam:N or lbfgs:N"),
+        ("optimizer_lab.py", ["--output", "T_d1"], "invalid choice: 'T_d1'"),
+        ("optimizer_lab.py", ["--n-train", "1"], "'1'; allowed: an integer >= 2"),
+    ],
+)
+def test_reference_and_optimizer_labs_refuse_bad_flags(script, args, message) -> None:
+    _lab_refuses(script, args, message)
