@@ -225,7 +225,7 @@ class _PerfectModelStage(LRGFGLR):
     Everything after the residual (scale, fault directions, EWMA scales, projections, omnibus
     T², limits, alarm logic) is the detector's own code, so the row measures that stage on a
     perfect model. ``reference_of(y, seed)`` gives the reference of a record; ``monitored`` the
-    channels. Not registered: it reads what no diagnoser may.
+    channels. Batch only (``detect``). Not registered: it reads what no diagnoser may.
     """
 
     reference_of: Callable[[np.ndarray, int], np.ndarray]
@@ -253,6 +253,12 @@ class _PerfectModelStage(LRGFGLR):
 
     def _centre(self, y: np.ndarray) -> np.ndarray:
         return self._episode_centre
+
+    def _update(self, y: np.ndarray) -> Any:
+        raise NotImplementedError(
+            "the perfect-model stage scores whole episodes with detect(), whose seed gives the "
+            "reference; a single sample carries no seed"
+        )
 
     def _reset(self) -> None:
         self._k = 0

@@ -259,6 +259,8 @@ def test_directional_row_is_lrgf_glr_stage_on_a_perfect_model() -> None:
     assert not det.alarm[:onset].any()
     assert np.allclose(det.residual[:onset], 0.0, atol=1e-9)
     assert det.alarm[onset : onset + 20].any()
+    with pytest.raises(NotImplementedError, match="whole episodes with detect"):
+        stage.update(ep.y[0])
     # the row's records carry its label and its measured-input variant runs end to end
     recs = oracle_records(data, cfg)
     assert {r.diagnoser for r in recs} == {STAGE_LABEL}
