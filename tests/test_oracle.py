@@ -11,6 +11,7 @@ from diagnosers.alarm import EWMA
 from diagnosers.base import Episode
 from evaluation.intervals import limit_ratio
 from evaluation.oracle import (
+    DIRECTIONAL_CALIBRATION,
     DIRECTIONAL_TARGET,
     MEASURED_INPUTS_LABEL,
     ORACLE_LABEL,
@@ -87,6 +88,20 @@ def test_oracle_config_rejects_bad_values() -> None:
         OracleConfig(target=0.7)
     with pytest.raises(ValueError, match=r"stage='cusum'.*one of \['t2', 'directional'\]"):
         OracleConfig(stage="cusum")
+    with pytest.raises(ValueError, match=r"n_calibration=0 is outside the allowed range"):
+        OracleConfig(n_calibration=0)
+
+
+def test_calibration_seeds_stay_clear_of_test_and_training_seeds() -> None:
+    paper = TRACKS["paper"]
+    assert OracleConfig().calibration_seeds(paper) == paper.validation_seeds
+    directional = OracleConfig(stage="directional")
+    start = paper.validation_seed_start
+    assert directional.calibration_seeds(paper) == range(start, start + DIRECTIONAL_CALIBRATION)
+    crowded = paper.with_seeds(test=start + 50)
+    with pytest.raises(ValueError, match=r"n_calibration=100 puts calibration seeds .* test"):
+        directional.calibration_seeds(crowded)
+    assert OracleConfig(stage="directional", n_calibration=50).calibration_seeds(crowded)
     with pytest.raises(ValueError, match=r"inputs='exact'.*measured"):
         OracleConfig(inputs="exact")
 
