@@ -51,6 +51,7 @@ upper ends all under 0.0082.
 
 from __future__ import annotations
 
+import hashlib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from enum import StrEnum
@@ -193,9 +194,17 @@ class PhysicalLimit:
 
     name = ORACLE_LABEL
 
-    def __init__(self, data: TrackData, config: OracleConfig | None = None) -> None:
+    def __init__(
+        self,
+        data: TrackData,
+        config: OracleConfig | None = None,
+        *,
+        simulations: _Simulations | None = None,
+    ) -> None:
         self.data = data
         self.config = config or OracleConfig()
+        # rows scored together share their simulations (healthy episodes and references)
+        self._sims = simulations or _Simulations(data)
         self.name = self.config.label
         idx = [MEASUREMENT_NAMES.index(c) for c in self.config.channels]
         self._idx = np.array(idx)
@@ -205,7 +214,7 @@ class PhysicalLimit:
 
     def _reference(self, y: np.ndarray, seed: int) -> np.ndarray:
         measured = y if self.config.inputs == OracleInputs.MEASURED else None
-        return self.data.reference(seed, measured)
+        return self._sims.reference(seed, measured)
 
     def _statistic(self, y: np.ndarray, seed: int) -> tuple[np.ndarray, np.ndarray]:
         y_ref = self._reference(y, seed)
@@ -216,7 +225,7 @@ class PhysicalLimit:
         """Calibrate the stage on healthy episodes of ``seeds`` (default:
         :meth:`OracleConfig.calibration_seeds`, validation seeds of the track)."""
         seeds = list(self.config.calibration_seeds(self.data.track) if seeds is None else seeds)
-        healthy = [self.data.load_test("nominal", s).episode for s in seeds]
+        healthy = [self._sims.healthy(s) for s in seeds]
         if self.config.stage == OracleStage.DIRECTIONAL:
             self.stage_ = _PerfectModelStage(
                 false_alarm_target=self.config.false_alarm_target,
@@ -274,10 +283,7 @@ class _PerfectModelStage(LRGFGLR):
 
     def _fit(self, episodes: list[Episode]) -> None:
         self.out_idx_ = np.array([self.channels_.index(c) for c in self.monitored])
-        self.in_idx_ = [np.zeros(0, dtype=int)] * len(self.monitored)
-        self.lrgf_, self.mem_ = [], []
-        self.v_paper_ = np.ones(len(self.monitored))
-        self.train_fit_loss_ = np.zeros(len(self.monitored))
+        self.v_paper_ = np.ones(len(self.monitored))  # read by _finish, unused by this scale
         cal = []
         for ep in episodes:
             r = ep.y[:, self.out_idx_] - self._centre_of(ep.y, ep.seed)
@@ -308,6 +314,28 @@ class _PerfectModelStage(LRGFGLR):
         return d[:, self.out_idx_] / self.v_residual_
 
 
+class _Simulations:
+    """Healthy episodes and references of one track, each simulated once for every row that
+    asks (the T² and directional rows calibrate on the same first validation episodes, and
+    the two measured-input rows replay the same records)."""
+
+    def __init__(self, data: TrackData) -> None:
+        self.data = data
+        self._healthy: dict[int, Episode] = {}
+        self._references: dict[tuple[int, bytes | None], np.ndarray] = {}
+
+    def healthy(self, seed: int) -> Episode:
+        if seed not in self._healthy:
+            self._healthy[seed] = self.data.load_test("nominal", seed).episode
+        return self._healthy[seed]
+
+    def reference(self, seed: int, measured: np.ndarray | None) -> np.ndarray:
+        key = (seed, None if measured is None else hashlib.sha1(measured.tobytes()).digest())
+        if key not in self._references:
+            self._references[key] = self.data.reference(seed, measured)
+        return self._references[key]
+
+
 def oracle_records(
     data: TrackData, config: OracleConfig | None = None, *, t_on: int = 0
 ) -> list[CellResult]:
@@ -321,7 +349,8 @@ def reference_records(
     data: TrackData, configs: Sequence[OracleConfig], *, t_on: int = 0
 ) -> list[CellResult]:
     """The records of several reference rows (one per config), each test cell simulated once."""
-    observers = [PhysicalLimit(data, c).fit() for c in configs]
+    sims = _Simulations(data)
+    observers = [PhysicalLimit(data, c, simulations=sims).fit() for c in configs]
     out = []
     for sc, seed in data.cells():
         loaded: LoadedEpisode = data.load_test(sc, seed)
