@@ -15,6 +15,7 @@ from diagnosers import (
     baselines,  # noqa: F401  (registers limits, pca, arx-band)
     isolation,  # noqa: F401  (registers lrgf-iso, lrgf-lda)
     lrgf_glr,  # noqa: F401  (registers lrgf-glr)
+    lrgf_glr_adaptive,  # noqa: F401  (registers lrgf-glr-adaptive)
     lrgf_mem,  # noqa: F401  (registers lrgf-mem-paper, lrgf-mem)
 )
 

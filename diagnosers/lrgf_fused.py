@@ -49,7 +49,8 @@ def _lagged_dots(g: np.ndarray, x: np.ndarray, n_lags: int, first_lag: int) -> n
 
 
 class LRGFFreeRun(torch.autograd.Function):
-    """``y = C tanh(g2 (H(q) W u - g1) / 2) (+ c0)``, eq. (6), over whole sequences.
+    """``y = C tanh(g2 (H(q) W u - g1) / 2) (+ c0)``, eq. (6), over whole sequences; the last
+    ``n_linear`` neurons output ``H(q) W u`` itself.
 
     Inputs: ``u_n`` (B, T, n) standardised inputs; ``weight_in`` (v, n); ``num`` (v, r+1) and
     ``den`` (v, r) the neuron filters (``a_0 = 1`` implied); ``g1``, ``g2`` (v,); ``weight_out``
@@ -74,6 +75,7 @@ class LRGFFreeRun(torch.autograd.Function):
         weight_out: torch.Tensor,
         bias_out: torch.Tensor | None,
         steady_window: int,
+        n_linear: int,
     ) -> torch.Tensor:
         b_len, t_len, n_in = u_n.shape
         num_, den_ = _np64(num), _np64(den)
@@ -97,10 +99,12 @@ class LRGFFreeRun(torch.autograd.Function):
         z[..., w:] = zf + dc[:, None, None] * s0[..., None] if w else zf
         centred = z - g1_[:, None, None]
         h = np.tanh((0.5 * g2_)[:, None, None] * centred)
+        lin = slice(v - n_linear, v)  # the linear neurons: f(z) = z
+        h[lin] = z[lin]
         y = w_out @ h.reshape(v, b_len * t_len)  # (m, BT)
         if bias_out is not None:
             y += _np64(bias_out)[:, None]
-        ctx.parts = (u_rows, x, zf, centred, h, s_bar, s0, dc, w, (b_len, t_len))
+        ctx.parts = (u_rows, x, zf, centred, h, s_bar, s0, dc, w, (b_len, t_len), lin)
         ctx.coefs = (num_, den_, den_full, g2_, w_in, w_out)
         ctx.has_bias = bias_out is not None
         ctx.u_dtype = u_n.dtype
@@ -114,19 +118,23 @@ class LRGFFreeRun(torch.autograd.Function):
     @staticmethod
     @once_differentiable
     def backward(ctx: Any, grad_y: torch.Tensor) -> tuple:  # type: ignore[override]
-        u_rows, x, zf, centred, h, s_bar, s0, dc, w, (b_len, t_len) = ctx.parts
+        u_rows, x, zf, centred, h, s_bar, s0, dc, w, (b_len, t_len), lin = ctx.parts
         num_, den_, den_full, g2_, w_in, w_out = ctx.coefs
         v, r = den_.shape
         gy = np.ascontiguousarray(_np64(grad_y).reshape(b_len * t_len, -1).T)  # (m, BT)
         grad_w_out = gy @ h.reshape(v, -1).T
         grad_bias = gy.sum(1) if ctx.has_bias else None
-        # through the activation: da = dh (1 - h^2), dz = da g2 / 2
-        da = (w_out.T @ gy).reshape(v, b_len, t_len)
+        # through the activation: da = dh (1 - h^2), dz = da g2 / 2; a linear neuron's dz = dh
+        dh = (w_out.T @ gy).reshape(v, b_len, t_len)
+        d_lin = dh[lin].copy()
+        da = dh
         da *= 1.0 - h * h
         grad_g2 = 0.5 * np.einsum("cbt,cbt->c", da, centred)
         dz = da
         dz *= (0.5 * g2_)[:, None, None]
         grad_g1 = -dz.sum(axis=(1, 2))
+        dz[lin] = d_lin
+        grad_g1[lin] = grad_g2[lin] = 0.0
         # through the filter (zero state at t = w): gA = anti-causal 1/A applied to dz
         dz_f = dz[..., w:]
         ones = np.ones((v, 1))
@@ -167,6 +175,7 @@ class LRGFFreeRun(torch.autograd.Function):
                 for g, dt in zip(grads, ctx.dtypes, strict=True)
             ),
             None,
+            None,
         )
 
 
@@ -180,10 +189,13 @@ def lrgf_free_run(
     weight_out: torch.Tensor,
     bias_out: torch.Tensor | None = None,
     steady_window: int = 0,
+    *,
+    n_linear: int = 0,
 ) -> torch.Tensor:
     """Eq. (6) on standardised ``u_n`` (B, T, n) -> (B, T, m); see :class:`LRGFFreeRun`.
 
-    ``steady_window`` ``0`` is the zero start, ``W >= 1`` the steady start over ``W`` samples.
+    ``steady_window`` ``0`` is the zero start, ``W >= 1`` the steady start over ``W`` samples;
+    the last ``n_linear`` neurons are linear (:class:`diagnosers.lrgf_net.LRGF`).
     """
     if u_n.ndim != 3 or u_n.shape[-1] != weight_in.shape[1]:
         raise ValueError(
@@ -207,4 +219,8 @@ def lrgf_free_run(
             )
     if isinstance(steady_window, bool) or not isinstance(steady_window, int) or steady_window < 0:
         raise ValueError(f"steady_window={steady_window!r} must be an integer >= 0")
-    return LRGFFreeRun.apply(u_n, weight_in, num, den, g1, g2, weight_out, bias_out, steady_window)
+    if isinstance(n_linear, bool) or not isinstance(n_linear, int) or not 0 <= n_linear <= v:
+        raise ValueError(f"n_linear={n_linear!r}; allowed: an integer from 0 to {v} (the neurons)")
+    return LRGFFreeRun.apply(
+        u_n, weight_in, num, den, g1, g2, weight_out, bias_out, steady_window, n_linear
+    )

@@ -64,6 +64,15 @@ integrates the baseline's settling transient for a few of its time constants (1/
 ``lrgf-glr-adaptive`` runs without it. It learns a unit's own offset from the model (a plant
 unlike the training plants) and loses small, slow faults that stay under the hold level.
 
+**Operating points outside the training data** (``novelty_gain``, default 5). Where the
+bank's own prediction of a relation with exogenous inputs only (T_rg1's) leaves the range of
+its training predictions by ``d`` training standard deviations (:mod:`diagnosers.novelty`),
+every relation's normalised error is divided by ``1 + novelty_gain · d``: the networks
+extrapolate there, and the healthy false-alarm streaks sat there. The calibration sees the same
+division, with each out-of-fold record measured against its own fold bank's training range (a
+fold bank has seen fewer operating points, as the detector meets new ones on fresh episodes).
+``0`` turns it off.
+
 ``signal`` is ``[T², score_f1, ...]`` with ``upper`` their limits; alarm when any exceeds its
 limit after the silent warm-up, for ``on_delay`` samples in a row (an alarm system's on-delay,
 as in ISA-18.2; the same or different statistics). The limits stay per sample: an on-delay of
@@ -73,7 +82,6 @@ delays every alarm by d − 1 samples, so it is chosen together with ``false_ala
 
 from __future__ import annotations
 
-import inspect
 from enum import StrEnum
 from typing import Any, ClassVar
 
@@ -96,11 +104,12 @@ from diagnosers.lrgf_mem import (
     PARAMETER_CONSTRAINTS,
     MemSelect,
 )
+from diagnosers.novelty import NoveltyScaled, PredictionRange, exogenous_relations, novelty_scale
 from diagnosers.parallel import TrainedBank
 from diagnosers.registry import register
 from fcc_env.validation import Integer, Options, Real, RealSequence, check_params
 
-__all__ = ["LRGFGLR", "Calibration", "DirectionalDetector", "LRGFGLRAdaptive"]
+__all__ = ["LRGFGLR", "Calibration", "DirectionalDetector"]
 
 
 class Calibration(StrEnum):
@@ -134,6 +143,7 @@ GLR_CONSTRAINTS: dict[str, Any] = {
     "slow_ewma_lambda": (Real(0, 1, closed="left"), RealSequence(0, 1, closed="neither")),
     "slow_share": Real(0, 1, closed="neither"),
     "on_delay": Integer(1, 1000),
+    "novelty_gain": Real(0),
 }
 
 #: the FCC-v0 faults whose directions are learned by default
@@ -141,7 +151,7 @@ DEFAULT_FAULTS = ("f1", "f2", "f3", "f4")
 
 
 @register("lrgf-glr")
-class LRGFGLR(LRGFMEM):
+class LRGFGLR(NoveltyScaled, LRGFMEM):
     """``lrgf-mem``'s bank, a cross-fitted limit and tests along learned fault directions."""
 
     #: T_rg1, the slow high-gain relation that alone carries f3, gets a larger network
@@ -166,9 +176,11 @@ class LRGFGLR(LRGFMEM):
         slow_ewma_lambda: float | list[float] = 0.02,
         slow_share: float = 0.5,
         on_delay: int = 1,
+        novelty_gain: float = 5.0,
         relations: list[list[Any]] | None = None,
         n_hidden: int | list[int] | None = None,
         order: int = 2,
+        n_linear: int = 0,
         steady_window: int = 100,
         mem_hidden: int = 5,
         mem_input_delays: int = 15,
@@ -194,6 +206,7 @@ class LRGFGLR(LRGFMEM):
             relations=relations,
             n_hidden=n_hidden,
             order=order,
+            n_linear=n_linear,
             steady_window=steady_window,
             mem_hidden=mem_hidden,
             mem_input_delays=mem_input_delays,
@@ -231,6 +244,7 @@ class LRGFGLR(LRGFMEM):
         self.slow_ewma_lambda = slow_ewma_lambda
         self.slow_share = slow_share
         self.on_delay = on_delay
+        self.novelty_gain = novelty_gain
 
     @classmethod
     def fast_params(cls) -> dict[str, Any]:
@@ -276,23 +290,34 @@ class LRGFGLR(LRGFMEM):
                     )
         self.in_idx_ = [np.array([idx[c] for c in ins]) for _, ins in relations]
         self.out_idx_ = np.array([idx[o] for o, _ in relations])
+        self.novelty_relations_ = exogenous_relations(relations)
         w = self.steady_window
         ys = [e.y for e in episodes]
         cal_parts: list[tuple[np.ndarray, np.ndarray]] = []
         if self.calibration == Calibration.CROSS_FIT and len(ys) >= self.n_folds:
-            cal_parts, (self.lrgf_, self.mem_, v_paper, fits) = self._cross_fit_models(ys)
+            cal_parts, novelty, (self.lrgf_, self.mem_, v_paper, fits) = self._cross_fit_models(ys)
+            train = ys
         else:  # lrgf-mem's split (also when there are fewer episodes than folds)
             train, cal, cal_from = self._split(episodes)
             self.lrgf_, self.mem_, v_paper, fits = self._train_models(train)
             w = max(w, cal_from)
             cal_parts = [self._parts(y) for y in cal]
+            novelty = self._novelty_records(train, cal)
+        self.prediction_range_ = self._prediction_range(train)
         self.v_paper_ = np.array(v_paper)
         self.train_fit_loss_ = np.array([f.best_val_loss for f in fits])
-        self._calibrate(cal_parts, w)
+        self._calibrate(cal_parts, w, novelty)
 
-    def _calibrate(self, cal_parts: list[tuple[np.ndarray, np.ndarray]], w: int) -> None:
+    def _calibrate(
+        self,
+        cal_parts: list[tuple[np.ndarray, np.ndarray]],
+        w: int,
+        novelty: list[np.ndarray] | None = None,
+    ) -> None:
         """Error-model choice, scale, fault directions and limits from healthy calibration
-        records ``cal_parts`` (``(y_out − y_m, y_e)`` each; the first ``w`` samples skipped)."""
+        records ``cal_parts`` (``(y_out − y_m, y_e)`` each; the first ``w`` samples skipped)
+        with, per record, its distance outside the training predictions ``novelty`` (``(T,)``,
+        None: inside)."""
         relations = self._relations()
         n_cal = sum(max(0, r.shape[0] - w) for r, _ in cal_parts)
         if n_cal < MIN_CALIBRATION_SAMPLES:
@@ -306,7 +331,12 @@ class LRGFGLR(LRGFMEM):
             self.use_mem_ = np.sqrt(np.mean(on**2, axis=0)) < np.sqrt(np.mean(off**2, axis=0))
         else:
             self.use_mem_ = np.ones(len(relations), dtype=bool)
-        rem = [(r - e * self.use_mem_)[w:] for r, e in cal_parts]
+        if novelty is None:
+            novelty = [np.zeros(r.shape[0]) for r, _ in cal_parts]
+        rem = [
+            ((r - e * self.use_mem_) / novelty_scale(d, self.novelty_gain)[:, None])[w:]
+            for (r, e), d in zip(cal_parts, novelty, strict=True)
+        ]
         self.v_residual_ = np.maximum(np.sqrt(np.mean(np.concatenate(rem) ** 2, axis=0)), 1e-9)
         norm = [r / self.v_residual_ for r in rem]
         self.directions_ = self._learn_directions()
@@ -383,8 +413,9 @@ class LRGFGLR(LRGFMEM):
 
     def _cross_fit_models(
         self, ys: list[np.ndarray]
-    ) -> tuple[list[tuple[np.ndarray, np.ndarray]], TrainedBank]:
-        """Out-of-fold :meth:`_parts` of every record of ``ys``, and the bank trained on all.
+    ) -> tuple[list[tuple[np.ndarray, np.ndarray]], list[np.ndarray], TrainedBank]:
+        """Out-of-fold :meth:`_parts` of every record of ``ys`` and their novelty against the
+        fold bank's own training range, and the bank trained on all.
 
         With ``refit_epochs=None`` the ``n_folds`` banks without a fold and the bank on all
         records are trained from scratch in one call, so that ``n_jobs`` processes share all of
@@ -403,11 +434,12 @@ class LRGFGLR(LRGFMEM):
             final = self._train_banks(
                 [ys], init=[fold_banks[0]], max_epochs=min(self.refit_epochs, self.max_epochs)
             )[0]
-        cal_parts = []
-        for fold, bank in zip(folds, fold_banks, strict=True):
+        cal_parts, novelty = [], []
+        for fold, train, bank in zip(folds, sets, fold_banks, strict=True):
             self.lrgf_, self.mem_ = bank.lrgf, bank.mem  # _parts runs the current models
             cal_parts += [self._parts(ys[i]) for i in fold]
-        return cal_parts, final
+            novelty += self._novelty_records(train, [ys[i] for i in fold])
+        return cal_parts, novelty, final
 
     def _sequential(self) -> DirectionalGLR | CUSUM:
         if self.detector == DirectionalDetector.GLR:
@@ -468,7 +500,7 @@ class LRGFGLR(LRGFMEM):
 
     def _normalised(self, y: np.ndarray) -> np.ndarray:
         r, e = self._parts(y)
-        return (r - e * self.use_mem_) / self.v_residual_
+        return (r - e * self.use_mem_) / self.v_residual_ / self._scale_of(y)[:, None]
 
     def _finish(self) -> None:
         super()._finish()
@@ -479,6 +511,9 @@ class LRGFGLR(LRGFMEM):
         self._lower = np.full(len(self.upper_), -np.inf)
         self._no_limit = np.full(len(self.upper_), np.inf)
         self._hold_limits = self.baseline_hold * self.upper_
+        self._novelty_on = (
+            getattr(self, "prediction_range_", None) is not None and self.novelty_gain > 0
+        )
 
     @property
     def _n_slow_scales(self) -> int:
@@ -596,6 +631,9 @@ class LRGFGLR(LRGFMEM):
         warm = self._k < self.steady_window
         self._k += 1
         e = np.zeros(len(centre)) if warm else (y_out - centre) / self.v_residual_
+        if not warm and self._novelty_on:
+            d = self.prediction_range_.distance(self._step_y_m[self.novelty_relations_])
+            e /= novelty_scale(d, self.novelty_gain)
         _, signal = self._stage_step(e, warm=warm)
         return self._decision(y_out - centre, signal, warm)
 
@@ -603,7 +641,7 @@ class LRGFGLR(LRGFMEM):
         centre = self._centre(y)
         resid = y[:, self.out_idx_] - centre
         w = self.steady_window
-        e = resid / self.v_residual_
+        e = resid / self.v_residual_ / self._scale_of(y)[:, None]
         e[:w] = 0.0
         if self.baseline_lambda > 0:  # the baseline's hold makes the stage a recursion
             # detect() has just reset the stage (base contract), so it starts fresh
@@ -623,11 +661,16 @@ class LRGFGLR(LRGFMEM):
 
     # ---- persistence ---------------------------------------------------------------------------
     def _get_state(self) -> dict[str, np.ndarray]:
+        rng = self.prediction_range_
         return {
             **super()._get_state(),
             "directions": self.directions_,
             "dir_weights": self.dir_weights_,
             "h_dir": self.h_dir_,
+            "novelty_relations": np.asarray(self.novelty_relations_),
+            "prediction_range": (
+                np.zeros((3, 0)) if rng is None else rng.to_array()  # type: ignore[union-attr]
+            ),
         }
 
     def _set_state(self, state: dict[str, np.ndarray]) -> None:
@@ -637,41 +680,11 @@ class LRGFGLR(LRGFMEM):
             self.h_dir_ = state["h_dir"]
         except KeyError as e:
             raise ValueError(f"saved state lacks array {e.args[0]!r}") from None
+        if "prediction_range" in state:
+            rng = np.asarray(state["prediction_range"])
+            self.novelty_relations_ = np.asarray(state["novelty_relations"], dtype=int)
+            self.prediction_range_ = PredictionRange.from_array(rng) if rng.size else None
+        else:  # saved before the novelty scale existed: it ran without one, and still does
+            self.novelty_relations_, self.prediction_range_ = np.zeros(0, dtype=int), None
+            self.novelty_gain = 0.0
         super()._set_state(state)
-
-
-def _init_with_defaults(init: Any, defaults: dict[str, Any]) -> Any:
-    """``init``'s keyword signature with some defaults changed, for a registered variant whose
-    only difference is its defaults (``get_params`` and ``make`` read the signature)."""
-    sig = inspect.signature(init)
-    params = [
-        p.replace(default=defaults[p.name]) if p.name in defaults else p
-        for p in sig.parameters.values()
-    ]
-    return sig.replace(parameters=params)
-
-
-@register("lrgf-glr-adaptive")
-class LRGFGLRAdaptive(LRGFGLR):
-    """``lrgf-glr`` with the held baseline on (``baseline_lambda=0.005``, ``baseline_hold=0.5``).
-
-    For a plant that differs from the plants it was trained on (the ``uncertain`` track): the
-    baseline learns the unit's own slow offset from the model while the plant is healthy. It
-    pays on small and slow faults, which stay under the hold level and are learned as baseline.
-    The setting was chosen on validation seeds (``scripts/baseline_lab.py``; see the README).
-    """
-
-    DEFAULTS: ClassVar[dict[str, Any]] = {
-        "baseline_lambda": 0.005,
-        "baseline_hold": 0.5,
-        # the configuration the baseline was validated with: lrgf-glr's before the T_rg1
-        # network grew and the slow scale came (see the README)
-        "n_hidden": 5,
-        "slow_ewma_lambda": 0.0,
-        "false_alarm_target": 0.02,
-    }
-
-    def __init__(self, **params: Any) -> None:
-        super().__init__(**{**self.DEFAULTS, **params})
-
-    __init__.__signature__ = _init_with_defaults(LRGFGLR.__init__, DEFAULTS)  # type: ignore[attr-defined]

@@ -174,6 +174,7 @@ MIN_CALIBRATION_SAMPLES = 50
 PARAMETER_CONSTRAINTS: dict[str, Any] = {
     "n_hidden": (Integer(1, 64), IntegerSequence(1, 64, unique=False), None),
     "order": Integer(1, 8),
+    "n_linear": Integer(0, 64),
     "steady_window": Integer(1, 100_000),
     "mem_hidden": Integer(1, 256),
     "mem_input_delays": Integer(1, 100),
@@ -232,6 +233,7 @@ class _LRGFMEMBase(Diagnoser):
         relations: list[list[Any]] | None = None,
         n_hidden: int | list[int] | None = 3,
         order: int = 2,
+        n_linear: int = 0,
         steady_window: int = 100,
         mem_hidden: int = 5,
         mem_input_delays: int = 15,
@@ -256,6 +258,7 @@ class _LRGFMEMBase(Diagnoser):
         self.relations = relations
         self.n_hidden = n_hidden
         self.order = order
+        self.n_linear = n_linear
         self.steady_window = steady_window
         self.mem_hidden = mem_hidden
         self.mem_input_delays = mem_input_delays
@@ -342,7 +345,14 @@ class _LRGFMEMBase(Diagnoser):
 
     def _validate_params(self) -> None:
         check_params(self.get_params(), PARAMETER_CONSTRAINTS)
-        self._hidden_sizes()
+        sizes = self._hidden_sizes()
+        if self.n_linear > min(sizes):
+            raise invalid(
+                "n_linear",
+                self.n_linear,
+                f"an integer from 0 to the smallest network's size ({min(sizes)})",
+                f"the networks have {list(sizes)} neurons",
+            )
 
     # ---- fitting -------------------------------------------------------------------------------
     def _split(self, episodes: list[Episode]) -> tuple[list[np.ndarray], list[np.ndarray], int]:
@@ -507,6 +517,7 @@ class _LRGFMEMBase(Diagnoser):
     def _step_centre(self, y: np.ndarray) -> np.ndarray:
         """y_m + y_e of every relation for one measurement ``y``: :meth:`_centre`, streaming."""
         centre = self._bank.step(y)
+        self._step_y_m = centre.copy()  # the networks' outputs alone (lrgf-glr's novelty)
         if len(self._mem_used):
             centre[self._mem_used] += self._mem_bank.step(y)
         return centre
@@ -647,6 +658,9 @@ class _LRGFMEMBase(Diagnoser):
                     ) from None
                 module.eval()
                 store.append(module)
+        # a model saved before ``n_linear`` existed has tanh neurons only, whatever the class's
+        # default is now: the hyperparameter follows the networks that were loaded
+        self.n_linear = min((int(net.n_linear) for net in self.lrgf_), default=0)
         self._bank = None
 
 
@@ -667,6 +681,7 @@ class LRGFMEM(_LRGFMEMBase):
         relations: list[list[Any]] | None = None,
         n_hidden: int | list[int] = 5,
         order: int = 2,
+        n_linear: int = 0,
         steady_window: int = 100,
         mem_hidden: int = 5,
         mem_input_delays: int = 15,
@@ -692,6 +707,7 @@ class LRGFMEM(_LRGFMEMBase):
             relations=relations,
             n_hidden=n_hidden,
             order=order,
+            n_linear=n_linear,
             steady_window=steady_window,
             mem_hidden=mem_hidden,
             mem_input_delays=mem_input_delays,

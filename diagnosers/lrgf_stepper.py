@@ -98,6 +98,7 @@ class LRGFStepper:
             )
             self.w = np64(model.weight_in)
             self.g1, self.g2 = np64(model.g1), np64(model.g2)
+            self.n_linear = model.n_linear
             self.c = np64(model.weight_out)
             self.c0 = (
                 np64(model.bias_out) if model.bias_out is not None else np.zeros(model.n_outputs)
@@ -116,7 +117,7 @@ class LRGFStepper:
         """Consume ``u(k)`` (physical, shape ``(n,)``) and return ``y(k)`` (physical, shape ``(m,)``)."""
         s = self.w @ ((np.asarray(u, dtype=np.float64) - self.in_mean) / self.in_scale)
         z = self.filters.step(s)
-        h = lrgf_activation(z, self.g1, self.g2)
+        h = lrgf_activation(z, self.g1, self.g2, self.n_linear)
         return (self.c @ h + self.c0) * self.out_scale + self.out_mean
 
 
@@ -144,6 +145,10 @@ class BankStepper:
             self.d[j] = st.c0[0] * st.out_scale[0] + st.out_mean[0]
         self.g1 = np.concatenate([st.g1 for st in steppers])
         self.g2 = np.concatenate([st.g2 for st in steppers])
+        # the relations' linear neurons, wherever they sit in the stacked rows
+        self.linear = np.concatenate(
+            [np.arange(st.w.shape[0]) >= st.w.shape[0] - st.n_linear for st in steppers]
+        )
         starts = {(net.initial_state, net.steady_window) for net in nets}
         if len(starts) != 1:
             raise ValueError("all relations must share one initial-state convention")
@@ -161,4 +166,6 @@ class BankStepper:
     def step(self, y: np.ndarray) -> np.ndarray:
         """Nominal-model outputs y_m of every relation for one measurement vector."""
         z = self.filters.step(self.w @ y + self.b)
-        return self.c @ lrgf_activation(z, self.g1, self.g2) + self.d
+        h = lrgf_activation(z, self.g1, self.g2)
+        h[self.linear] = z[self.linear]
+        return self.c @ h + self.d

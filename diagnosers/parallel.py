@@ -59,6 +59,7 @@ class BankSettings:
 
     n_hidden: int
     order: int
+    n_linear: int
     steady_window: int
     mem_hidden: int
     mem_input_delays: int
@@ -133,6 +134,7 @@ def _train_relation(job: _RelationJob) -> tuple[_Exported, _Exported, float, Fit
             s.n_hidden,
             s.order,
             1,
+            n_linear=s.n_linear,
             initial_state="steady",
             steady_window=s.steady_window,
             seed=job.seed,

@@ -284,6 +284,8 @@ class _PerfectModelStage(LRGFGLR):
     def _fit(self, episodes: list[Episode]) -> None:
         self.out_idx_ = np.array([self.channels_.index(c) for c in self.monitored])
         self.v_paper_ = np.ones(len(self.monitored))  # read by _finish, unused by this scale
+        # a perfect model has no training range to leave
+        self.novelty_relations_, self.prediction_range_ = np.zeros(0, dtype=int), None
         cal = []
         for ep in episodes:
             r = ep.y[:, self.out_idx_] - self._centre_of(ep.y, ep.seed)

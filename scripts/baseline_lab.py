@@ -91,9 +91,9 @@ def val_track(name: str, n_healthy: int, n_faulty: int):
 class _Stash(LRGFGLR):
     """lrgf-glr that keeps its out-of-fold calibration records."""
 
-    def _calibrate(self, cal_parts, w):
-        self.stash_ = (cal_parts, w)
-        super()._calibrate(cal_parts, w)
+    def _calibrate(self, cal_parts, w, novelty=None):
+        self.stash_ = (cal_parts, w, novelty)
+        super()._calibrate(cal_parts, w, novelty)
 
 
 def train(track: str, epochs: int, tag: str, n_train: int | None, params: dict) -> None:
@@ -105,10 +105,11 @@ def train(track: str, epochs: int, tag: str, n_train: int | None, params: dict) 
     print(f"{track}{tag}: trained in {time.perf_counter() - t0:.0f} s", flush=True)
     d = OUT / f"{track}{tag}"
     d.mkdir(parents=True, exist_ok=True)
-    cal_parts, w = det.stash_
+    cal_parts, w, novelty = det.stash_
     det.__class__ = LRGFGLR  # saved as the registered diagnoser, so that it loads
     np.savez(d / "cal.npz", **{f"r{i}": r for i, (r, _) in enumerate(cal_parts)},
-             **{f"e{i}": e for i, (_, e) in enumerate(cal_parts)}, w=w)  # fmt: skip
+             **{f"e{i}": e for i, (_, e) in enumerate(cal_parts)},
+             **{f"d{i}": x for i, x in enumerate(novelty or [])}, w=w)  # fmt: skip
     det.save(d / "model")
 
 
@@ -117,7 +118,10 @@ def load(track: str, tag: str = ""):
     det = diagnosers.Diagnoser.load(d / "model")
     z = np.load(d / "cal.npz")
     n = sum(1 for k in z.files if k.startswith("r"))
-    return det, [(z[f"r{i}"], z[f"e{i}"]) for i in range(n)], int(z["w"])
+    cal = [(z[f"r{i}"], z[f"e{i}"]) for i in range(n)]
+    # a bank stored before the novelty records: the calibration sees none
+    novelty = [z[f"d{i}"] for i in range(n)] if "d0" in z.files else None
+    return det, cal, int(z["w"]), novelty
 
 
 def episodes(track: str, n_healthy: int, n_faulty: int, eval_track: str | None = None):
@@ -200,14 +204,14 @@ def main() -> None:
         extra = parse_set(a.set)
     except ValueError as err:
         ap.error(str(err))
-    det, cal, w = load(a.track, a.tag)
+    det, cal, w, novelty = load(a.track, a.tag)
     tracks = (a.eval_tracks or a.track).split(",")
     eps = {tr: episodes(a.track, a.n_healthy, a.n_faulty, tr) for tr in tracks}
     results = []
     for lam in [float(x) for x in a.lambdas.split(",")]:
         for hold in [float(x) for x in a.holds.split(",")]:
             det.set_params(baseline_lambda=lam, baseline_hold=hold, **extra)
-            det._calibrate(cal, w)
+            det._calibrate(cal, w, novelty)
             det._fitted_ = True  # the lab re-calibrates the stored bank in place
             for tr in tracks:
                 res = evaluate(det, eps[tr])

@@ -118,7 +118,7 @@ def main() -> None:
         extra = parse_set(a.set)
     except ValueError as err:
         ap.error(str(err))
-    det, cal, w = load(a.track, a.tag)
+    det, cal, w, novelty = load(a.track, a.tag)
     ys = healthy_episodes(a.track, a.n_healthy)
     train = (
         np.concatenate([e.y for e in TrackData(track=val_track(a.track, 1, 1)).train_episodes()])
@@ -128,7 +128,7 @@ def main() -> None:
     out = []
     for target in [float(t) for t in a.targets.split(",")]:
         det.set_params(false_alarm_target=target, **extra)
-        det._calibrate(cal, w)
+        det._calibrate(cal, w, novelty)
         det._fitted_ = True  # the lab re-calibrates the stored bank in place
         detections = [
             det.detect(diagnosers.Episode(y, det.channels_, 10.0))

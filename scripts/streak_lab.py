@@ -26,8 +26,8 @@ def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--track", default="paper")
     a = ap.parse_args()
-    det, cal, w = load(a.track)
-    det._calibrate(cal, w)
+    det, cal, w, novelty = load(a.track)
+    det._calibrate(cal, w, novelty)
     det._fitted_ = True
     eps = episodes(a.track, 60, 10, a.track)
     ch = list(det.channels_)

@@ -86,10 +86,10 @@ def main() -> None:
     unknown = [t for t in a.eval_tracks.split(",") if t not in TRACKS]
     if unknown:
         ap.error(f"--eval-tracks {unknown}; allowed: {', '.join(TRACKS)}")
-    det, cal, w = load("paper", a.tag)
+    det, cal, w, novelty = load("paper", a.tag)
     # the lab re-calibrates the stored bank in place, directions from the chosen training seeds
     det.set_params(fault_seeds=list(range(1000, 1000 + a.n_seeds)))
-    det._calibrate(cal, w)
+    det._calibrate(cal, w, novelty)
     det._fitted_ = True
     norm = [(r - e * det.use_mem_)[w:] / det.v_residual_ for r, e in cal]
     white = Whitener(norm, a.order)

@@ -380,13 +380,14 @@ def test_persistence_round_trip(tmp_path, dtype: torch.dtype) -> None:
      ("steady", 400, 300), ("steady", 7, 8)],
 )  # fmt: skip
 @pytest.mark.parametrize("output_bias", [False, True])
-@pytest.mark.parametrize("order", [1, 2, 3])
+@pytest.mark.parametrize(("order", "n_linear"), [(1, 0), (2, 0), (3, 0), (2, 1), (1, 4)])
 def test_fused_free_run_equals_reference_values_and_gradients(
-    initial_state: str, steady_window: int, t_len: int, output_bias: bool, order: int
-) -> None:
+    initial_state: str, steady_window: int, t_len: int, output_bias: bool, order: int,
+    n_linear: int,
+) -> None:  # fmt: skip
     net = LRGF(
         3, 4, order, 2, output_bias=output_bias, initial_state=initial_state,
-        steady_window=steady_window, seed=order,
+        steady_window=steady_window, seed=order, n_linear=n_linear,
     ).double()  # fmt: skip
     rng = np.random.default_rng(order)
     u = torch.from_numpy(np.cumsum(rng.normal(size=(2, t_len, 3)), axis=1) * 0.1)
@@ -412,8 +413,8 @@ def test_fused_free_run_float32_matches_reference() -> None:
     assert all(p.grad is not None and p.grad.dtype == torch.float32 for p in net.parameters())
 
 
-@pytest.mark.parametrize("steady_window", [0, 1, 5])
-def test_gradcheck_fused_free_run(steady_window: int) -> None:
+@pytest.mark.parametrize(("steady_window", "n_linear"), [(0, 0), (1, 0), (5, 0), (5, 1), (0, 3)])
+def test_gradcheck_fused_free_run(steady_window: int, n_linear: int) -> None:
     gen = torch.Generator().manual_seed(steady_window)
 
     def rand(*shape: int) -> torch.Tensor:
@@ -431,7 +432,9 @@ def test_gradcheck_fused_free_run(steady_window: int) -> None:
         rand(2, 3),
         rand(2),
     )
-    assert torch.autograd.gradcheck(lambda *a: lrgf_free_run(*a, steady_window=steady_window), args)
+    assert torch.autograd.gradcheck(
+        lambda *a: lrgf_free_run(*a, steady_window=steady_window, n_linear=n_linear), args
+    )
 
 
 def test_fused_free_run_refuses_bad_input() -> None:
@@ -454,3 +457,45 @@ def test_fused_free_run_refuses_bad_input() -> None:
         lrgf_free_run(torch.zeros(1, 4, 2), args[0], args[1], torch.zeros(3, 1), *args[3:])
     with pytest.raises(ValueError, match=r"weight_out has shape \(1, 4\); allowed: \(1, 3\)"):
         lrgf_free_run(torch.zeros(1, 4, 2), *args[:5], torch.zeros(1, 4))
+    with pytest.raises(ValueError, match=r"n_linear=4; allowed: an integer from 0 to 3"):
+        lrgf_free_run(torch.zeros(1, 4, 2), *args, n_linear=4)
+
+
+# ---- linear neurons ----------------------------------------------------------------------------
+def test_all_linear_network_is_a_sum_of_iir_filters() -> None:
+    """With every neuron linear, eq. (6) is y = sum_i c_i H_i(q) w_i u: scipy's lfilter is the
+    oracle, and the activation's g1, g2 play no part."""
+    net = LRGF(2, 3, 2, 1, n_linear=3, seed=3).double()
+    with torch.no_grad():
+        net.g1.fill_(5.0)
+        net.g2_raw.fill_(-3.0)
+    u = np.random.default_rng(2).normal(size=(200, 2))
+    num, den = (t.detach().numpy() for t in net.filter_coefficients())
+    s = u @ net.weight_in.detach().numpy().T
+    c = net.weight_out.detach().numpy()[0]
+    oracle = sum(c[i] * sps.lfilter(num[i], np.r_[1.0, den[i]], s[:, i]) for i in range(3))
+    np.testing.assert_allclose(net.predict(u)[:, 0], oracle, rtol=0, atol=1e-12)
+
+
+def test_linear_neuron_extrapolates_where_tanh_neurons_saturate() -> None:
+    """A linear neuron's output grows with its input without bound; a tanh neuron's does not."""
+    z = np.linspace(-50.0, 50.0, 11)[:, None].repeat(2, axis=1)
+    h = lrgf_activation(z, np.zeros(2), np.ones(2), n_linear=1)
+    np.testing.assert_array_equal(h[:, 1], z[:, 1])
+    assert np.all(np.abs(h[:, 0]) <= 1.0)
+
+
+def test_linear_neurons_stream_save_and_refuse_bad_counts(tmp_path) -> None:
+    net = LRGF(2, 3, 2, 1, n_linear=2, initial_state="steady", steady_window=5, seed=4).double()
+    u = np.random.default_rng(0).normal(size=(120, 2))
+    st = LRGFStepper(net)
+    y_stream = np.stack([st.step(row) for row in u])
+    np.testing.assert_allclose(y_stream, net.predict(u), rtol=0, atol=1e-10)
+    config, state = export_module(net)
+    assert config["n_linear"] == 2
+    np.testing.assert_array_equal(build_module(config, state).predict(u), net.predict(u))
+    old = {k: v for k, v in config.items() if k != "n_linear"}  # saved before n_linear existed
+    assert build_module(old, state).n_linear == 0
+    for bad in (-1, 4, 1.5, True):
+        with pytest.raises(ValueError, match=rf"n_linear={bad!r}; allowed: an integer from 0 to"):
+            LRGF(2, 3, 2, n_linear=bad)

@@ -303,7 +303,7 @@ def test_slow_score_is_the_projected_slow_ewma(slow_det) -> None:
     # (zero through the warm-up), projected on the slow block's weights
     ep = inject_step_fault(make_episode(900, seed=9), onset=500, magnitude=1.0)
     r, e = slow_det._parts(ep.y)
-    norm = (r - e * slow_det.use_mem_) / slow_det.v_residual_
+    norm = (r - e * slow_det.use_mem_) / slow_det.v_residual_ / slow_det._scale_of(ep.y)[:, None]
     norm[: slow_det.steady_window] = 0.0
     lam = slow_det.slow_ewma_lambda
     z_slow = signal.lfilter([lam], [1.0, lam - 1.0], norm, axis=0)
@@ -336,7 +336,7 @@ def test_several_slow_scales_stream_equal_batch_and_roundtrip(slow_det, train, t
     # oracle: each slow score is scipy's first-order filter of the normalised remaining error,
     # projected on its block's weights
     r, e = det._parts(ep.y)
-    norm = (r - e * det.use_mem_) / det.v_residual_
+    norm = (r - e * det.use_mem_) / det.v_residual_ / det._scale_of(ep.y)[:, None]
     w, k = det.steady_window, len(det.out_idx_)
     norm[:w] = 0.0
     for j, lam in enumerate((0.1, 0.03), start=1):

@@ -1,0 +1,113 @@
+"""The operating-point novelty of ``lrgf-glr`` (diagnosers.novelty): the range, the distance,
+which relations measure it, and that the detector divides by exactly ``1 + gain · d``."""
+
+from __future__ import annotations
+
+import copy
+
+import numpy as np
+import pytest
+from synthetic import make_episode
+
+from diagnosers.lrgf_glr import LRGFGLR
+from diagnosers.lrgf_mem import BANK_RELATIONS, DILUTE_RELATIONS
+from diagnosers.novelty import PredictionRange, exogenous_relations, novelty_scale
+
+
+def test_exogenous_relations_are_those_no_fault_moves() -> None:
+    # T_rx reads T_rg2 and T_rg2 reads T_rg1, both outputs of the bank: only T_rg1 is exogenous
+    assert exogenous_relations(BANK_RELATIONS).tolist() == [1]
+    assert exogenous_relations(BANK_RELATIONS + DILUTE_RELATIONS).tolist() == [1]
+    assert exogenous_relations([["a", ["b"]], ["b", ["a"]]]).tolist() == []
+
+
+def test_distance_in_training_standard_deviations() -> None:
+    train = [np.array([[0.0, 10.0], [2.0, 14.0]]), np.array([[1.0, 12.0]])]
+    rng = PredictionRange.of(train)
+    sd = np.std([[0.0, 10.0], [2.0, 14.0], [1.0, 12.0]], axis=0)
+    np.testing.assert_allclose(rng.scale, sd)
+    p = np.array([[1.0, 12.0], [2.0, 14.0], [3.0, 12.0], [1.0, 10.0 - 2 * sd[1]], [5.0, 20.0]])
+    expected = [0.0, 0.0, 1.0 / sd[0], 2.0, max(3.0 / sd[0], 6.0 / sd[1])]
+    np.testing.assert_allclose(rng.distance(p), expected)
+    np.testing.assert_allclose(novelty_scale(rng.distance(p), 5.0), 1.0 + 5.0 * np.array(expected))
+    back = PredictionRange.from_array(rng.to_array())
+    np.testing.assert_array_equal(back.distance(p), rng.distance(p))
+
+
+def test_bad_ranges_are_refused() -> None:
+    with pytest.raises(ValueError, match=r"at least 2 samples in all; got shape \(1, 2\)"):
+        PredictionRange.of([np.zeros((1, 2))])
+    with pytest.raises(ValueError, match=r"\(3, channels\) array; got shape \(2, 2\)"):
+        PredictionRange.from_array(np.zeros((2, 2)))
+
+
+FAST = {**LRGFGLR.fast_params(), "fault_scenarios": ["f3"], "n_folds": 2}
+
+
+@pytest.fixture(scope="module")
+def det() -> LRGFGLR:
+    return LRGFGLR(**FAST).fit([make_episode(1500, seed=s) for s in (1, 2, 3)])
+
+
+def _beyond_training(det: LRGFGLR):
+    """A copy of ``det`` whose training range is narrowed to the lower three quarters of a
+    healthy episode's predictions, so that the episode leaves it often (the fast settings'
+    networks saturate, so no input drives them far out of their real range), with that
+    distance."""
+    ep = make_episode(1200, seed=9)
+    narrow = copy.deepcopy(det)
+    p = det._exogenous_predictions(ep.y)[det.steady_window :]
+    high = np.quantile(p, 0.75, axis=0)
+    narrow.prediction_range_ = PredictionRange(p.min(axis=0), high, p.std(axis=0))
+    d = narrow.prediction_range_.distance(det._exogenous_predictions(ep.y))
+    assert (d > 0.1).mean() > 0.1, "the episode must leave the range often"
+    return narrow, ep, d
+
+
+def test_the_error_is_divided_by_one_plus_gain_times_distance(det) -> None:
+    det, ep, d = _beyond_training(det)
+    w = det.steady_window
+    off = copy.deepcopy(det)
+    off.novelty_gain = 0.0
+    off._finish()
+    # oracle: the T² of the EWMA of (raw normalised error) / (1 + gain d), by hand
+    raw = (ep.y[:, det.out_idx_] - det._centre(ep.y)) / det.v_residual_
+    scaled = raw / (1.0 + det.novelty_gain * d)[:, None]
+    scaled[:w] = 0.0
+    z = np.zeros(raw.shape[1])
+    t2 = []
+    for row in scaled:
+        z = det.ewma_lambda * row + (1.0 - det.ewma_lambda) * z
+        t2.append(z @ det.s_inv_ @ z)
+    got = det.detect(ep).signal[:, 0]
+    np.testing.assert_allclose(got[w:], np.array(t2)[w:], rtol=1e-9, atol=1e-12)
+    # inside the range (before the first excursion) the gain changes nothing
+    first = w + int(np.argmax(d[w:] > 0))
+    assert first > w + 10
+    np.testing.assert_allclose(off.detect(ep).signal[w:first, 0], got[w:first], rtol=1e-12)
+    assert not np.allclose(off.detect(ep).signal[first:, 0], got[first:])
+    stream = np.array([det.update(row).signal for row in ep.y])
+    np.testing.assert_allclose(stream, det.detect(ep).signal, rtol=1e-9, atol=1e-12)
+
+
+def test_the_range_survives_save_and_an_old_save_runs_without_it(det, tmp_path) -> None:
+    det, ep, _ = _beyond_training(det)
+    det.save(tmp_path / "m")
+    back = LRGFGLR.load(tmp_path / "m")
+    np.testing.assert_array_equal(
+        back.prediction_range_.to_array(), det.prediction_range_.to_array()
+    )
+    np.testing.assert_array_equal(back.detect(ep).signal, det.detect(ep).signal)
+    # a model saved before the novelty scale: its state has no range, so it runs without one
+    state = dict(np.load(tmp_path / "m" / "state.npz"))
+    for key in ("prediction_range", "novelty_relations"):
+        state.pop(key)
+    np.savez(tmp_path / "m" / "state.npz", **state)
+    old = LRGFGLR.load(tmp_path / "m")
+    assert old.prediction_range_ is None and old.get_params()["novelty_gain"] == 0.0
+    assert np.all(old._scale_of(ep.y) == 1.0)
+
+
+def test_a_negative_gain_is_refused() -> None:
+    with pytest.raises(ValueError, match=r"novelty_gain=-1"):
+        LRGFGLR(**{**FAST, "novelty_gain": -1.0}).fit([make_episode(600, seed=1)] * 2)
