@@ -13,6 +13,10 @@ training range.
     python scripts/fd_tail_lab.py --tag=_rg1x10 --targets 0.02,0.03,0.04 --n-healthy 200 \
         --set slow_ewma_lambda=0.02
     python scripts/fd_tail_lab.py --tag=_rg1x10 --set slow_ewma_lambda=0.02,on_delay=2 --streaks 10
+    python scripts/fd_tail_lab.py --tag=_nov --set novelty_gain=0 --by-range
+
+``--by-range`` prints, by where the T_rg1 network's prediction sits in its training range, the
+mean normalised remaining error and the alarm samples there (the evidence for ``novelty_gain``).
 """
 
 from __future__ import annotations
@@ -95,6 +99,36 @@ def streak_report(
         )
 
 
+#: bins of where the first exogenous relation's prediction sits in its training range (0 lowest,
+#: 1 highest training prediction)
+RANGE_BINS = ((-np.inf, 0.0), (0.0, 0.1), (0.1, 0.9), (0.9, 0.95), (0.95, 1.0), (1.0, np.inf))
+
+
+def range_report(det, ys: np.ndarray, detections: list) -> None:
+    """Per bin of :data:`RANGE_BINS`: samples, the mean normalised remaining error of every
+    relation (before any novelty division) and the alarm samples there."""
+    rng = det.prediction_range_
+    if rng is None:
+        print("no relation with exogenous inputs: no training range to report")
+        return
+    w = det.steady_window
+    pos, err, alarm = [], [], []
+    for y, d in zip(ys, detections, strict=True):
+        p = det._exogenous_predictions(y)[w:, 0]
+        pos.append((p - rng.low[0]) / (rng.high[0] - rng.low[0]))
+        err.append(((y[:, det.out_idx_] - det._centre(y)) / det.v_residual_)[w:])
+        alarm.append(d.alarm[w:])
+    q, e, a = np.concatenate(pos), np.concatenate(err), np.concatenate(alarm)
+    names = [det.channels_[i] for i in det.out_idx_]
+    print(f"by the {names[det.novelty_relations_[0]]} prediction's place in its training range "
+          f"(mean normalised error of {', '.join(names)}; alarm samples):")  # fmt: skip
+    for lo, hi in RANGE_BINS:
+        m = (q >= lo) & (q < hi) if np.isfinite(hi) else q >= lo
+        if m.any():
+            print(f"  [{lo}, {hi}): {m.sum()} samples, mean error {np.round(e[m].mean(0), 2)}, "
+                  f"{a[m].sum()} of {a.sum()} alarm samples")  # fmt: skip
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--track", default="paper")
@@ -110,6 +144,12 @@ def main() -> None:
         type=at_least(0),
         default=0,
         help="report alarm runs of this many samples or more (0: no report)",
+    )
+    ap.add_argument(
+        "--by-range",
+        action="store_true",
+        help="report the error and the alarms by where the model's prediction sits in its "
+        "training range",
     )
     a = ap.parse_args()
     if a.block > a.n_healthy:
@@ -148,6 +188,8 @@ def main() -> None:
         out.append({"target": target, **extra, "r_fd": r_fd.tolist()})
         if a.streaks:
             streak_report(det, ys, detections, train, a.streaks)
+        if a.by_range:
+            range_report(det, ys, detections)
     (OUT / f"false-alarm-{a.track}{a.tag}-{int(time.time())}.json").write_text(json.dumps(out))
 
 
