@@ -111,3 +111,34 @@ def test_the_range_survives_save_and_an_old_save_runs_without_it(det, tmp_path) 
 def test_a_negative_gain_is_refused() -> None:
     with pytest.raises(ValueError, match=r"novelty_gain=-1"):
         LRGFGLR(**{**FAST, "novelty_gain": -1.0}).fit([make_episode(600, seed=1)] * 2)
+
+
+def test_out_of_fold_novelty_is_measured_against_the_fold_banks_own_range(monkeypatch) -> None:
+    """Each out-of-fold record's distance comes from the fold bank that never saw it, against
+    the range of that bank's predictions on its own training records; the detector keeps the
+    final bank's range on all records."""
+    train = [make_episode(1500, seed=s) for s in (1, 2, 3)]
+    seen: list[tuple[list[int], list[int], PredictionRange]] = []
+    real = LRGFGLR._novelty_records
+
+    def spy(self, train_records, cal_records):
+        def ids(records):
+            return [next(i for i, e in enumerate(train) if e.y is r) for r in records]
+
+        rng = self._prediction_range(train_records)
+        seen.append((ids(train_records), ids(cal_records), rng))
+        out = real(self, train_records, cal_records)
+        for y, d in zip(cal_records, out, strict=True):
+            np.testing.assert_array_equal(d, rng.distance(self._exogenous_predictions(y)))
+        return out
+
+    monkeypatch.setattr(LRGFGLR, "_novelty_records", spy)
+    det = LRGFGLR(**{**FAST, "n_folds": 3}).fit(train)
+    assert [(t, c) for t, c, _ in seen] == [([1, 2], [0]), ([0, 2], [1]), ([0, 1], [2])]
+    # the fold banks' ranges differ from each other and from the final bank's
+    finals = det.prediction_range_.to_array()
+    assert all(not np.array_equal(r.to_array(), finals) for _, _, r in seen)
+    final = PredictionRange.of(
+        [det._exogenous_predictions(e.y)[det.steady_window :] for e in train]
+    )
+    np.testing.assert_array_equal(finals, final.to_array())
