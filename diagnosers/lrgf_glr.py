@@ -254,7 +254,7 @@ class LRGFGLR(NoveltyScaled, LRGFMEM):
         params = self.get_params()
         check_params({k: params[k] for k in PARAMETER_CONSTRAINTS}, PARAMETER_CONSTRAINTS)
         check_params({k: params[k] for k in GLR_CONSTRAINTS}, GLR_CONSTRAINTS)
-        self._hidden_sizes()  # checks the relations too
+        self._check_sizes()  # checks the relations and n_linear too
         known = {"f1", "f2", "f3", "f4"}
         if not set(self._faults()) <= known:
             raise ValueError(f"fault_scenarios must be among {sorted(known)}, got {self._faults()}")
@@ -667,10 +667,7 @@ class LRGFGLR(NoveltyScaled, LRGFMEM):
             "directions": self.directions_,
             "dir_weights": self.dir_weights_,
             "h_dir": self.h_dir_,
-            "novelty_relations": np.asarray(self.novelty_relations_),
-            "prediction_range": (
-                np.zeros((3, 0)) if rng is None else rng.to_array()  # type: ignore[union-attr]
-            ),
+            "prediction_range": (np.zeros((3, 0)) if rng is None else rng.to_array()),
         }
 
     def _set_state(self, state: dict[str, np.ndarray]) -> None:
@@ -682,7 +679,12 @@ class LRGFGLR(NoveltyScaled, LRGFMEM):
             raise ValueError(f"saved state lacks array {e.args[0]!r}") from None
         if "prediction_range" in state:
             rng = np.asarray(state["prediction_range"])
-            self.novelty_relations_ = np.asarray(state["novelty_relations"], dtype=int)
+            self.novelty_relations_ = exogenous_relations(self._relations())
+            if rng.size and rng.shape[-1] != len(self.novelty_relations_):
+                raise ValueError(
+                    f"prediction_range has {rng.shape[-1]} columns; allowed: one per relation "
+                    f"with exogenous inputs ({len(self.novelty_relations_)})"
+                )
             self.prediction_range_ = PredictionRange.from_array(rng) if rng.size else None
         else:  # saved before the novelty scale existed: it ran without one, and still does
             self.novelty_relations_, self.prediction_range_ = np.zeros(0, dtype=int), None

@@ -345,6 +345,10 @@ class _LRGFMEMBase(Diagnoser):
 
     def _validate_params(self) -> None:
         check_params(self.get_params(), PARAMETER_CONSTRAINTS)
+        self._check_sizes()
+
+    def _check_sizes(self) -> None:
+        """The networks' sizes (and the relations) and ``n_linear`` against the smallest."""
         sizes = self._hidden_sizes()
         if self.n_linear > min(sizes):
             raise invalid(
@@ -516,10 +520,11 @@ class _LRGFMEMBase(Diagnoser):
 
     def _step_centre(self, y: np.ndarray) -> np.ndarray:
         """y_m + y_e of every relation for one measurement ``y``: :meth:`_centre`, streaming."""
-        centre = self._bank.step(y)
-        self._step_y_m = centre.copy()  # the networks' outputs alone (lrgf-glr's novelty)
-        if len(self._mem_used):
-            centre[self._mem_used] += self._mem_bank.step(y)
+        self._step_y_m = self._bank.step(y)  # the networks' outputs alone (lrgf-glr's novelty)
+        if not len(self._mem_used):
+            return self._step_y_m
+        centre = self._step_y_m.copy()
+        centre[self._mem_used] += self._mem_bank.step(y)
         return centre
 
     def _decide(self, y_out: np.ndarray, centre: np.ndarray, z: np.ndarray, warm: bool) -> Decision:

@@ -145,9 +145,12 @@ class BankStepper:
             self.d[j] = st.c0[0] * st.out_scale[0] + st.out_mean[0]
         self.g1 = np.concatenate([st.g1 for st in steppers])
         self.g2 = np.concatenate([st.g2 for st in steppers])
-        # the relations' linear neurons, wherever they sit in the stacked rows
-        self.linear = np.concatenate(
-            [np.arange(st.w.shape[0]) >= st.w.shape[0] - st.n_linear for st in steppers]
+        # the rows of the relations' linear neurons in the stacked layout (none by default, and
+        # then step() does no extra work)
+        self.linear = np.flatnonzero(
+            np.concatenate(
+                [np.arange(st.w.shape[0]) >= st.w.shape[0] - st.n_linear for st in steppers]
+            )
         )
         starts = {(net.initial_state, net.steady_window) for net in nets}
         if len(starts) != 1:
@@ -167,5 +170,6 @@ class BankStepper:
         """Nominal-model outputs y_m of every relation for one measurement vector."""
         z = self.filters.step(self.w @ y + self.b)
         h = lrgf_activation(z, self.g1, self.g2)
-        h[self.linear] = z[self.linear]
+        if self.linear.size:
+            h[self.linear] = z[self.linear]
         return self.c @ h + self.d

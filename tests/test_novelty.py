@@ -100,12 +100,27 @@ def test_the_range_survives_save_and_an_old_save_runs_without_it(det, tmp_path) 
     np.testing.assert_array_equal(back.detect(ep).signal, det.detect(ep).signal)
     # a model saved before the novelty scale: its state has no range, so it runs without one
     state = dict(np.load(tmp_path / "m" / "state.npz"))
-    for key in ("prediction_range", "novelty_relations"):
-        state.pop(key)
+    state.pop("prediction_range")
     np.savez(tmp_path / "m" / "state.npz", **state)
     old = LRGFGLR.load(tmp_path / "m")
     assert old.prediction_range_ is None and old.get_params()["novelty_gain"] == 0.0
     assert np.all(old._scale_of(ep.y) == 1.0)
+
+
+def test_a_saved_range_that_does_not_fit_the_relations_is_refused(det, tmp_path) -> None:
+    det.save(tmp_path / "m")
+    state = dict(np.load(tmp_path / "m" / "state.npz"))
+    state["prediction_range"] = np.zeros((3, 2))  # the bank has one exogenous relation
+    np.savez(tmp_path / "m" / "state.npz", **state)
+    with pytest.raises(ValueError, match=r"prediction_range has 2 columns; allowed: one per"):
+        LRGFGLR.load(tmp_path / "m")
+
+
+def test_more_linear_neurons_than_the_smallest_network_has_are_refused() -> None:
+    with pytest.raises(
+        ValueError, match=r"n_linear=6 .*from 0 to the smallest network's size \(5\)"
+    ):
+        LRGFGLR(**{**FAST, "n_linear": 6}).fit([make_episode(600, seed=1)] * 2)
 
 
 def test_a_negative_gain_is_refused() -> None:
