@@ -230,10 +230,10 @@ def test_bad_values_rejected_with_value_and_allowed_range(changes: dict, match: 
 def test_overlapping_seed_ranges_name_the_overlap() -> None:
     with pytest.raises(
         ValueError,
-        match=r"train_seed_start=40 is outside the allowed range: a start whose seeds 40\.\.59 "
-        r"avoid the test seeds 0\.\.49 \(seeds 40\.\.49 would be both test and train seeds\)",
+        match=r"train_seed_start=190 is outside the allowed range: a start whose seeds 190\.\.209 "
+        r"avoid the test seeds 0\.\.199 \(seeds 190\.\.199 would be both test and train seeds\)",
     ):
-        make(train_seed_start=40)
+        make(train_seed_start=190)
     with pytest.raises(ValueError, match=r"seeds 5000\.\.5019 would be both test and validation"):
         make(test_seed_start=4990)
 
@@ -241,7 +241,7 @@ def test_overlapping_seed_ranges_name_the_overlap() -> None:
 def test_with_seeds_holds_out_a_private_range() -> None:
     t = TRACKS["paper"].with_seeds(test=100_000)
     assert t.test_cells()[0] == ("nominal", 100_000)
-    assert t.test_seeds == range(100_000, 100_050)
+    assert t.test_seeds == range(100_000, 100_000 + MIN_HEALTHY)
     assert t.train_seeds == TRACKS["paper"].train_seeds
     assert t.digest() != TRACKS["paper"].digest()
 
