@@ -10,7 +10,8 @@ Prints, measured on this machine:
   trained on the leaderboard's 6 training episodes: the ``arx-band`` baseline's linear ARX model
   against the LRGF in the paper's configuration and in ``lrgf-mem``'s;
 * streaming ``update`` throughput and whole-episode ``detect`` throughput of ``lrgf-mem-paper``,
-  ``lrgf-mem`` and ``lrgf-glr``;
+  ``lrgf-mem``, ``lrgf-glr`` and ``lrgf-glr-adaptive`` (whose held baseline makes ``detect`` a
+  per-sample recursion);
 * with ``--bank N``: the wall time of training ``lrgf-mem`` and ``lrgf-glr`` (its cross-fitted
   calibration trains the bank ``n_folds + 1`` times) on N healthy episodes (the tracks train on
   9), with ``--n-jobs`` worker processes (default 2: here a bank trains alone; the diagnosers'
@@ -159,10 +160,11 @@ def main(argv: list[str] | None = None) -> int:
     update, detect = _throughput(bank, held_out[0], detect_repeats=1)
     print(f"lrgf-mem streaming update ({len(bank.lrgf_)} relations): {update:,.0f} samples/s")
     print(f"lrgf-mem detect on a whole episode: {detect:,.0f} samples/s")
-    glr = diagnosers.make("lrgf-glr", max_epochs=100, mem_max_epochs=20).fit(three)
-    update, detect = _throughput(glr, held_out[0], detect_repeats=1)
-    print(f"lrgf-glr streaming update ({glr.detector}): {update:,.0f} samples/s")
-    print(f"lrgf-glr detect on a whole episode: {detect:,.0f} samples/s")
+    for name in ("lrgf-glr", "lrgf-glr-adaptive"):
+        glr = diagnosers.make(name, max_epochs=100, mem_max_epochs=20).fit(three)
+        update, detect = _throughput(glr, held_out[0], detect_repeats=1)
+        print(f"{name} streaming update ({glr.detector}): {update:,.0f} samples/s")
+        print(f"{name} detect on a whole episode: {detect:,.0f} samples/s")
     return 0
 
 

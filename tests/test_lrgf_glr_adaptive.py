@@ -1,0 +1,61 @@
+"""``lrgf-glr-adaptive``: ``lrgf-glr`` with a held running-mean baseline."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from synthetic import make_episode
+
+import diagnosers
+from diagnosers.lrgf_glr import LRGFGLR
+from diagnosers.lrgf_glr_adaptive import LRGFGLRAdaptive
+
+FAST = {**LRGFGLR.fast_params(), "fault_scenarios": ["f3"], "baseline_settle": 50}
+
+
+@pytest.fixture(scope="module")
+def adaptive() -> LRGFGLRAdaptive:
+    return LRGFGLRAdaptive(**FAST).fit([make_episode(1500, seed=s) for s in (1, 2, 3)])
+
+
+def test_variant_is_lrgf_glr_with_the_baseline_only() -> None:
+    plain = diagnosers.make("lrgf-glr").get_params()
+    variant = diagnosers.make("lrgf-glr-adaptive").get_params()
+    changed = {k for k in plain if plain[k] != variant[k]}
+    assert changed == {"baseline_lambda", "baseline_hold"}
+    assert variant["baseline_lambda"] == 1e-4 and variant["baseline_hold"] == 1.0
+    # a user's value still wins over the variant's default
+    assert LRGFGLRAdaptive(baseline_hold=0.5).baseline_hold == 0.5
+
+
+def test_baseline_is_the_running_mean_of_the_held_samples(adaptive) -> None:
+    # below 1/λ = 10,000 samples the gain is 1/n: the baseline removed from sample k is the mean
+    # of samples 0..k-1 (0 at the first), computed here by hand
+    e = np.random.default_rng(4).normal(size=(600, 3)) + np.array([2.0, -1.0, 0.5])
+    out = adaptive._track(e, hold=False)
+    mean_before = np.vstack([np.zeros(3), np.cumsum(e, axis=0)[:-1] / np.arange(1, 600)[:, None]])
+    np.testing.assert_allclose(out, e - mean_before, rtol=1e-10, atol=1e-12)
+
+
+def _offset(ep, column: str, value: float, onset: int = 0):
+    y = ep.y.copy()
+    y[onset:, ep.channels.index(column)] += value
+    return diagnosers.Episode(y, ep.channels, ep.sample_time_s, fault_onset=ep.fault_onset)
+
+
+def test_absorbs_a_plant_offset_and_holds_on_a_later_fault(adaptive) -> None:
+    # another plant: 4 residual scales off the model from the start. It is learned while the
+    # baseline settles; an 8-scale step at sample 800 is not learned, so its alarm lasts.
+    det = adaptive
+    col = det.channels_[det.out_idx_[1]]
+    scale = det.v_residual_[1]
+    ep = _offset(make_episode(1500, seed=11), col, 4.0 * scale)
+    w = det.steady_window + det.baseline_settle
+    assert det.detect(ep).alarm[w + 100 :].mean() < 0.05
+    plain = LRGFGLR(**{**det.get_params(), "baseline_lambda": 0.0})
+    plain.fit([make_episode(1500, seed=s) for s in (1, 2, 3)])
+    assert plain.detect(ep).alarm[w:].mean() > 0.9
+    faulty = _offset(ep, col, 8.0 * scale, onset=800)
+    alarm = det.detect(faulty).alarm
+    assert alarm[800:810].any()
+    assert alarm[820:].mean() > 0.95
