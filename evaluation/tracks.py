@@ -21,7 +21,7 @@ part of :meth:`Track.to_json`, so results on the private range are stored apart.
 
 >>> t = TRACKS["incipient"]
 >>> t.test_cells()[:2], len(t.test_cells())
-([('nominal', 0), ('nominal', 1)], 130)
+([('nominal', 0), ('nominal', 1)], 280)
 >>> spec = t.fault_spec("f2", seed=3)
 >>> spec == t.fault_spec("f2", seed=3), spec.profile.value, spec.onset + spec.ramp_samples <= 3800
 (True, 'incipient', True)
@@ -637,8 +637,8 @@ def parse_tracks(text: str) -> tuple[Track, ...]:
 def tracks_markdown(tracks: tuple[Track, ...] | None = None) -> str:
     """A Markdown table of tracks (name, episodes, description) for the README's "Tracks" section.
 
-    >>> print(tracks_markdown((TRACKS["paper"],)).splitlines()[2][:37])
-    | `paper` | 50 healthy, 80 faulty | T
+    >>> print(tracks_markdown((TRACKS["paper"],)).splitlines()[2][:38])
+    | `paper` | 200 healthy, 80 faulty | T
     """
     tracks = tuple(TRACKS.values()) if tracks is None else tracks
     lines = ["| track | test episodes | what it tests |", "|---|---|---|"]
