@@ -4,8 +4,8 @@ and what the healthy alarms are. Uses a bank stored by ``scripts/baseline_lab.py
 out-of-fold calibration records, and re-calibrates its alarm stage per target.
 
 It prints the realised r_fd with its 95 % BCa interval over all episodes and over disjoint blocks
-of ``--block`` episodes (a track has 50 healthy test episodes, so a block's upper end is what a
-leaderboard on fresh seeds would show), the share of episodes with any alarm and the worst one;
+of ``--block`` episodes (a track's healthy test episodes: 50 until 2026-11-26, 200 since, so
+``--block 200`` shows what a leaderboard on fresh seeds would), the share of episodes with any alarm and the worst one;
 with ``--streaks N`` also the run-length profile of the alarms and every run of N samples or
 more, with the statistic furthest over its limit and how far each channel was outside its
 training range.
@@ -136,7 +136,10 @@ def main() -> None:
     ap.add_argument("--targets", default="0.03", help="false_alarm_target values, comma-separated")
     ap.add_argument("--n-healthy", type=at_least(1), default=200)
     ap.add_argument(
-        "--block", type=at_least(2), default=50, help="episodes per block (a track's 50)"
+        "--block",
+        type=at_least(2),
+        default=50,
+        help="episodes per block (50: a track until 2026-11-26; 200 now)",
     )
     ap.add_argument("--set", default="", help="extra hyperparameters k=v,k=v (JSON values)")
     ap.add_argument(
