@@ -6,9 +6,9 @@ out-of-fold calibration records, and re-calibrates its alarm stage per target.
 It prints the realised r_fd with its 95 % BCa interval over all episodes and over disjoint blocks
 of ``--block`` episodes (a track's healthy test episodes: 50 until 2026-11-26, 200 since, so
 ``--block 200`` shows what a leaderboard on fresh seeds would), the share of episodes with any
-alarm and the worst one; with ``--streaks N`` also the run-length profile of the alarms and every run of N samples or
-more, with the statistic furthest over its limit and how far each channel was outside its
-training range.
+alarm and the worst one; with ``--streaks N`` also the run-length profile of the alarms and every
+run of N samples or more, with the statistic furthest over its limit and how far each channel was
+outside its training range.
 
     python scripts/fd_tail_lab.py --tag=_rg1x10 --targets 0.02,0.03,0.04 --n-healthy 200 \
         --set slow_ewma_lambda=0.02
