@@ -17,7 +17,8 @@ track of :mod:`evaluation.tracks`, a sweep of the chosen diagnosers over the tra
 * ``figures/`` — as the classic leaderboard.
 
 and ``<out>/summary.md`` / ``.csv`` / ``.json``: diagnosers × tracks (r_fd with interval, mean
-r_td over faults, mean t_dt / oracle ratio) and the wall time per track.
+r_td over faults, mean t_dt / oracle ratio, the faults at the physical limit and whether r_fd's
+upper end holds the goal, :func:`limit_goal`) and the wall time per track.
 """
 
 from __future__ import annotations
@@ -58,9 +59,15 @@ from evaluation.tracks import Track
 from fcc_env.io import atomic_open, atomic_write, atomic_write_json
 
 __all__ = [
+    "GOAL_R_FD",
+    "GOAL_R_TD_MARGIN",
+    "GOAL_TIME_FACTOR",
+    "GOAL_TIME_SLACK",
+    "LimitGoal",
     "TrackRow",
     "TrackRun",
     "isolation_table",
+    "limit_goal",
     "run_track",
     "track_legend",
     "track_rows",
@@ -135,6 +142,53 @@ class TrackRun:
     n_reused: int
     n_trained: int = 0
     n_reused_models: int = 0
+
+
+# ---- the goal "at the physical limit" ---------------------------------------------------------
+#: A fault's mean t_dt is at the limit when it is at most this factor times the physical-limit
+#: row's ...
+GOAL_TIME_FACTOR = 1.5
+#: ... plus this many samples (where the limit detects at once, the next samples are all a
+#: detector can do better than nothing).
+GOAL_TIME_SLACK = 2.0
+#: ... and its mean r_td is at most this far below the limit's.
+GOAL_R_TD_MARGIN = 0.03
+#: The upper end of r_fd's 95 % interval may not exceed this.
+GOAL_R_FD = 0.01
+
+
+@dataclass(frozen=True)
+class LimitGoal:
+    """Which faults of a row are at the physical limit, and whether its r_fd holds the goal."""
+
+    faults_at_limit: tuple[str, ...]
+    n_faults: int
+    r_fd_holds: bool
+
+
+def limit_goal(row: TrackRow, limit: TrackRow) -> LimitGoal:
+    """Score ``row`` against the physical-limit row ``limit`` of the same track.
+
+    A fault is at the limit when the row's mean t_dt ≤ :data:`GOAL_TIME_FACTOR` × the limit's
+    + :data:`GOAL_TIME_SLACK` samples and its mean r_td ≥ the limit's − :data:`GOAL_R_TD_MARGIN`
+    (point estimates over the track's seeds; an undefined value, e.g. a fault never detected,
+    is not at the limit). r_fd holds when the upper end of its interval is at most
+    :data:`GOAL_R_FD`. This is the goal of the project's detector issue (issue 11), written
+    once here so that every table scores it the same way.
+    """
+    at = []
+    for fault, cell in row.faults.items():
+        ref = limit.faults.get(fault)
+        if ref is None:
+            continue
+        t, t_ref = cell.t_dt.estimate, ref.t_dt.estimate
+        r, r_ref = cell.r_td.estimate, ref.r_td.estimate
+        if not all(math.isfinite(v) for v in (t, t_ref, r, r_ref)):
+            continue
+        if t <= GOAL_TIME_FACTOR * t_ref + GOAL_TIME_SLACK and r >= r_ref - GOAL_R_TD_MARGIN:
+            at.append(fault)
+    holds = math.isfinite(row.r_fd.high) and row.r_fd.high <= GOAL_R_FD
+    return LimitGoal(tuple(at), len(row.faults), holds)
 
 
 def _by(records: Sequence[CellResult], label: str, scenario: str) -> list[CellResult]:
@@ -497,10 +551,14 @@ def write_track(run: TrackRun, out: Path) -> list[Path]:
 
 
 def summary_table(runs: Sequence[TrackRun]) -> tuple[str, list[dict[str, Any]]]:
-    """Diagnosers × tracks: r_fd with interval, mean r_td, mean t_dt / oracle; wall times."""
+    """Diagnosers × tracks: r_fd with interval, mean r_td, mean t_dt / oracle, the faults at the
+    physical limit and whether r_fd holds the goal (:func:`limit_goal`; empty for the limit row
+    itself and on a track without it); wall times."""
     rows = []
     for run in runs:
+        limit = next((r for r in run.rows if r.label == ORACLE_LABEL), None)
         for row in run.rows:
+            goal = limit_goal(row, limit) if limit is not None and row is not limit else None
             rows.append(
                 {
                     "track": run.track.name,
@@ -510,20 +568,34 @@ def summary_table(runs: Sequence[TrackRun]) -> tuple[str, list[dict[str, Any]]]:
                     "r_fd_high": row.r_fd.high,
                     "mean_r_td": row.mean_r_td(),
                     "mean_t_dt_over_oracle": row.mean_ratio(),
+                    "faults_at_limit": "" if goal is None else " ".join(goal.faults_at_limit),
+                    "n_faults_at_limit": "" if goal is None else len(goal.faults_at_limit),
+                    "n_faults": len(row.faults),
+                    "r_fd_holds_goal": "" if goal is None else goal.r_fd_holds,
                     "track_wall_s": run.wall_s,
                 }
             )
     lines = [
         "# Benchmark v2 summary",
         "",
-        "| track | diagnoser | r_fd [95 % CI] | mean r_td | mean t_dt/oracle | track wall time |",
-        "|---|---|---|---|---|---|",
+        f"At the limit: faults whose mean t_dt ≤ {GOAL_TIME_FACTOR:g} × the physical limit's + "
+        f"{GOAL_TIME_SLACK:g} samples with r_td at most {GOAL_R_TD_MARGIN:g} below it; "
+        f"r_fd ≤ {GOAL_R_FD:g}: the upper end of its 95 % interval.",
+        "",
+        "| track | diagnoser | r_fd [95 % CI] | r_fd ≤ 0.01 | mean r_td | mean t_dt/oracle "
+        "| faults at the limit | track wall time |",
+        "|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
+        if r["n_faults_at_limit"] == "":  # the limit row itself, or no limit row
+            at, holds = "", ""
+        else:
+            at = f"{r['n_faults_at_limit']}/{r['n_faults']} {r['faults_at_limit']}".rstrip()
+            holds = "yes" if r["r_fd_holds_goal"] else "no"
         lines.append(
             f"| {r['track']} | {r['diagnoser']} | {r['r_fd']:.4f} [{r['r_fd_low']:.4f}, "
-            f"{r['r_fd_high']:.4f}] | {r['mean_r_td']:.3f} | {r['mean_t_dt_over_oracle']:.2f} "
-            f"| {r['track_wall_s']:.0f} s |"
+            f"{r['r_fd_high']:.4f}] | {holds} | {r['mean_r_td']:.3f} | "
+            f"{r['mean_t_dt_over_oracle']:.2f} | {at} | {r['track_wall_s']:.0f} s |"
         )
     return "\n".join(lines) + "\n", rows
 
