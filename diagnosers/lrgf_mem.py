@@ -80,6 +80,12 @@ for the others), so it follows a user's own ``relations``.
 RMS of the remaining error on the calibration episodes: an NNARX that does not generalise adds its
 own error to the band centre (seen on this plant for several relations).
 
+``val_fraction`` (default 0.25): the share at the end of every training episode that each LRGF
+network holds out to choose its epoch (early stopping, :func:`diagnosers.training.fit_lrgf`).
+``0`` trains on every sample for ``max_epochs`` and keeps the parameters of the lowest training
+loss. ``lrgf-mem`` and ``lrgf-mem-paper`` keep 0.25, the setting they were validated with;
+``lrgf-glr`` uses 0 (its module docstring says why).
+
 Training data split: the healthy episodes passed to ``fit`` are divided into a training part (the
 first ``n − max(1, n // 3)`` episodes) for the nominal and error models, and a calibration part
 (the rest) for ``v`` and h. With a single episode, the nominal and error models are trained on its
@@ -190,6 +196,7 @@ PARAMETER_CONSTRAINTS: dict[str, Any] = {
     "method": Options(Method),
     "lr": Real(0, 1, closed="right"),
     "max_epochs": Integer(1, 100_000),
+    "val_fraction": Real(0, 1, closed="left"),
     "mem_max_epochs": Integer(1, 100_000),
     "mem_select": Options(MemSelect),
     "seed": Integer(0),
@@ -249,6 +256,7 @@ class _LRGFMEMBase(Diagnoser):
         method: str = "adam",
         lr: float = 0.01,
         max_epochs: int = 3000,
+        val_fraction: float = 0.25,
         mem_max_epochs: int = 200,
         mem_select: str = "always",
         seed: int = 0,
@@ -274,6 +282,7 @@ class _LRGFMEMBase(Diagnoser):
         self.method = method
         self.lr = lr
         self.max_epochs = max_epochs
+        self.val_fraction = val_fraction
         self.mem_max_epochs = mem_max_epochs
         self.mem_select = mem_select
         self.seed = seed
@@ -702,6 +711,7 @@ class LRGFMEM(_LRGFMEMBase):
         method: str = "adam",
         lr: float = 0.03,
         max_epochs: int = 3000,
+        val_fraction: float = 0.25,
         mem_max_epochs: int = 200,
         mem_select: str = "if_better",
         seed: int = 0,
@@ -728,6 +738,7 @@ class LRGFMEM(_LRGFMEMBase):
             method=method,
             lr=lr,
             max_epochs=max_epochs,
+            val_fraction=val_fraction,
             mem_max_epochs=mem_max_epochs,
             mem_select=mem_select,
             seed=seed,

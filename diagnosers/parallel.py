@@ -68,6 +68,7 @@ class BankSettings:
     method: str
     lr: float
     max_epochs: int
+    val_fraction: float
     mem_max_epochs: int
     progress: bool | None
 
@@ -150,6 +151,7 @@ def _train_relation(job: _RelationJob) -> tuple[_Exported, _Exported, float, Fit
             lr=s.lr,
             max_epochs=s.max_epochs,
             patience=max(50, s.max_epochs // 5),
+            val_fraction=s.val_fraction,
             seed=job.seed,
             progress=s.progress,
         )

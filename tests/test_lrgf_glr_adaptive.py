@@ -18,12 +18,13 @@ def adaptive() -> LRGFGLRAdaptive:
     return LRGFGLRAdaptive(**FAST).fit([make_episode(1500, seed=s) for s in (1, 2, 3)])
 
 
-def test_variant_is_lrgf_glr_with_the_baseline_only() -> None:
+def test_variant_is_lrgf_glr_with_the_baseline_and_all_samples_only() -> None:
     plain = diagnosers.make("lrgf-glr").get_params()
     variant = diagnosers.make("lrgf-glr-adaptive").get_params()
     changed = {k for k in plain if plain[k] != variant[k]}
-    assert changed == {"baseline_lambda", "baseline_hold"}
+    assert changed == {"baseline_lambda", "baseline_hold", "val_fraction"}
     assert variant["baseline_lambda"] == 1e-4 and variant["baseline_hold"] == 1.0
+    assert variant["val_fraction"] == 0.0 and plain["val_fraction"] == 0.25
     # a user's value still wins over the variant's default
     assert LRGFGLRAdaptive(baseline_hold=0.5).baseline_hold == 0.5
 

@@ -144,6 +144,29 @@ def test_learning_rate_reaches_the_trainer():
     assert fits[0.001] != fits[0.05]
 
 
+@pytest.mark.parametrize("val_fraction", [0.0, 0.25])
+def test_val_fraction_reaches_each_network(val_fraction):
+    """The bank's network equals one trained by ``fit_lrgf`` directly with that hold-out share
+    (same seed, one thread); 0 and 0.25 train different networks."""
+    from diagnosers.lrgf_net import LRGF
+    from diagnosers.training import fit_lrgf
+
+    eps = _episodes([1000, 1001], n=400)
+    kw = {"max_epochs": 20, "mem_max_epochs": 2, "mem_input_delays": 2, "mem_output_delays": 2}
+    det = diagnosers.make("lrgf-mem-paper", val_fraction=val_fraction, **kw).fit(eps)
+    names = list(fcc_env.MEASUREMENT_NAMES)
+    ui, yi = [names.index("T_rg2"), names.index("T_fp")], [names.index("T_rx")]
+    train = eps[: len(eps) - max(1, len(eps) // 3)]  # lrgf-mem's split: the first episode
+    net = LRGF(2, 3, 2, 1, initial_state="steady", steady_window=100, seed=0).double()
+    fit_lrgf(net, [e.y[:, ui] for e in train], [e.y[:, yi] for e in train], lr=0.01,
+             max_epochs=20, patience=50, val_fraction=val_fraction, seed=0, num_threads=1)  # fmt: skip
+    net.eval()
+    u = eps[1].y[:, ui]
+    np.testing.assert_array_equal(det.lrgf_[0].predict(u), net.predict(u))
+    other = diagnosers.make("lrgf-mem-paper", val_fraction=0.25 - val_fraction, **kw).fit(eps)
+    assert not np.array_equal(other.lrgf_[0].predict(u), net.predict(u))
+
+
 def test_per_relation_network_sizes_reach_the_networks_and_survive_save_load(tmp_path):
     eps = _episodes([1000, 1001], n=400)
     kw = {"max_epochs": 5, "mem_max_epochs": 2, "mem_input_delays": 2, "mem_output_delays": 2}
@@ -200,6 +223,10 @@ def test_per_relation_network_sizes_reach_the_networks_and_survive_save_load(tmp
             r"ewma_lambda=None is outside the allowed range: a number in \(0, 1\]",
         ),
         ({"progress": 1}, r"progress=1 is outside the allowed range: True or False"),
+        (
+            {"val_fraction": 1.0},
+            r"val_fraction=1.0 is outside the allowed range: a number in \[0, 1\)",
+        ),
     ],
 )
 def test_bad_hyperparameters(kwargs, match):
