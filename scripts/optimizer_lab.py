@@ -105,6 +105,9 @@ def main() -> None:
     )
     ap.add_argument("--val-fraction", type=float, default=0.25)
     ap.add_argument("--seed", type=at_least(0), default=101, help="the network's seed")
+    ap.add_argument(
+        "--hidden", type=at_least(1), default=None, help="neurons (default: the bank's)"
+    )
     a = ap.parse_args()
     if not 0.0 <= a.val_fraction < 1.0:
         ap.error(f"--val-fraction {a.val_fraction}; allowed: a number in [0, 1)")
@@ -114,7 +117,7 @@ def main() -> None:
     ui = [MEASUREMENT_NAMES.index(c) for c in RELATIONS[a.output]]
     yi = MEASUREMENT_NAMES.index(a.output)
     val = [data.load_test("nominal", s).episode for s in range(5000, 5010)]
-    hidden = 10 if a.output == "T_rg1" else 5
+    hidden = a.hidden or (10 if a.output == "T_rg1" else 5)
     adam = training._adam_loop
     for kind, n in a.variants:
         net = LRGF(len(ui), hidden, 2, 1, initial_state="steady", steady_window=100, seed=a.seed)
