@@ -83,8 +83,9 @@ own error to the band centre (seen on this plant for several relations).
 ``val_fraction`` (default 0.25): the share at the end of every training episode that each LRGF
 network holds out to choose its epoch (early stopping, :func:`diagnosers.training.fit_lrgf`).
 ``0`` trains on every sample for ``max_epochs`` and keeps the parameters of the lowest training
-loss. ``lrgf-mem`` and ``lrgf-mem-paper`` keep 0.25, the setting they were validated with;
-``lrgf-glr`` uses 0 (its module docstring says why).
+loss, at the same cost per epoch (the network runs over the whole episode either way).
+``lrgf-mem``, ``lrgf-mem-paper`` and ``lrgf-glr`` keep 0.25, the setting they were validated
+with; ``lrgf-glr-adaptive`` uses 0 (:mod:`diagnosers.lrgf_glr_adaptive` says why).
 
 Training data split: the healthy episodes passed to ``fit`` are divided into a training part (the
 first ``n − max(1, n // 3)`` episodes) for the nominal and error models, and a calibration part
