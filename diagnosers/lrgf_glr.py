@@ -59,9 +59,10 @@ of each relation's normalised remaining error is subtracted before the EWMA. ``b
 error with gain λ (the running mean's 1/n at first), always during the ``baseline_settle``
 samples after the warm-up, later only while every statistic stays below ``baseline_hold`` × its
 limit, so a growing fault is not learned. The limits are calibrated on the out-of-fold records
-run through the same recursion. The slow scale sees the baseline-removed error too, but it
-integrates the baseline's settling transient for a few of its time constants (1/λ samples), so
-``lrgf-glr-adaptive`` runs without it. It learns a unit's own offset from the model (a plant
+run through the same recursion. The slow scale sees the baseline-removed error too, settling
+transient included, and so do its limits (``lrgf-glr-adaptive`` keeps the slow scale: with
+λ = 1e-4 the baseline is a running mean that settles within its first few hundred samples,
+where a faster λ used to leave a transient for 1/λ samples). It learns a unit's own offset from the model (a plant
 unlike the training plants) and loses small, slow faults that stay under the hold level.
 
 **Operating points outside the training data** (``novelty_gain``, default 5). Where the
