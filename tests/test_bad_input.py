@@ -444,6 +444,10 @@ def test_whitened_glr_lab_refuses_bad_flags_by_value_and_range(args, message) ->
         ("optimizer_lab.py", ["--variants", "lbfgs:0"], "'lbfgs:0'; allowed: adam:N or lbfgs:N"),
         ("optimizer_lab.py", ["--output", "T_d1"], "invalid choice: 'T_d1'"),
         ("optimizer_lab.py", ["--n-train", "1"], "'1'; allowed: an integer >= 2"),
+        ("optimizer_lab.py", ["--val-fraction", "1"], "--val-fraction 1.0; allowed: a number in"),
+        ("optimizer_lab.py", ["--val-fraction", "x"], "invalid float value: 'x'"),
+        ("optimizer_lab.py", ["--seed", "-1"], "'-1'; allowed: an integer >= 0"),
+        ("optimizer_lab.py", ["--hidden", "0"], "'0'; allowed: an integer >= 1"),
     ],
 )
 def test_reference_and_optimizer_labs_refuse_bad_flags(script, args, message) -> None:
