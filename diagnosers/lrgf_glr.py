@@ -62,8 +62,9 @@ limit, so a growing fault is not learned. The limits are calibrated on the out-o
 run through the same recursion. The slow scale sees the baseline-removed error too, settling
 transient included, and so do its limits (``lrgf-glr-adaptive`` keeps the slow scale: with
 λ = 1e-4 the baseline is a running mean that settles within its first few hundred samples,
-where a faster λ used to leave a transient for 1/λ samples). It learns a unit's own offset from the model (a plant
-unlike the training plants) and loses small, slow faults that stay under the hold level.
+where a faster λ used to leave a transient for 1/λ samples). It learns a unit's own offset
+from the model (a plant unlike the training plants) and loses small, slow faults that stay
+under the hold level.
 
 **Operating points outside the training data** (``novelty_gain``, default 5). Where the
 bank's own prediction of a relation with exogenous inputs only (T_rg1's) leaves the range of

@@ -156,10 +156,13 @@ def test_val_fraction_reaches_each_network(val_fraction):
     det = diagnosers.make("lrgf-mem-paper", val_fraction=val_fraction, **kw).fit(eps)
     names = list(fcc_env.MEASUREMENT_NAMES)
     ui, yi = [names.index("T_rg2"), names.index("T_fp")], [names.index("T_rx")]
-    train = eps[: len(eps) - max(1, len(eps) // 3)]  # lrgf-mem's split: the first episode
-    net = LRGF(2, 3, 2, 1, initial_state="steady", steady_window=100, seed=0).double()
-    fit_lrgf(net, [e.y[:, ui] for e in train], [e.y[:, yi] for e in train], lr=0.01,
-             max_epochs=20, patience=50, val_fraction=val_fraction, seed=0, num_threads=1)  # fmt: skip
+    train = det._split(eps)[0]  # the records the bank trains on
+    p = det.get_params()
+    net = LRGF(2, p["n_hidden"], p["order"], 1, initial_state="steady",
+               steady_window=p["steady_window"], seed=p["seed"]).double()  # fmt: skip
+    fit_lrgf(net, [y[:, ui] for y in train], [y[:, yi] for y in train], lr=p["lr"],
+             max_epochs=20, patience=50, val_fraction=val_fraction, seed=p["seed"],
+             num_threads=1)  # fmt: skip
     net.eval()
     u = eps[1].y[:, ui]
     np.testing.assert_array_equal(det.lrgf_[0].predict(u), net.predict(u))
