@@ -288,6 +288,16 @@ def _csv_list(text: str) -> tuple[str, ...]:
     return items
 
 
+def _non_negative_int(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"must be >= 0, got {v}")
+    return v
+
+
 def _positive_int(text: str) -> int:
     try:
         v = int(text)
@@ -441,6 +451,18 @@ def build_parser() -> argparse.ArgumentParser:
             "fault"
         ),
     )
+    p.add_argument(
+        "--test-seed-start",
+        type=_non_negative_int,
+        default=None,
+        metavar="N",
+        help=(
+            "with --track: score every track on test seeds from N instead of 0 (a private range "
+            "no tuning loop has seen, e.g. 100000; the training and validation seeds and the "
+            "trained models stay the same). It must keep clear of the training (1000..) and "
+            "validation (5000..) seeds"
+        ),
+    )
     p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
     p.add_argument("--no-progress", action="store_true", help="no progress bar")
     return p
@@ -485,6 +507,12 @@ def resolve_options(
 ) -> LeaderboardOptions:
     """Fill defaults (``--quick`` or full) and check names against the allowed sets."""
     from diagnosers import available
+
+    if args.test_seed_start is not None:
+        parser.error(
+            f"--test-seed-start {args.test_seed_start} applies to --track; the paper "
+            "leaderboard's test seeds are 0..--seeds−1 (--validation: 5000..)"
+        )
 
     avail = available()
     if args.diagnosers is not None:
@@ -594,11 +622,14 @@ _NOT_FOR_TRACKS: dict[str, Any] = {
 def track_options(
     args: argparse.Namespace, parser: argparse.ArgumentParser, tracks: Sequence[Track]
 ) -> tuple[Track, ...]:
-    """The tracks as ``--quick`` and ``--train-episodes`` change them (explicit flags win).
+    """The tracks as ``--quick``, ``--train-episodes`` and ``--test-seed-start`` change them
+    (explicit flags win).
 
     ``--train-episodes N`` gives every track N healthy training episodes (a data-rich run of the
-    same test episodes; the published tracks train on 9). Options that a track defines for
-    itself (its scenarios, seeds, horizon, fault settings) are refused by name.
+    same test episodes; the published tracks train on 9). ``--test-seed-start N`` moves every
+    track's test episodes to seeds N.. (a replication on seeds nobody has read; the models,
+    trained on the training seeds, are the same). Options that a track defines for itself (its
+    scenarios, seeds, horizon, fault settings) are refused by name.
     """
     for dest, unset in _NOT_FOR_TRACKS.items():
         if getattr(args, dest) != unset:
@@ -606,7 +637,8 @@ def track_options(
             parser.error(
                 f"{flag} applies to the paper leaderboard, not to --track: a track fixes its own "
                 "scenarios, seeds, horizon and fault settings (see evaluation.tracks); allowed "
-                "with --track: --quick, --train-episodes, --diagnosers, --out, --backend, "
+                "with --track: --quick, --train-episodes, --test-seed-start, --diagnosers, --out, "
+                "--backend, "
                 "--workers, --ray-address, --import, --no-figures, --no-progress"
             )
     out = tuple(tracks)
@@ -614,6 +646,11 @@ def track_options(
         out = tuple(t.replace(n_healthy=6, n_faulty=3, n_train=3) for t in out)
     if args.train_episodes is not None:
         out = tuple(t.replace(n_train=args.train_episodes) for t in out)
+    if args.test_seed_start is not None:
+        try:
+            out = tuple(t.with_seeds(test=args.test_seed_start) for t in out)
+        except ValueError as e:
+            parser.error(f"--test-seed-start {args.test_seed_start}: {e}")
     return out
 
 

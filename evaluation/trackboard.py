@@ -271,6 +271,14 @@ def track_legend(sample_time_s: float | None = None) -> str:
     )
 
 
+def _seed_line(track: Track) -> str:
+    test, train = track.test_seeds, track.train_seeds
+    return (
+        f"Test seeds {test.start}–{test.stop - 1}; trained on healthy episodes of seeds "
+        f"{train.start}–{train.stop - 1}."
+    )
+
+
 def track_table(run: TrackRun) -> str:
     """Markdown table of a track (header sentences, legend, rows)."""
     faults = run.track.faults
@@ -281,6 +289,8 @@ def track_table(run: TrackRun) -> str:
         f"## Track `{run.track.name}`",
         "",
         run.track.description,
+        "",
+        _seed_line(run.track),
         "",
         track_legend(run.records[0].sample_time_s if run.records else None),
         "",
@@ -334,6 +344,8 @@ def run_track(
     import_modules(imports)
     config = SweepConfig(diagnosers=default_specs(diagnosers), data=data, imports=tuple(imports))
     config.validate()
+    for reference in DEFAULT_REFERENCES:  # refuse seed clashes before any work, not after it
+        reference.calibration_seeds(track)
     store = out / "store" / canonical_hash(data.store_key())[:12]
     n_reused_models = 0
     if model_cache is not None:
@@ -582,7 +594,9 @@ def summary_table(runs: Sequence[TrackRun]) -> tuple[str, list[dict[str, Any]]]:
         "",
         f"At the limit: faults whose mean t_dt ≤ {GOAL_TIME_FACTOR:g} × the physical limit's + "
         f"{GOAL_TIME_SLACK:g} samples with r_td at most {GOAL_R_TD_MARGIN:g} below it; "
-        f"r_fd ≤ {GOAL_R_FD:g}: the upper end of its 95 % interval.",
+        f"r_fd ≤ {GOAL_R_FD:g}: the upper end of its 95 % interval. Test seeds from "
+        + ", ".join(str(s) for s in sorted({run.track.test_seed_start for run in runs}))
+        + ".",
         "",
         f"| track | diagnoser | r_fd [95 % CI] | r_fd ≤ {GOAL_R_FD:g} | mean r_td | "
         "mean t_dt/oracle | faults at the limit | track wall time |",

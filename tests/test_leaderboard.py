@@ -316,6 +316,47 @@ def test_track_options_train_episodes_and_quick() -> None:
     assert (quick[0].n_healthy, quick[0].n_faulty) == (6, 3)
 
 
+def test_track_options_move_the_test_seeds_only() -> None:
+    from evaluation.leaderboard import track_options
+    from evaluation.tracks import parse_tracks
+
+    parser = build_parser()
+    tracks = parse_tracks("paper,random")
+    args = parser.parse_args(["--track", "paper,random", "--test-seed-start", "100000"])
+    moved = track_options(args, parser, tracks)
+    for before, after in zip(tracks, moved, strict=True):
+        assert after.test_seeds.start == 100_000
+        assert len(after.test_seeds) == len(before.test_seeds)
+        assert (after.train_seeds, after.validation_seeds) == (
+            before.train_seeds,
+            before.validation_seeds,
+        )
+    assert moved[1].test_cells()[-1][1] >= 100_000
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--test-seed-start", "7"], "--test-seed-start 7 applies to --track"),
+        (
+            ["--track", "paper", "--test-seed-start", "900"],
+            "--test-seed-start 900: train_seed_start=1000 is outside the allowed range",
+        ),
+        (
+            ["--track", "paper", "--test-seed-start", "5050"],
+            "calibration seeds 5000..5099 into the track's test seeds 5050..5249",
+        ),
+        (["--track", "paper", "--test-seed-start", "-1"], "must be >= 0, got -1"),
+    ],
+)
+def test_test_seed_start_refused_by_value_and_range(tmp_path, capsys, argv, message) -> None:
+    with pytest.raises(SystemExit) as e:
+        main([*argv, "--diagnosers", "limits", "--out", str(tmp_path / "o"), "--no-progress"])
+    assert e.value.code == 2
+    assert message in capsys.readouterr().err
+    assert not (tmp_path / "o").exists()  # refused before any work
+
+
 def test_track_refuses_a_bad_train_episodes_count(tmp_path, capsys) -> None:
     with pytest.raises(SystemExit) as e:
         main(["--track", "paper", "--train-episodes", "0", "--out", str(tmp_path / "o")])

@@ -63,3 +63,4 @@ def test_summary_scores_every_row_but_the_limit() -> None:
     assert rows[1]["faults_at_limit"] == "" and rows[1]["r_fd_holds_goal"] == ""
     assert "| paper | good | 0.0050 [0.0040, 0.0080] | yes | " in text
     assert "| 2/3 f1 f2 | 1 s |" in text
+    assert "Test seeds from 0." in text

@@ -216,6 +216,7 @@ def test_run_track_end_to_end(tmp_path) -> None:
     assert {p.name for p in paths} >= {"leaderboard.md", "leaderboard.csv", "leaderboard.json"}
     text = track_table(run)
     assert "oracle (physical limit)" in text and "t_dt/oracle" in text
+    assert "Test seeds 0–1; trained on healthy episodes of seeds 1000–1001." in text
     assert list((tmp_path / "paper" / "figures").rglob("*.png"))
     # a second run resumes: nothing computed again
     again = run_track(TINY, ["limits"], tmp_path / "paper", workers=0, progress=False)
@@ -247,6 +248,14 @@ def test_tracks_with_one_training_set_share_their_models(tmp_path) -> None:
         model_cache=cache,
     )  # fmt: skip
     assert (third.n_trained, third.n_reused_models) == (1, 0)  # other noise: trained anew
+    # a replication on a private test range: the same models, new episodes
+    private = run_track(
+        TINY.with_seeds(test=100_000), ["limits"], tmp_path / "private", workers=0,
+        progress=False, figures=False, model_cache=cache,
+    )  # fmt: skip
+    assert (private.n_trained, private.n_reused_models) == (0, 1)
+    assert {r.seed for r in private.records} == {100_000, 100_001}
+    assert "Test seeds 100000–100001" in track_table(private)
 
 
 def test_directional_row_is_lrgf_glr_stage_on_a_perfect_model() -> None:
