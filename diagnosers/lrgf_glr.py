@@ -100,6 +100,7 @@ from diagnosers.alarm import (
     normal_tail_limit,
 )
 from diagnosers.base import Decision, Detection, Episode
+from diagnosers.baseline import HeldBaseline, _row
 from diagnosers.lrgf_mem import (
     LRGFMEM,
     MIN_CALIBRATION_SAMPLES,
@@ -142,6 +143,8 @@ GLR_CONSTRAINTS: dict[str, Any] = {
     "baseline_lambda": Real(0, 1, closed="left"),
     "baseline_hold": Real(0, 1, closed="right"),
     "baseline_settle": Integer(0, 100_000),
+    "baseline_filters": (RealSequence(1, 1e6), None),
+    "baseline_ridge": Real(0, closed="neither"),
     "slow_ewma_lambda": (Real(0, 1, closed="left"), RealSequence(0, 1, closed="neither")),
     "slow_share": Real(0, 1, closed="neither"),
     "on_delay": Integer(1, 1000),
@@ -153,7 +156,7 @@ DEFAULT_FAULTS = ("f1", "f2", "f3", "f4")
 
 
 @register("lrgf-glr")
-class LRGFGLR(NoveltyScaled, LRGFMEM):
+class LRGFGLR(HeldBaseline, NoveltyScaled, LRGFMEM):
     """``lrgf-mem``'s bank, a cross-fitted limit and tests along learned fault directions."""
 
     #: T_rg1, the slow high-gain relation that alone carries f3, gets a larger network
@@ -175,6 +178,8 @@ class LRGFGLR(NoveltyScaled, LRGFMEM):
         baseline_lambda: float = 0.0,
         baseline_hold: float = 0.5,
         baseline_settle: int = 200,
+        baseline_filters: list[float] | None = None,
+        baseline_ridge: float = 1.0,
         slow_ewma_lambda: float | list[float] = 0.02,
         slow_share: float = 0.5,
         on_delay: int = 1,
@@ -245,6 +250,8 @@ class LRGFGLR(NoveltyScaled, LRGFMEM):
         self.baseline_lambda = baseline_lambda
         self.baseline_hold = baseline_hold
         self.baseline_settle = baseline_settle
+        self.baseline_filters = baseline_filters
+        self.baseline_ridge = baseline_ridge
         self.slow_ewma_lambda = slow_ewma_lambda
         self.slow_share = slow_share
         self.on_delay = on_delay
@@ -259,6 +266,11 @@ class LRGFGLR(NoveltyScaled, LRGFMEM):
         check_params({k: params[k] for k in PARAMETER_CONSTRAINTS}, PARAMETER_CONSTRAINTS)
         check_params({k: params[k] for k in GLR_CONSTRAINTS}, GLR_CONSTRAINTS)
         self._check_sizes()  # checks the relations and n_linear too
+        if self.baseline_filters is not None and self.baseline_lambda == 0:
+            raise ValueError(
+                f"baseline_filters={self.baseline_filters} needs a baseline: baseline_lambda "
+                "must be in (0, 1), got 0"
+            )
         known = {"f1", "f2", "f3", "f4"}
         if not set(self._faults()) <= known:
             raise ValueError(f"fault_scenarios must be among {sorted(known)}, got {self._faults()}")
@@ -300,7 +312,7 @@ class LRGFGLR(NoveltyScaled, LRGFMEM):
         cal_parts: list[tuple[np.ndarray, np.ndarray]] = []
         if self.calibration == Calibration.CROSS_FIT and len(ys) >= self.n_folds:
             cal_parts, novelty, (self.lrgf_, self.mem_, v_paper, fits) = self._cross_fit_models(ys)
-            train = ys
+            train, cal = ys, ys  # every record is out of fold once, in order
         else:  # lrgf-mem's split (also when there are fewer episodes than folds)
             train, cal, cal_from = self._split(episodes)
             self.lrgf_, self.mem_, v_paper, fits = self._train_models(train)
@@ -310,18 +322,19 @@ class LRGFGLR(NoveltyScaled, LRGFMEM):
         self.prediction_range_ = self._prediction_range(train)
         self.v_paper_ = np.array(v_paper)
         self.train_fit_loss_ = np.array([f.best_val_loss for f in fits])
-        self._calibrate(cal_parts, w, novelty)
+        self._calibrate(cal_parts, w, novelty, cal)
 
     def _calibrate(
         self,
         cal_parts: list[tuple[np.ndarray, np.ndarray]],
         w: int,
         novelty: list[np.ndarray] | None = None,
+        cal_ys: list[np.ndarray] | None = None,
     ) -> None:
         """Error-model choice, scale, fault directions and limits from healthy calibration
         records ``cal_parts`` (``(y_out − y_m, y_e)`` each; the first ``w`` samples skipped)
         with, per record, its distance outside the training predictions ``novelty`` (``(T,)``,
-        None: inside)."""
+        None: inside) and its measurements ``cal_ys`` (needed by ``baseline_filters``)."""
         relations = self._relations()
         n_cal = sum(max(0, r.shape[0] - w) for r, _ in cal_parts)
         if n_cal < MIN_CALIBRATION_SAMPLES:
@@ -347,9 +360,31 @@ class LRGFGLR(NoveltyScaled, LRGFMEM):
         # Without a baseline the statistics are fixed filters of the error: one fit. With one,
         # what the baseline absorbs depends on when it holds, which depends on the limits: fit
         # on an always-adapting baseline, then once more on the baseline held by those limits.
-        self._fit_alarm_stage([self._track(e, hold=False) for e in norm])
+        phis = self._calibration_features(cal_parts, w, cal_ys)
+        pairs = list(zip(norm, phis, strict=True))
+        self._fit_alarm_stage([self._track(e, hold=False, phi=p) for e, p in pairs])
         if self.baseline_lambda > 0:
-            self._fit_alarm_stage([self._track(e, hold=True) for e in norm])
+            self._fit_alarm_stage([self._track(e, hold=True, phi=p) for e, p in pairs])
+
+    def _calibration_features(
+        self,
+        cal_parts: list[tuple[np.ndarray, np.ndarray]],
+        w: int,
+        cal_ys: list[np.ndarray] | None,
+    ) -> list[np.ndarray | None]:
+        """The regression baseline's regressors of every calibration record past ``w`` (the
+        record's own out-of-fold network outputs), or None per record without it."""
+        self._reset_baseline()
+        if not self._regression_on:
+            return [None] * len(cal_parts)
+        if cal_ys is None or len(cal_ys) != len(cal_parts):
+            raise ValueError("baseline_filters needs the calibration records' measurements")
+        feats = []
+        for (r, _), y in zip(cal_parts, cal_ys, strict=True):
+            phi = self._baseline_features(y, y[:, self.out_idx_] - r)
+            assert phi is not None
+            feats.append(phi[w:])
+        return feats
 
     def _fit_alarm_stage(self, norm: list[np.ndarray]) -> None:
         """Covariances and limits of the alarm stage on healthy (baseline-removed) normalised
@@ -552,48 +587,13 @@ class LRGFGLR(NoveltyScaled, LRGFMEM):
         self._over_run = 0  # samples in a row with a statistic over its limit
         self._reset_baseline()
 
-    def _reset_baseline(self) -> None:
-        self._b = np.zeros(len(self.out_idx_)) if self.baseline_lambda > 0 else None
-        self._n_seen = self._n_adapted = 0
-
-    def _track(self, e: np.ndarray, *, hold: bool) -> np.ndarray:
-        """The baseline-removed error of a normalised error record ``e`` (T, k) past its warm-up.
-        ``hold=False`` adapts the baseline at every sample (no limits needed); ``hold=True``
-        runs the detector's own recursion with the current limits."""
-        if self.baseline_lambda == 0:
-            return e
-        out = np.empty_like(e)
-        if hold:
-            self._reset_stage()
-            for k in range(e.shape[0]):
-                out[k] = self._stage_step(e[k], warm=False)[0]
-        else:
-            self._reset_baseline()
-            for k in range(e.shape[0]):
-                out[k] = e[k] - self._b
-                self._baseline_step(e[k], inside_hold=True)
-        return out
-
-    def _baseline_step(self, e: np.ndarray, *, inside_hold: bool) -> None:
-        """Adapt the baseline to the normalised error ``e`` of one sample past the warm-up.
-
-        Settling: the first ``baseline_settle`` samples always adapt (the plant is taken as
-        healthy when monitoring starts, as in training), with the running mean's gain 1/n until
-        λ takes over. Later the baseline follows the slow healthy error only while every
-        statistic is well inside its limit (``inside_hold``), so a fault's growing error is not
-        absorbed into it.
-        """
-        assert self._b is not None
-        settling = self._n_seen < self.baseline_settle
-        self._n_seen += 1
-        if settling or inside_hold:
-            self._n_adapted += 1
-            self._b += max(self.baseline_lambda, 1.0 / self._n_adapted) * (e - self._b)
-
-    def _stage_step(self, e: np.ndarray, *, warm: bool) -> tuple[np.ndarray, np.ndarray]:
+    def _stage_step(
+        self, e: np.ndarray, *, warm: bool, phi: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
         """One sample of the alarm stage: (baseline-removed error, signal). The one place the
-        recursion is written; streaming ``update`` and batch ``detect`` both call it."""
-        et = e if self._b is None else e - self._b
+        recursion is written; streaming ``update`` and batch ``detect`` both call it. ``phi``:
+        the sample's regressors with ``baseline_filters``."""
+        et = e if self._b is None else e - self._baseline_value(phi)
         z = self._ewma.update(et)
         signal = np.empty(len(self.upper_))
         signal[0] = z @ self.s_inv_ @ z
@@ -606,7 +606,8 @@ class LRGFGLR(NoveltyScaled, LRGFMEM):
         else:
             signal[1:] = self._seq.update(self.dir_weights_ @ et)
         if self._b is not None and not warm:
-            self._baseline_step(e, inside_hold=bool((signal <= self._hold_limits).all()))
+            inside = bool((signal <= self._hold_limits).all())
+            self._baseline_step(e, inside_hold=inside, phi=phi)
         return et, signal
 
     def _scores(self, e: np.ndarray, z: np.ndarray, seq: np.ndarray | None) -> np.ndarray:
@@ -638,18 +639,22 @@ class LRGFGLR(NoveltyScaled, LRGFMEM):
         if not warm and self._novelty_on:
             d = self.prediction_range_.distance(self._step_y_m[self.novelty_relations_])
             e /= novelty_scale(d, self.novelty_gain)
-        _, signal = self._stage_step(e, warm=warm)
+        phi = self._baseline_features_step(y, self._step_y_m)  # the filters run while warm too
+        _, signal = self._stage_step(e, warm=warm, phi=phi)
         return self._decision(y_out - centre, signal, warm)
 
     def _detect(self, y: np.ndarray) -> Detection:
-        centre = self._centre(y)
+        y_m, centre = self._outputs_and_centre(y)
         resid = y[:, self.out_idx_] - centre
         w = self.steady_window
         e = resid / self.v_residual_ / self._scale_of(y)[:, None]
         e[:w] = 0.0
         if self.baseline_lambda > 0:  # the baseline's hold makes the stage a recursion
             # detect() has just reset the stage (base contract), so it starts fresh
-            sig = np.array([self._stage_step(e[k], warm=k < w)[1] for k in range(len(e))])
+            phi = self._baseline_features(y, y_m)
+            sig = np.array(
+                [self._stage_step(e[k], warm=k < w, phi=_row(phi, k))[1] for k in range(len(e))]
+            )
         else:
             z = EWMA(self.ewma_lambda).filter(e)
             if self._has_slow_scale:

@@ -501,12 +501,17 @@ class _LRGFMEMBase(Diagnoser):
 
     def _centre(self, y: np.ndarray) -> np.ndarray:
         """y_m + y_e for every relation over a whole record: (T, k)."""
-        cols = []
+        return self._outputs_and_centre(y)[1]
+
+    def _outputs_and_centre(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The networks' outputs y_m and y_m + y_e for every relation over a record: (T, k)."""
+        ym, cols = [], []
         for j in range(len(self.lrgf_)):
             u = y[:, self.in_idx_[j]]
             y_m = self.lrgf_[j].predict(u)[:, 0]
+            ym.append(y_m)
             cols.append(y_m + self.mem_[j].predict(u)[:, 0] if self.use_mem_[j] else y_m)
-        return np.column_stack(cols)
+        return np.column_stack(ym), np.column_stack(cols)
 
     def _remaining(self, y: np.ndarray) -> np.ndarray:
         return y[:, self.out_idx_] - self._centre(y)

@@ -124,6 +124,14 @@ def load(track: str, tag: str = ""):
     return det, cal, int(z["w"]), novelty
 
 
+def calibration_records(track: str, cal: list) -> list[np.ndarray] | None:
+    """The measurements of a bank's out-of-fold calibration records, in order (its training
+    episodes; ``baseline_filters`` needs them), or None when the count differs (a bank trained
+    with ``--n-train``)."""
+    ys = [e.y for e in TrackData(track=val_track(track, 1, 1)).train_episodes()]
+    return ys if len(ys) == len(cal) else None
+
+
 def episodes(track: str, n_healthy: int, n_faulty: int, eval_track: str | None = None):
     name = eval_track or track
     path = OUT / f"episodes-{name}-{n_healthy}-{n_faulty}.npz"
@@ -205,13 +213,14 @@ def main() -> None:
     except ValueError as err:
         ap.error(str(err))
     det, cal, w, novelty = load(a.track, a.tag)
+    cal_ys = calibration_records(a.track, cal)
     tracks = (a.eval_tracks or a.track).split(",")
     eps = {tr: episodes(a.track, a.n_healthy, a.n_faulty, tr) for tr in tracks}
     results = []
     for lam in [float(x) for x in a.lambdas.split(",")]:
         for hold in [float(x) for x in a.holds.split(",")]:
             det.set_params(baseline_lambda=lam, baseline_hold=hold, **extra)
-            det._calibrate(cal, w, novelty)
+            det._calibrate(cal, w, novelty, cal_ys)
             det._fitted_ = True  # the lab re-calibrates the stored bank in place
             for tr in tracks:
                 res = evaluate(det, eps[tr])

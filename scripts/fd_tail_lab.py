@@ -26,7 +26,7 @@ import json
 import time
 
 import numpy as np
-from baseline_lab import OUT, at_least, load, parse_set, val_track
+from baseline_lab import OUT, at_least, calibration_records, load, parse_set, val_track
 from tqdm import tqdm
 
 import diagnosers
@@ -163,6 +163,7 @@ def main() -> None:
         ap.error(str(err))
     det, cal, w, novelty = load(a.track, a.tag)
     ys = healthy_episodes(a.track, a.n_healthy)
+    cal_ys = calibration_records(a.track, cal)
     train = (
         np.concatenate([e.y for e in TrackData(track=val_track(a.track, 1, 1)).train_episodes()])
         if a.streaks
@@ -171,7 +172,7 @@ def main() -> None:
     out = []
     for target in [float(t) for t in a.targets.split(",")]:
         det.set_params(false_alarm_target=target, **extra)
-        det._calibrate(cal, w, novelty)
+        det._calibrate(cal, w, novelty, cal_ys)
         det._fitted_ = True  # the lab re-calibrates the stored bank in place
         detections = [
             det.detect(diagnosers.Episode(y, det.channels_, 10.0))

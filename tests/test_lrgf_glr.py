@@ -401,3 +401,64 @@ def test_on_delay_alarms_after_that_many_exceedances_in_a_row(
 def test_on_delay_outside_its_range_is_refused_by_name(train, bad) -> None:
     with pytest.raises(ValueError, match=r"on_delay=.* is outside the allowed range"):
         LRGFGLR(**{**FAST, "on_delay": bad}).fit(train)
+
+
+# ---- the regression baseline ---------------------------------------------------------------------
+@pytest.fixture(scope="module")
+def regression_det(train) -> LRGFGLR:
+    params = {**FAST, "n_folds": 2, "baseline_lambda": 1e-3, "baseline_settle": 300}
+    params["baseline_hold"] = 1.0
+    return LRGFGLR(**params, slow_ewma_lambda=0.0, baseline_filters=[1, 30]).fit(train)
+
+
+def test_regression_baseline_stream_equals_batch_and_roundtrip(regression_det, tmp_path) -> None:
+    det = regression_det
+    ep = inject_step_fault(make_episode(900, seed=9), onset=500, magnitude=3.0)
+    batch = _stream_equals_batch(det, ep)
+    det.save(tmp_path / "m")
+    again = diagnosers.Diagnoser.load(tmp_path / "m")
+    assert again.baseline_filters == [1, 30] and again.baseline_ridge == 1.0
+    np.testing.assert_array_equal(again.detect(ep).signal, batch.signal)
+
+
+def _gain_mismatch(ep, gain: float):
+    """Another plant: T_rg1 answers the air flow with ``gain`` °C per ton/h more than the
+    training plants (and T_rg2 follows T_rg1 as before)."""
+    y = ep.y.copy()
+    i, o = ep.channels.index("R_ar"), ep.channels.index("T_rg1")
+    y[:, o] += gain * (y[:, i] - y[:, i].mean())
+    return diagnosers.Episode(y, ep.channels, ep.sample_time_s, fault_onset=ep.fault_onset)
+
+
+def test_regression_baseline_learns_a_gain_the_running_mean_cannot(regression_det, train) -> None:
+    # The mismatch moves with every air-flow step, so a constant cannot remove it; the
+    # regression on the relation's filtered inputs learns it while settling.
+    det = regression_det
+    ep = _gain_mismatch(make_episode(2000, seed=21), 0.4)
+    mean_only = LRGFGLR(**{**det.get_params(), "baseline_filters": None}).fit(train)
+    w = det.steady_window + det.baseline_settle
+    with_regression = det.detect(ep).alarm[w:].mean()
+    with_mean = mean_only.detect(ep).alarm[w:].mean()
+    assert with_mean > 0.3
+    assert with_regression < 0.05
+    # and a step fault that comes later is still found and kept in alarm
+    faulty = _gain_mismatch(
+        inject_step_fault(make_episode(2000, seed=22), onset=1200, magnitude=4.0), 0.05
+    )
+    alarm = det.detect(faulty).alarm
+    assert alarm[1200:1230].any() and alarm[1250:].mean() > 0.9
+
+
+@pytest.mark.parametrize(
+    ("changes", "match"),
+    [
+        ({"baseline_filters": [0.5]}, r"baseline_filters=\[0.5\]"),
+        ({"baseline_filters": []}, r"baseline_filters=\[\]"),
+        ({"baseline_ridge": 0.0}, "baseline_ridge=0.0"),
+        ({"baseline_filters": [1, 30], "baseline_lambda": 0.0}, "needs a baseline"),
+    ],
+)
+def test_regression_baseline_parameters_are_checked(train, changes, match) -> None:
+    params = {**FAST, "baseline_lambda": 1e-3, **changes}
+    with pytest.raises(ValueError, match=match):
+        LRGFGLR(**params).fit(train)
