@@ -1,4 +1,4 @@
-"""``lrgf-glr-adaptive``: ``lrgf-glr`` with a held running-mean baseline."""
+"""``lrgf-glr-adaptive``: ``lrgf-glr`` with a held regression baseline."""
 
 from __future__ import annotations
 
@@ -18,22 +18,33 @@ def adaptive() -> LRGFGLRAdaptive:
     return LRGFGLRAdaptive(**FAST).fit([make_episode(1500, seed=s) for s in (1, 2, 3)])
 
 
-def test_variant_is_lrgf_glr_with_the_baseline_and_all_samples_only() -> None:
+def test_variant_is_lrgf_glr_with_the_baseline_target_and_all_samples_only() -> None:
     plain = diagnosers.make("lrgf-glr").get_params()
     variant = diagnosers.make("lrgf-glr-adaptive").get_params()
     changed = {k for k in plain if plain[k] != variant[k]}
-    assert changed == {"baseline_lambda", "baseline_hold", "val_fraction"}
+    assert changed == {
+        "baseline_lambda",
+        "baseline_hold",
+        "baseline_filters",
+        "baseline_ridge",
+        "false_alarm_target",
+        "val_fraction",
+    }
     assert variant["baseline_lambda"] == 1e-4 and variant["baseline_hold"] == 1.0
+    assert variant["baseline_filters"] == [1, 10, 50] and plain["baseline_filters"] is None
+    assert (variant["baseline_ridge"], variant["false_alarm_target"]) == (3.0, 0.07)
     assert variant["val_fraction"] == 0.0 and plain["val_fraction"] == 0.25
     # a user's value still wins over the variant's default
     assert LRGFGLRAdaptive(baseline_hold=0.5).baseline_hold == 0.5
 
 
-def test_baseline_is_the_running_mean_of_the_held_samples(adaptive) -> None:
+def test_without_filters_the_baseline_is_the_running_mean_of_the_held_samples(adaptive) -> None:
     # below 1/λ = 10,000 samples the gain is 1/n: the baseline removed from sample k is the mean
     # of samples 0..k-1 (0 at the first), computed here by hand
     e = np.random.default_rng(4).normal(size=(600, 3)) + np.array([2.0, -1.0, 0.5])
-    out = adaptive._track(e, hold=False)
+    det = LRGFGLRAdaptive(**{**adaptive.get_params(), "baseline_filters": None})
+    det.__dict__.update({k: v for k, v in adaptive.__dict__.items() if k.endswith("_")})
+    out = det._track(e, hold=False)
     mean_before = np.vstack([np.zeros(3), np.cumsum(e, axis=0)[:-1] / np.arange(1, 600)[:, None]])
     np.testing.assert_allclose(out, e - mean_before, rtol=1e-10, atol=1e-12)
 
@@ -53,7 +64,7 @@ def test_absorbs_a_plant_offset_and_holds_on_a_later_fault(adaptive) -> None:
     ep = _offset(make_episode(1500, seed=11), col, 4.0 * scale)
     w = det.steady_window + det.baseline_settle
     assert det.detect(ep).alarm[w:].mean() < 0.05
-    plain = LRGFGLR(**{**det.get_params(), "baseline_lambda": 0.0})
+    plain = LRGFGLR(**{**det.get_params(), "baseline_lambda": 0.0, "baseline_filters": None})
     plain.fit([make_episode(1500, seed=s) for s in (1, 2, 3)])
     assert plain.detect(ep).alarm[w:].mean() > 0.9
     faulty = _offset(ep, col, 8.0 * scale, onset=800)
