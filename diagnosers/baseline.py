@@ -80,6 +80,7 @@ class RegressionBaseline:
         self.n_relations = len(self.n_signals)
         self.width = max(self.n_signals)
         self.gains = 1.0 / taus  # per filter, a = 1/τ
+        self._gains_kw = self.gains[None, :, None]
         self.n_features = 1 + len(taus) * self.width
         self.forgetting = 1.0 - forgetting_lambda
         self.ridge = ridge
@@ -88,7 +89,11 @@ class RegressionBaseline:
     def reset(self) -> None:
         """A fresh episode: filters unset, coefficients zero, information ρ I."""
         k, p = self.n_relations, self.n_features
-        self._state: np.ndarray | None = None  # filter outputs (n_taus, k, width)
+        # the regressors of the current sample; the filter outputs live in them, (k, n_taus, width)
+        self._phi_now = np.zeros((k, p))
+        self._phi_now[:, 0] = 1.0
+        self._state = self._phi_now[:, 1:].reshape(k, len(self.gains), self.width)
+        self._started = False
         self._info = np.broadcast_to(self.ridge * np.eye(p), (k, p, p)).copy()
         self._moment = np.zeros((k, p))
         self.theta_ = np.zeros((k, p))
@@ -110,11 +115,12 @@ class RegressionBaseline:
 
     def features(self, x: np.ndarray) -> np.ndarray:
         """Regressors ``(k, p)`` of one sample's padded signals ``x`` ``(k, width)``."""
-        if self._state is None:
-            self._state = np.broadcast_to(x, (len(self.gains), *x.shape)).copy()
+        if not self._started:
+            self._state[...] = x[:, None, :]
+            self._started = True
         else:
-            self._state += self.gains[:, None, None] * (x - self._state)
-        return self._phi(self._state)
+            self._state += self._gains_kw * (x[:, None, :] - self._state)
+        return self._phi_now.copy()
 
     def features_batch(self, x: np.ndarray) -> np.ndarray:
         """Regressors ``(T, k, p)`` of a record of padded signals ``x`` ``(T, k, width)``: the
