@@ -448,6 +448,11 @@ def test_whitened_glr_lab_refuses_bad_flags_by_value_and_range(args, message) ->
         ("optimizer_lab.py", ["--val-fraction", "x"], "invalid float value: 'x'"),
         ("optimizer_lab.py", ["--seed", "-1"], "'-1'; allowed: an integer >= 0"),
         ("optimizer_lab.py", ["--hidden", "0"], "'0'; allowed: an integer >= 1"),
+        ("plant_mismatch_lab.py", ["--lags", "1,0.5"], "'1,0.5'; allowed: comma-separated"),
+        ("plant_mismatch_lab.py", ["--lags", "x"], "'x'; allowed: comma-separated numbers >= 1"),
+        ("plant_mismatch_lab.py", ["--ridge", "0"], "--ridge 0.0; allowed: a number > 0"),
+        ("plant_mismatch_lab.py", ["--from", "300"], "'300'; allowed: an integer >= 301"),
+        ("plant_mismatch_lab.py", ["--n-healthy", "0"], "'0'; allowed: an integer >= 1"),
     ],
 )
 def test_reference_and_optimizer_labs_refuse_bad_flags(script, args, message) -> None:
