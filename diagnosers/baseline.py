@@ -191,6 +191,26 @@ class HeldBaseline:
             )
             self._gather, self._signal_mean, self._signal_scale = self._signal_layout()
 
+    def _calibration_features(
+        self,
+        cal_parts: list[tuple[np.ndarray, np.ndarray]],
+        w: int,
+        cal_ys: list[np.ndarray] | None,
+    ) -> list[np.ndarray | None]:
+        """The regression baseline's regressors of every calibration record past ``w`` (the
+        record's own out-of-fold network outputs), or None per record without it."""
+        self._reset_baseline()
+        if not self._regression_on:
+            return [None] * len(cal_parts)
+        if cal_ys is None or len(cal_ys) != len(cal_parts):
+            raise ValueError("baseline_filters needs the calibration records' measurements")
+        feats = []
+        for (r, _), y in zip(cal_parts, cal_ys, strict=True):
+            phi = self._baseline_features(y, y[:, self.out_idx_] - r)
+            assert phi is not None
+            feats.append(phi[w:])
+        return feats
+
     def _signal_layout(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Where each relation's padded signals come from in ``[y, y_m, 0]`` and the networks'
         own input and output scalers: ``(k, width)`` index, mean and scale."""

@@ -64,7 +64,11 @@ transient included, and so do its limits (``lrgf-glr-adaptive`` keeps the slow s
 λ = 1e-4 the baseline is a running mean that settles within its first few hundred samples,
 where a faster λ used to leave a transient for 1/λ samples). It learns a unit's own offset
 from the model (a plant unlike the training plants) and loses small, slow faults that stay
-under the hold level.
+under the hold level. With ``baseline_filters`` (time constants in samples; ridge
+``baseline_ridge``) the baseline is a regression instead of a mean: per relation an online
+exponentially weighted ridge regression of the normalised error on a constant and low-pass
+filters of the relation's inputs and network output (:mod:`diagnosers.baseline`), which learns
+another plant's gains as well as its offset (``lrgf-glr-adaptive``).
 
 **Operating points outside the training data** (``novelty_gain``, default 5). Where the
 bank's own prediction of a relation with exogenous inputs only (T_rg1's) leaves the range of
@@ -365,26 +369,6 @@ class LRGFGLR(HeldBaseline, NoveltyScaled, LRGFMEM):
         self._fit_alarm_stage([self._track(e, hold=False, phi=p) for e, p in pairs])
         if self.baseline_lambda > 0:
             self._fit_alarm_stage([self._track(e, hold=True, phi=p) for e, p in pairs])
-
-    def _calibration_features(
-        self,
-        cal_parts: list[tuple[np.ndarray, np.ndarray]],
-        w: int,
-        cal_ys: list[np.ndarray] | None,
-    ) -> list[np.ndarray | None]:
-        """The regression baseline's regressors of every calibration record past ``w`` (the
-        record's own out-of-fold network outputs), or None per record without it."""
-        self._reset_baseline()
-        if not self._regression_on:
-            return [None] * len(cal_parts)
-        if cal_ys is None or len(cal_ys) != len(cal_parts):
-            raise ValueError("baseline_filters needs the calibration records' measurements")
-        feats = []
-        for (r, _), y in zip(cal_parts, cal_ys, strict=True):
-            phi = self._baseline_features(y, y[:, self.out_idx_] - r)
-            assert phi is not None
-            feats.append(phi[w:])
-        return feats
 
     def _fit_alarm_stage(self, norm: list[np.ndarray]) -> None:
         """Covariances and limits of the alarm stage on healthy (baseline-removed) normalised
