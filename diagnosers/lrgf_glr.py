@@ -104,7 +104,7 @@ from diagnosers.alarm import (
     normal_tail_limit,
 )
 from diagnosers.base import Decision, Detection, Episode
-from diagnosers.baseline import HeldBaseline, _row
+from diagnosers.baseline import HeldBaseline
 from diagnosers.lrgf_mem import (
     LRGFMEM,
     MIN_CALIBRATION_SAMPLES,
@@ -639,8 +639,9 @@ class LRGFGLR(HeldBaseline, NoveltyScaled, LRGFMEM):
         if self.baseline_lambda > 0:  # the baseline's hold makes the stage a recursion
             # detect() has just reset the stage (base contract), so it starts fresh
             phi = None if y_m is None else self._baseline_features(y, y_m)
+            rows = [None] * len(e) if phi is None else list(phi)
             sig = np.array(
-                [self._stage_step(e[k], warm=k < w, phi=_row(phi, k))[1] for k in range(len(e))]
+                [self._stage_step(e[k], warm=k < w, phi=rows[k])[1] for k in range(len(e))]
             )
         else:
             z = EWMA(self.ewma_lambda).filter(e)
@@ -664,6 +665,8 @@ class LRGFGLR(HeldBaseline, NoveltyScaled, LRGFMEM):
             "dir_weights": self.dir_weights_,
             "h_dir": self.h_dir_,
             "prediction_range": (np.zeros((3, 0)) if rng is None else rng.to_array()),
+            # the limits were calibrated with this baseline (a marker for older saves)
+            "baseline_filters": np.asarray(self.baseline_filters or [], dtype=np.float64),
         }
 
     def _set_state(self, state: dict[str, np.ndarray]) -> None:
@@ -685,4 +688,8 @@ class LRGFGLR(HeldBaseline, NoveltyScaled, LRGFMEM):
         else:  # saved before the novelty scale existed: it ran without one, and still does
             self.novelty_relations_, self.prediction_range_ = np.zeros(0, dtype=int), None
             self.novelty_gain = 0.0
+        if "baseline_filters" not in state:
+            # saved before the regression baseline existed: its limits were calibrated with the
+            # running mean, whatever the class's default is now, so it keeps the running mean
+            self.baseline_filters = None
         super()._set_state(state)

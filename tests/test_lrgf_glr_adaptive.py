@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 from synthetic import make_episode
@@ -71,3 +73,25 @@ def test_absorbs_a_plant_offset_and_holds_on_a_later_fault(adaptive) -> None:
     alarm = det.detect(faulty).alarm
     assert alarm[800:810].any()
     assert alarm[820:].mean() > 0.95
+
+
+def test_a_model_saved_before_the_regression_keeps_its_running_mean(adaptive, tmp_path) -> None:
+    # The limits of a model saved by an earlier version were calibrated with the running mean;
+    # loading it must not switch it to the class's new default (the regression baseline).
+    plain = LRGFGLRAdaptive(**{**adaptive.get_params(), "baseline_filters": None})
+    plain.fit([make_episode(1500, seed=s) for s in (1, 2, 3)])
+    plain.save(tmp_path / "m")
+    config = tmp_path / "m" / "config.json"
+    cfg = json.loads(config.read_text())
+    del cfg["params"]["baseline_filters"], cfg["params"]["baseline_ridge"]  # an older save
+    config.write_text(json.dumps(cfg))
+    with np.load(tmp_path / "m" / "state.npz") as z:
+        state = {k: z[k] for k in z.files if k != "baseline_filters"}
+    np.savez(tmp_path / "m" / "state.npz", **state)
+    again = diagnosers.Diagnoser.load(tmp_path / "m")
+    assert again.baseline_filters is None
+    ep = make_episode(900, seed=9)
+    np.testing.assert_array_equal(again.detect(ep).signal, plain.detect(ep).signal)
+    # saved now, the regression is kept
+    adaptive.save(tmp_path / "r")
+    assert diagnosers.Diagnoser.load(tmp_path / "r").baseline_filters == [1, 10, 50]
