@@ -628,17 +628,14 @@ class LRGFGLR(HeldBaseline, NoveltyScaled, LRGFMEM):
         return self._decision(y_out - centre, signal, warm)
 
     def _detect(self, y: np.ndarray) -> Detection:
-        if self._regression_on:  # the regression also needs the networks' outputs alone
-            y_m, centre = self._outputs_and_centre(y)
-        else:  # through _centre, which a subclass may override (the perfect-model stage)
-            y_m, centre = None, self._centre(y)
+        y_m, centre = self._outputs_and_centre(y)
         resid = y[:, self.out_idx_] - centre
         w = self.steady_window
         e = resid / self.v_residual_ / self._scale_of(y)[:, None]
         e[:w] = 0.0
         if self.baseline_lambda > 0:  # the baseline's hold makes the stage a recursion
             # detect() has just reset the stage (base contract), so it starts fresh
-            phi = None if y_m is None else self._baseline_features(y, y_m)
+            phi = self._baseline_features(y, y_m)  # None without the regression
             rows = [None] * len(e) if phi is None else list(phi)
             sig = np.array(
                 [self._stage_step(e[k], warm=k < w, phi=rows[k])[1] for k in range(len(e))]

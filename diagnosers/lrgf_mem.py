@@ -504,7 +504,9 @@ class _LRGFMEMBase(Diagnoser):
         return self._outputs_and_centre(y)[1]
 
     def _outputs_and_centre(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The networks' outputs y_m and y_m + y_e for every relation over a record: (T, k)."""
+        """The networks' outputs y_m and y_m + y_e for every relation over a record: (T, k).
+        The one place a record's centre is computed: a subclass with another model overrides
+        this (``_centre`` reads it)."""
         ym, cols = [], []
         for j in range(len(self.lrgf_)):
             u = y[:, self.in_idx_[j]]

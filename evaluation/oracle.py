@@ -296,8 +296,9 @@ class _PerfectModelStage(LRGFGLR):
         self._episode_centre = self._centre_of(episode.y, episode.seed)
         return super().detect(episode)
 
-    def _centre(self, y: np.ndarray) -> np.ndarray:
-        return self._episode_centre
+    def _outputs_and_centre(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        # a perfect model: its output is the centre, with no error model on top
+        return self._episode_centre, self._episode_centre
 
     def _update(self, y: np.ndarray) -> Any:
         raise NotImplementedError(
