@@ -164,11 +164,12 @@ def main() -> None:
     det, cal, w, novelty = load(a.track, a.tag)
     ys = healthy_episodes(a.track, a.n_healthy)
     cal_ys = calibration_records(a.track, cal)
-    train = (
-        np.concatenate([e.y for e in TrackData(track=val_track(a.track, 1, 1)).train_episodes()])
-        if a.streaks
-        else None
-    )
+    train = None
+    if a.streaks:  # the same training episodes, loaded once when the counts match
+        train_ys = cal_ys or [
+            e.y for e in TrackData(track=val_track(a.track, 1, 1)).train_episodes()
+        ]
+        train = np.concatenate(train_ys)
     out = []
     for target in [float(t) for t in a.targets.split(",")]:
         det.set_params(false_alarm_target=target, **extra)
