@@ -36,15 +36,20 @@ from evaluation.sources import TrackData
 from fcc_env.simulation import AFTERBURN_WARNING_C
 
 
-def healthy_episodes(track: str, n_healthy: int) -> np.ndarray:
-    """Measurements ``(n, T, channels)`` of the track's healthy validation episodes (cached)."""
-    path = OUT / f"healthy-{track}-{n_healthy}.npy"
+def healthy_episodes(track: str, n_healthy: int) -> list[np.ndarray]:
+    """Measurements ``(T, channels)`` of the track's healthy validation episodes (cached). An
+    episode the plant ended early is shorter, so they are a list, not one array."""
+    path = OUT / f"healthy-{track}-{n_healthy}.npz"
+    legacy = path.with_suffix(".npy")  # cached before episodes could differ in length
+    if legacy.exists():
+        return list(np.load(legacy))
     if path.exists():
-        return np.load(path)
+        z = np.load(path)
+        return [z[f"y{i}"] for i in range(len(z.files))]
     data = TrackData(track=val_track(track, n_healthy, 1))
     cells = [(sc, seed) for sc, seed in data.cells() if sc == "nominal"]
-    ys = np.stack([data.load_test(sc, seed).episode.y for sc, seed in tqdm(cells, "simulate")])
-    np.save(path, ys)
+    ys = [data.load_test(sc, seed).episode.y for sc, seed in tqdm(cells, "simulate")]
+    np.savez(path, **{f"y{i}": y for i, y in enumerate(ys)})
     return ys
 
 
@@ -56,7 +61,7 @@ def alarm_runs(alarm: np.ndarray) -> list[tuple[int, int]]:
 
 
 def streak_report(
-    det, ys: np.ndarray, detections: list, train: np.ndarray, min_length: int
+    det, ys: list[np.ndarray], detections: list, train: np.ndarray, min_length: int
 ) -> None:
     """The run-length profile of the healthy alarms and, per run of ``min_length`` samples or
     more, the statistic furthest over its limit, how far each channel was outside its range in
@@ -104,7 +109,7 @@ def streak_report(
 RANGE_BINS = ((-np.inf, 0.0), (0.0, 0.1), (0.1, 0.9), (0.9, 0.95), (0.95, 1.0), (1.0, np.inf))
 
 
-def range_report(det, ys: np.ndarray, detections: list) -> None:
+def range_report(det, ys: list[np.ndarray], detections: list) -> None:
     """Per bin of :data:`RANGE_BINS`: samples, the mean normalised remaining error of every
     relation (before any novelty division) and the alarm samples there."""
     rng = det.prediction_range_
