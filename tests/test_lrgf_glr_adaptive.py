@@ -34,7 +34,7 @@ def test_variant_is_lrgf_glr_with_the_baseline_target_and_all_samples_only() -> 
     }
     assert variant["baseline_lambda"] == 1e-4 and variant["baseline_hold"] == 1.0
     assert variant["baseline_filters"] == [1, 10, 50] and plain["baseline_filters"] is None
-    assert (variant["baseline_ridge"], variant["false_alarm_target"]) == (3.0, 0.07)
+    assert (variant["baseline_ridge"], variant["false_alarm_target"]) == (3.0, 0.04)
     assert variant["val_fraction"] == 0.0 and plain["val_fraction"] == 0.25
     # a user's value still wins over the variant's default
     assert LRGFGLRAdaptive(baseline_hold=0.5).baseline_hold == 0.5
