@@ -17,6 +17,13 @@ outside its training range.
 
 ``--by-range`` prints, by where the T_rg1 network's prediction sits in its training range, the
 mean normalised remaining error and the alarm samples there (the evidence for ``novelty_gain``).
+``--by-plant`` (tracks with plant variation) prints the rank correlation of each episode's alarm
+share with its plant draw: the distance to the nearest training plant and to the nominal plant,
+each drawn parameter, and the feed-drift period.
+
+    python scripts/fd_tail_lab.py --track uncertain --tag=_vf0 --n-healthy 600 --targets 0.04 \
+        --set baseline_lambda=0.0001,baseline_hold=1,baseline_filters=[1,10,50],baseline_ridge=3 \
+        --by-plant
 """
 
 from __future__ import annotations
@@ -27,13 +34,16 @@ import time
 
 import numpy as np
 from baseline_lab import OUT, at_least, calibration_records, load, parse_set, val_track
+from scipy.stats import spearmanr
 from tqdm import tqdm
 
 import diagnosers
 from evaluation.intervals import bootstrap_ci
 from evaluation.metrics import episode_scores
 from evaluation.sources import TrackData
+from evaluation.tracks import TRACKS
 from fcc_env.simulation import AFTERBURN_WARNING_C
+from fcc_env.uncertainty import GROUP_FIELDS, PlantUncertainty
 
 
 def healthy_episodes(track: str, n_healthy: int) -> list[np.ndarray]:
@@ -134,6 +144,46 @@ def range_report(det, ys: list[np.ndarray], detections: list) -> None:
                   f"{a[m].sum()} of {a.sum()} alarm samples")  # fmt: skip
 
 
+def plant_report(track: str, r_fd: np.ndarray) -> None:
+    """Spearman correlation of the episodes' alarm shares ``r_fd`` with their plant draws
+    (the healthy validation episodes, in seed order), each drawn multiplier as ``v`` in
+    [−1, 1]."""
+    if not TRACKS[track].plant_variation:
+        print(f"track {track!r} draws no plants: no plant report")
+        return
+    pu = PlantUncertainty()
+
+    def draw(seed: int) -> tuple[np.ndarray, float]:
+        truth = pu.draw(seed).truth
+        v = []
+        for group, names in GROUP_FIELDS.items():
+            h = getattr(pu, group)
+            for name in names:
+                m = truth["multipliers"][name]
+                m = 1.0 / np.sqrt(m) if group == "valve" else m  # the valve's gain
+                v.append((m - 1.0) / h)
+        return np.array(v), truth["effects"][0]["params"]["period_s"]
+
+    seeds = val_track(track, len(r_fd), 1)
+    drawn = [draw(seed) for seed in seeds.test_seeds[: len(r_fd)]]
+    v = np.array([d[0] for d in drawn])
+    period = np.array([d[1] for d in drawn])
+    train = np.array([draw(seed)[0] for seed in seeds.train_seeds])
+    nearest = np.linalg.norm(v[:, None] - train[None], axis=2).min(axis=1)
+    rows = {
+        "distance to the nearest training plant": nearest,
+        "distance to the nominal plant": np.linalg.norm(v, axis=1),
+        "feed-drift period": period,
+        **{name: v[:, j] for j, name in enumerate(n for ns in GROUP_FIELDS.values() for n in ns)},
+    }
+    print(
+        f"Spearman rank correlation of the alarm share with the plant draw ({len(r_fd)} episodes):"
+    )
+    for name, values in rows.items():
+        res = spearmanr(r_fd, values)
+        print(f"  {name}: {res.statistic:+.2f} (p {res.pvalue:.2f})")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--track", default="paper")
@@ -158,6 +208,11 @@ def main() -> None:
         action="store_true",
         help="report the error and the alarms by where the model's prediction sits in its "
         "training range",
+    )
+    ap.add_argument(
+        "--by-plant",
+        action="store_true",
+        help="report how each episode's alarm share correlates with its plant draw",
     )
     a = ap.parse_args()
     if a.block > a.n_healthy:
@@ -200,6 +255,8 @@ def main() -> None:
             streak_report(det, ys, detections, train, a.streaks)
         if a.by_range:
             range_report(det, ys, detections)
+        if a.by_plant:
+            plant_report(a.track, r_fd)
     (OUT / f"false-alarm-{a.track}{a.tag}-{int(time.time())}.json").write_text(json.dumps(out))
 
 
