@@ -66,9 +66,11 @@ __all__ = [
     "LimitGoal",
     "TrackRow",
     "TrackRun",
+    "goal_table",
     "isolation_table",
     "limit_goal",
     "run_track",
+    "track_goals",
     "track_legend",
     "track_rows",
     "track_table",
@@ -615,10 +617,84 @@ def summary_table(runs: Sequence[TrackRun]) -> tuple[str, list[dict[str, Any]]]:
     return "\n".join(lines) + "\n", rows
 
 
+def track_goals(runs: Sequence[TrackRun]) -> list[dict[str, Any]]:
+    """Per track with a physical-limit row, the goal read across its diagnosers (reference rows
+    excluded): the diagnosers whose r_fd holds; the best of them (most faults at the limit, then
+    the lower mean t_dt/oracle) with its faults; and each fault at the limit for any of them,
+    with the first such diagnoser in that order. A track where no diagnoser holds r_fd has no
+    best and no fault at the limit."""
+    out = []
+    references = set(REFERENCE_LABELS.values())
+    for run in runs:
+        limit = next((r for r in run.rows if r.label == ORACLE_LABEL), None)
+        if limit is None:
+            continue
+        scored = [(row, limit_goal(row, limit)) for row in run.rows if row.label not in references]
+        holding = sorted(
+            ((row, g) for row, g in scored if g.r_fd_holds),
+            key=lambda rg: (-len(rg[1].faults_at_limit), _nan_last(rg[0].mean_ratio())),
+        )
+        by_fault: dict[str, str] = {}
+        for row, goal in holding:
+            for fault in goal.faults_at_limit:
+                by_fault.setdefault(fault, row.label)
+        best = holding[0] if holding else None
+        out.append(
+            {
+                "track": run.track.name,
+                "n_faults": len(limit.faults),
+                "r_fd_holds": [row.label for row, _ in holding],
+                "best": None if best is None else best[0].label,
+                "best_faults_at_limit": [] if best is None else list(best[1].faults_at_limit),
+                "faults_at_limit_any": {f: by_fault[f] for f in limit.faults if f in by_fault},
+            }
+        )
+    return out
+
+
+def _nan_last(x: float) -> float:
+    return x if math.isfinite(x) else math.inf
+
+
+def goal_table(goals: Sequence[dict[str, Any]]) -> str:
+    """The per-track goal of :func:`track_goals` as markdown, with the totals."""
+    lines = [
+        "## The goal per track",
+        "",
+        "Among the diagnosers whose r_fd holds the goal: the best one (most faults at the "
+        "limit), and each fault at the limit for any of them.",
+        "",
+        "| track | r_fd holds | best diagnoser | its faults at the limit | "
+        "faults at the limit, any diagnoser |",
+        "|---|---|---|---|---|",
+    ]
+    for g in goals:
+        anyone = ", ".join(f"{f} ({d})" for f, d in g["faults_at_limit_any"].items())
+        lines.append(
+            f"| {g['track']} | {', '.join(g['r_fd_holds']) or 'none'} | {g['best'] or ''} | "
+            f"{len(g['best_faults_at_limit'])}/{g['n_faults']} "
+            f"{' '.join(g['best_faults_at_limit'])}".rstrip()
+            + f" | {len(g['faults_at_limit_any'])}/{g['n_faults']} {anyone}".rstrip()
+            + " |"
+        )
+    n = sum(g["n_faults"] for g in goals)
+    lines += [
+        "",
+        f"Tracks where some diagnoser's r_fd holds: {sum(bool(g['r_fd_holds']) for g in goals)}"
+        f" of {len(goals)}. Faults at the limit: {sum(len(g['best_faults_at_limit']) for g in goals)}"
+        f" of {n} with the best diagnoser per track, "
+        f"{sum(len(g['faults_at_limit_any']) for g in goals)} of {n} with any.",
+    ]
+    return "\n".join(lines) + "\n"
+
+
 def write_summary(runs: Sequence[TrackRun], out: Path) -> list[Path]:
     text, rows = summary_table(runs)
+    goals = track_goals(runs)
+    if goals:
+        text += "\n" + goal_table(goals)
     return [
         atomic_write(out / "summary.md", text),
         _write_csv(out / "summary.csv", rows),
-        atomic_write_json(out / "summary.json", {"rows": rows}, indent=1),
+        atomic_write_json(out / "summary.json", {"rows": rows, "goals": goals}, indent=1),
     ]

@@ -5,8 +5,16 @@ from __future__ import annotations
 import math
 
 from evaluation.intervals import Interval
-from evaluation.oracle import ORACLE_LABEL
-from evaluation.trackboard import FaultCell, TrackRow, TrackRun, limit_goal, summary_table
+from evaluation.oracle import ORACLE_LABEL, REFERENCE_LABELS
+from evaluation.trackboard import (
+    FaultCell,
+    TrackRow,
+    TrackRun,
+    goal_table,
+    limit_goal,
+    summary_table,
+    track_goals,
+)
 from evaluation.tracks import TRACKS
 
 NAN = math.nan
@@ -64,3 +72,46 @@ def test_summary_scores_every_row_but_the_limit() -> None:
     assert "| paper | good | 0.0050 [0.0040, 0.0080] | yes | " in text
     assert "| 2/3 f1 f2 | 1 s |" in text
     assert "Test seeds from 0." in text
+
+
+def _run(track: str, *rows: TrackRow) -> TrackRun:
+    return TrackRun(TRACKS[track], (), (*rows, LIMIT), wall_s=1.0, n_computed=0, n_reused=0)
+
+
+def test_goal_per_track_takes_only_diagnosers_whose_r_fd_holds() -> None:
+    fast_but_noisy = _row("noisy", 0.02, {"f1": (1.0, 0.0), "f2": (0.9, 5.0), "f3": (1.0, 5.0)})
+    quiet = _row("quiet", 0.009, {"f1": (1.0, 1.0), "f2": (0.9, 30.0), "f3": (0.99, 15.0)})
+    quieter = _row("quieter", 0.005, {"f1": (1.0, 9.0), "f2": (0.9, 12.0), "f3": (0.5, 99.0)})
+    # a reference row meets everything but is not a diagnoser
+    perfect = _row(
+        next(v for v in REFERENCE_LABELS.values() if v != ORACLE_LABEL),
+        0.003,
+        {"f1": (1.0, 0.0), "f2": (0.9, 5.0), "f3": (1.0, 5.0)},
+    )
+    none_holds = _run("small", fast_but_noisy)
+    goals = track_goals([_run("paper", fast_but_noisy, quiet, quieter, perfect), none_holds])
+    paper, small = goals
+    assert paper["r_fd_holds"] == ["quiet", "quieter"]  # "quiet": two faults, "quieter": one
+    assert paper["best"] == "quiet" and paper["best_faults_at_limit"] == ["f1", "f3"]
+    assert paper["faults_at_limit_any"] == {"f1": "quiet", "f2": "quieter", "f3": "quiet"}
+    assert small["r_fd_holds"] == [] and small["best"] is None
+    assert small["faults_at_limit_any"] == {}
+    text = goal_table(goals)
+    assert "| paper | quiet, quieter | quiet | 2/3 f1 f3 | 3/3 f1 (quiet), f2 (quieter), " in text
+    assert "| small | none |  | 0/3 | 0/3 |" in text
+    assert "Tracks where some diagnoser's r_fd holds: 1 of 2." in text
+    assert "Faults at the limit: 2 of 6 with the best diagnoser per track, 3 of 6 with any." in text
+
+
+def test_equal_counts_rank_by_the_mean_time_ratio() -> None:
+    def with_ratio(label: str, ratio: float) -> TrackRow:
+        cell = FaultCell(_iv(1.0), _iv(0.0), _iv(ratio), misses=0, terminated=0, n=20)
+        return TrackRow(label, _iv(0.005, 0.004, 0.008), 1.0, 0.05, 3, {"f1": cell})
+
+    goals = track_goals([_run("paper", with_ratio("slow", 2.0), with_ratio("fast", 1.2))])
+    assert goals[0]["r_fd_holds"] == ["fast", "slow"] and goals[0]["best"] == "fast"
+
+
+def test_a_run_without_the_limit_row_has_no_goal() -> None:
+    run = TrackRun(TRACKS["paper"], (), (LIMIT,)[:0], wall_s=1.0, n_computed=0, n_reused=0)
+    assert track_goals([run]) == []
