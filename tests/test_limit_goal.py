@@ -1,20 +1,13 @@
-"""The goal "at the physical limit" (``evaluation.trackboard.limit_goal``) and the summary."""
+"""The goal "at the physical limit" (``evaluation.goal``) and the track summary."""
 
 from __future__ import annotations
 
 import math
 
+from evaluation.goal import goal_table, limit_goal, track_goals
 from evaluation.intervals import Interval
 from evaluation.oracle import ORACLE_LABEL, REFERENCE_LABELS
-from evaluation.trackboard import (
-    FaultCell,
-    TrackRow,
-    TrackRun,
-    goal_table,
-    limit_goal,
-    summary_table,
-    track_goals,
-)
+from evaluation.trackboard import FaultCell, TrackRow, TrackRun, summary_table
 from evaluation.tracks import TRACKS
 
 NAN = math.nan
