@@ -57,7 +57,7 @@ the out-of-fold calibration statistic (no reference distribution fits an autocor
 (seeds 5000-5999, ``scripts/fd_tail_lab.py --tag=_nov --n-healthy 1000 --block 200``): at 0.03
 one block of 200 (a track's size) has its r_fd interval's upper end at 0.0102, over the
 benchmark's 0.01; at 0.025 the five blocks reach at most 0.0091, for the same detection times
-within 3 samples on the paper, small, incipient and random validation faults.
+within 5 samples on the paper, small, incipient and random validation faults.
 
 **Held baseline** (``baseline_lambda > 0``; ``lrgf-glr-adaptive``). A running estimate ``b``
 of each relation's normalised remaining error is subtracted before the EWMA. ``b`` follows the
