@@ -201,8 +201,15 @@ def test_directions_are_unit_vectors_from_training_seeds_only(train) -> None:
 @pytest.fixture(scope="module")
 def baseline_det(train) -> LRGFGLR:
     # lrgf-glr-adaptive's stage: the baseline without the slow scale (which would integrate the
-    # settling transient of the baseline for a few of its time constants)
-    params = {**FAST, "n_folds": 2, "baseline_lambda": 0.02, "baseline_settle": 50}
+    # settling transient of the baseline for a few of its time constants); the target these
+    # tests' offsets were sized for, whatever the class default is
+    params = {
+        **FAST,
+        "n_folds": 2,
+        "baseline_lambda": 0.02,
+        "baseline_settle": 50,
+        "false_alarm_target": 0.03,
+    }
     return LRGFGLR(**params, slow_ewma_lambda=0.0).fit(train)
 
 
