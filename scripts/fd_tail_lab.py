@@ -144,42 +144,46 @@ def range_report(det, ys: list[np.ndarray], detections: list) -> None:
                   f"{a[m].sum()} of {a.sum()} alarm samples")  # fmt: skip
 
 
-def plant_report(track: str, r_fd: np.ndarray) -> None:
-    """Spearman correlation of the episodes' alarm shares ``r_fd`` with their plant draws
-    (the healthy validation episodes, in seed order), each drawn multiplier as ``v`` in
-    [−1, 1]."""
+def plant_draws(track: str, n_healthy: int) -> dict[str, np.ndarray] | None:
+    """Per healthy validation episode (in seed order) what its plant draw was: the distance to
+    the nearest training plant and to the nominal plant, the feed-drift period and each drawn
+    parameter as ``v`` in [−1, 1] (the valve as its gain); None on a track without plant
+    variation."""
     if not TRACKS[track].plant_variation:
-        print(f"track {track!r} draws no plants: no plant report")
-        return
+        return None
     pu = PlantUncertainty()
 
     def draw(seed: int) -> tuple[np.ndarray, float]:
         truth = pu.draw(seed).truth
-        v = []
-        for group, names in GROUP_FIELDS.items():
-            h = getattr(pu, group)
-            for name in names:
-                m = truth["multipliers"][name]
-                m = 1.0 / np.sqrt(m) if group == "valve" else m  # the valve's gain
-                v.append((m - 1.0) / h)
+        v = [
+            ((truth["valve_gain"] if group == "valve" else truth["multipliers"][name]) - 1.0)
+            / getattr(pu, group)
+            for group, names in GROUP_FIELDS.items()
+            for name in names
+        ]
         return np.array(v), truth["effects"][0]["params"]["period_s"]
 
-    seeds = val_track(track, len(r_fd), 1)
-    drawn = [draw(seed) for seed in seeds.test_seeds[: len(r_fd)]]
+    seeds = val_track(track, n_healthy, 1)
+    drawn = [draw(seed) for seed in seeds.test_seeds[:n_healthy]]
     v = np.array([d[0] for d in drawn])
-    period = np.array([d[1] for d in drawn])
     train = np.array([draw(seed)[0] for seed in seeds.train_seeds])
-    nearest = np.linalg.norm(v[:, None] - train[None], axis=2).min(axis=1)
-    rows = {
-        "distance to the nearest training plant": nearest,
+    return {
+        "distance to the nearest training plant": np.linalg.norm(
+            v[:, None] - train[None], axis=2
+        ).min(axis=1),
         "distance to the nominal plant": np.linalg.norm(v, axis=1),
-        "feed-drift period": period,
+        "feed-drift period": np.array([d[1] for d in drawn]),
         **{name: v[:, j] for j, name in enumerate(n for ns in GROUP_FIELDS.values() for n in ns)},
     }
+
+
+def plant_report(draws: dict[str, np.ndarray], r_fd: np.ndarray) -> None:
+    """Spearman correlation of the episodes' alarm shares ``r_fd`` with their plant draws
+    (:func:`plant_draws`)."""
     print(
         f"Spearman rank correlation of the alarm share with the plant draw ({len(r_fd)} episodes):"
     )
-    for name, values in rows.items():
+    for name, values in draws.items():
         res = spearmanr(r_fd, values)
         print(f"  {name}: {res.statistic:+.2f} (p {res.pvalue:.2f})")
 
@@ -230,6 +234,11 @@ def main() -> None:
             e.y for e in TrackData(track=val_track(a.track, 1, 1)).train_episodes()
         ]
         train = np.concatenate(train_ys)
+    draws = None
+    if a.by_plant:  # the same draws for every target
+        draws = plant_draws(a.track, len(ys))
+        if draws is None:
+            print(f"track {a.track!r} draws no plants: no plant report")
     out = []
     for target in [float(t) for t in a.targets.split(",")]:
         det.set_params(false_alarm_target=target, **extra)
@@ -255,8 +264,8 @@ def main() -> None:
             streak_report(det, ys, detections, train, a.streaks)
         if a.by_range:
             range_report(det, ys, detections)
-        if a.by_plant:
-            plant_report(a.track, r_fd)
+        if draws is not None:
+            plant_report(draws, r_fd)
     (OUT / f"false-alarm-{a.track}{a.tag}-{int(time.time())}.json").write_text(json.dumps(out))
 
 
