@@ -110,13 +110,11 @@ out, so changing them reuses a stored model.
 
 from __future__ import annotations
 
-import json
 from enum import StrEnum
 from pathlib import Path
 from typing import Any, ClassVar
 
 import numpy as np
-import torch
 
 from diagnosers.alarm import (
     EWMA,
@@ -128,10 +126,16 @@ from diagnosers.alarm import (
 from diagnosers.base import Decision, Detection, Diagnoser, Episode, require_varying
 from diagnosers.lrgf_stepper import BankStepper
 from diagnosers.mem import BandScale, MEMBankStepper, OutputActivation, band, t_alpha
+from diagnosers.modules import load_bank, save_bank
 from diagnosers.parallel import BankSettings, TrainedBank, train_banks
 from diagnosers.registry import register
-from diagnosers.training import Method, build_module, export_module
-from fcc_env.io import atomic_open, atomic_write
+from diagnosers.relations import (
+    BANK_RELATIONS,
+    DILUTE_RELATIONS,
+    PAPER_RELATIONS,
+    parse_relations,
+)
+from diagnosers.training import Method
 from fcc_env.validation import (
     Boolean,
     Integer,
@@ -171,7 +175,6 @@ class MemSelect(StrEnum):
     IF_BETTER = "if_better"
 
 
-PAPER_RELATIONS: list[list[Any]] = [["T_rx", ["T_rg2", "T_fp"]]]
 ALARM_FILTERS = tuple(f.value for f in AlarmFilter)
 LIMIT_METHODS = tuple(m.value for m in LimitMethod)
 #: fewest healthy calibration samples (after the warm-up) that ``fit`` accepts
@@ -204,25 +207,6 @@ PARAMETER_CONSTRAINTS: dict[str, Any] = {
     "progress": (Boolean(), None),
     "n_jobs": (Integer(1), None),
 }
-
-#: The bank of ``lrgf-mem``: the paper's (14)–(16) with the inputs the model's physics needs.
-#: s2 gets T_fp (feed preheat heats the regenerator through the riser and stripper; without it the
-#: relation is poor, spec §7.7) and drops its own output as an input (in simulation mode the
-#: network's recurrence plays that role); s1 and s3 are the paper's.
-#: :data:`DILUTE_RELATIONS` (s4 with R_ar for the O2 slip, s5 with T_rg2) are available but not in
-#: the default bank: their networks' held-out errors (0.71 and 0.56 °C) come from the afterburn
-#: nonlinearity, and on the validation protocol adding them to the final configuration tripled the
-#: false detection rate (0.0088 against 0.0028 over 40 seeds) without detecting any fault sooner
-#: (f3 after 69 samples against 66).
-BANK_RELATIONS: list[list[Any]] = [
-    ["T_rx", ["T_rg2", "T_fp"]],
-    ["T_rg1", ["T_ar", "R_ar", "T_fp"]],
-    ["T_rg2", ["T_rg1", "T_ar", "R_ar"]],
-]
-DILUTE_RELATIONS: list[list[Any]] = [
-    ["T_d1", ["T_rg1", "R_ar"]],
-    ["T_dg", ["T_d1", "T_rg2"]],
-]
 
 
 class _LRGFMEMBase(Diagnoser):
@@ -303,32 +287,7 @@ class _LRGFMEMBase(Diagnoser):
     # ---- validation ----------------------------------------------------------------------------
     def _relations(self) -> list[tuple[str, tuple[str, ...]]]:
         rel = type(self).DEFAULT_RELATIONS if self.relations is None else self.relations
-        out = []
-        for item in rel:
-            if not (isinstance(item, list | tuple) and len(item) == 2):
-                raise ValueError(f"each relation must be [output, [inputs...]], got {item!r}")
-            output, inputs = item
-            if isinstance(inputs, str):
-                inputs = [inputs]
-            if not isinstance(output, str):
-                raise invalid("relations", rel, "[[output, [inputs...]], ...]", f"{item!r}")
-            if not isinstance(inputs, list | tuple) or not inputs:
-                raise invalid(
-                    "relations", rel, "[[output, [inputs...]], ...]", f"{output!r} has no inputs"
-                )
-            if not all(isinstance(i, str) for i in inputs):
-                raise invalid("relations", rel, "channel names (str)", f"inputs {list(inputs)!r}")
-            if output in inputs:
-                raise invalid(
-                    "relations",
-                    rel,
-                    "[[output, [inputs...]], ...] with the output not among its inputs",
-                    f"{output!r} is its own input",
-                )
-            out.append((output, tuple(inputs)))
-        if not out:
-            raise invalid("relations", rel, "a non-empty list of [output, [inputs...]]")
-        return out
+        return parse_relations(rel)
 
     def _hidden_sizes(self) -> tuple[int, ...]:
         """Neurons of each relation's network: ``n_hidden`` for every relation, one per relation
@@ -636,50 +595,19 @@ class _LRGFMEMBase(Diagnoser):
         self._finish()
 
     def _save_extra(self, directory: Path) -> None:
-        configs, tensors = [], {}
-        for j, (net, mem) in enumerate(zip(self.lrgf_, self.mem_, strict=True)):
-            c1, s1 = export_module(net)
-            c2, s2 = export_module(mem)
-            configs.append({"lrgf": c1, "mem": c2})
-            tensors.update({f"{j}.lrgf.{k}": v for k, v in s1.items()})
-            tensors.update({f"{j}.mem.{k}": v for k, v in s2.items()})
-        atomic_write(directory / "models.json", json.dumps(configs, indent=2))
-        with atomic_open(directory / "weights.pt", "wb") as fh:
-            torch.save(tensors, fh)
+        save_bank(
+            directory, [{"lrgf": n, "mem": m} for n, m in zip(self.lrgf_, self.mem_, strict=True)]
+        )
 
     def _load_extra(self, directory: Path) -> None:
+        bank = load_bank(directory)
         try:
-            configs = json.loads((directory / "models.json").read_text())
-        except (OSError, json.JSONDecodeError, UnicodeDecodeError) as e:
+            self.lrgf_ = [parts["lrgf"] for parts in bank]
+            self.mem_ = [parts["mem"] for parts in bank]
+        except KeyError as e:
             raise ValueError(
-                f"{directory / 'models.json'} is missing or not valid JSON: {e}"
-            ) from e
-        weights = directory / "weights.pt"
-        try:
-            tensors = torch.load(weights, weights_only=True)
-        except Exception as e:
-            # torch's text for a refused pickle suggests weights_only=False, i.e. executing the
-            # file: never relay that advice about a file that may have been tampered with.
-            raise ValueError(
-                f"{weights} is not a valid model file of this library ({type(e).__name__}); "
-                "it is corrupted or was not written by Diagnoser.save: save the diagnoser again"
+                f"{directory / 'models.json'} lacks the {e.args[0]!r} part of a relation"
             ) from None
-        if not isinstance(tensors, dict) or not isinstance(configs, list):
-            raise ValueError(f"{weights} is not a valid model file of this library")
-        self.lrgf_, self.mem_ = [], []
-        for j, cfg in enumerate(configs):
-            for part, store in (("lrgf", self.lrgf_), ("mem", self.mem_)):
-                prefix = f"{j}.{part}."
-                sd = {k[len(prefix) :]: v for k, v in tensors.items() if k.startswith(prefix)}
-                try:
-                    module = build_module(cfg[part], sd)
-                except Exception as e:
-                    raise ValueError(
-                        f"{directory}: models.json and weights.pt do not describe a valid model "
-                        f"({type(e).__name__}: {e})"
-                    ) from None
-                module.eval()
-                store.append(module)
         # a model saved before ``n_linear`` existed has tanh neurons only, whatever the class's
         # default is now: the hyperparameter follows the networks that were loaded
         self.n_linear = min((int(net.n_linear) for net in self.lrgf_), default=0)

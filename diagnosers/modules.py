@@ -2,20 +2,26 @@
 
 :func:`paper_lrgf` and :func:`paper_mem` build the paper's nominal model and model error model;
 :func:`export_module` / :func:`build_module` split a module into a JSON-able config and a tensor
-state dict and back (loaded with ``torch.load(..., weights_only=True)``, so a file never runs code).
+state dict and back (loaded with ``torch.load(..., weights_only=True)``, so a file never runs code);
+:func:`save_bank` / :func:`load_bank` write and read a diagnoser's bank of them as
+``models.json`` and ``weights.pt``.
 """
 
 from __future__ import annotations
 
 import copy
+import json
+from collections.abc import Mapping, Sequence
+from pathlib import Path
 from typing import Any
 
 import torch
 
 from diagnosers.lrgf import LRGF
 from diagnosers.mem import NNARXErrorModel
+from fcc_env.io import atomic_open, atomic_write
 
-__all__ = ["build_module", "export_module", "paper_lrgf", "paper_mem"]
+__all__ = ["build_module", "export_module", "load_bank", "paper_lrgf", "paper_mem", "save_bank"]
 
 
 # ---- paper configurations ----------------------------------------------------------------------
@@ -75,3 +81,63 @@ def build_module(config: dict[str, Any], state: dict[str, torch.Tensor]) -> LRGF
     module = _KINDS[kind].from_config(copy.deepcopy(config))
     module.load_state_dict(state)
     return module
+
+
+Module = LRGF | NNARXErrorModel
+
+
+def save_bank(directory: Path, bank: Sequence[Mapping[str, Module]]) -> None:
+    """Write a bank of modules into ``directory``: per relation a mapping of part name to module
+    (``{"lrgf": ..., "mem": ...}``), as ``models.json`` (the configs) and ``weights.pt`` (tensors
+    only), each written atomically."""
+    configs: list[dict[str, Any]] = []
+    tensors: dict[str, torch.Tensor] = {}
+    for j, parts in enumerate(bank):
+        configs.append({})
+        for part, module in parts.items():
+            config, state = export_module(module)
+            configs[j][part] = config
+            tensors.update({f"{j}.{part}.{k}": v for k, v in state.items()})
+    atomic_write(directory / "models.json", json.dumps(configs, indent=2))
+    with atomic_open(directory / "weights.pt", "wb") as fh:
+        torch.save(tensors, fh)
+
+
+def load_bank(directory: Path) -> list[dict[str, Module]]:
+    """Inverse of :func:`save_bank`: the bank's modules, in evaluation mode.
+
+    ``weights.pt`` is read with ``weights_only=True``: a file never runs code. Raises ValueError
+    naming the file when either is missing, corrupted or not written by :func:`save_bank`.
+    """
+    try:
+        configs = json.loads((directory / "models.json").read_text())
+    except (OSError, json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise ValueError(f"{directory / 'models.json'} is missing or not valid JSON: {e}") from e
+    weights = directory / "weights.pt"
+    try:
+        tensors = torch.load(weights, weights_only=True)
+    except Exception as e:
+        # torch's text for a refused pickle suggests weights_only=False, i.e. executing the
+        # file: never relay that advice about a file that may have been tampered with.
+        raise ValueError(
+            f"{weights} is not a valid model file of this library ({type(e).__name__}); "
+            "it is corrupted or was not written by Diagnoser.save: save the diagnoser again"
+        ) from None
+    if not isinstance(tensors, dict) or not isinstance(configs, list):
+        raise ValueError(f"{weights} is not a valid model file of this library")
+    bank: list[dict[str, Module]] = []
+    for j, parts in enumerate(configs):
+        bank.append({})
+        for part, config in parts.items() if isinstance(parts, dict) else ():
+            prefix = f"{j}.{part}."
+            state = {k[len(prefix) :]: v for k, v in tensors.items() if k.startswith(prefix)}
+            try:
+                module = build_module(config, state)
+            except Exception as e:
+                raise ValueError(
+                    f"{directory}: models.json and weights.pt do not describe a valid model "
+                    f"({type(e).__name__}: {e})"
+                ) from None
+            module.eval()
+            bank[j][part] = module
+    return bank

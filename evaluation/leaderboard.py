@@ -26,19 +26,18 @@ Diagnosers of your own: ``--import MODULE[,MODULE]`` imports modules that regist
 ``fcc_fault_diagnosis.diagnosers`` entry-point group instead (:mod:`diagnosers.registry`).
 
 Table formatting (:func:`markdown_table`, :func:`summary_rows`) is separate from computation
-(:func:`run`) and from the CLI (:func:`main`), the only place that prints.
+(:func:`run`), from writing the files (:mod:`evaluation.outputs`) and from the CLI (:func:`main`),
+the only place that prints.
 """
 
 from __future__ import annotations
 
 import argparse
-import csv
 import dataclasses
-import math
 import os
 import sys
 import time
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, NoReturn
@@ -48,7 +47,6 @@ from evaluation.harness import (
     BACKENDS,
     BASELINES,
     TRAIN_SEED_BASE,
-    CellResult,
     DiagnoserSpec,
     SimulatedData,
     SweepConfig,
@@ -56,20 +54,16 @@ from evaluation.harness import (
     default_specs,
     run_sweep,
 )
-from evaluation.records import unpack_detection
-from evaluation.store import ResultStore, canonical_hash
+from evaluation.outputs import figure_cells, write_outputs
+from evaluation.store import canonical_hash
 from evaluation.tables import (
     PAPER_TABLE2,
-    SUMMARY_COLUMNS,
-    data_label,
-    header_text,
     markdown_table,
     reference_row,
     sample_time,
     summary_rows,
     table_legend,
 )
-from fcc_env.io import atomic_open, atomic_write, atomic_write_json
 
 if TYPE_CHECKING:
     from evaluation.tracks import Track
@@ -125,12 +119,6 @@ class LeaderboardOptions:
     imports: tuple[str, ...] = ()
 
 
-def _package_version() -> str:
-    from fcc_env import MODEL_VERSION, __version__
-
-    return f"{__version__} ({MODEL_VERSION})"
-
-
 def build_config(opts: LeaderboardOptions) -> SweepConfig:
     """The sweep the options describe (validated by :func:`run_sweep`)."""
     if opts.external is not None:
@@ -179,105 +167,6 @@ def run(opts: LeaderboardOptions) -> SweepResults:
         progress=opts.progress,
         figure_cells=figure_cells(config) if opts.figures else (),
     )
-
-
-# ---- outputs -----------------------------------------------------------------------------------
-def write_outputs(results: SweepResults, out: Path, *, figures: bool = True) -> list[Path]:
-    """Write the table, CSVs, raw results and figures of ``results`` into ``out``."""
-    out.mkdir(parents=True, exist_ok=True)
-    summaries = results.summary()
-    reference = reference_row(results.config)
-    md = header_text(results) + markdown_table(summaries, reference=reference)
-    written = []
-    written.append(atomic_write(out / "leaderboard.md", md))
-    version = _package_version()
-    label = data_label(results.config)
-    rows = summary_rows(summaries, data=label, version=version)
-    fields = [*SUMMARY_COLUMNS, "data", "package_version"]
-    written.append(_write_csv(out / "leaderboard.csv", fields, rows))
-    records = [r.to_json() for r in results.records]
-    written.append(
-        _write_csv(
-            out / "results.csv",
-            list(CellResult.__dataclass_fields__),
-            [{k: _csv_value(v) for k, v in r.items()} for r in records],
-        )
-    )
-    cfg = results.config
-    payload = {
-        "data": cfg.data.store_key(),
-        "diagnosers": [s.to_json() for s in cfg.diagnosers],
-        "cells": [list(c) for c in cfg.data.cells()],
-        "t_on": cfg.t_on,
-        "package_version": version,
-        "records": records,
-    }
-    written.append(atomic_write_json(out / "results.json", payload, indent=1))
-    if figures:
-        written += write_figures(results, out / "figures")
-    return written
-
-
-def _csv_value(v: Any) -> Any:
-    if v is None or (isinstance(v, float) and math.isnan(v)):
-        return ""
-    return v
-
-
-def _write_csv(path: Path, fields: Sequence[str], rows: Sequence[Mapping[str, Any]]) -> Path:
-    """A CSV table written atomically (a killed run never leaves half a table)."""
-    with atomic_open(path, "w") as fh:
-        w = csv.DictWriter(fh, fieldnames=list(fields), lineterminator="\r\n")
-        w.writeheader()
-        w.writerows(rows)
-    return path
-
-
-def figure_cells(config: SweepConfig) -> list[tuple[str, int]]:
-    """The cells drawn as figures: each scenario's first test seed."""
-    first: dict[str, int] = {}
-    for sc, seed in config.data.cells():
-        first.setdefault(sc, seed)
-    return list(first.items())
-
-
-def write_figures(results: SweepResults, directory: Path) -> list[Path]:
-    """One PNG per scenario × diagnoser on the scenario's first test seed.
-
-    Diagnosers with a :meth:`~diagnosers.base.Diagnoser.band_view` (``lrgf-mem``: one band per
-    relation around its measured output) get a second one, ``<label>-bands.png``, whose strip shows
-    the detector's alarms with the band exits as a separate row. The arrays come
-    from the scoring pass (``run_sweep(figure_cells=...)`` keeps them in the store); a cell whose
-    arrays are missing (a sweep run without figures) is skipped.
-    """
-    from evaluation.plots import detection_figure, save_png
-
-    cfg = results.config
-    store = ResultStore.open(results.store_dir, cfg.data.store_key())
-    paths = []
-    for sc, seed in figure_cells(cfg):
-        for spec in cfg.diagnosers:
-            arrays = store.read_detection(spec.key, sc, seed, cfg.cell_hash(spec, store.data_hash))
-            if arrays is None:
-                continue
-            episode, onset, detection, bands = unpack_detection(arrays)
-            onset = onset if episode.fault_onset is not None else None
-            fig = detection_figure(
-                episode, detection, title=f"{spec.key} on {sc}, seed {seed}", fault_onset=onset
-            )
-            paths.append(save_png(fig, directory / sc / f"{spec.key}.png"))
-            if bands is not None:
-                # the panels show the models' bands; shading and strip the detector's alarms,
-                # the band exits a row of their own (they are not the detector's decision)
-                fig = detection_figure(
-                    episode,
-                    bands,
-                    title=f"{spec.key} on {sc}, seed {seed}: model bands",
-                    fault_onset=onset,
-                    decisions=detection,
-                )
-                paths.append(save_png(fig, directory / sc / f"{spec.key}-bands.png"))
-    return paths
 
 
 # ---- CLI ---------------------------------------------------------------------------------------

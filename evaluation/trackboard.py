@@ -60,13 +60,14 @@ from evaluation.oracle import (
     REFERENCE_LABELS,
     reference_records,
 )
+from evaluation.outputs import write_csv
 from evaluation.records import CellResult
 from evaluation.sources import TrackData
 from evaluation.store import ResultStore, canonical_hash
 from evaluation.sweep import DiagnoserSpec, SweepConfig, default_specs, dir_files, run_sweep
 from evaluation.tables import R_FD_TEXT, R_TD_TEXT, t_dt_text
 from evaluation.tracks import Track
-from fcc_env.io import atomic_open, atomic_write, atomic_write_json
+from fcc_env.io import atomic_write, atomic_write_json
 
 # the goal's names (evaluation.goal) stay importable from here, as before they moved
 __all__ = [
@@ -295,7 +296,7 @@ def run_track(
     variation) reuses that track's models instead of training again. ``imports``: modules
     that register diagnosers of your own (:attr:`SweepConfig.imports`).
     """
-    from evaluation.leaderboard import figure_cells, write_figures
+    from evaluation.outputs import figure_cells, write_figures
 
     t0 = time.perf_counter()
     data = TrackData(track=track)
@@ -401,22 +402,6 @@ def _flat(row: TrackRow, track: str) -> dict[str, Any]:
     return d
 
 
-def _write_csv(path: Path, rows: Sequence[dict[str, Any]]) -> Path:
-    import csv
-
-    fields: list[str] = []
-    for r in rows:
-        fields += [k for k in r if k not in fields]
-    with atomic_open(path, "w") as fh:
-        w = csv.DictWriter(fh, fieldnames=fields)
-        w.writeheader()
-        for r in rows:
-            w.writerow(
-                {k: ("" if isinstance(v, float) and math.isnan(v) else v) for k, v in r.items()}
-            )
-    return path
-
-
 def isolation_labels(records: Sequence[CellResult]) -> list[str]:
     """The diagnosers of ``records`` that isolate (their faulty records carry a diagnosis)."""
     return list(dict.fromkeys(r.diagnoser for r in records if r.diagnosis))
@@ -505,13 +490,13 @@ def write_track(run: TrackRun, out: Path) -> list[Path]:
     name = run.track.name
     paths = [
         atomic_write(out / "leaderboard.md", track_table(run) + isolation_table(run)),
-        _write_csv(out / "leaderboard.csv", [_flat(r, name) for r in run.rows]),
+        write_csv(out / "leaderboard.csv", [_flat(r, name) for r in run.rows]),
         atomic_write_json(
             out / "leaderboard.json",
             {"track": run.track.to_json(), "rows": [r.to_json() for r in run.rows]},
             indent=1,
         ),
-        _write_csv(out / "results.csv", [r.to_json() for r in run.records]),
+        write_csv(out / "results.csv", [r.to_json() for r in run.records]),
         atomic_write_json(
             out / "results.json", {"records": [r.to_json() for r in run.records]}, indent=1
         ),
@@ -580,6 +565,6 @@ def write_summary(runs: Sequence[TrackRun], out: Path) -> list[Path]:
         text += "\n" + goal_table(goals)
     return [
         atomic_write(out / "summary.md", text),
-        _write_csv(out / "summary.csv", rows),
+        write_csv(out / "summary.csv", rows),
         atomic_write_json(out / "summary.json", {"rows": rows, "goals": goals}, indent=1),
     ]
