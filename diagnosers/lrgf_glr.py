@@ -110,6 +110,7 @@ from diagnosers.alarm import (
 )
 from diagnosers.base import Decision, Detection, Episode
 from diagnosers.baseline import HeldBaseline
+from diagnosers.fault_directions import FaultDirections
 from diagnosers.lrgf_mem import (
     LRGFMEM,
     MIN_CALIBRATION_SAMPLES,
@@ -160,12 +161,9 @@ GLR_CONSTRAINTS: dict[str, Any] = {
     "novelty_gain": Real(0),
 }
 
-#: the FCC-v0 faults whose directions are learned by default
-DEFAULT_FAULTS = ("f1", "f2", "f3", "f4")
-
 
 @register("lrgf-glr")
-class LRGFGLR(HeldBaseline, NoveltyScaled, LRGFMEM):
+class LRGFGLR(HeldBaseline, FaultDirections, NoveltyScaled, LRGFMEM):
     """``lrgf-mem``'s bank, a cross-fitted limit and tests along learned fault directions."""
 
     #: T_rg1, the slow high-gain relation that alone carries f3, gets a larger network
@@ -286,12 +284,6 @@ class LRGFGLR(HeldBaseline, NoveltyScaled, LRGFMEM):
         for s in self._fault_seeds():
             if not (isinstance(s, int | np.integer) and 1000 <= s < 5000):
                 raise ValueError(f"fault_seeds must be training seeds in 1000..4999, got {s!r}")
-
-    def _faults(self) -> tuple[str, ...]:
-        return DEFAULT_FAULTS if self.fault_scenarios is None else tuple(self.fault_scenarios)
-
-    def _fault_seeds(self) -> list[int]:
-        return [1000, 1001, 1002] if self.fault_seeds is None else list(self.fault_seeds)
 
     # ---- fitting -------------------------------------------------------------------------------
     def _parts(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -473,58 +465,6 @@ class LRGFGLR(HeldBaseline, NoveltyScaled, LRGFMEM):
         if self.detector == DirectionalDetector.GLR:
             return DirectionalGLR(self.glr_window)
         return CUSUM(self.cusum_drift)
-
-    def _learn_directions(self) -> np.ndarray:
-        """Unit fault directions ``(m, k)`` in the normalised remaining-error space.
-
-        Each fault of ``fault_scenarios`` is simulated (paper magnitude and onset) on the training
-        seeds ``fault_seeds`` together with the healthy episode of each seed; the direction is
-        the mean difference of their normalised remaining errors over ``direction_window``
-        samples after the onset. Empty when the episodes are not FCC-v0's channels.
-        """
-        import fcc_env
-
-        if tuple(self.channels_) != tuple(fcc_env.MEASUREMENT_NAMES) or not self._faults():
-            return np.zeros((0, len(self.out_idx_)))
-        out = []
-        for diffs in self._fault_differences(self.direction_window).values():
-            mean = np.mean([d.mean(axis=0) for d in diffs], axis=0)
-            out.append(mean / np.linalg.norm(mean))
-        return np.array(out)
-
-    def _fault_differences(self, window: int) -> dict[str, list[np.ndarray]]:
-        """Per fault of ``fault_scenarios``, the normalised remaining error of each training
-        fault (seeds ``fault_seeds``, paper magnitude and onset) minus its healthy twin's, over
-        the ``window`` samples from the onset: ``(window, k)`` arrays, the fault's signature
-        without noise. Episodes that end inside the window are left out."""
-        import fcc_env
-        from fcc_env.scenarios import FaultSpec
-
-        seeds = self._fault_seeds()
-        healthy = fcc_env.simulate_episodes(seeds, fcc_env.DEFAULT_N_SAMPLES)
-        out = {}
-        for f in self._faults():
-            res = fcc_env.simulate_episodes(
-                seeds, fcc_env.DEFAULT_N_SAMPLES, fault=FaultSpec(scenario=f)
-            )
-            diffs = []
-            for b in range(len(seeds)):
-                onset, stop = res.fault_onsets[b], res.terminated_at[b]
-                if onset is None or (0 <= stop < onset + window):
-                    continue
-                diffs.append(self._pair_difference(res, healthy, b, onset + window)[onset:])
-            if not diffs:
-                raise ValueError(f"no training episode of fault {f} lasted through its window")
-            out[f] = diffs
-        return out
-
-    def _pair_difference(self, faulty: Any, healthy: Any, b: int, end: int) -> np.ndarray:
-        """The normalised remaining error of training fault ``b`` (a
-        :func:`fcc_env.simulate_episodes` result) minus its healthy twin's, first ``end``
-        samples: ``(end, k)``."""
-        d = self._normalised(faulty.observations[b][:end].astype(np.float64))
-        d -= self._normalised(healthy.observations[b][:end].astype(np.float64))
-        return d
 
     def _normalised(self, y: np.ndarray) -> np.ndarray:
         r, e = self._parts(y)
