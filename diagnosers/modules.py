@@ -123,12 +123,16 @@ def load_bank(directory: Path) -> list[dict[str, Module]]:
             f"{weights} is not a valid model file of this library ({type(e).__name__}); "
             "it is corrupted or was not written by Diagnoser.save: save the diagnoser again"
         ) from None
-    if not isinstance(tensors, dict) or not isinstance(configs, list):
+    if not (
+        isinstance(tensors, dict)
+        and isinstance(configs, list)
+        and all(isinstance(parts, dict) for parts in configs)
+    ):
         raise ValueError(f"{weights} is not a valid model file of this library")
     bank: list[dict[str, Module]] = []
     for j, parts in enumerate(configs):
         bank.append({})
-        for part, config in parts.items() if isinstance(parts, dict) else ():
+        for part, config in parts.items():
             prefix = f"{j}.{part}."
             state = {k[len(prefix) :]: v for k, v in tensors.items() if k.startswith(prefix)}
             try:

@@ -15,7 +15,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
-from evaluation.oracle import ORACLE_LABEL, REFERENCE_LABELS
+from evaluation.oracle import REFERENCE_LABELS
 
 if TYPE_CHECKING:  # the track tables import this module
     from evaluation.trackboard import TrackRow, TrackRun
@@ -87,7 +87,7 @@ def track_goals(runs: Sequence[TrackRun]) -> list[dict[str, Any]]:
     out = []
     references = set(REFERENCE_LABELS.values())
     for run in runs:
-        limit = next((r for r in run.rows if r.label == ORACLE_LABEL), None)
+        limit = run.limit_row
         if limit is None:
             continue
         scored = [(row, limit_goal(row, limit)) for row in run.rows if row.label not in references]

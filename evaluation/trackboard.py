@@ -149,6 +149,11 @@ class TrackRun:
     n_trained: int = 0
     n_reused_models: int = 0
 
+    @property
+    def limit_row(self) -> TrackRow | None:
+        """The physical-limit row, None when the run has none."""
+        return next((r for r in self.rows if r.label == ORACLE_LABEL), None)
+
 
 def _by(records: Sequence[CellResult], label: str, scenario: str) -> list[CellResult]:
     return [r for r in records if r.diagnoser == label and r.scenario == scenario]
@@ -512,7 +517,7 @@ def summary_table(runs: Sequence[TrackRun]) -> tuple[str, list[dict[str, Any]]]:
     rows: list[dict[str, Any]] = []
     goals: list[LimitGoal | None] = []
     for run in runs:
-        limit = next((r for r in run.rows if r.label == ORACLE_LABEL), None)
+        limit = run.limit_row
         for row in run.rows:
             goal = limit_goal(row, limit) if limit is not None and row is not limit else None
             goals.append(goal)

@@ -39,9 +39,10 @@ group           FCCParams field(s)          default h  reason (sensitivity at th
 
 Measured with the defaults over 100 seeds (``scripts/uncertainty_measure.py 100 all``): no
 healthy episode terminates (over 600 healthy ``uncertain`` validation episodes, seeds
-5000-5599, two do: seeds 5359 and 5534 end in an afterburn after 1897 and 863 samples); RMS(drawn − nominal) median / p90 in °C: T_rx 1.0 / 2.3, T_rg1
-1.2 / 3.6, T_rg2 1.3 / 3.4, T_d1 1.6 / 3.0, T_dg 1.7 / 3.4, i.e. about 4 noise σ on the
-temperatures at the median (mostly a constant offset: the drawn plant has its own steady state).
+5000-5599, two do: seeds 5359 and 5534 end in an afterburn after 1897 and 863 samples);
+RMS(drawn − nominal) median / p90 in °C: T_rx 1.0 / 2.3, T_rg1 1.2 / 3.6, T_rg2 1.3 / 3.4,
+T_d1 1.6 / 3.0, T_dg 1.7 / 3.4, i.e. about 4 noise σ on the temperatures at the median
+(mostly a constant offset: the drawn plant has its own steady state).
 
 Fault parameters (``rho_b``, ``K_w1``/``K_w2``, ``k_sigma``, ``V_rx_sp_m3``) are never drawn, so a
 fault's size keeps its meaning. ``beta_sv`` is not drawn because ``valve_beta`` sets it. In flow
