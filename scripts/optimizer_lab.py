@@ -11,6 +11,14 @@ the run only (same data, scaling, loss and early stopping); the library is not c
 
     python scripts/optimizer_lab.py --output T_rg1 --variants adam:3000,lbfgs:600,lbfgs:1500
     python scripts/optimizer_lab.py --output T_rg1 --variants adam:3000 --val-fraction 0 --seed 7
+    python scripts/optimizer_lab.py --output T_rg1 --variants adam:3000 --weight-decay 1e-3
+    python scripts/optimizer_lab.py --output T_rg1 --variants adam:3000 --input-noise 0.05
+
+Two regularisers against the gap between the training episodes and fresh ones (issue 11: more
+training episodes were what reduced T_rg1's model error): ``--weight-decay`` runs Adam as
+``torch.optim.AdamW`` with that decoupled decay, and ``--input-noise`` adds fresh white noise of
+that standard deviation (in the network's standardised input units) to the inputs at every epoch
+(the validation loss then sees it too, so early stopping is noisier).
 
 ``--val-fraction`` is the share of every training episode held out for early stopping (0: train on
 every sample and keep the lowest training loss); the held-out error is printed with the measured
@@ -41,6 +49,7 @@ RELATIONS = {
     "T_rg2": ["T_rg1", "T_ar", "R_ar"],
 }
 INNER_STEPS, HISTORY = 20, 50
+ADAM_LOOP = training._adam_loop
 
 
 def lbfgs_loop(
@@ -86,6 +95,36 @@ def lbfgs_loop(
     return res
 
 
+def adamw_loop(weight_decay: float) -> Callable[..., FitResult]:
+    """``fit_lrgf``'s Adam loop with ``torch.optim.AdamW`` (decoupled weight decay)."""
+
+    def loop(*args, **kwargs) -> FitResult:
+        adam = torch.optim.Adam
+        torch.optim.Adam = lambda params, lr: torch.optim.AdamW(  # type: ignore[misc,assignment]
+            params, lr=lr, weight_decay=weight_decay
+        )
+        try:
+            return ADAM_LOOP(*args, **kwargs)
+        finally:
+            torch.optim.Adam = adam  # type: ignore[misc]
+
+    return loop
+
+
+def with_input_noise(net: LRGF, std: float, seed: int) -> None:
+    """Make ``net.forward_normalized`` add fresh white noise of ``std`` to its inputs while
+    gradients are on (training); prediction (no gradients) is left exact."""
+    gen = torch.Generator().manual_seed(seed)
+    forward = net.forward_normalized
+
+    def noisy(u: torch.Tensor) -> torch.Tensor:
+        if torch.is_grad_enabled():
+            u = u + std * torch.randn(u.shape, generator=gen, dtype=u.dtype)
+        return forward(u)
+
+    net.forward_normalized = noisy  # type: ignore[method-assign]
+
+
 def variant(text: str) -> tuple[str, int]:
     """An argparse type: ``adam:N`` or ``lbfgs:N`` with N >= 1, refused by value otherwise."""
     kind, _, n = text.partition(":")
@@ -108,7 +147,17 @@ def main() -> None:
     ap.add_argument(
         "--hidden", type=at_least(1), default=None, help="neurons (default: the bank's)"
     )
+    ap.add_argument("--weight-decay", type=float, default=0.0, help="AdamW's decay (0: Adam)")
+    ap.add_argument("--input-noise", type=float, default=0.0, help="standardised units")
+    ap.add_argument(
+        "--train-inputs",
+        choices=("measured", "true"),
+        default="measured",
+        help="train on the measured inputs or (an oracle, to bound an input smoother) the true ones",
+    )
     a = ap.parse_args()
+    if a.weight_decay < 0 or a.input_noise < 0:
+        ap.error(f"--weight-decay {a.weight_decay}, --input-noise {a.input_noise}; allowed: >= 0")
     if not 0.0 <= a.val_fraction < 1.0:
         ap.error(f"--val-fraction {a.val_fraction}; allowed: a number in [0, 1)")
     track = TRACKS["paper"].with_seeds(test=5000, validation=9000).replace(n_train=a.n_train)
@@ -122,10 +171,15 @@ def main() -> None:
     for kind, n in a.variants:
         net = LRGF(len(ui), hidden, 2, 1, initial_state="steady", steady_window=100, seed=a.seed)
         net = net.double()
-        training._adam_loop = adam if kind == "adam" else lbfgs_loop  # type: ignore[assignment]
+        if a.input_noise > 0:
+            with_input_noise(net, a.input_noise, a.seed)
+        if kind == "lbfgs":
+            training._adam_loop = lbfgs_loop  # type: ignore[assignment]
+        elif a.weight_decay > 0:
+            training._adam_loop = adamw_loop(a.weight_decay)  # type: ignore[assignment]
         try:
             t0 = time.perf_counter()
-            fit_lrgf(net, [e.y[:, ui] for e in train], [e.y[:, [yi]] for e in train], lr=0.03,
+            res = fit_lrgf(net, [(e.y if a.train_inputs == "measured" else e.y_clean)[:, ui] for e in train], [e.y[:, [yi]] for e in train], lr=0.03,
                      max_epochs=n, patience=max(50, n // 5), seed=a.seed,
                      val_fraction=a.val_fraction)  # fmt: skip
             wall = time.perf_counter() - t0
@@ -140,6 +194,9 @@ def main() -> None:
             )
             rms[inputs] = math.sqrt(float(np.mean(err**2)))
         print(f"{a.output}, {a.n_train} episodes, {kind}:{n}, val_fraction {a.val_fraction}, "
+              f"weight decay {a.weight_decay:g}, input noise {a.input_noise:g}, "
+              f"trained on the {a.train_inputs} inputs, "
+              f"validation loss {res.best_val_loss:.6g} (best epoch {res.best_epoch} of {res.n_epochs}), "
               f"seed {a.seed}: {wall:.0f} s, held-out error against the noise-free output "
               f"{rms['measured']:.3f} °C RMS from the measured inputs, {rms['true']:.3f} °C "
               "from the true inputs", flush=True)  # fmt: skip
