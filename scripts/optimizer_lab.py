@@ -155,6 +155,11 @@ def main() -> None:
         default="measured",
         help="train on the measured inputs or (an oracle, to bound an input smoother) the true ones",
     )
+    ap.add_argument(
+        "--products",
+        action="store_true",
+        help="add the pairwise products of the inputs' deviations from their training means",
+    )
     a = ap.parse_args()
     if a.weight_decay < 0 or a.input_noise < 0:
         ap.error(f"--weight-decay {a.weight_decay}, --input-noise {a.input_noise}; allowed: >= 0")
@@ -167,9 +172,20 @@ def main() -> None:
     yi = MEASUREMENT_NAMES.index(a.output)
     val = [data.load_test("nominal", s).episode for s in range(5000, 5010)]
     hidden = a.hidden or (10 if a.output == "T_rg1" else 5)
+    centre = np.mean(np.concatenate([e.y[:, ui] for e in train]), axis=0)
+
+    def features(u: np.ndarray) -> np.ndarray:
+        """The relation's inputs, with their deviations' pairwise products under --products."""
+        if not a.products:
+            return u
+        d = u - centre
+        pairs = [d[:, i] * d[:, j] for i in range(d.shape[1]) for j in range(i, d.shape[1])]
+        return np.column_stack([u, *pairs])
+
+    n_in = features(train[0].y[:2, ui]).shape[1]
     adam = training._adam_loop
     for kind, n in a.variants:
-        net = LRGF(len(ui), hidden, 2, 1, initial_state="steady", steady_window=100, seed=a.seed)
+        net = LRGF(n_in, hidden, 2, 1, initial_state="steady", steady_window=100, seed=a.seed)
         net = net.double()
         if a.input_noise > 0:
             with_input_noise(net, a.input_noise, a.seed)
@@ -179,7 +195,7 @@ def main() -> None:
             training._adam_loop = adamw_loop(a.weight_decay)  # type: ignore[assignment]
         try:
             t0 = time.perf_counter()
-            res = fit_lrgf(net, [(e.y if a.train_inputs == "measured" else e.y_clean)[:, ui] for e in train], [e.y[:, [yi]] for e in train], lr=0.03,
+            res = fit_lrgf(net, [features((e.y if a.train_inputs == "measured" else e.y_clean)[:, ui]) for e in train], [e.y[:, [yi]] for e in train], lr=0.03,
                      max_epochs=n, patience=max(50, n // 5), seed=a.seed,
                      val_fraction=a.val_fraction)  # fmt: skip
             wall = time.perf_counter() - t0
@@ -190,12 +206,12 @@ def main() -> None:
         for inputs in ("measured", "true"):
             u_of = (lambda e: e.y) if inputs == "measured" else (lambda e: e.y_clean)
             err = np.concatenate(
-                [e.y_clean[100:, yi] - net.predict(u_of(e)[:, ui])[100:, 0] for e in val]  # type: ignore[index]
+                [e.y_clean[100:, yi] - net.predict(features(u_of(e)[:, ui]))[100:, 0] for e in val]  # type: ignore[index]
             )
             rms[inputs] = math.sqrt(float(np.mean(err**2)))
         print(f"{a.output}, {a.n_train} episodes, {kind}:{n}, val_fraction {a.val_fraction}, "
               f"weight decay {a.weight_decay:g}, input noise {a.input_noise:g}, "
-              f"trained on the {a.train_inputs} inputs, "
+              f"trained on the {a.train_inputs} inputs, products {a.products}, "
               f"validation loss {res.best_val_loss:.6g} (best epoch {res.best_epoch} of {res.n_epochs}), "
               f"seed {a.seed}: {wall:.0f} s, held-out error against the noise-free output "
               f"{rms['measured']:.3f} °C RMS from the measured inputs, {rms['true']:.3f} °C "
