@@ -6,7 +6,7 @@ import math
 
 from evaluation.goal import goal_table, limit_goal, track_goals
 from evaluation.intervals import Interval
-from evaluation.oracle import ORACLE_LABEL, REFERENCE_LABELS
+from evaluation.oracle import ORACLE_LABEL, REFERENCE_LABELS, STAGE_LABEL
 from evaluation.trackboard import FaultCell, TrackRow, TrackRun, summary_table
 from evaluation.tracks import TRACKS
 
@@ -94,6 +94,24 @@ def test_goal_per_track_takes_only_diagnosers_whose_r_fd_holds() -> None:
     assert "| small | none |  | 0/3 | 0/3 |" in text
     assert "Tracks where some diagnoser's r_fd holds: 1 of 2." in text
     assert "Faults at the limit: 2 of 6 with the best diagnoser per track, 3 of 6 with any." in text
+    # the perfect-model row on the T² stage is not the one that says what is reachable
+    assert paper["reachable"] is None and "Reachable" not in text
+
+
+def test_goal_says_which_faults_a_perfect_model_on_the_measured_inputs_reaches() -> None:
+    best = _row("best", 0.009, {"f1": (1.0, 0.0), "f2": (0.9, 30.0), "f3": (0.99, 15.0)})
+    # the stage row misses f2 (r_td 0.8 < 0.87) though its r_fd does not hold: still scored
+    stage = _row(STAGE_LABEL, 0.02, {"f1": (1.0, 1.0), "f2": (0.8, 9.0), "f3": (0.99, 19.0)})
+    other = _row("other", 0.009, {"f1": (1.0, 9.0), "f2": (0.9, 12.0), "f3": (0.5, 99.0)})
+    goals = track_goals([_run("paper", best, stage), _run("small", other)])
+    assert goals[0]["reachable"] == ["f1", "f3"] and goals[1]["reachable"] is None
+    assert goals[0]["best"] == "best"  # a reference row is never the best
+    text = goal_table(goals)
+    assert "| paper | best | best | 2/3 f1 f3 | 2/3 f1 (best), f3 (best) | 2/3 f1 f3 |" in text
+    assert "| small | other | other | 1/3 f2 | 1/3 f2 (other) | |" in text
+    # only tracks with the row count: 2 reachable of paper's 3, both met by its best
+    assert "Reachable from the measured inputs: 2 of 3, of which the best diagnoser" in text
+    assert text.rstrip().endswith("meets 2.")
 
 
 def test_equal_counts_rank_by_the_mean_time_ratio() -> None:
