@@ -99,7 +99,8 @@ def test_goal_per_track_takes_only_diagnosers_whose_r_fd_holds() -> None:
 
 
 def test_goal_says_which_faults_a_perfect_model_on_the_measured_inputs_reaches() -> None:
-    best = _row("best", 0.009, {"f1": (1.0, 0.0), "f2": (0.9, 30.0), "f3": (0.99, 15.0)})
+    # the best diagnoser meets f2 as well, which the perfect model on measured inputs does not
+    best = _row("best", 0.009, {"f1": (1.0, 0.0), "f2": (0.9, 12.0), "f3": (0.99, 15.0)})
     # the stage row misses f2 (r_td 0.8 < 0.87) though its r_fd does not hold: still scored
     stage = _row(STAGE_LABEL, 0.02, {"f1": (1.0, 1.0), "f2": (0.8, 9.0), "f3": (0.99, 19.0)})
     other = _row("other", 0.009, {"f1": (1.0, 9.0), "f2": (0.9, 12.0), "f3": (0.5, 99.0)})
@@ -107,9 +108,13 @@ def test_goal_says_which_faults_a_perfect_model_on_the_measured_inputs_reaches()
     assert goals[0]["reachable"] == ["f1", "f3"] and goals[1]["reachable"] is None
     assert goals[0]["best"] == "best"  # a reference row is never the best
     text = goal_table(goals)
-    assert "| paper | best | best | 2/3 f1 f3 | 2/3 f1 (best), f3 (best) | 2/3 f1 f3 |" in text
+    assert (
+        "| paper | best | best | 3/3 f1 f2 f3 | 3/3 f1 (best), f2 (best), f3 (best) | 2/3 f1 f3 |"
+        in text
+    )
     assert "| small | other | other | 1/3 f2 | 1/3 f2 (other) | |" in text
-    # only tracks with the row count: 2 reachable of paper's 3, both met by its best
+    # only tracks with the row count: 2 reachable of paper's 3, both met by its best (its f2,
+    # outside the reachable set, is not counted)
     assert "Reachable from the measured inputs: 2 of 3, of which the best diagnoser" in text
     assert text.rstrip().endswith("meets 2.")
 
