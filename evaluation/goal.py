@@ -11,7 +11,8 @@ The physical-limit row reads the true inputs, which no diagnoser may. So the tab
 which faults a *perfect model driven by the measured inputs*, with `lrgf-glr`'s alarm stage
 (:data:`evaluation.oracle.STAGE_LABEL`), brings to the limit: a fault it misses is out of reach
 of every detector of that family however good its model, and a diagnoser's miss there says
-little about the diagnoser.
+little about the diagnoser. On a track with plant variation (`uncertain`) the perfect model
+knows each episode's drawn plant, so there "reachable" means with a model of that very plant.
 """
 
 from __future__ import annotations
