@@ -145,17 +145,14 @@ def goal_table(goals: Sequence[dict[str, Any]]) -> str:
     ]
     for g in goals:
         anyone = ", ".join(f"{f} ({d})" for f, d in g["faults_at_limit_any"].items())
-        reach = g.get("reachable")
+        reach = g["reachable"]
+        reach_cell = "" if reach is None else f"{len(reach)}/{g['n_faults']} {' '.join(reach)}"
         lines.append(
             f"| {g['track']} | {', '.join(g['r_fd_holds']) or 'none'} | {g['best'] or ''} | "
             f"{len(g['best_faults_at_limit'])}/{g['n_faults']} "
             f"{' '.join(g['best_faults_at_limit'])}".rstrip()
             + f" | {len(g['faults_at_limit_any'])}/{g['n_faults']} {anyone}".rstrip()
-            + (
-                " |"
-                if reach is None
-                else f" | {len(reach)}/{g['n_faults']} {' '.join(reach)}".rstrip()
-            )
+            + f" | {reach_cell}".rstrip()
             + " |"
         )
     n = sum(g["n_faults"] for g in goals)
@@ -166,7 +163,7 @@ def goal_table(goals: Sequence[dict[str, Any]]) -> str:
         f" of {n} with the best diagnoser per track, "
         f"{sum(len(g['faults_at_limit_any']) for g in goals)} of {n} with any.",
     ]
-    scored = [g for g in goals if g.get("reachable") is not None]
+    scored = [g for g in goals if g["reachable"] is not None]
     if scored:
         reach_n = sum(len(g["reachable"]) for g in scored)
         met = sum(len(set(g["best_faults_at_limit"]) & set(g["reachable"])) for g in scored)
