@@ -5,18 +5,21 @@
 True
 """
 
-from diagnosers.base import UNKNOWN, Decision, Detection, Diagnoser, Episode, NotFittedError
+from diagnosers.contract import NotFittedError
+from diagnosers.detection import UNKNOWN, Decision, Detection
+from diagnosers.diagnoser import Diagnoser
+from diagnosers.episode import Episode
 from diagnosers.registry import available, diagnoser_class, import_modules, make, register
 from fcc_env import __version__  # the project's one version
 
 # isort: split
 # Importing the model modules registers their diagnosers (after the registry exists).
 from diagnosers import (
-    baselines,  # noqa: F401  (registers limits, pca, arx-band)
-    isolation,  # noqa: F401  (registers lrgf-iso, lrgf-lda)
+    classical,  # noqa: F401  (registers limits, pca, arx-band)
+    isolators,  # noqa: F401  (registers lrgf-iso, lrgf-lda)
     lrgf_glr,  # noqa: F401  (registers lrgf-glr)
-    lrgf_glr_adaptive,  # noqa: F401  (registers lrgf-glr-adaptive)
-    lrgf_mem,  # noqa: F401  (registers lrgf-mem-paper, lrgf-mem)
+    lrgf_mem,  # noqa: F401  (registers lrgf-mem)
+    lrgf_presets,  # noqa: F401  (registers lrgf-mem-paper, lrgf-glr-adaptive)
 )
 
 __all__ = [

@@ -35,7 +35,7 @@ from typing import Protocol, runtime_checkable
 import numpy as np
 from scipy import stats
 
-from fcc_env.validation import Integer, Options, Real, check
+from fcc_common.validation import Integer, Options, Real, check
 
 __all__ = [
     "CUSUM",

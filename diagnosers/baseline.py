@@ -148,82 +148,84 @@ class RegressionBaseline:
 
 
 class HeldBaseline:
-    """``lrgf-glr``'s held baseline as a mixin: a running mean of each relation's normalised
-    error (``baseline_filters`` None) or a :class:`RegressionBaseline` on its filtered signals.
+    """A held baseline of each relation's normalised error: a running mean (``filters`` None)
+    or a :class:`RegressionBaseline` on the relation's filtered signals.
 
-    The host supplies the hyperparameters ``baseline_lambda``, ``baseline_settle``,
-    ``baseline_filters`` and ``baseline_ridge``, the fitted ``in_idx_``, ``out_idx_`` and
-    ``lrgf_``, and the alarm stage's ``_reset_stage`` and ``_stage_step``.
+    The optional part of ``lrgf-glr``'s alarm stage (:class:`diagnosers.directional_stage.
+    DirectionalStage`) that removes a unit's own slow offset (or gains) from the error before
+    the statistics, learning only while the stage says the plant looks healthy.
+
+    Args:
+        lam: the gain λ in (0, 1) (the running mean's ``1/n`` until λ takes over; the
+            regression's forgetting).
+        hold: learn after the settling only while every statistic is below ``hold`` × its
+            limit, in (0, 1].
+        settle: samples after the warm-up during which it always learns.
+        filters: the regression's low-pass time constants [samples]; None: the running mean.
+        ridge: the regression's ridge ρ > 0.
+
+    :meth:`bind` gives it the bank's layout (inputs, outputs and the networks' scalers) before
+    use; :meth:`reset` starts an episode.
     """
 
-    baseline_lambda: float
-    baseline_settle: int
-    baseline_filters: Sequence[float] | None
-    baseline_ridge: float
-    in_idx_: list[np.ndarray]
-    out_idx_: np.ndarray
-    lrgf_: list[Any]
-
-    def _reset_stage(self) -> None:  # pragma: no cover - the host's
-        raise NotImplementedError
-
-    def _stage_step(
-        self, e: np.ndarray, *, warm: bool, phi: np.ndarray | None = None
-    ) -> tuple[np.ndarray, np.ndarray]:  # pragma: no cover - the host's
-        raise NotImplementedError
+    def __init__(
+        self,
+        *,
+        lam: float,
+        hold: float,
+        settle: int,
+        filters: Sequence[float] | None = None,
+        ridge: float = 1.0,
+    ) -> None:
+        self.lam = lam
+        self.hold = hold
+        self.settle = settle
+        self.filters = filters
+        self.ridge = ridge
+        self._layout: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
     @property
-    def _regression_on(self) -> bool:
-        return self.baseline_lambda > 0 and bool(self.baseline_filters)
+    def regression(self) -> bool:
+        """Whether the baseline is a regression (``filters``) rather than a running mean."""
+        return bool(self.filters)
 
-    def _reset_baseline(self) -> None:
-        on = self.baseline_lambda > 0
-        self._b = np.zeros(len(self.out_idx_)) if on else None
+    def bind(
+        self, in_idx: Sequence[np.ndarray], out_idx: np.ndarray, networks: Sequence[Any]
+    ) -> None:
+        """Take the bank's layout: each relation's input channels ``in_idx``, output channels
+        ``out_idx`` and networks (their input and output scalers standardise the signals)."""
+        self._in_idx, self._out_idx, self._networks = list(in_idx), out_idx, list(networks)
+        self._layout = None
+
+    def reset(self) -> None:
+        """A fresh episode: the running mean at zero, or a fresh regression."""
+        self._b = np.zeros(len(self._out_idx))
         self._n_seen = self._n_adapted = 0
         self._reg: RegressionBaseline | None = None
-        if self._regression_on:
-            assert self.baseline_filters is not None
+        if self.regression:
+            assert self.filters is not None
             self._reg = RegressionBaseline(
-                [len(i) + 1 for i in self.in_idx_],
-                self.baseline_filters,
-                forgetting_lambda=self.baseline_lambda,
-                ridge=self.baseline_ridge,
+                [len(i) + 1 for i in self._in_idx],
+                self.filters,
+                forgetting_lambda=self.lam,
+                ridge=self.ridge,
             )
-            self._gather, self._signal_mean, self._signal_scale = self._signal_layout()
-
-    def _calibration_features(
-        self,
-        cal_parts: list[tuple[np.ndarray, np.ndarray]],
-        w: int,
-        cal_ys: list[np.ndarray] | None,
-    ) -> list[np.ndarray | None]:
-        """The regression baseline's regressors of every calibration record past ``w`` (the
-        record's own out-of-fold network outputs), or None per record without it."""
-        self._reset_baseline()
-        if not self._regression_on:
-            return [None] * len(cal_parts)
-        if cal_ys is None or len(cal_ys) != len(cal_parts):
-            raise ValueError("baseline_filters needs the calibration records' measurements")
-        feats = []
-        for (r, _), y in zip(cal_parts, cal_ys, strict=True):
-            phi = self._baseline_features(y, y[:, self.out_idx_] - r)
-            assert phi is not None
-            feats.append(phi[w:])
-        return feats
+            if self._layout is None:
+                self._layout = self._signal_layout()
 
     def _signal_layout(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Where each relation's padded signals come from in ``[y, y_m, 0]`` and the networks'
         own input and output scalers: ``(k, width)`` index, mean and scale."""
         assert self._reg is not None
-        n_ch = 1 + max(int(i.max()) for i in self.in_idx_ if len(i))
-        n_ch = max(n_ch, 1 + int(self.out_idx_.max()))
+        n_ch = 1 + max(int(i.max()) for i in self._in_idx if len(i))
+        n_ch = max(n_ch, 1 + int(self._out_idx.max()))
         k, width = self._reg.n_relations, self._reg.width
         zero = n_ch + k  # the padding reads a constant 0
         gather = np.full((k, width), zero)
         mean, scale = np.zeros((k, width)), np.ones((k, width))
-        for j, net in enumerate(self.lrgf_):
-            n = len(self.in_idx_[j])
-            gather[j, :n] = self.in_idx_[j]
+        for j, net in enumerate(self._networks):
+            n = len(self._in_idx[j])
+            gather[j, :n] = self._in_idx[j]
             gather[j, n] = n_ch + j
             mean[j, :n] = np.asarray(net.input_mean, dtype=np.float64)
             scale[j, :n] = np.asarray(net.input_scale, dtype=np.float64)
@@ -235,62 +237,53 @@ class HeldBaseline:
     def _signals(self, y: np.ndarray, y_m: np.ndarray) -> np.ndarray:
         """Padded standardised signals ``(..., k, width)`` of measurements ``y`` ``(..., c)``
         and network outputs ``y_m`` ``(..., k)``."""
+        assert self._layout is not None
+        gather, mean, scale = self._layout
         y = np.asarray(y, dtype=np.float64)[..., : self._n_channels]
         ext = np.concatenate([y, y_m, np.zeros((*y.shape[:-1], 1))], axis=-1)
-        return (ext[..., self._gather] - self._signal_mean) / self._signal_scale
+        return (ext[..., gather] - mean) / scale
 
-    def _baseline_features(self, y: np.ndarray, y_m: np.ndarray) -> np.ndarray | None:
-        """Regressors ``(T, k, p)`` of a whole record, None without the regression."""
+    def features(self, y: np.ndarray, y_m: np.ndarray) -> np.ndarray | None:
+        """Regressors ``(T, k, p)`` of a whole record ``y`` with network outputs ``y_m``
+        (from a fresh start of the filters), None without the regression."""
         if self._reg is None:
             return None
         return self._reg.features_batch(self._signals(y, y_m))
 
-    def _baseline_features_step(self, y: np.ndarray, y_m: np.ndarray) -> np.ndarray | None:
-        """Regressors ``(k, p)`` of one sample (advances the filters), None without it."""
+    def features_step(self, y: np.ndarray, y_m: np.ndarray) -> np.ndarray | None:
+        """Regressors ``(k, p)`` of one sample (advances the filters), None without them."""
         if self._reg is None:
             return None
         return self._reg.features(self._signals(y, y_m))
 
-    def _baseline_value(self, phi: np.ndarray | None) -> np.ndarray:
+    def value(self, phi: np.ndarray | None) -> np.ndarray:
         """The baseline ``(k,)`` to subtract from this sample's normalised error."""
         if self._reg is not None:
             assert phi is not None
             return self._reg.predict(phi)
-        assert self._b is not None
         return self._b
 
-    def _track(self, e: np.ndarray, *, hold: bool, phi: np.ndarray | None = None) -> np.ndarray:
-        """The baseline-removed error of a normalised error record ``e`` (T, k) past its warm-up
-        (``phi``: its regressors ``(T, k, p)`` with the regression). ``hold=False`` adapts the
-        baseline at every sample (no limits needed); ``hold=True`` runs the detector's own
-        recursion with the current limits."""
-        if self.baseline_lambda == 0:
-            return e
+    def track(self, e: np.ndarray, phi: np.ndarray | None) -> np.ndarray:
+        """The baseline-removed error of a normalised error record ``e`` (T, k) past its
+        warm-up, the baseline learning at every sample (``phi``: its regressors with the
+        regression). From a fresh :meth:`reset`."""
+        self.reset()
         out = np.empty_like(e)
-        if hold:
-            self._reset_stage()
-            for k in range(e.shape[0]):
-                out[k] = self._stage_step(e[k], warm=False, phi=_row(phi, k))[0]
-        else:
-            self._reset_baseline()
-            for k in range(e.shape[0]):
-                p = _row(phi, k)
-                out[k] = e[k] - self._baseline_value(p)
-                self._baseline_step(e[k], inside_hold=True, phi=p)
+        for k in range(e.shape[0]):
+            p = None if phi is None else phi[k]
+            out[k] = e[k] - self.value(p)
+            self.adapt(e[k], inside_hold=True, phi=p)
         return out
 
-    def _baseline_step(
-        self, e: np.ndarray, *, inside_hold: bool, phi: np.ndarray | None = None
-    ) -> None:
+    def adapt(self, e: np.ndarray, *, inside_hold: bool, phi: np.ndarray | None = None) -> None:
         """Adapt the baseline to the normalised error ``e`` of one sample past the warm-up.
 
-        Settling: the first ``baseline_settle`` samples always adapt (the plant is taken as
-        healthy when monitoring starts, as in training), with the running mean's gain 1/n until
-        λ takes over. Later the baseline follows the slow healthy error only while every
-        statistic is well inside its limit (``inside_hold``), so a fault's growing error is not
-        absorbed into it.
+        Settling: the first ``settle`` samples always adapt (the plant is taken as healthy when
+        monitoring starts, as in training), with the running mean's gain 1/n until λ takes
+        over. Later the baseline follows the slow healthy error only while every statistic is
+        well inside its limit (``inside_hold``), so a fault's growing error is not absorbed.
         """
-        settling = self._n_seen < self.baseline_settle
+        settling = self._n_seen < self.settle
         self._n_seen += 1
         if not (settling or inside_hold):
             return
@@ -299,9 +292,4 @@ class HeldBaseline:
             assert phi is not None
             self._reg.adapt(phi, e)
             return
-        assert self._b is not None
-        self._b += max(self.baseline_lambda, 1.0 / self._n_adapted) * (e - self._b)
-
-
-def _row(phi: np.ndarray | None, k: int) -> np.ndarray | None:
-    return None if phi is None else phi[k]
+        self._b += max(self.lam, 1.0 / self._n_adapted) * (e - self._b)

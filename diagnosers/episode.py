@@ -2,7 +2,7 @@
 
 ``Episode.from_batch`` (a simulated :class:`fcc_env.BatchResult`), ``Episode.from_dataset`` (a
 ``python -m fcc_env.generate`` file) and ``Episode.from_frame`` (a pandas DataFrame) build
-episodes from data in one call; :mod:`diagnosers.base` re-exports the class.
+episodes from data in one call; the package exports the class as ``diagnosers.Episode``.
 """
 
 from __future__ import annotations

@@ -1,8 +1,11 @@
-"""Isolating diagnosers: ``lrgf-mem``'s detection, plus which fault it is.
+"""Isolating diagnosers: any LRGF detector's detection, plus which fault it is.
 
-Both diagnosers here *compose* an inner :class:`diagnosers.lrgf_mem.LRGFMEM` (``detector_``),
-trained on the healthy training episodes exactly as ``lrgf-mem`` is: their alarms are that
-detector's alarms, sample for sample, so isolation cannot cost detection. While alarmed, they
+Both diagnosers here *compose* an inner detector (``detector_``): the registered LRGF detector
+named ``detector_name`` (default ``lrgf-mem``; ``lrgf-glr`` and its presets too) with the
+hyperparameters ``detector``, trained on the healthy training episodes exactly as that detector
+is: their alarms are its alarms, sample for sample, so isolation cannot cost detection. The
+isolator reads the detection only through its public parts: the residual of each relation and
+the detector's ``residual_scale_`` and ``steady_window``. While alarmed, they
 compare the bank's residuals with what they learned from labelled training faults
 (``Episode.fault_onset`` and ``Episode.scenario``, training seeds only).
 
@@ -10,11 +13,11 @@ compare the bank's residuals with what they learned from labelled training fault
 three relations (T_rx, T_rg1, T_rg2) are averaged by EWMAs of the weights
 :data:`FEATURE_LAMBDAS` (exponential windows of about 3 to 100 samples): a 12-vector ``q`` that
 holds the *time course* of the signature as well as its direction (f1, f2 and f4 point nearly
-the same way, see :mod:`evaluation.isolability`; they differ in how the relations respond over
-time). The feature of an alarmed sample is ``q − q_0``, ``q_0`` the value just before the
-alarm began (an alarm begins after ``alarm_gap`` quiet samples): the healthy model error of the
-slow averages cancels. Signatures turn as a fault propagates, so each *age* of the alarm (samples
-since it began, bins :data:`AGE_EDGES`) has its own classifier.
+the same way, see :mod:`evaluation.isolation.isolability`; they differ in how the relations
+respond over time). The feature of an alarmed sample is ``q − q_0``, ``q_0`` the value just
+before the alarm began (an alarm begins after ``alarm_gap`` quiet samples): the healthy model
+error of the slow averages cancels. Signatures turn as a fault propagates, so each *age* of the
+alarm (samples since it began, bins :data:`AGE_EDGES`) has its own classifier.
 
 * ``lrgf-iso`` (structured residuals, nearest direction): per age bin and fault, a few prototype
   directions (spherical k-means of the training samples' unit features); the score of a fault
@@ -36,7 +39,7 @@ below one half. Before the alarm, and between alarms, the diagnosis is ``""``.
 
 Thresholds are set on the training faults only (training seeds 1000+); the hyperparameters
 (``score_lambda``, ``min_angle_deg``, ``unknown_quantile``) were chosen on validation seeds
-(5000+) of the paper track (``python -m evaluation.isolation_study --seeds validation``).
+(5000+) of the paper track (``python -m evaluation.isolation.study --seeds validation``).
 """
 
 from __future__ import annotations
@@ -46,15 +49,16 @@ from pathlib import Path
 from typing import Any, ClassVar
 
 import numpy as np
-from scipy import stats
 
 from diagnosers.alarm import EWMA
-from diagnosers.base import NO_DIAGNOSIS, UNKNOWN, Decision, Detection, Diagnoser, Episode
-from diagnosers.lrgf_mem import LRGFMEM
-from diagnosers.registry import register
-from fcc_env.validation import Integer, Real, check_params, invalid
+from diagnosers.bank_detector import BankDetector
+from diagnosers.detection import NO_DIAGNOSIS, UNKNOWN, Decision, Detection
+from diagnosers.diagnoser import Diagnoser
+from diagnosers.episode import Episode
+from diagnosers.registry import diagnoser_class, make
+from fcc_common.validation import Integer, Real, check_params, invalid
 
-__all__ = ["AGE_EDGES", "FEATURE_LAMBDAS", "LRGFISO", "LRGFLDA", "spherical_kmeans"]
+__all__ = ["AGE_EDGES", "FEATURE_LAMBDAS", "MIN_CLASS_SAMPLES", "IsolatingDetector"]
 
 #: EWMA weights of the exponential windows of the residuals (features of both isolators)
 FEATURE_LAMBDAS: tuple[float, ...] = (0.3, 0.1, 0.03, 0.01)
@@ -64,32 +68,14 @@ AGE_EDGES: tuple[int, ...] = (0, 10, 30, 100, 300, 1000)
 MIN_CLASS_SAMPLES = 10
 
 
-def spherical_kmeans(u: np.ndarray, k: int, *, seed: int = 0, n_iter: int = 50) -> np.ndarray:
-    """``k`` unit prototype vectors of the unit vectors ``u`` (n, d) (cosine k-means).
+class IsolatingDetector(Diagnoser):
+    """An isolator around any LRGF detector: alarm-relative features, per-age classifiers.
 
-    Deterministic in ``seed``; starts from k-means++-style picks by angle.
+    Hyperparameters shared by the isolators: ``detector_name`` (a registered
+    :class:`~diagnosers.bank_detector.BankDetector`, default ``"lrgf-mem"``), ``detector`` (its
+    hyperparameters; None: its defaults), ``unknown_quantile``, ``alarm_gap``, ``score_lambda``
+    and ``seed`` (module docstring).
     """
-    rng = np.random.default_rng(seed)
-    n = u.shape[0]
-    k = min(k, n)
-    centres = [u[int(rng.integers(n))]]
-    for _ in range(1, k):
-        d = 1.0 - np.max(u @ np.array(centres).T, axis=1)
-        p = np.maximum(d, 0.0)
-        centres.append(u[int(rng.choice(n, p=p / p.sum()))] if p.sum() > 0 else u[0])
-    c = np.array(centres)
-    for _ in range(n_iter):
-        lab = np.argmax(u @ c.T, axis=1)
-        new = np.array([u[lab == j].sum(axis=0) if np.any(lab == j) else c[j] for j in range(k)])
-        new /= np.maximum(np.linalg.norm(new, axis=1, keepdims=True), 1e-12)
-        if np.allclose(new, c):
-            break
-        c = new
-    return c
-
-
-class _IsolatingLRGF(Diagnoser):
-    """Shared implementation: inner ``lrgf-mem``, alarm-relative features, per-age classifiers."""
 
     isolates: ClassVar[bool] = True
     #: hyperparameter constraints checked in ``fit`` (besides ``detector``)
@@ -100,16 +86,36 @@ class _IsolatingLRGF(Diagnoser):
         "seed": Integer(0),
     }
 
+    detector_name: str
+    detector: dict[str, Any] | None
+    alarm_gap: int
+    score_lambda: float
+    detector_: BankDetector
+
     @classmethod
     def fast_params(cls) -> dict[str, Any]:
-        return {"detector": LRGFMEM.fast_params()}
+        return {"detector": diagnoser_class("lrgf-mem").fast_params()}
+
+    def _detector_class(self) -> type[BankDetector]:
+        try:
+            cls = diagnoser_class(self.detector_name)
+        except ValueError:
+            cls = None
+        if cls is None or not issubclass(cls, BankDetector):
+            raise invalid(
+                "detector_name",
+                self.detector_name,
+                "the registry name of an LRGF detector (lrgf-mem, lrgf-mem-paper, lrgf-glr, "
+                "lrgf-glr-adaptive)",
+            )
+        return cls
 
     def result_params(self) -> dict[str, Any]:
-        # the inner lrgf-mem's execution parameters (n_jobs, progress) do not change the fit
+        # the inner detector's execution parameters (n_jobs, progress) do not change the fit
         # either; without them an empty dict is the default detector, as in _fit
         params = super().result_params()
         if isinstance(self.detector, dict):
-            skip = LRGFMEM.execution_params
+            skip = self._detector_class().execution_params
             inner = {k: v for k, v in self.detector.items() if k not in skip}
             params["detector"] = inner or None
         return params
@@ -119,16 +125,19 @@ class _IsolatingLRGF(Diagnoser):
             {k: v for k, v in self.get_params().items() if k in self.CONSTRAINTS}, self.CONSTRAINTS
         )
         if self.detector is not None and not isinstance(self.detector, dict):
-            raise invalid("detector", self.detector, "a dict of lrgf-mem hyperparameters or None")
-        LRGFMEM(**(self.detector or {}))._validate_params()
+            raise invalid(
+                "detector", self.detector, f"a dict of {self.detector_name} hyperparameters or None"
+            )
+        self._detector_class()
+        make(self.detector_name, **(self.detector or {}))._validate_params()
 
     # ---- features ------------------------------------------------------------------------------
     def _n_features_in(self) -> int:
-        return len(self.detector_.out_idx_) * len(FEATURE_LAMBDAS)
+        return len(self.detector_.residual_scale_) * len(FEATURE_LAMBDAS)
 
     def _normalised(self, residual: np.ndarray, k0: int) -> np.ndarray:
         """Normalised remaining error; zero during the detector's warm-up (as its EWMA sees it)."""
-        e = residual / self.detector_.v_residual_
+        e = residual / self.detector_.residual_scale_
         if k0 < self.detector_.steady_window:
             e = np.array(e, copy=True)
             e[: self.detector_.steady_window - k0] = 0.0
@@ -172,7 +181,7 @@ class _IsolatingLRGF(Diagnoser):
 
     def diagnose_detection(self, det: Detection) -> Detection:
         """The isolator's detection from its inner detector's detection of the same record
-        (what :meth:`detect` computes; lets a study reuse one lrgf-mem run for several
+        (what :meth:`detect` computes; lets a study reuse one detector run for several
         isolators)."""
         D, bins, new = self._batch_features(det.residual, det.alarm)
         diag, scores = self._diagnose(D, bins, new)
@@ -192,7 +201,9 @@ class _IsolatingLRGF(Diagnoser):
     # ---- fitting -------------------------------------------------------------------------------
     def _fit(self, episodes: list[Episode]) -> None:
         healthy = [e for e in episodes if e.fault_onset is None]
-        self.detector_ = LRGFMEM(**(self.detector or {})).fit(healthy)
+        detector = make(self.detector_name, **(self.detector or {}))
+        assert isinstance(detector, BankDetector)  # checked by _validate_params
+        self.detector_ = detector.fit(healthy)
         self.fit_isolation([e for e in episodes if e.fault_onset is not None])
 
     def fit_isolation(
@@ -200,7 +211,7 @@ class _IsolatingLRGF(Diagnoser):
     ) -> None:
         """Learn the fault classes from labelled faulty episodes (``detector_`` already fitted).
 
-        Public so that a trained ``lrgf-mem`` can be reused: set ``detector_``, call this
+        Public so that a trained detector can be reused: set ``detector_``, call this
         (``detections``: the inner detector's detections of ``faulty``, if already computed).
         """
         per: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
@@ -287,7 +298,7 @@ class _IsolatingLRGF(Diagnoser):
         self._k = 0
 
     def _update(self, y: np.ndarray) -> Decision:
-        d = self.detector_._update(y)
+        d = self.detector_.update(y)
         e = self._normalised(d.residual[None, :], self._k)[0]
         q = np.concatenate([f.update(e) for f in self._filters])
         D, b, new = self._step_features(self._k, q, d.alarm)
@@ -296,7 +307,8 @@ class _IsolatingLRGF(Diagnoser):
         return Decision(d.alarm, d.signal, d.lower, d.upper, d.residual, str(diag[0]), scores[0])
 
     def _detect(self, y: np.ndarray) -> Detection:
-        return self.diagnose_detection(self.detector_._detect(y))
+        episode = Episode(y, channels=self.channels_, sample_time_s=self.sample_time_s_)
+        return self.diagnose_detection(self.detector_.detect(episode))
 
     def band_view(self, episode: Episode) -> Detection | None:
         self._check_episode(episode)
@@ -321,8 +333,11 @@ class _IsolatingLRGF(Diagnoser):
 
     def _load_extra(self, directory: Path) -> None:
         inner = Diagnoser.load(directory / "detector")
-        if not isinstance(inner, LRGFMEM):
-            raise ValueError(f"{directory / 'detector'} holds a {inner.name!r}, not an lrgf-mem")
+        if not isinstance(inner, BankDetector) or inner.name != self.detector_name:
+            raise ValueError(
+                f"{directory / 'detector'} holds a {inner.name!r}, not the isolator's detector "
+                f"{self.detector_name!r}"
+            )
         if inner.channels_ != self.channels_:
             raise ValueError(
                 f"{directory / 'detector'} was trained on channels {inner.channels_}, the "
@@ -337,142 +352,3 @@ class _IsolatingLRGF(Diagnoser):
                     f"axis must hold the {n_bins} age bins"
                 )
         self._finish_iso()
-
-
-@register("lrgf-iso")
-class LRGFISO(_IsolatingLRGF):
-    """``lrgf-mem`` + nearest signature direction of the bank's residuals (module docstring)."""
-
-    CONSTRAINTS: ClassVar[dict[str, Any]] = {
-        **_IsolatingLRGF.CONSTRAINTS,
-        "n_prototypes": Integer(1, MIN_CLASS_SAMPLES),
-        "min_angle_deg": Real(0, 90),
-    }
-
-    def __init__(
-        self,
-        *,
-        detector: dict[str, Any] | None = None,
-        n_prototypes: int = 2,
-        unknown_quantile: float = 0.02,
-        min_angle_deg: float = 20.0,
-        alarm_gap: int = 100,
-        score_lambda: float = 0.1,
-        seed: int = 0,
-    ) -> None:
-        self.detector = detector
-        self.n_prototypes = n_prototypes
-        self.unknown_quantile = unknown_quantile
-        self.min_angle_deg = min_angle_deg
-        self.alarm_gap = alarm_gap
-        self.score_lambda = score_lambda
-        self.seed = seed
-
-    @staticmethod
-    def _unit(F: np.ndarray) -> np.ndarray:
-        norm = np.sqrt(np.sum(F * F, axis=1, keepdims=True))
-        return F / np.maximum(norm, 1e-12)
-
-    def _fit_classes(self, binned: dict[int, dict[str, np.ndarray]]) -> None:
-        B, C, P, d = len(AGE_EDGES), len(self.classes_), self.n_prototypes, self._n_features_in()
-        self.prototypes_ = np.zeros((B, C, P, d))
-        self.threshold_ = np.zeros((B, C))
-        for b in range(B):
-            for j, c in enumerate(self.classes_):
-                u = self._unit(binned[b][c])
-                p = spherical_kmeans(u, P, seed=self.seed + 97 * b + j)
-                self.prototypes_[b, j] = p[np.arange(P) % len(p)]  # repeat when fewer found
-            floor = float(np.cos(np.radians(self.min_angle_deg)))
-            for j, c in enumerate(self.classes_):
-                own = self._scores(binned[b][c], b)[0][:, j]
-                self.threshold_[b, j] = min(float(np.quantile(own, self.unknown_quantile)), floor)
-
-    def _scores(self, D: np.ndarray, b: int) -> tuple[np.ndarray, np.ndarray]:
-        u = self._unit(D)
-        protos = self.prototypes_[b]  # (C, P, d)
-        cos = np.sum(u[:, None, None, :] * protos[None], axis=3)  # (n, C, P)
-        scores = np.max(cos, axis=2)
-        return scores, scores >= self.threshold_[b][None, :]
-
-    def _class_state(self) -> dict[str, np.ndarray]:
-        return {"prototypes": self.prototypes_, "threshold": self.threshold_}
-
-    def _set_class_state(self, state: dict[str, np.ndarray]) -> None:
-        self.prototypes_ = np.asarray(state["prototypes"], dtype=np.float64)
-        self.threshold_ = np.asarray(state["threshold"], dtype=np.float64)
-
-
-@register("lrgf-lda")
-class LRGFLDA(_IsolatingLRGF):
-    """``lrgf-mem`` + linear discriminant analysis of exponential residual windows (baseline)."""
-
-    def __init__(
-        self,
-        *,
-        detector: dict[str, Any] | None = None,
-        unknown_quantile: float = 0.01,
-        alarm_gap: int = 100,
-        score_lambda: float = 0.03,
-        seed: int = 0,
-    ) -> None:
-        self.detector = detector
-        self.unknown_quantile = unknown_quantile
-        self.alarm_gap = alarm_gap
-        self.score_lambda = score_lambda
-        self.seed = seed
-
-    def _fit_classes(self, binned: dict[int, dict[str, np.ndarray]]) -> None:
-        # scikit-learn fits; only its arrays are kept (see the module docstring)
-        from sklearn.discriminant_analysis import LinearDiscriminantAnalysis
-
-        B, C, d = len(AGE_EDGES), len(self.classes_), self._n_features_in()
-        self.means_ = np.zeros((B, C, d))
-        self.precision_ = np.tile(np.eye(d), (B, 1, 1))
-        self.log_priors_ = np.zeros((B, C))
-        self.threshold_ = np.zeros((B, C))
-        if not C:
-            return
-        for b in range(B):
-            X = np.concatenate([binned[b][c] for c in self.classes_])
-            y = np.concatenate([np.full(len(binned[b][c]), j) for j, c in enumerate(self.classes_)])
-            if C >= 2:
-                lda = LinearDiscriminantAnalysis(solver="lsqr", store_covariance=True).fit(X, y)
-                self.means_[b], cov = lda.means_, lda.covariance_
-                self.log_priors_[b] = np.log(lda.priors_)
-            else:  # one class: nothing to discriminate, the unknown region only
-                self.means_[b], cov = X.mean(axis=0, keepdims=True), np.cov(X, rowvar=False)
-            cov = cov + 1e-6 * np.trace(cov) / d * np.eye(d)
-            self.precision_[b] = np.linalg.inv(cov)
-            d2 = self._mahalanobis(X, b)
-            # never tighter than the Gaussian model's own quantile (χ² with d degrees of freedom)
-            floor = float(stats.chi2.ppf(1.0 - self.unknown_quantile, d))
-            self.threshold_[b] = [
-                max(float(np.quantile(d2[y == j, j], 1.0 - self.unknown_quantile)), floor)
-                for j in range(C)
-            ]
-
-    def _mahalanobis(self, F: np.ndarray, b: int) -> np.ndarray:
-        diff = F[:, None, :] - self.means_[b][None, :, :]  # (n, C, d)
-        # elementwise products and sums, no BLAS: each row's result is the same in a batch of
-        # one (streaming) and of n (batch), to the bit
-        m = np.sum(diff[:, :, :, None] * self.precision_[b][None, None, :, :], axis=2)
-        return np.sum(m * diff, axis=2)
-
-    def _scores(self, D: np.ndarray, b: int) -> tuple[np.ndarray, np.ndarray]:
-        # LDA's discriminant with a pooled covariance: -d²/2 + log prior (same argmax as sklearn)
-        d2 = self._mahalanobis(D, b)
-        return -0.5 * d2 + self.log_priors_[b][None, :], d2 <= self.threshold_[b][None, :]
-
-    def _class_state(self) -> dict[str, np.ndarray]:
-        return {
-            "means": self.means_,
-            "precision": self.precision_,
-            "log_priors": self.log_priors_,
-            "threshold": self.threshold_,
-        }
-
-    def _set_class_state(self, state: dict[str, np.ndarray]) -> None:
-        self.means_ = np.asarray(state["means"], dtype=np.float64)
-        self.precision_ = np.asarray(state["precision"], dtype=np.float64)
-        self.log_priors_ = np.asarray(state["log_priors"], dtype=np.float64)
-        self.threshold_ = np.asarray(state["threshold"], dtype=np.float64)

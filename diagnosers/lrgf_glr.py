@@ -24,7 +24,8 @@ limit is calibrated:
   healthy episode of the same seed, so the difference of their remaining errors is the fault's
   signature without noise. Its mean over the first ``direction_window`` samples after the onset,
   made a unit vector, is the fault's direction ``d_f``.
-* **Residual evaluation** (``detector``):
+* **Residual evaluation** (``statistic``; the stage is
+  :class:`diagnosers.directional_stage.DirectionalStage`):
 
   - ``"directional"``: the EWMA vector ``z`` (weight ``ewma_lambda``) is projected on each
     direction with :class:`diagnosers.alarm.DirectionalProjection`, the one-sided score
@@ -35,7 +36,7 @@ limit is calibrated:
   - ``"cusum"``: :class:`diagnosers.alarm.CUSUM` on the same projections, drift
     ``cusum_drift``.
 
-  ``slow_ewma_lambda > 0`` (default 0.02; ``detector="directional"`` only) adds a second EWMA
+  ``slow_ewma_lambda > 0`` (default 0.02; ``statistic="directional"`` only) adds a second EWMA
   of that weight beside ``z``, with its own covariance and its own projections on the same
   directions: a small or slow fault whose shift stays under the fast EWMA's noise builds up in
   the slow one, which averages the white part of the remaining error away (its low-frequency
@@ -47,7 +48,7 @@ limit is calibrated:
   Beside the directional tests an omnibus Hotelling T² of ``z`` (as in ``lrgf-mem``) keeps
   faults outside the learned directions detectable; it gets ``omnibus_share`` of the false-alarm
   target and the directional tests share the rest equally (a union bound, so the realised rate
-  stays at or below the target). ``detector="t2"`` is ``lrgf-mem``'s stage alone.
+  stays at or below the target). ``statistic="t2"`` is ``lrgf-mem``'s stage alone.
 
 Limits: T² ``chi2-tail`` as in ``lrgf-mem``; the directional scores
 :func:`diagnosers.alarm.normal_tail_limit`; GLR and CUSUM statistics the empirical quantile of
@@ -93,36 +94,35 @@ delays every alarm by d − 1 samples, so it is chosen together with ``false_ala
 
 from __future__ import annotations
 
-from enum import StrEnum
 from typing import Any, ClassVar
 
 import numpy as np
-from scipy.linalg import block_diag
 
-from diagnosers.alarm import (
-    CUSUM,
-    EWMA,
-    DirectionalGLR,
-    DirectionalProjection,
-    HotellingT2,
-    calibrate_limit,
-    normal_tail_limit,
-)
-from diagnosers.base import Decision, Detection, Episode
-from diagnosers.baseline import HeldBaseline
-from diagnosers.fault_directions import FaultDirections
-from diagnosers.lrgf_mem import (
-    LRGFMEM,
+from diagnosers.alarm import LimitMethod
+from diagnosers.bank_detector import (
+    BANK_CONSTRAINTS,
+    BANK_DEFAULTS,
     MIN_CALIBRATION_SAMPLES,
-    PARAMETER_CONSTRAINTS,
+    RUN_DEFAULTS,
+    BankDetector,
     MemSelect,
+    holdout_split,
 )
-from diagnosers.novelty import NoveltyScaled, PredictionRange, exogenous_relations, novelty_scale
+from diagnosers.baseline import HeldBaseline
+from diagnosers.detection import Decision, Detection
+from diagnosers.directional_stage import DirectionalStage, Statistic
+from diagnosers.episode import Episode
+from diagnosers.fault_directions import FaultDirections, paired_difference
+from diagnosers.novelty import NoveltyScale, PredictionRange, exogenous_relations, novelty_scale
 from diagnosers.parallel import TrainedBank
+from diagnosers.presets import keyword_init
 from diagnosers.registry import register
-from fcc_env.validation import Integer, Options, Real, RealSequence, check_params
+from diagnosers.relation_bank import RelationBank
+from fcc_common.validation import Integer, Options, Real, RealSequence, check_params
 
-__all__ = ["LRGFGLR", "Calibration", "DirectionalDetector"]
+__all__ = ["GLR_CONSTRAINTS", "LRGFGLR", "Calibration"]
+
+from enum import StrEnum
 
 
 class Calibration(StrEnum):
@@ -132,137 +132,92 @@ class Calibration(StrEnum):
     HOLDOUT = "holdout"
 
 
-class DirectionalDetector(StrEnum):
-    """Residual evaluation of ``lrgf-glr`` (see the module docstring)."""
-
-    T2 = "t2"
-    DIRECTIONAL = "directional"
-    GLR = "glr"
-    CUSUM = "cusum"
-
-
+#: declarative constraints of :class:`LRGFGLR`'s own hyperparameters, checked in ``fit``
 GLR_CONSTRAINTS: dict[str, Any] = {
-    "calibration": Options(Calibration),
-    "n_folds": Integer(2, 20),
-    "refit_epochs": (Integer(1, 100_000), None),
-    "detector": Options(DirectionalDetector),
+    "false_alarm_target": Real(0, 0.5, closed="neither"),
+    "statistic": Options(Statistic),
+    "ewma_lambda": Real(0, 1, closed="right"),
+    "slow_ewma_lambda": (Real(0, 1, closed="left"), RealSequence(0, 1, closed="neither")),
+    "slow_share": Real(0, 1, closed="neither"),
     "omnibus_share": Real(0, 1, closed="right"),
     "glr_window": Integer(1, 5000),
     "cusum_drift": Real(0),
+    "limit_method": Options(LimitMethod),
+    "threshold_margin": Real(0.5, 10),
+    "on_delay": Integer(1, 1000),
+    "calibration": Options(Calibration),
+    "n_folds": Integer(2, 20),
+    "refit_epochs": (Integer(1, 100_000), None),
     "direction_window": Integer(1, 2000),
     "baseline_lambda": Real(0, 1, closed="left"),
     "baseline_hold": Real(0, 1, closed="right"),
     "baseline_settle": Integer(0, 100_000),
     "baseline_filters": (RealSequence(1, 1e6), None),
     "baseline_ridge": Real(0, closed="neither"),
-    "slow_ewma_lambda": (Real(0, 1, closed="left"), RealSequence(0, 1, closed="neither")),
-    "slow_share": Real(0, 1, closed="neither"),
-    "on_delay": Integer(1, 1000),
     "novelty_gain": Real(0),
 }
 
 
 @register("lrgf-glr")
-class LRGFGLR(HeldBaseline, FaultDirections, NoveltyScaled, LRGFMEM):
-    """``lrgf-mem``'s bank, a cross-fitted limit and tests along learned fault directions."""
+class LRGFGLR(BankDetector):
+    """A bank of LRGF relations, a cross-fitted limit and tests along learned fault directions.
 
-    #: T_rg1, the slow high-gain relation that alone carries f3, gets a larger network
-    HIDDEN_BY_OUTPUT: ClassVar[dict[str, int]] = {"T_rg1": 10}
+    Composition: the model bank (:class:`~diagnosers.relation_bank.RelationBank`, ``bank_``),
+    the alarm stage (:class:`~diagnosers.directional_stage.DirectionalStage`, ``stage_``,
+    which owns ``false_alarm_target``) and the optional parts, each built from its
+    hyperparameters: the fault directions (:class:`~diagnosers.fault_directions.
+    FaultDirections`: ``fault_scenarios``, ``fault_seeds``, ``direction_window``), the held
+    baseline (:class:`~diagnosers.baseline.HeldBaseline`: ``baseline_*``, off at
+    ``baseline_lambda=0``) and the novelty scale (:class:`~diagnosers.novelty.NoveltyScale`:
+    ``novelty_gain``, off at 0). See the module docstring for each.
+    """
 
-    def __init__(
-        self,
-        *,
-        calibration: str = "cross-fit",
-        n_folds: int = 3,
-        refit_epochs: int | None = None,
-        detector: str = "directional",
-        omnibus_share: float = 0.2,
-        glr_window: int = 200,
-        cusum_drift: float = 0.5,
-        fault_scenarios: list[str] | None = None,
-        fault_seeds: list[int] | None = None,
-        direction_window: int = 300,
-        baseline_lambda: float = 0.0,
-        baseline_hold: float = 0.5,
-        baseline_settle: int = 200,
-        baseline_filters: list[float] | None = None,
-        baseline_ridge: float = 1.0,
-        slow_ewma_lambda: float | list[float] = 0.02,
-        slow_share: float = 0.5,
-        on_delay: int = 1,
-        novelty_gain: float = 5.0,
-        relations: list[list[Any]] | None = None,
-        n_hidden: int | list[int] | None = None,
-        order: int = 2,
-        n_linear: int = 0,
-        steady_window: int = 100,
-        mem_hidden: int = 5,
-        mem_input_delays: int = 15,
-        mem_output_delays: int = 15,
-        mem_output_activation: str = "linear",
-        alpha: float = 0.01,
-        band_definition: str = "residual",
-        alarm_filter: str = "ewma-t2",
-        ewma_lambda: float = 0.3,
-        false_alarm_target: float = 0.025,
-        threshold_margin: float = 1.0,
-        limit_method: str = "chi2-tail",
-        method: str = "adam",
-        lr: float = 0.03,
-        max_epochs: int = 3000,
-        val_fraction: float = 0.25,
-        mem_max_epochs: int = 200,
-        mem_select: str = "if_better",
-        seed: int = 0,
-        progress: bool = False,
-        n_jobs: int | None = None,
-    ) -> None:
-        super().__init__(
-            relations=relations,
-            n_hidden=n_hidden,
-            order=order,
-            n_linear=n_linear,
-            steady_window=steady_window,
-            mem_hidden=mem_hidden,
-            mem_input_delays=mem_input_delays,
-            mem_output_delays=mem_output_delays,
-            mem_output_activation=mem_output_activation,
-            alpha=alpha,
-            band_definition=band_definition,
-            alarm_filter=alarm_filter,
-            ewma_lambda=ewma_lambda,
-            false_alarm_target=false_alarm_target,
-            threshold_margin=threshold_margin,
-            limit_method=limit_method,
-            method=method,
-            lr=lr,
-            max_epochs=max_epochs,
-            val_fraction=val_fraction,
-            mem_max_epochs=mem_max_epochs,
-            mem_select=mem_select,
-            seed=seed,
-            progress=progress,
-            n_jobs=n_jobs,
-        )
-        self.calibration = calibration
-        self.n_folds = n_folds
-        self.refit_epochs = refit_epochs
-        self.detector = detector
-        self.omnibus_share = omnibus_share
-        self.glr_window = glr_window
-        self.cusum_drift = cusum_drift
-        self.fault_scenarios = fault_scenarios
-        self.fault_seeds = fault_seeds
-        self.direction_window = direction_window
-        self.baseline_lambda = baseline_lambda
-        self.baseline_hold = baseline_hold
-        self.baseline_settle = baseline_settle
-        self.baseline_filters = baseline_filters
-        self.baseline_ridge = baseline_ridge
-        self.slow_ewma_lambda = slow_ewma_lambda
-        self.slow_share = slow_share
-        self.on_delay = on_delay
-        self.novelty_gain = novelty_gain
+    DEFAULTS: ClassVar[dict[str, Any]] = {
+        **BANK_DEFAULTS,
+        "n_hidden": None,
+        # the alarm stage
+        "false_alarm_target": 0.025,
+        "statistic": "directional",
+        "ewma_lambda": 0.3,
+        "slow_ewma_lambda": 0.02,
+        "slow_share": 0.5,
+        "omnibus_share": 0.2,
+        "glr_window": 200,
+        "cusum_drift": 0.5,
+        "limit_method": "chi2-tail",
+        "threshold_margin": 1.0,
+        "on_delay": 1,
+        # where the limits are calibrated
+        "calibration": "cross-fit",
+        "n_folds": 3,
+        "refit_epochs": None,
+        # the optional parts
+        "fault_scenarios": None,
+        "fault_seeds": None,
+        "direction_window": 300,
+        "baseline_lambda": 0.0,
+        "baseline_hold": 0.5,
+        "baseline_settle": 200,
+        "baseline_filters": None,
+        "baseline_ridge": 1.0,
+        "novelty_gain": 5.0,
+        **RUN_DEFAULTS,
+        "progress": False,
+    }
+    __init__ = keyword_init(DEFAULTS)
+
+    false_alarm_target: float
+    statistic: str
+    calibration: str
+    n_folds: int
+    refit_epochs: int | None
+    fault_scenarios: list[str] | None
+    fault_seeds: list[int] | None
+    direction_window: int
+    baseline_lambda: float
+    baseline_filters: list[float] | None
+    novelty_gain: float
+    mem_select: str
 
     @classmethod
     def fast_params(cls) -> dict[str, Any]:
@@ -270,7 +225,7 @@ class LRGFGLR(HeldBaseline, FaultDirections, NoveltyScaled, LRGFMEM):
 
     def _validate_params(self) -> None:
         params = self.get_params()
-        check_params({k: params[k] for k in PARAMETER_CONSTRAINTS}, PARAMETER_CONSTRAINTS)
+        check_params({k: params[k] for k in BANK_CONSTRAINTS}, BANK_CONSTRAINTS)
         check_params({k: params[k] for k in GLR_CONSTRAINTS}, GLR_CONSTRAINTS)
         self._check_sizes()  # checks the relations and n_linear too
         if self.baseline_filters is not None and self.baseline_lambda == 0:
@@ -278,65 +233,62 @@ class LRGFGLR(HeldBaseline, FaultDirections, NoveltyScaled, LRGFMEM):
                 f"baseline_filters={self.baseline_filters} needs a baseline: baseline_lambda "
                 "must be in (0, 1), got 0"
             )
-        known = {"f1", "f2", "f3", "f4"}
-        if not set(self._faults()) <= known:
-            raise ValueError(f"fault_scenarios must be among {sorted(known)}, got {self._faults()}")
-        for s in self._fault_seeds():
-            if not (isinstance(s, int | np.integer) and 1000 <= s < 5000):
-                raise ValueError(f"fault_seeds must be training seeds in 1000..4999, got {s!r}")
+        self._fault_directions().check()
+
+    # ---- the parts -----------------------------------------------------------------------------
+    def _fault_directions(self) -> FaultDirections:
+        return FaultDirections(self.fault_scenarios, self.fault_seeds, self.direction_window)
+
+    def _new_stage(self) -> DirectionalStage:
+        """The alarm stage of the hyperparameters, with its held baseline if any."""
+        baseline = None
+        if self.baseline_lambda > 0:
+            baseline = HeldBaseline(
+                lam=self.baseline_lambda,
+                hold=self.baseline_hold,
+                settle=self.baseline_settle,
+                filters=self.baseline_filters,
+                ridge=self.baseline_ridge,
+            )
+            baseline.bind(self.bank_.in_idx, self.bank_.out_idx, self.bank_.lrgf)
+        settings = {k: getattr(self, k) for k in DirectionalStage.PARAMETERS}
+        return DirectionalStage(**settings, baseline=baseline)
+
+    def _new_novelty(self) -> NoveltyScale:
+        relations = exogenous_relations(self._relations())
+        return NoveltyScale(self.novelty_gain, relations, self.steady_window)
 
     # ---- fitting -------------------------------------------------------------------------------
-    def _parts(self, y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(y_out − y_m, y_e) of every relation over a record, with the current models."""
-        ym, ye = [], []
-        for j in range(len(self.lrgf_)):
-            u = y[:, self.in_idx_[j]]
-            ym.append(self.lrgf_[j].predict(u)[:, 0])
-            ye.append(self.mem_[j].predict(u)[:, 0])
-        return y[:, self.out_idx_] - np.column_stack(ym), np.column_stack(ye)
-
     def _fit(self, episodes: list[Episode]) -> None:
-        self._bank = None
-        relations = self._relations()
-        idx = {c: i for i, c in enumerate(self.channels_)}
-        for out, ins in relations:
-            for c in (out, *ins):
-                if c not in idx:
-                    raise ValueError(
-                        f"relation channel {c!r} is not in the episodes' channels {list(idx)}"
-                    )
-        self.in_idx_ = [np.array([idx[c] for c in ins]) for _, ins in relations]
-        self.out_idx_ = np.array([idx[o] for o, _ in relations])
-        self.novelty_relations_ = exogenous_relations(relations)
+        bank = self._new_bank()
+        self.novelty_ = self._new_novelty()
         w = self.steady_window
         ys = [e.y for e in episodes]
-        cal_parts: list[tuple[np.ndarray, np.ndarray]] = []
         if self.calibration == Calibration.CROSS_FIT and len(ys) >= self.n_folds:
-            cal_parts, novelty, (self.lrgf_, self.mem_, v_paper, fits) = self._cross_fit_models(ys)
+            cal_parts, distances, final = self._cross_fit_models(ys)
+            bank.set_models(final)
             train, cal = ys, ys  # every record is out of fold once, in order
         else:  # lrgf-mem's split (also when there are fewer episodes than folds)
-            train, cal, cal_from = self._split(episodes)
-            self.lrgf_, self.mem_, v_paper, fits = self._train_models(train)
+            train, cal, cal_from = holdout_split(episodes)
+            bank.set_models(self._train_banks([train])[0])
             w = max(w, cal_from)
-            cal_parts = [self._parts(y) for y in cal]
-            novelty = self._novelty_records(train, cal)
-        self.prediction_range_ = self._prediction_range(train)
-        self.v_paper_ = np.array(v_paper)
-        self.train_fit_loss_ = np.array([f.best_val_loss for f in fits])
-        self._calibrate(cal_parts, w, novelty, cal)
+            cal_parts = [bank.parts(y) for y in cal]
+            distances = self.novelty_.distances(bank, train, cal)
+        self.novelty_.fit(bank, train)
+        self._calibrate(cal_parts, w, distances, cal)
 
     def _calibrate(
         self,
         cal_parts: list[tuple[np.ndarray, np.ndarray]],
         w: int,
-        novelty: list[np.ndarray] | None = None,
-        cal_ys: list[np.ndarray] | None = None,
+        distances: list[np.ndarray],
+        cal_ys: list[np.ndarray],
     ) -> None:
-        """Error-model choice, scale, fault directions and limits from healthy calibration
-        records ``cal_parts`` (``(y_out − y_m, y_e)`` each; the first ``w`` samples skipped)
-        with, per record, its distance outside the training predictions ``novelty`` (``(T,)``,
-        None: inside) and its measurements ``cal_ys`` (needed by ``baseline_filters``)."""
-        relations = self._relations()
+        """Error-model choice, scale, fault directions and the stage's limits from healthy
+        calibration records ``cal_parts`` (``(y_out − y_m, y_e)`` each; the first ``w`` samples
+        skipped) with, per record, its distance outside the training predictions
+        ``distances`` (``(T,)``) and its measurements ``cal_ys``."""
+        bank = self.bank_
         n_cal = sum(max(0, r.shape[0] - w) for r, _ in cal_parts)
         if n_cal < MIN_CALIBRATION_SAMPLES:
             raise ValueError(
@@ -346,96 +298,37 @@ class LRGFGLR(HeldBaseline, FaultDirections, NoveltyScaled, LRGFMEM):
         on = np.concatenate([(r - e)[w:] for r, e in cal_parts])
         off = np.concatenate([r[w:] for r, _ in cal_parts])
         if self.mem_select == MemSelect.IF_BETTER:
-            self.use_mem_ = np.sqrt(np.mean(on**2, axis=0)) < np.sqrt(np.mean(off**2, axis=0))
+            bank.use_mem = np.sqrt(np.mean(on**2, axis=0)) < np.sqrt(np.mean(off**2, axis=0))
         else:
-            self.use_mem_ = np.ones(len(relations), dtype=bool)
-        if novelty is None:
-            novelty = [np.zeros(r.shape[0]) for r, _ in cal_parts]
+            bank.use_mem = np.ones(len(bank), dtype=bool)
         rem = [
-            ((r - e * self.use_mem_) / novelty_scale(d, self.novelty_gain)[:, None])[w:]
-            for (r, e), d in zip(cal_parts, novelty, strict=True)
+            ((r - e * bank.use_mem) / novelty_scale(d, self.novelty_gain)[:, None])[w:]
+            for (r, e), d in zip(cal_parts, distances, strict=True)
         ]
         self.v_residual_ = np.maximum(np.sqrt(np.mean(np.concatenate(rem) ** 2, axis=0)), 1e-9)
         norm = [r / self.v_residual_ for r in rem]
-        self.directions_ = self._learn_directions()
-        # Without a baseline the statistics are fixed filters of the error: one fit. With one,
-        # what the baseline absorbs depends on when it holds, which depends on the limits: fit
-        # on an always-adapting baseline, then once more on the baseline held by those limits.
-        phis = self._calibration_features(cal_parts, w, cal_ys)
-        pairs = list(zip(norm, phis, strict=True))
-        self._fit_alarm_stage([self._track(e, hold=False, phi=p) for e, p in pairs])
-        if self.baseline_lambda > 0:
-            self._fit_alarm_stage([self._track(e, hold=True, phi=p) for e, p in pairs])
-
-    def _fit_alarm_stage(self, norm: list[np.ndarray]) -> None:
-        """Covariances and limits of the alarm stage on healthy (baseline-removed) normalised
-        errors ``norm``; then the derived state (:meth:`_finish`)."""
-        k, m = len(self.out_idx_), len(self.directions_)
-        z = np.concatenate([EWMA(self.ewma_lambda).filter(e) for e in norm])
-        t2 = HotellingT2(centered=False).fit(z)
-        self.s_inv_ = t2.precision_
-        det = DirectionalDetector(self.detector)
-        share = 1.0 if m == 0 or det is DirectionalDetector.T2 else self.omnibus_share
-        self.h_ = calibrate_limit(
-            np.asarray(t2.score(z))[:, None],
-            self.false_alarm_target * share,
-            method=self.limit_method,
-            dof=k,
-            margin=self.threshold_margin,
+        directions = self._fault_directions().learn(
+            self.channels_, len(bank), paired_difference(self.normalised)
         )
-        self.dir_weights_ = np.zeros((0, k))
-        self.h_dir_ = np.zeros(0)
-        if m and det is not DirectionalDetector.T2:
-            t_dir = self.false_alarm_target * (1.0 - share) / m
-            if det is DirectionalDetector.DIRECTIONAL:
-                zz = self._scales(z, norm)
-                # one block of projections per EWMA scale, each with its own healthy covariance
-                blocks = [
-                    DirectionalProjection().fit(self.directions_, np.cov(zz[:, i : i + k].T))
-                    for i in range(0, zz.shape[1], k)
-                ]
-                self.dir_weights_ = block_diag(*[b.weights_ for b in blocks])
-                n_slow = len(blocks) - 1
-                # the fast scale keeps 1 - slow_share, the slow scales split slow_share equally
-                shares = (
-                    [1.0 - self.slow_share] + [self.slow_share / n_slow] * n_slow
-                    if n_slow
-                    else [1.0]
-                )
-                scores = zz @ self.dir_weights_.T  # m columns per scale
-                self.h_dir_ = self.threshold_margin * np.concatenate(
-                    [
-                        normal_tail_limit(scores[:, i * m : (i + 1) * m], t_dir * sh)
-                        for i, sh in enumerate(shares)
-                    ]
-                )
-            else:
-                proj = DirectionalProjection().fit(self.directions_, np.cov(np.concatenate(norm).T))
-                self.dir_weights_ = proj.weights_
-                seq = np.concatenate([self._sequential().filter(proj.score(e)) for e in norm])
-                self.h_dir_ = self.threshold_margin * np.full(
-                    m, np.quantile(seq.max(axis=1), 1.0 - t_dir * m)
-                )
+        self.stage_ = self._new_stage()
+        features: list[np.ndarray | None] = [None] * len(cal_parts)
+        baseline = self.stage_.baseline
+        if baseline is not None and baseline.regression:
+            # the regressors of every calibration record past w (its own out-of-fold outputs)
+            baseline.reset()
+            features = []
+            for (r, _), y in zip(cal_parts, cal_ys, strict=True):
+                phi = baseline.features(y, y[:, bank.out_idx] - r)
+                assert phi is not None
+                features.append(phi[w:])
+        self.stage_.fit(norm, directions, features)
         self._finish()
-
-    def _slow_lambdas(self) -> tuple[float, ...]:
-        """The weights of the slower EWMA scales (``slow_ewma_lambda``; none for 0)."""
-        lam = self.slow_ewma_lambda
-        if isinstance(lam, int | float | np.integer | np.floating):
-            return (float(lam),) if lam > 0 else ()
-        return tuple(float(x) for x in lam)
-
-    def _scales(self, z: np.ndarray, norm: list[np.ndarray]) -> np.ndarray:
-        """The EWMAs the directional tests project: ``z`` (weight ``ewma_lambda``), beside it
-        one EWMA of every record of ``norm`` per slow scale (``slow_ewma_lambda``)."""
-        slow = [np.concatenate([EWMA(lam).filter(e) for e in norm]) for lam in self._slow_lambdas()]
-        return np.column_stack([z, *slow]) if slow else z
 
     def _cross_fit_models(
         self, ys: list[np.ndarray]
     ) -> tuple[list[tuple[np.ndarray, np.ndarray]], list[np.ndarray], TrainedBank]:
-        """Out-of-fold :meth:`_parts` of every record of ``ys`` and their novelty against the
-        fold bank's own training range, and the bank trained on all.
+        """Out-of-fold ``(y_out − y_m, y_e)`` of every record of ``ys`` and their novelty
+        against the fold bank's own training range, and the bank trained on all.
 
         With ``refit_epochs=None`` the ``n_folds`` banks without a fold and the bank on all
         records are trained from scratch in one call, so that ``n_jobs`` processes share all of
@@ -454,184 +347,92 @@ class LRGFGLR(HeldBaseline, FaultDirections, NoveltyScaled, LRGFMEM):
             final = self._train_banks(
                 [ys], init=[fold_banks[0]], max_epochs=min(self.refit_epochs, self.max_epochs)
             )[0]
-        cal_parts, novelty = [], []
-        for fold, train, bank in zip(folds, sets, fold_banks, strict=True):
-            self.lrgf_, self.mem_ = bank.lrgf, bank.mem  # _parts runs the current models
-            cal_parts += [self._parts(ys[i]) for i in fold]
-            novelty += self._novelty_records(train, [ys[i] for i in fold])
-        return cal_parts, novelty, final
+        cal_parts, distances = [], []
+        for fold, train, trained in zip(folds, sets, fold_banks, strict=True):
+            bank = RelationBank(self._relations(), self.channels_)
+            bank.set_models(trained)
+            cal_parts += [bank.parts(ys[i]) for i in fold]
+            distances += self.novelty_.distances(bank, train, [ys[i] for i in fold])
+        return cal_parts, distances, final
 
-    def _sequential(self) -> DirectionalGLR | CUSUM:
-        if self.detector == DirectionalDetector.GLR:
-            return DirectionalGLR(self.glr_window)
-        return CUSUM(self.cusum_drift)
-
-    def _normalised(self, y: np.ndarray) -> np.ndarray:
-        r, e = self._parts(y)
-        return (r - e * self.use_mem_) / self.v_residual_ / self._scale_of(y)[:, None]
+    def normalised(self, y: np.ndarray) -> np.ndarray:
+        """The normalised remaining error ``(T, k)`` of a record ``y`` with the fitted bank,
+        scale and novelty (what the alarm stage reads)."""
+        r, e = self.bank_.parts(y)
+        scale = self.novelty_.scale(self.bank_, y)
+        return (r - e * self.bank_.use_mem) / self.v_residual_ / scale[:, None]
 
     def _finish(self) -> None:
-        super()._finish()
+        """Derived state shared by ``_fit`` and ``_set_state``."""
         self.v_ = np.maximum(self.v_residual_, 1e-9)
-        self._proj = DirectionalProjection()
-        self._proj.set_state({"weights": self.dir_weights_})
-        self.upper_ = np.concatenate([self.h_, self.h_dir_])
-        self._lower = np.full(len(self.upper_), -np.inf)
-        self._no_limit = np.full(len(self.upper_), np.inf)
-        self._hold_limits = self.baseline_hold * self.upper_
-        self._novelty_on = (
-            getattr(self, "prediction_range_", None) is not None and self.novelty_gain > 0
-        )
-
-    @property
-    def _n_slow_scales(self) -> int:
-        """How many slow scales the fitted directional tests carry (one limit a direction each)."""
-        m = len(self.directions_)
-        return len(self.h_dir_) // m - 1 if m and len(self.h_dir_) else 0
-
-    @property
-    def _has_slow_scale(self) -> bool:
-        """Whether the fitted directional tests carry a slow scale."""
-        return self._n_slow_scales > 0
-
-    def _signal_names(self) -> tuple[str, ...]:
-        m = len(self.directions_) if len(self.h_dir_) else 0
-        names = [f"{self.detector}[{f}]" for f in self._faults()[:m]]
-        n_slow = self._n_slow_scales
-        for j in range(n_slow):
-            tag = "slow" if n_slow == 1 else f"slow{j + 1}"
-            names += [f"{self.detector}-{tag}[{f}]" for f in self._faults()[:m]]
-        return ("T2[ewma]", *names)
+        self.directions_ = self.stage_.directions_
+        faults = self._fault_directions().faults
+        self.signal_names_ = self.stage_.signal_names(faults)
 
     # ---- detection -----------------------------------------------------------------------------
     def _reset(self) -> None:
-        super()._reset()
-        self._reset_stage()
-
-    def _reset_stage(self) -> None:
-        """Fresh alarm-stage state: EWMA, sequential test and baseline."""
-        self._ewma = EWMA(self.ewma_lambda)
-        self._ewma_slow = [EWMA(lam) for lam in self._slow_lambdas()[: self._n_slow_scales]]
-        self._seq = self._sequential() if len(self.h_dir_) else None
-        self._over_run = 0  # samples in a row with a statistic over its limit
-        self._reset_baseline()
-
-    def _stage_step(
-        self, e: np.ndarray, *, warm: bool, phi: np.ndarray | None = None
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """One sample of the alarm stage: (baseline-removed error, signal). The one place the
-        recursion is written; streaming ``update`` and batch ``detect`` both call it. ``phi``:
-        the sample's regressors with ``baseline_filters``."""
-        et = e if self._b is None else e - self._baseline_value(phi)
-        z = self._ewma.update(et)
-        signal = np.empty(len(self.upper_))
-        signal[0] = z @ self.s_inv_ @ z
-        if self._seq is None:
-            pass
-        elif self.detector == DirectionalDetector.DIRECTIONAL:
-            if self._ewma_slow:
-                z = np.concatenate([z, *(ew.update(et) for ew in self._ewma_slow)])
-            signal[1:] = self.dir_weights_ @ z
-        else:
-            signal[1:] = self._seq.update(self.dir_weights_ @ et)
-        if self._b is not None and not warm:
-            inside = bool((signal <= self._hold_limits).all())
-            self._baseline_step(e, inside_hold=inside, phi=phi)
-        return et, signal
-
-    def _scores(self, e: np.ndarray, z: np.ndarray, seq: np.ndarray | None) -> np.ndarray:
-        """T² of the fast EWMA (the first k columns of ``z``) and the directional scores of all
-        of ``z`` (or the sequential statistics ``seq``)."""
-        t2 = np.atleast_1d(self.t2_.score(z[..., : len(self.out_idx_)]))
-        if not len(self.h_dir_):
-            return t2[..., None] if z.ndim == 2 else t2
-        if self.detector == DirectionalDetector.DIRECTIONAL:
-            d = self._proj.score(z)
-        else:
-            assert seq is not None
-            d = seq
-        if z.ndim == 2:
-            return np.column_stack([t2, d])
-        return np.concatenate([t2, d])
-
-    def _decision(self, resid: np.ndarray, signal: np.ndarray, warm: bool) -> Decision:
-        upper = self._no_limit if warm else self.upper_
-        self._over_run = self._over_run + 1 if (signal > upper).any() else 0
-        return Decision(self._over_run >= self.on_delay, signal, self._lower, upper, resid)
+        self.bank_.reset()
+        self.stage_.reset()
+        self._k = 0
 
     def _update(self, y: np.ndarray) -> Decision:
-        centre = self._step_centre(y)
-        y_out = y[self.out_idx_]
+        y_m, centre = self.bank_.step(y)
+        y_out = y[self.bank_.out_idx]
         warm = self._k < self.steady_window
         self._k += 1
         e = np.zeros(len(centre)) if warm else (y_out - centre) / self.v_residual_
-        if not warm and self._novelty_on:
-            d = self.prediction_range_.distance(self._step_y_m[self.novelty_relations_])
-            e /= novelty_scale(d, self.novelty_gain)
-        phi = self._baseline_features_step(y, self._step_y_m)  # the filters run while warm too
-        _, signal = self._stage_step(e, warm=warm, phi=phi)
-        return self._decision(y_out - centre, signal, warm)
+        if not warm and self.novelty_.active:
+            e /= self.novelty_.scale_step(y_m)
+        baseline = self.stage_.baseline
+        # the baseline's filters run while warm too
+        phi = None if baseline is None else baseline.features_step(y, y_m)
+        _, signal = self.stage_.step(e, warm=warm, phi=phi)
+        return self.stage_.decision(y_out - centre, signal, warm)
 
     def _detect(self, y: np.ndarray) -> Detection:
-        y_m, centre = self._outputs_and_centre(y)
-        resid = y[:, self.out_idx_] - centre
+        y_m, centre = self.bank_.outputs_and_centre(y)
+        resid = y[:, self.bank_.out_idx] - centre
         w = self.steady_window
-        e = resid / self.v_residual_ / self._scale_of(y)[:, None]
+        e = resid / self.v_residual_ / self.novelty_.scale(self.bank_, y)[:, None]
         e[:w] = 0.0
-        if self.baseline_lambda > 0:  # the baseline's hold makes the stage a recursion
-            # detect() has just reset the stage (base contract), so it starts fresh
-            phi = self._baseline_features(y, y_m)  # None without the regression
-            rows = [None] * len(e) if phi is None else list(phi)
-            sig = np.array(
-                [self._stage_step(e[k], warm=k < w, phi=rows[k])[1] for k in range(len(e))]
-            )
-        else:
-            z = EWMA(self.ewma_lambda).filter(e)
-            if self._has_slow_scale:
-                z = self._scales(z, [e])
-            seq = None
-            if len(self.h_dir_) and self.detector != DirectionalDetector.DIRECTIONAL:
-                seq = self._sequential().filter(self._proj.score(e))
-            sig = self._scores(e, z, seq)
+        baseline = self.stage_.baseline
+        # detect() has just reset the stage (base contract), so it starts fresh
+        phi = None if baseline is None else baseline.features(y, y_m)
+        sig = self.stage_.signals(e, w, phi)
         return Detection.from_decisions(
-            [self._decision(resid[k], sig[k], k < w) for k in range(y.shape[0])],
+            [self.stage_.decision(resid[k], sig[k], k < w) for k in range(y.shape[0])],
             self.signal_names_,
         )
 
     # ---- persistence ---------------------------------------------------------------------------
     def _get_state(self) -> dict[str, np.ndarray]:
-        rng = self.prediction_range_
+        rng = self.novelty_.range_
         return {
-            **super()._get_state(),
-            "directions": self.directions_,
-            "dir_weights": self.dir_weights_,
-            "h_dir": self.h_dir_,
+            **self.bank_.get_state(),
+            **self.stage_.get_state(),
+            "v_residual": self.v_residual_,
             "prediction_range": (np.zeros((3, 0)) if rng is None else rng.to_array()),
-            # the limits were calibrated with this baseline (a marker for older saves)
-            "baseline_filters": np.asarray(self.baseline_filters or [], dtype=np.float64),
         }
 
     def _set_state(self, state: dict[str, np.ndarray]) -> None:
+        self._set_bank_state(state)
         try:
-            self.directions_ = state["directions"]
-            self.dir_weights_ = state["dir_weights"]
-            self.h_dir_ = state["h_dir"]
+            self.v_residual_ = state["v_residual"]
+            rng = np.asarray(state["prediction_range"])
         except KeyError as e:
             raise ValueError(f"saved state lacks array {e.args[0]!r}") from None
-        if "prediction_range" in state:
-            rng = np.asarray(state["prediction_range"])
-            self.novelty_relations_ = exogenous_relations(self._relations())
-            if rng.size and rng.shape[-1] != len(self.novelty_relations_):
-                raise ValueError(
-                    f"prediction_range has {rng.shape[-1]} columns; allowed: one per relation "
-                    f"with exogenous inputs ({len(self.novelty_relations_)})"
-                )
-            self.prediction_range_ = PredictionRange.from_array(rng) if rng.size else None
-        else:  # saved before the novelty scale existed: it ran without one, and still does
-            self.novelty_relations_, self.prediction_range_ = np.zeros(0, dtype=int), None
-            self.novelty_gain = 0.0
-        if "baseline_filters" not in state:
-            # saved before the regression baseline existed: its limits were calibrated with the
-            # running mean, whatever the class's default is now, so it keeps the running mean
-            self.baseline_filters = None
-        super()._set_state(state)
+        self.novelty_ = self._new_novelty()
+        if rng.size and rng.shape[-1] != len(self.novelty_.relations):
+            raise ValueError(
+                f"prediction_range has {rng.shape[-1]} columns; allowed: one per relation "
+                f"with exogenous inputs ({len(self.novelty_.relations)})"
+            )
+        self.novelty_.range_ = PredictionRange.from_array(rng) if rng.size else None
+        self.stage_ = self._new_stage()
+        self.stage_.set_state(state)
+        self._finish()
+
+    def _load_extra(self, directory: Any) -> None:
+        super()._load_extra(directory)
+        if self.stage_.baseline is not None:  # the baseline reads the loaded networks' scalers
+            self.stage_.baseline.bind(self.bank_.in_idx, self.bank_.out_idx, self.bank_.lrgf)

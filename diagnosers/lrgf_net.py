@@ -26,7 +26,13 @@ from diagnosers.iir import (
 )
 from diagnosers.lrgf_fused import lrgf_free_run
 
-__all__ = ["LRGF", "InitialState", "lrgf_activation", "set_scaler_buffers"]
+__all__ = [
+    "LRGF",
+    "InitialState",
+    "contracted_denominator",
+    "lrgf_activation",
+    "set_scaler_buffers",
+]
 
 ArrayT = TypeVar("ArrayT", torch.Tensor, np.ndarray)
 
@@ -101,6 +107,92 @@ def set_scaler_buffers(
         raise ValueError("scaler scales must be positive")
 
 
+def contracted_denominator(theta: torch.Tensor, max_pole_radius: float) -> torch.Tensor:
+    """Filter denominators ``[a_1..a_r]`` (rows) from the raw parameters ``theta`` ``(v, r)``.
+
+    Reflection coefficients ``k = 0.999 tanh(theta)`` give roots in the open unit disk, which are
+    then contracted, ``a_j <- rho^j a_j``, into the radius ``rho = max_pole_radius``.
+    """
+    # Contracting the roots by rho gives an explicit margin: with k = tanh(theta) alone, poles
+    # approach the unit circle exponentially fast in r as the |k_j| saturate. Keeping |k| below
+    # 1 as well stops saturated parameters from producing exactly repeated roots, whose
+    # float64 rounding would move them by ~eps**(1/r) (past the margin for r >= 6).
+    a = denominator_from_reflection(_MAX_REFLECTION * torch.tanh(theta))
+    powers = max_pole_radius ** torch.arange(1, theta.shape[-1] + 1, dtype=theta.dtype)
+    return a * powers
+
+
+def _initial_values(
+    seed: int,
+    sizes: tuple[int, int, int, int],
+    init_pole_range: tuple[float, float],
+    max_pole_radius: float,
+) -> dict[str, np.ndarray]:
+    """Initial parameters of an :class:`LRGF` of ``sizes = (v, n, r, m)``, drawn from ``seed``.
+
+    Poles are drawn real in ``init_pole_range``; ``b, b0`` are rescaled so that each neuron's
+    filter has unit static gain ``|H_i(1)| = 1``, keeping ``z`` of the order of ``s`` whatever the
+    pole positions. ``g1`` is near 0 and ``g2 = 2``, so that ``f`` starts near ``tanh``.
+    """
+    rng = np.random.default_rng(seed)
+    v, n, r, m = sizes
+    lo, hi = init_pole_range
+    theta = np.empty((v, r))
+    for i in range(v):
+        poles = rng.uniform(lo, hi, size=r)
+        k = reflection_from_denominator(np.poly(poles / max_pole_radius)[1:])
+        # clustered real poles of high order can need |k| beyond the cap: clip (still stable)
+        theta[i] = np.arctanh(np.clip(k / _MAX_REFLECTION, -1 + 1e-9, 1 - 1e-9))
+    b = rng.normal(size=(v, r))
+    b0 = rng.normal(scale=0.5, size=v)
+    a = contracted_denominator(torch.from_numpy(theta), max_pole_radius)
+    num = numerator_from_state_space(a, torch.from_numpy(b), torch.from_numpy(b0))
+    dc = (num.sum(-1) / (1.0 + a.sum(-1))).numpy()
+    gain = np.where(np.abs(dc) > 1e-3, np.abs(dc), 1.0)
+    # the order of the draws is part of what a seed means: changing it changes every network
+    return {
+        "weight_in": rng.normal(scale=1.0 / math.sqrt(n), size=(v, n)),
+        "reflection_raw": theta,
+        "b": b / gain[:, None],
+        "b0": b0 / gain,
+        "g1": rng.normal(scale=0.1, size=v),
+        "g2_raw": np.full(v, _inverse_softplus(2.0)),
+        "weight_out": rng.uniform(-1.0, 1.0, size=(m, v)) / math.sqrt(v),
+    }
+
+
+def _check_sizes(
+    n_inputs: int, n_hidden: int, order: int, n_outputs: int, n_linear: int, steady_window: int
+) -> None:
+    """Raise ValueError naming the first of :class:`LRGF`'s size arguments out of range."""
+    for name, val in (("n_inputs", n_inputs), ("n_hidden", n_hidden), ("order", order)):
+        if isinstance(val, bool) or not isinstance(val, int) or val < 1:
+            raise ValueError(f"{name}={val!r} must be a positive integer")
+    if isinstance(n_outputs, bool) or not isinstance(n_outputs, int) or n_outputs < 1:
+        raise ValueError(f"n_outputs={n_outputs!r} must be a positive integer")
+    if isinstance(n_linear, bool) or not isinstance(n_linear, int) or not 0 <= n_linear <= n_hidden:
+        raise ValueError(
+            f"n_linear={n_linear!r}; allowed: an integer from 0 to n_hidden={n_hidden}"
+        )
+    if isinstance(steady_window, bool) or not isinstance(steady_window, int) or steady_window < 1:
+        raise ValueError(f"steady_window={steady_window!r} must be a positive integer")
+
+
+def _check_poles(
+    max_pole_radius: float, init_pole_range: tuple[float, float]
+) -> tuple[float, float]:
+    """Check :class:`LRGF`'s pole arguments; return ``init_pole_range`` as floats."""
+    if not 0.0 < max_pole_radius < 1.0:
+        raise ValueError(f"max_pole_radius={max_pole_radius!r} must lie in (0, 1)")
+    lo, hi = (float(p) for p in init_pole_range)
+    if not -max_pole_radius < lo <= hi < max_pole_radius:
+        raise ValueError(
+            f"init_pole_range={init_pole_range!r} must satisfy "
+            f"-max_pole_radius < low <= high < max_pole_radius (= {max_pole_radius})"
+        )
+    return lo, hi
+
+
 class LRGF(nn.Module):
     r"""LRGF network of IIR-filter neurons, eqs. (1)-(8) of the paper, with an optional scaler.
 
@@ -123,13 +215,10 @@ class LRGF(nn.Module):
 
     **Linear neurons** (``n_linear``, not in the paper; default 0). The last ``n_linear`` neurons
     skip the activation, ``f(z) = z``: a linear dynamic path beside the tanh neurons, which
-    extrapolates linearly where a sum of tanh units flattens. Why it is an option and not the
-    default: on the FCC's T_rg1 relation (9 training episodes, validation seeds 5000+) the
-    hottest 5 % of samples carry a mean error of +0.6 °C with 10 tanh neurons. One linear
-    neuron among 10 removed it for one initialisation (+0.04 °C) but not with 11 or 12 neurons
-    (+0.61, +0.77 °C); ``lrgf-glr``'s bank with one linear neuron per relation detected small
-    faults far later (small f1 r_td 0.53 against 0.97; README). ``g1`` and ``g2`` of a linear
-    neuron are unused (zero gradient).
+    extrapolates linearly where a sum of tanh units flattens. It is not the default because on
+    the FCC it did not reliably help the fit and made a bank detect small faults later (the
+    measurements are in the lab record). ``g1`` and ``g2`` of a linear neuron are unused (zero
+    gradient).
 
     Units: :meth:`forward` takes and returns *physical* units. It standardises the input with the
     buffers ``input_mean``/``input_scale``, runs eq. (6) (:meth:`forward_normalized`), and maps the
@@ -199,33 +288,8 @@ class LRGF(nn.Module):
         seed: int = 0,
     ) -> None:
         super().__init__()
-        for name, val in (("n_inputs", n_inputs), ("n_hidden", n_hidden), ("order", order)):
-            if isinstance(val, bool) or not isinstance(val, int) or val < 1:
-                raise ValueError(f"{name}={val!r} must be a positive integer")
-        if isinstance(n_outputs, bool) or not isinstance(n_outputs, int) or n_outputs < 1:
-            raise ValueError(f"n_outputs={n_outputs!r} must be a positive integer")
-        if (
-            isinstance(n_linear, bool)
-            or not isinstance(n_linear, int)
-            or not 0 <= n_linear <= n_hidden
-        ):
-            raise ValueError(
-                f"n_linear={n_linear!r}; allowed: an integer from 0 to n_hidden={n_hidden}"
-            )
-        if (
-            isinstance(steady_window, bool)
-            or not isinstance(steady_window, int)
-            or steady_window < 1
-        ):
-            raise ValueError(f"steady_window={steady_window!r} must be a positive integer")
-        if not 0.0 < max_pole_radius < 1.0:
-            raise ValueError(f"max_pole_radius={max_pole_radius!r} must lie in (0, 1)")
-        lo, hi = (float(p) for p in init_pole_range)
-        if not -max_pole_radius < lo <= hi < max_pole_radius:
-            raise ValueError(
-                f"init_pole_range={init_pole_range!r} must satisfy "
-                f"-max_pole_radius < low <= high < max_pole_radius (= {max_pole_radius})"
-            )
+        _check_sizes(n_inputs, n_hidden, order, n_outputs, n_linear, steady_window)
+        lo, hi = _check_poles(max_pole_radius, init_pole_range)
         try:
             self.initial_state = InitialState(initial_state)
         except ValueError:
@@ -269,33 +333,14 @@ class LRGF(nn.Module):
         filter has unit static gain ``|H_i(1)| = 1``, keeping ``z`` of the order of ``s`` whatever the
         pole positions. ``g1 = 0`` and ``g2 = 2`` make ``f = tanh`` at the start.
         """
-        rng = np.random.default_rng(self.seed)
-        v, n, r, m = self.n_hidden, self.n_inputs, self.order, self.n_outputs
-        lo, hi = self.init_pole_range
-        theta = np.empty((v, r))
-        for i in range(v):
-            poles = rng.uniform(lo, hi, size=r)
-            k = reflection_from_denominator(np.poly(poles / self.max_pole_radius)[1:])
-            # clustered real poles of high order can need |k| beyond the cap: clip (still stable)
-            theta[i] = np.arctanh(np.clip(k / _MAX_REFLECTION, -1 + 1e-9, 1 - 1e-9))
-        b = rng.normal(size=(v, r))
-        b0 = rng.normal(scale=0.5, size=v)
-        a = self._denominator(torch.from_numpy(theta))
-        num = numerator_from_state_space(a, torch.from_numpy(b), torch.from_numpy(b0))
-        dc = (num.sum(-1) / (1.0 + a.sum(-1))).numpy()
-        gain = np.where(np.abs(dc) > 1e-3, np.abs(dc), 1.0)
-        dt = self.weight_in.dtype
-
-        def put(p: torch.Tensor, x: np.ndarray) -> None:
-            p.copy_(torch.as_tensor(x, dtype=dt))
-
-        put(self.weight_in, rng.normal(scale=1.0 / math.sqrt(n), size=(v, n)))
-        put(self.reflection_raw, theta)
-        put(self.b, b / gain[:, None])
-        put(self.b0, b0 / gain)
-        put(self.g1, rng.normal(scale=0.1, size=v))
-        put(self.g2_raw, np.full(v, _inverse_softplus(2.0)))
-        put(self.weight_out, rng.uniform(-1.0, 1.0, size=(m, v)) / math.sqrt(v))
+        values = _initial_values(
+            self.seed,
+            (self.n_hidden, self.n_inputs, self.order, self.n_outputs),
+            self.init_pole_range,
+            self.max_pole_radius,
+        )
+        for name, x in values.items():
+            getattr(self, name).copy_(torch.as_tensor(x, dtype=self.weight_in.dtype))
         if self.bias_out is not None:
             self.bias_out.zero_()
 
@@ -304,15 +349,6 @@ class LRGF(nn.Module):
     def g2(self) -> torch.Tensor:
         """Activation slopes ``g2 > 0``, shape ``(v,)``."""
         return F.softplus(self.g2_raw)
-
-    def _denominator(self, theta: torch.Tensor) -> torch.Tensor:
-        # Contracting the roots by rho gives an explicit margin: with k = tanh(theta) alone, poles
-        # approach the unit circle exponentially fast in r as the |k_j| saturate. Keeping |k| below
-        # 1 as well stops saturated parameters from producing exactly repeated roots, whose
-        # float64 rounding would move them by ~eps**(1/r) (past the margin for r >= 6).
-        a = denominator_from_reflection(_MAX_REFLECTION * torch.tanh(theta))
-        powers = self.max_pole_radius ** torch.arange(1, self.order + 1, dtype=theta.dtype)
-        return a * powers
 
     def filter_coefficients(self) -> tuple[torch.Tensor, torch.Tensor]:
         """Transfer-function coefficients of the neuron filters, always in float64.
@@ -324,7 +360,7 @@ class LRGF(nn.Module):
             ``(num, den)``: ``num = [n_0..n_r]`` of shape ``(v, r + 1)`` and ``den = [a_1..a_r]`` of
             shape ``(v, r)``; ``H_i(q) = num_i(q^-1) / (1 + den_i(q^-1))``.
         """
-        a = self._denominator(self.reflection_raw.double())
+        a = contracted_denominator(self.reflection_raw.double(), self.max_pole_radius)
         num = numerator_from_state_space(a, self.b.double(), self.b0.double())
         return num, a
 

@@ -17,9 +17,9 @@ from typing import Any
 
 import torch
 
-from diagnosers.lrgf import LRGF
-from diagnosers.mem import NNARXErrorModel
-from fcc_env.io import atomic_open, atomic_write
+from diagnosers.lrgf_net import LRGF
+from diagnosers.mem_net import NNARXErrorModel
+from fcc_common.io import atomic_open, atomic_write
 
 __all__ = ["build_module", "export_module", "load_bank", "paper_lrgf", "paper_mem", "save_bank"]
 

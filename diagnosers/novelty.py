@@ -21,7 +21,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["NoveltyScaled", "PredictionRange", "exogenous_relations", "novelty_scale"]
+__all__ = ["NoveltyScale", "PredictionRange", "exogenous_relations", "novelty_scale"]
 
 
 def exogenous_relations(relations: Sequence[tuple[str, Sequence[str]]]) -> np.ndarray:
@@ -75,41 +75,65 @@ def novelty_scale(distance: np.ndarray, gain: float) -> np.ndarray:
     return 1.0 + gain * np.asarray(distance, dtype=np.float64)
 
 
-class NoveltyScaled:
-    """The novelty of a bank diagnoser's records, for ``lrgf-glr`` (its networks ``lrgf_`` with
-    inputs ``in_idx_``, ``steady_window``, the hyperparameter ``novelty_gain``; the learned
-    ``novelty_relations_`` and ``prediction_range_``)."""
+class NoveltyScale:
+    """Divide a bank's normalised errors by ``1 + gain · d`` where its exogenous relations'
+    prediction leaves their training range by ``d`` training standard deviations.
 
-    lrgf_: list[Any]
-    in_idx_: list[np.ndarray]
-    steady_window: int
-    novelty_gain: float
-    novelty_relations_: np.ndarray
-    prediction_range_: PredictionRange | None
+    The optional part of ``lrgf-glr`` (``novelty_gain``). Args: ``gain`` ≥ 0 (0: off),
+    ``relations``: the indices of the relations with exogenous inputs only
+    (:func:`exogenous_relations`), ``steady_window``: the warm-up left out of the range.
 
-    def _exogenous_predictions(self, y: np.ndarray) -> np.ndarray:
-        """The current networks' outputs ``(T, c)`` of the relations with exogenous inputs."""
-        cols = [self.lrgf_[j].predict(y[:, self.in_idx_[j]])[:, 0] for j in self.novelty_relations_]
+    Attributes:
+        range_: the :class:`PredictionRange` of the bank's training predictions (after
+            :meth:`fit`; None when no relation has exogenous inputs only).
+    """
+
+    def __init__(self, gain: float, relations: np.ndarray, steady_window: int) -> None:
+        self.gain = gain
+        self.relations = relations
+        self.steady_window = steady_window
+        self.range_: PredictionRange | None = None
+
+    def predictions(self, bank: Any, y: np.ndarray) -> np.ndarray:
+        """The outputs ``(T, c)`` of the networks of ``bank`` (``lrgf`` and ``in_idx``) of the
+        relations with exogenous inputs, over a record ``y``."""
+        cols = [bank.lrgf[j].predict(y[:, bank.in_idx[j]])[:, 0] for j in self.relations]
         return np.column_stack(cols) if cols else np.zeros((y.shape[0], 0))
 
-    def _prediction_range(self, train: list[np.ndarray]) -> PredictionRange | None:
-        """The current networks' range on their training records (None: no such relation)."""
-        if not len(self.novelty_relations_):
+    def training_range(self, bank: Any, train: list[np.ndarray]) -> PredictionRange | None:
+        """The range of ``bank``'s predictions on its training records (None: no relation)."""
+        if not len(self.relations):
             return None
         w = self.steady_window
-        return PredictionRange.of([self._exogenous_predictions(y)[w:] for y in train])
+        return PredictionRange.of([self.predictions(bank, y)[w:] for y in train])
 
-    def _novelty_records(self, train: list[np.ndarray], cal: list[np.ndarray]) -> list[np.ndarray]:
-        """How far the current networks' prediction of each record of ``cal`` leaves their
-        range on ``train``, per sample."""
-        rng = self._prediction_range(train)
+    def fit(self, bank: Any, train: list[np.ndarray]) -> NoveltyScale:
+        """Learn ``range_`` from the training records of ``bank``."""
+        self.range_ = self.training_range(bank, train)
+        return self
+
+    def distances(
+        self, bank: Any, train: list[np.ndarray], cal: list[np.ndarray]
+    ) -> list[np.ndarray]:
+        """How far ``bank``'s prediction of each record of ``cal`` leaves its range on
+        ``train``, per sample (a fold bank measured against its own training range)."""
+        rng = self.training_range(bank, train)
         if rng is None:
             return [np.zeros(y.shape[0]) for y in cal]
-        return [rng.distance(self._exogenous_predictions(y)) for y in cal]
+        return [rng.distance(self.predictions(bank, y)) for y in cal]
 
-    def _scale_of(self, y: np.ndarray) -> np.ndarray:
-        """``1 + novelty_gain · d`` per sample of a record ``y`` ``(T, channels)``."""
-        if getattr(self, "prediction_range_", None) is None or self.novelty_gain == 0:
+    @property
+    def active(self) -> bool:
+        """Whether it scales at all (a range was learned and the gain is positive)."""
+        return self.range_ is not None and self.gain > 0
+
+    def scale(self, bank: Any, y: np.ndarray) -> np.ndarray:
+        """``1 + gain · d`` per sample of a record ``y`` ``(T, channels)``."""
+        if self.range_ is None or self.gain == 0:
             return np.ones(y.shape[0])
-        d = self.prediction_range_.distance(self._exogenous_predictions(y))
-        return novelty_scale(d, self.novelty_gain)
+        return novelty_scale(self.range_.distance(self.predictions(bank, y)), self.gain)
+
+    def scale_step(self, y_m: np.ndarray) -> np.ndarray:
+        """``1 + gain · d`` of one sample (a 0-d array) from the networks' outputs ``y_m``."""
+        assert self.range_ is not None
+        return novelty_scale(self.range_.distance(y_m[self.relations]), self.gain)

@@ -10,11 +10,11 @@ bits.
 
 Every job goes through the same path, :func:`_train_relation`, which returns the trained modules
 in their exported form (config + state dict as numpy arrays, from
-:func:`diagnosers.training.export_module`); the caller rebuilds them with
-:func:`diagnosers.training.build_module`. Torch modules never cross a process boundary as
+:func:`diagnosers.modules.export_module`); the caller rebuilds them with
+:func:`diagnosers.modules.build_module`. Torch modules never cross a process boundary as
 pickles, and the in-process path is the pooled one without the pool.
 
-The pool uses the ``spawn`` start method with :func:`fcc_env.workers.init_worker` (one thread per
+The pool uses the ``spawn`` start method with :func:`fcc_common.workers.init_worker` (one thread per
 worker, exit when the parent dies), as the sweep's local backend does. As with any ``spawn``
 pool, a script that trains with ``n_jobs > 1`` needs the ``if __name__ == "__main__":`` guard:
 each worker imports the script's main module.
@@ -32,17 +32,12 @@ from typing import Any, NamedTuple, TypeVar
 import numpy as np
 import torch
 
-from diagnosers.lrgf import LRGF
-from diagnosers.mem import NNARXErrorModel
-from diagnosers.training import (
-    FitResult,
-    build_module,
-    export_module,
-    fit_lrgf,
-    fit_mem,
-    torch_threads,
-)
-from fcc_env.workers import init_worker
+from diagnosers.lrgf_net import LRGF
+from diagnosers.mem_net import NNARXErrorModel
+from diagnosers.modules import build_module, export_module
+from diagnosers.optimisers import FitResult, torch_threads
+from diagnosers.training import fit_lrgf, fit_mem
+from fcc_common.workers import init_worker
 
 __all__ = ["BankSettings", "TrainedBank", "run_jobs", "train_banks"]
 

@@ -28,21 +28,21 @@ from collections.abc import Callable, Iterable
 from importlib import metadata
 from typing import Any
 
-from diagnosers.base import Diagnoser
+from diagnosers.contract import DiagnoserContract
 
 logger = logging.getLogger(__name__)
 
 #: Entry-point group of third-party diagnosers (see the module docstring).
 ENTRY_POINT_GROUP = "fcc_fault_diagnosis.diagnosers"
 
-_REGISTRY: dict[str, type[Diagnoser]] = {}
+_REGISTRY: dict[str, type[DiagnoserContract]] = {}
 _ENTRY_POINTS_LOADED = False
 
 
-def register(name: str) -> Callable[[type[Diagnoser]], type[Diagnoser]]:
+def register(name: str) -> Callable[[type[DiagnoserContract]], type[DiagnoserContract]]:
     """Class decorator: make ``cls`` available as ``diagnosers.make(name)``."""
 
-    def deco(cls: type[Diagnoser]) -> type[Diagnoser]:
+    def deco(cls: type[DiagnoserContract]) -> type[DiagnoserContract]:
         if name in _REGISTRY and _REGISTRY[name] is not cls:
             # A module imported twice under two names (``python script.py`` runs it as
             # __main__) defines a second class of the same qualified name: say so.
@@ -97,7 +97,7 @@ def load_entry_points(*, force: bool = False) -> None:
                 stacklevel=2,
             )
             continue
-        if isinstance(obj, type) and issubclass(obj, Diagnoser) and not obj.name:
+        if isinstance(obj, type) and issubclass(obj, DiagnoserContract) and not obj.name:
             register(ep.name)(obj)
         logger.debug("loaded diagnoser entry point %s = %s", ep.name, ep.value)
 
@@ -108,8 +108,8 @@ def available() -> list[str]:
     return sorted(_REGISTRY)
 
 
-def diagnoser_class(name: str) -> type[Diagnoser]:
-    """The class registered as ``name`` (e.g. to read its :meth:`Diagnoser.fast_params`)."""
+def diagnoser_class(name: str) -> type[DiagnoserContract]:
+    """The class registered as ``name`` (e.g. to read its ``fast_params()``)."""
     if name not in _REGISTRY:
         load_entry_points()
     try:
@@ -122,7 +122,7 @@ def diagnoser_class(name: str) -> type[Diagnoser]:
         ) from None
 
 
-def make(name: str, **hyperparameters: Any) -> Diagnoser:
+def make(name: str, **hyperparameters: Any) -> DiagnoserContract:
     """Build the diagnoser registered as ``name`` with the given hyperparameters."""
     cls = diagnoser_class(name)
     cls._check_param_names(hyperparameters)

@@ -10,7 +10,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
-from fcc_env.validation import invalid
+from fcc_common.validation import invalid
 
 __all__ = ["BANK_RELATIONS", "DILUTE_RELATIONS", "PAPER_RELATIONS", "parse_relations"]
 

@@ -31,7 +31,7 @@ import numpy as np
 
 import diagnosers
 from diagnosers import Decision, Detection, Diagnoser, Episode
-from fcc_env.validation import Real, check
+from fcc_common.validation import Real, check
 
 
 @diagnosers.register("cusum-example")

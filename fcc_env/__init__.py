@@ -1,5 +1,21 @@
 """FCC converter (riser + two-stage regenerator) as a Gymnasium environment with faults f1–f4.
 
+The modules, by job:
+
+- :mod:`~fcc_env.params`, :mod:`~fcc_env.physics`: the frozen parameters; the pure right-hand
+  side, the measurement map and the steady state; :mod:`~fcc_env.integrator`: RK4 stepping;
+- :mod:`~fcc_env.scenarios`: :class:`FaultSpec`, the one typed fault request, and the faults;
+  :mod:`~fcc_env.excitation`: the operating program; :mod:`~fcc_env.plant`: :class:`PlantConfig`,
+  the noise and the envelope; :mod:`~fcc_env.effects`, :mod:`~fcc_env.uncertainty`: undeclared
+  effects and per-episode plant draws;
+- :mod:`~fcc_env.episode_setup`: one episode's set-up, shared by :mod:`~fcc_env.env` (``FCC-v0``) and
+  :mod:`~fcc_env.simulation` (:func:`simulate_episodes`);
+- :mod:`~fcc_env.generate`, :mod:`~fcc_env.demo`, :mod:`~fcc_env.simulator_speed`: the commands.
+
+A :class:`FaultSpec` and a :class:`PlantConfig` are validated once, when built, and travel whole
+from ``gym.make`` or :func:`simulate_episodes` to the physics; the env's keywords
+(``scenario=``, ``fault_time=``, ``valve_beta=``...) are turned into them once, on entry.
+
 Importing the package registers ``FCC-v0``:
 
 >>> import gymnasium as gym
@@ -11,6 +27,8 @@ Importing the package registers ``FCC-v0``:
 
 from gymnasium.envs.registration import register, registry
 
+from fcc_env.excitation import Excitation
+from fcc_env.integrator import integrate_step
 from fcc_env.params import (
     INPUT_NAMES,
     MEASUREMENT_NAMES,
@@ -20,17 +38,17 @@ from fcc_env.params import (
     FCCParams,
     Measurement,
 )
-from fcc_env.physics import integrate_step, measure, rhs, steady_state
+from fcc_env.physics import measure, rhs, steady_state
+from fcc_env.plant import PlantConfig
 from fcc_env.scenarios import (
     DEFAULT_N_SAMPLES,
     FAULTS,
     SCENARIOS,
-    Excitation,
     FaultProfile,
     FaultSpec,
     Scenario,
 )
-from fcc_env.simulation import BatchResult, PlantConfig, simulate_episodes
+from fcc_env.simulation import BatchResult, simulate_episodes
 
 ENV_ID = "FCC-v0"
 #: 3999 steps = 4000 samples including the reset observation (the paper's horizon).

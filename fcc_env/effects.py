@@ -32,8 +32,8 @@ from typing import Any
 
 import numpy as np
 
+from fcc_common.validation import Real, check
 from fcc_env.params import INPUT_NAMES, MEASUREMENT_NAMES
-from fcc_env.validation import Real, check
 
 SECONDS_PER_DAY = 86_400.0
 SECONDS_PER_HOUR = 3_600.0

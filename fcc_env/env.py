@@ -9,30 +9,22 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from fcc_common.validation import Integer, check, invalid
 from fcc_env import effects as fx
-from fcc_env.params import MEASUREMENT_NAMES, N_MEASUREMENTS, NOMINAL_INPUTS
-from fcc_env.physics import AUX_NAMES, aux_kernel, measure_kernel, step_kernel
+from fcc_env.episode_setup import EpisodeStream, add_noise, setup_episode
+from fcc_env.params import NOMINAL_INPUTS
+from fcc_env.physics import AUX_NAMES
+from fcc_env.plant import AFTERBURN_WARNING_C, PlantConfig, plant_from_request, termination_reason
 from fcc_env.scenarios import (
     DEFAULT_N_SAMPLES,
+    ENV_FAULT_KEYWORDS,
     RANDOM_SCENARIO,
     FaultSpec,
     Scenario,
+    fault_from_request,
     fault_time_range,
 )
-from fcc_env.simulation import (
-    AFTERBURN_WARNING_C,
-    FAULT_OPTION_NAMES,
-    N_SAMPLES_RANGE,
-    RESET_OPTION_NAMES,
-    PlantConfig,
-    add_noise,
-    apply_multipliers,
-    generic_sample,
-    plant_from_request,
-    setup_episode,
-    termination_reason,
-)
-from fcc_env.validation import Integer, check, invalid
+from fcc_env.simulation import N_SAMPLES_RANGE
 
 #: Actuator limits on the applied inputs (program + action), as fractions of nominal.
 U_F_LIMITS_REL = (0.5, 1.5)
@@ -43,9 +35,8 @@ ACTION_SCALE = np.array([0.5 * NOMINAL_INPUTS[0], 0.15 * NOMINAL_INPUTS[1]])
 OBS_LOW = np.array([0.0] + [-100.0] * 7, dtype=np.float32)
 OBS_HIGH = np.array([500.0] + [1500.0] * 7, dtype=np.float32)
 
-_CHUNK = 512  # samples of program and noise drawn at a time
-#: Kept importable for one release: the default horizon is :data:`fcc_env.scenarios.DEFAULT_N_SAMPLES`.
-DEFAULT_HORIZON = DEFAULT_N_SAMPLES
+#: The keys ``reset(options=...)`` takes.
+RESET_OPTION_NAMES = ("fault", *ENV_FAULT_KEYWORDS, "plant_effects")
 
 
 class FCCEnv(gym.Env):
@@ -109,8 +100,8 @@ class FCCEnv(gym.Env):
     ## Arguments
     | kwarg / reset option | default | meaning |
     |---|---|---|
-    | fault | None | a :class:`fcc_env.FaultSpec` (the typed form of the five options below; |
-    |  |  | given with them, they must agree). As a reset option it replaces the make fault |
+    | fault | None | a :class:`fcc_env.FaultSpec` instead of the five options below (not both); |
+    |  |  | as a reset option it replaces the make fault |
     | scenario | "nominal" | nominal, f1–f4 or random |
     | fault_time | paper's | onset sample (int, inside the horizon) |
     | fault_magnitude | paper's | relative change ≥ 0 (direction fixed by the fault) |
@@ -174,7 +165,7 @@ class FCCEnv(gym.Env):
             },
         )
         #: The fault every episode asks for unless ``reset(options=...)`` overrides it.
-        self.fault_spec = FaultSpec.from_request(
+        self.fault_spec = fault_from_request(
             fault,
             {
                 "scenario": scenario,
@@ -216,7 +207,7 @@ class FCCEnv(gym.Env):
             options: per-episode overrides of the ``make`` keywords (``None``: none). Keys:
 
                 * ``fault``: a whole :class:`fcc_env.FaultSpec` replacing the ``make`` fault
-                  (any of the keys below given with it must agree with it);
+                  (not together with the keys below);
                 * ``scenario`` (``"nominal"``, ``"f1"``..``"f4"`` or ``"random"``),
                   ``fault_time`` (onset sample), ``fault_magnitude`` (relative size),
                   ``fault_profile`` (``"abrupt"`` or ``"incipient"``), ``ramp_samples``
@@ -234,40 +225,11 @@ class FCCEnv(gym.Env):
             ``afterburn_warning``, ``termination_reason`` and the auxiliary variables).
         """
         seed = check("seed", seed, Integer(0), None)
-        if options is not None and not isinstance(options, Mapping):
-            raise invalid(
-                "options",
-                options,
-                f"a dict with keys from {list(RESET_OPTION_NAMES)}, or None",
-                "e.g. options={'scenario': 'f1'}",
-            )
+        spec, effects = episode_request(options, self.fault_spec, self._plant_effects)
         super().reset(seed=seed)
-        options = {} if options is None else dict(options)
-        unknown = sorted(set(options) - set(RESET_OPTION_NAMES))
-        if unknown:
-            raise ValueError(
-                f"Unknown reset option(s) {unknown}. Allowed: {list(RESET_OPTION_NAMES)}"
-            )
-        effects = (
-            fx.resolve(options.pop("plant_effects"))
-            if "plant_effects" in options
-            else self._plant_effects
-        )
-        fault_opts = {k: options[k] for k in FAULT_OPTION_NAMES if k in options}
-        if options.get("fault") is not None:
-            # a whole spec replaces the make() fault; old keys given with it must agree
-            spec = FaultSpec.from_request(options["fault"], fault_opts)
-        else:
-            spec = self.fault_spec.with_options(fault_opts)
         setup = setup_episode(self.np_random, self.config, spec, self.horizon, effects)
         self.fault = setup.fault
-        self._schedule = setup.schedule
-        self._pidx = setup.schedule.pidx
-        self._program = setup.program
-        self._noise_rng = setup.noise_rng
-        self._u_prog = np.empty((0, len(NOMINAL_INPUTS)))
-        self._z = np.empty((0, N_MEASUREMENTS))
-        self._pm = np.empty((0, self._pidx.shape[0]))
+        self._episode = EpisodeStream(setup, self.config, self._p_base)
         self._k = 0
         self._x = self._x0.copy()
         self._action = np.zeros(2)
@@ -282,36 +244,12 @@ class FCCEnv(gym.Env):
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
         if not hasattr(self, "_x"):
             raise gym.error.ResetNeeded("call reset() before step()")
-        raw = np.asarray(action)
-        if raw.dtype.kind not in "biuf":
-            raise invalid(
-                "action", action, "two real numbers [Δu_F, ΔR_ar] in [-1, 1]", f"dtype {raw.dtype}"
-            )
-        a = raw.astype(np.float64)
-        if a.shape != (2,):
-            raise invalid(
-                "action", action, "shape (2,): [Δu_F, ΔR_ar] in [-1, 1]", f"shape {a.shape}"
-            )
-        if not np.isfinite(a).all():
-            raise invalid("action", a.tolist(), "finite values in [-1, 1] (larger are clipped)")
+        a = check_action(action)
         clipped = np.clip(a, -1.0, 1.0)
         self._saturated = bool((clipped != a).any())
         self._action = clipped * ACTION_SCALE
         k = self._k
-        u = self._inputs(k)
-        if self._schedule.generic:
-            p = apply_multipliers(self._p_base[None], self._pidx[None], self._mult(k)[None])
-            _, _, xn = generic_sample(
-                self._x[None], u[None], p, k, self._schedule, self.config.sample_time_s,
-                self.config.rk4_substeps,
-            )  # fmt: skip
-            x_next = xn[0]
-        else:
-            x_next = self._x.copy()
-            step_kernel(
-                x_next, u, self._p_base, self._pidx, self._mult(k),
-                self.config.sample_time_s / self.config.rk4_substeps, self.config.rk4_substeps,
-            )  # fmt: skip
+        x_next = self._episode.advance(self._x, self._inputs(k), k)
         reason = termination_reason(x_next)
         self._k = k + 1
         if reason == "numerical_failure":
@@ -346,52 +284,19 @@ class FCCEnv(gym.Env):
         )
 
     # ---- helpers -------------------------------------------------------------------------------
-    def _mult(self, k: int) -> np.ndarray:
-        self._ensure(k)
-        return self._pm[k]
-
-    def _ensure(self, k: int) -> None:
-        while self._u_prog.shape[0] <= k:
-            ks = np.arange(self._u_prog.shape[0], self._u_prog.shape[0] + _CHUNK)
-            chunk = self._schedule.inputs(ks, self._program.take(_CHUNK))
-            self._u_prog = np.concatenate([self._u_prog, chunk])
-            self._z = np.concatenate(
-                [self._z, self._noise_rng.standard_normal((_CHUNK, N_MEASUREMENTS))]
-            )
-            self._pm = np.concatenate([self._pm, self._schedule.multipliers(ks)])
-
-    def _measure(self, k: int) -> np.ndarray:
-        """Noise-free measurement of sample k (state, held input, plant effects)."""
-        if self._schedule.generic:
-            p = apply_multipliers(self._p_base[None], self._pidx[None], self._mult(k)[None])
-            y, _, _ = generic_sample(
-                self._x[None], self._u[None], p, k, self._schedule, self.config.sample_time_s,
-                self.config.rk4_substeps, advance=False,
-            )  # fmt: skip
-            y = y[0]
-        else:
-            y = measure_kernel(self._x, self._u, self._p_base, self._pidx, self._mult(k))
-        return self._schedule.measure(k, y) if self._schedule.measure_effects else y
-
     def _inputs(self, k: int) -> np.ndarray:
-        self._ensure(k)
-        u = self._u_prog[k].copy()
-        u[0] += self._action[0]
-        u[1] += self._action[1]
-        lo_f, hi_f = U_F_LIMITS_REL[0] * NOMINAL_INPUTS[0], U_F_LIMITS_REL[1] * NOMINAL_INPUTS[0]
-        lo_a, hi_a = R_AR_LIMITS_REL[0] * NOMINAL_INPUTS[1], R_AR_LIMITS_REL[1] * NOMINAL_INPUTS[1]
-        if not (lo_f <= u[0] <= hi_f and lo_a <= u[1] <= hi_a):
-            self._saturated = True
-            u[0] = min(max(u[0], lo_f), hi_f)
-            u[1] = min(max(u[1], lo_a), hi_a)
+        u, saturated = actuator_inputs(self._episode.program(k), self._action)
+        self._saturated = self._saturated or saturated
         return u
 
+    def _measure(self, k: int) -> np.ndarray:
+        return self._episode.measure(self._x, self._u, k)
+
     def _make_obs(self, k: int) -> np.ndarray:
-        self._ensure(k)
-        return add_noise(self._y_clean, self._z[k], self.config.noise_scale)
+        return add_noise(self._y_clean, self._episode.noise(k), self.config.noise_scale)
 
     def _get_info(self) -> dict[str, Any]:
-        aux = aux_kernel(self._x, self._u, self._p_base, self._pidx, self._mult(self._k))
+        aux = self._episode.aux(self._x, self._u, self._k)
         return {
             "t": self._k,
             "time_s": self._k * self.config.sample_time_s,
@@ -409,4 +314,60 @@ class FCCEnv(gym.Env):
         }
 
 
-__all__ = ["MEASUREMENT_NAMES", "FCCEnv"]
+def episode_request(
+    options: Any, fault: FaultSpec, plant_effects: list[Any]
+) -> tuple[FaultSpec, list[Any]]:
+    """The fault and plant effects of one episode: ``reset``'s ``options`` over the ``make`` ones.
+
+    ``fault`` replaces the ``make`` fault whole; the env's fault keywords change single fields of
+    it (``None`` restores a field's default); ``plant_effects`` replace the ``make`` effects.
+    """
+    if options is not None and not isinstance(options, Mapping):
+        raise invalid(
+            "options",
+            options,
+            f"a dict with keys from {list(RESET_OPTION_NAMES)}, or None",
+            "e.g. options={'scenario': 'f1'}",
+        )
+    options = {} if options is None else dict(options)
+    unknown = sorted(set(options) - set(RESET_OPTION_NAMES))
+    if unknown:
+        raise ValueError(f"Unknown reset option(s) {unknown}. Allowed: {list(RESET_OPTION_NAMES)}")
+    effects = fx.resolve(options["plant_effects"]) if "plant_effects" in options else plant_effects
+    keywords = {k: options[k] for k in ENV_FAULT_KEYWORDS if k in options}
+    if options.get("fault") is not None:
+        return fault_from_request(options["fault"], keywords), effects
+    return fault.with_env_options(keywords), effects
+
+
+def check_action(action: Any) -> np.ndarray:
+    """``action`` as two finite float64 numbers; errors name the value and what is allowed."""
+    raw = np.asarray(action)
+    if raw.dtype.kind not in "biuf":
+        raise invalid(
+            "action", action, "two real numbers [Δu_F, ΔR_ar] in [-1, 1]", f"dtype {raw.dtype}"
+        )
+    a = raw.astype(np.float64)
+    if a.shape != (2,):
+        raise invalid("action", action, "shape (2,): [Δu_F, ΔR_ar] in [-1, 1]", f"shape {a.shape}")
+    if not np.isfinite(a).all():
+        raise invalid("action", a.tolist(), "finite values in [-1, 1] (larger are clipped)")
+    return a
+
+
+def actuator_inputs(program: np.ndarray, move: np.ndarray) -> tuple[np.ndarray, bool]:
+    """The inputs applied: the program plus the action's ``move`` (kg/s, t/h) on u_F and R_ar,
+    held within the actuator limits; and whether a limit was hit."""
+    u = program.copy()
+    u[0] += move[0]
+    u[1] += move[1]
+    lo_f, hi_f = U_F_LIMITS_REL[0] * NOMINAL_INPUTS[0], U_F_LIMITS_REL[1] * NOMINAL_INPUTS[0]
+    lo_a, hi_a = R_AR_LIMITS_REL[0] * NOMINAL_INPUTS[1], R_AR_LIMITS_REL[1] * NOMINAL_INPUTS[1]
+    if lo_f <= u[0] <= hi_f and lo_a <= u[1] <= hi_a:
+        return u, False
+    u[0] = min(max(u[0], lo_f), hi_f)
+    u[1] = min(max(u[1], lo_a), hi_a)
+    return u, True
+
+
+__all__ = ["RESET_OPTION_NAMES", "FCCEnv", "actuator_inputs", "check_action", "episode_request"]

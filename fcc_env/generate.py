@@ -27,14 +27,16 @@ from typing import Any
 
 import numpy as np
 
-from fcc_env import effects as fx
-from fcc_env.io import (
+from fcc_common.io import (
     PARQUET_SUFFIXES,
     atomic_open,
     atomic_write_json,
     read_columns,
     require_pyarrow,
 )
+from fcc_common.validation import Real, check, invalid
+from fcc_env import MODEL_VERSION
+from fcc_env import effects as fx
 from fcc_env.params import (
     INPUT_NAMES,
     INPUT_UNITS,
@@ -44,19 +46,20 @@ from fcc_env.params import (
     STATE_UNITS,
     FCCParams,
 )
-from fcc_env.scenarios import DEFAULT_N_SAMPLES, SCENARIOS, FaultSpec
+from fcc_env.plant import DEFAULT_VALVE_BETA, ENV_PLANT_KEYWORDS, PlantConfig, plant_from_request
+from fcc_env.scenarios import (
+    DEFAULT_N_SAMPLES,
+    ENV_FAULT_KEYWORDS,
+    SCENARIOS,
+    FaultSpec,
+    fault_from_request,
+)
 from fcc_env.simulation import (
     DEFAULT_MEMORY_BUDGET_BYTES,
-    DEFAULT_VALVE_BETA,
-    FAULT_OPTION_NAMES,
-    PLANT_OPTION_NAMES,
     SEEDS_RANGE,
-    PlantConfig,
     check_memory,
-    plant_from_request,
     simulate_episodes,
 )
-from fcc_env.validation import Real, check, invalid
 
 DATASET_FORMAT = "fcc-dataset"
 #: 2: ``columns`` maps each column to its unit, description and role (was a list of names; a
@@ -193,28 +196,26 @@ def write_dataset(
     """Simulate ``seeds`` and write ``path`` (``.csv``, or ``.parquet``/``.pq`` with ``pyarrow``)
     plus ``path.with_suffix('.json')``.
 
-    ``fault`` and ``plant`` as for :func:`fcc_env.simulate_episodes`, or (as before) the env's
-    keywords ``scenario`` and ``env_kwargs`` (``fault_time``, ``valve_beta``, ``noise_scale``...);
+    ``fault`` and ``plant`` as for :func:`fcc_env.simulate_episodes`, or the env's keywords
+    ``scenario`` and ``env_kwargs`` (``fault_time``, ``valve_beta``, ``noise_scale``...);
     the sidecar records the resolved ``fault`` and ``plant``. ``plant_effects`` are undeclared
     effects (:mod:`fcc_env.effects`): recorded under ``truth_plant_effects`` for reproducibility,
     a field the modelling loop never reads. A request whose arrays would exceed
     ``memory_budget_bytes`` (default 4 GiB) is refused before simulating. Both files are written atomically
-    (:mod:`fcc_env.io`), so a crash never leaves a torn file, with the permissions of a plain
+    (:mod:`fcc_common.io`), so a crash never leaves a torn file, with the permissions of a plain
     ``open`` (0o666 less the umask). Returns the table's path.
     """
-    from fcc_env import MODEL_VERSION
-
     out = Path(path)
     if out.suffix.lower() not in DATASET_SUFFIXES:
         raise invalid("path", str(out), f"a file name ending in one of {list(DATASET_SUFFIXES)}")
     parquet = out.suffix.lower() in PARQUET_SUFFIXES
     pq = require_pyarrow(out, "writing") if parquet else None  # before simulating
-    fault_kw = {k: env_kwargs.pop(k) for k in FAULT_OPTION_NAMES if k in env_kwargs}
-    spec = FaultSpec.from_request(fault, {**fault_kw, "scenario": scenario})
-    unknown = sorted(set(env_kwargs) - set(PLANT_OPTION_NAMES))
+    fault_kw = {k: env_kwargs.pop(k) for k in ENV_FAULT_KEYWORDS if k in env_kwargs}
+    spec = fault_from_request(fault, {**fault_kw, "scenario": scenario})
+    unknown = sorted(set(env_kwargs) - set(ENV_PLANT_KEYWORDS))
     if unknown:
         raise ValueError(
-            f"Unknown option(s) {unknown}. Allowed: {[*FAULT_OPTION_NAMES, *PLANT_OPTION_NAMES]}"
+            f"Unknown option(s) {unknown}. Allowed: {[*ENV_FAULT_KEYWORDS, *ENV_PLANT_KEYWORDS]}"
         )
     config = plant_from_request(plant, env_kwargs)
     effects = fx.resolve(plant_effects)
@@ -376,14 +377,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         budget = check("--memory-budget-gib", args.memory_budget_gib, Real(0, closed="neither"))
         budget *= 2**30
-        fault = FaultSpec.from_options(
+        fault = fault_from_request(
+            None,
             {
                 "scenario": args.scenario,
                 "fault_time": args.fault_time,
                 "fault_magnitude": args.fault_magnitude,
                 "fault_profile": args.fault_profile,
                 "ramp_samples": args.ramp_samples,
-            }
+            },
         )
         plant = PlantConfig.build(
             valve_beta=args.valve_beta,

@@ -1,4 +1,5 @@
-"""FCC converter physics: a pure right-hand side, the riser solve, RK4 and the steady state.
+"""FCC converter physics: a pure right-hand side, the riser solve, the measurement map and the
+steady state (RK4 stepping of it is :mod:`fcc_env.integrator`).
 
 The model is ``shared/fcc-model.md`` §2 (riser, reactor/stripper with level loop, weirs, well and
 slide valve, two dense beds, two dilute phases). One scalar implementation is compiled with numba
@@ -8,7 +9,7 @@ reference), so every path computes the same numbers.
 Why numba: the riser temperature is the root of an implicit energy balance inside every RHS call
 (Newton, spec §2.1); in numpy the per-call overhead dominates (the spec's prototype managed 700
 samples/s for one episode). Compiled scalar code runs the whole RK4 step in microseconds, and the
-batch kernel is the same code in a loop over episodes.
+batch kernel (:mod:`fcc_env.integrator`) is the same code in a loop over episodes.
 
 Choices the specification leaves open (and why):
 
@@ -17,14 +18,14 @@ Choices the specification leaves open (and why):
   safeguarded iteration always converges; we stop when the Newton step is below 1e-9 °C.
 * Integrator: classical RK4 at ``substeps`` steps per sample with zero-order-hold inputs and
   parameters switched at sample boundaries (spec §2.8, §6); 1 step per sample is the spec's
-  recommendation (error 1.4e-3 °C worst case against LSODA, tested in ``tests/test_physics.py``).
+  recommendation (error 1.4e-3 °C worst case against LSODA, tested in ``tests/fcc_env/test_physics.py``).
 * Measurement timing: the measurement of sample k uses the state at t_k, the input held over
   [t_k, t_k+1) (so T_rx feeds through from T_fp and u_F, spec §2.8) and the parameters in force
   over that interval, so the f1 density jump shows in T_rx at the onset sample (spec §7.6, "@ 0").
 * Correction to the reference data: ``shared/fcc-reference/f1.csv`` reports T_rx computed with the
   *nominal* catalyst density in the slide-valve law while its states evolve with the faulty one
   (its T_rx sits 5.97 °C below the riser temperature its own dynamics use, from the onset on).
-  We measure the riser the dynamics see; ``tests/test_physics.py`` proves the explanation by
+  We measure the riser the dynamics see; ``tests/fcc_env/test_physics.py`` proves the explanation by
   reproducing the reference's f1 T_rx from its states with the nominal density.
 * ``max(0, ·)`` guards of the spec are kept as written (weir crest, level-loop flow, valve head).
 """
@@ -132,10 +133,13 @@ N_AUX = len(AUX_NAMES)
 
 # error_model="numpy": a plant driven outside its envelope yields inf/NaN (caught by the envelope
 # checks) instead of raising inside compiled code.
-_jit = functools.partial(numba.njit, cache=True, fastmath=False, nogil=True, error_model="numpy")
+#: The compiler options of every scalar kernel of the model and the integrator.
+njit_kernel = functools.partial(
+    numba.njit, cache=True, fastmath=False, nogil=True, error_model="numpy"
+)
 
 
-@_jit
+@njit_kernel
 def _catalyst_flow(x: np.ndarray, u: np.ndarray, p: np.ndarray) -> float:
     """Regenerated-catalyst circulation F_rc (kg/s) from the slide-valve law (spec §2.3)."""
     if p[P_BETA] == 0.0:
@@ -144,7 +148,7 @@ def _catalyst_flow(x: np.ndarray, u: np.ndarray, p: np.ndarray) -> float:
     return u[0] * math.sqrt(p[P_RHOB] / p[P_RHOB0]) * math.sqrt(max(0.0, head))
 
 
-@_jit
+@njit_kernel
 def _riser(T2: float, C2: float, W_rx: float, F_rc: float, u: np.ndarray, p: np.ndarray):
     """Solve the riser energy balance for T_rx (°C); returns (T_rx, X, g)."""
     F_feed, T_fp = u[4], u[3]
@@ -184,8 +188,8 @@ def _riser(T2: float, C2: float, W_rx: float, F_rc: float, u: np.ndarray, p: np.
     return T, X, g
 
 
-@_jit
-def _rhs_core(x: np.ndarray, u: np.ndarray, p: np.ndarray, dx: np.ndarray, aux: np.ndarray) -> None:
+@njit_kernel
+def rhs_core(x: np.ndarray, u: np.ndarray, p: np.ndarray, dx: np.ndarray, aux: np.ndarray) -> None:
     """Write dx/dt (per second, state units) into ``dx`` and algebraic outputs into ``aux``."""
     W_rx, C_sc, W1, C1, T1, W2, C2, T2, _W_sp, Td1, Tdg = (
         x[0],
@@ -310,7 +314,7 @@ def _rhs_core(x: np.ndarray, u: np.ndarray, p: np.ndarray, dx: np.ndarray, aux: 
     aux[13] = xig
 
 
-@_jit
+@njit_kernel
 def measurements_into(x: np.ndarray, u: np.ndarray, T_rx: float, y: np.ndarray) -> None:
     """The Table 1 measurement map, the one definition every path uses.
 
@@ -327,181 +331,23 @@ def measurements_into(x: np.ndarray, u: np.ndarray, T_rx: float, y: np.ndarray) 
     y[7] = x[10]
 
 
-@_jit
+@njit_kernel
 def measure_batch_kernel(X: np.ndarray, U: np.ndarray, AUX: np.ndarray, Y: np.ndarray) -> None:
     """Y[b] = the measurements of X[b], U[b] with T_rx = AUX[b, 0]; shapes (B, ·)."""
     for b in range(X.shape[0]):
         measurements_into(X[b], U[b], AUX[b, 0], Y[b])
 
 
-@_jit
-def _measure_core(x: np.ndarray, u: np.ndarray, p: np.ndarray, y: np.ndarray) -> None:
+@njit_kernel
+def measure_core(x: np.ndarray, u: np.ndarray, p: np.ndarray, y: np.ndarray) -> None:
     """Noise-free Table 1 measurements at state x with input u held over the next sample."""
     F_rc = _catalyst_flow(x, u, p)
     T_rx, _, _ = _riser(x[7], x[6], x[0], F_rc, u, p)
     measurements_into(x, u, T_rx, y)
 
 
-@_jit
-def _rk4_inplace(
-    x: np.ndarray, u: np.ndarray, p: np.ndarray, h: float, n: int, work: np.ndarray, k1_ready: bool
-):
-    """Advance x by n RK4 steps of h seconds (inputs and parameters held).
-
-    With ``k1_ready`` the caller has already evaluated the RHS at (x, u, p) into ``work[0]``.
-    """
-    k1, k2, k3, k4, xt, aux = work[0], work[1], work[2], work[3], work[4], work[5]
-    for step in range(n):
-        if not (k1_ready and step == 0):
-            _rhs_core(x, u, p, k1, aux)
-        for i in range(N_STATES):
-            xt[i] = x[i] + 0.5 * h * k1[i]
-        _rhs_core(xt, u, p, k2, aux)
-        for i in range(N_STATES):
-            xt[i] = x[i] + 0.5 * h * k2[i]
-        _rhs_core(xt, u, p, k3, aux)
-        for i in range(N_STATES):
-            xt[i] = x[i] + h * k3[i]
-        _rhs_core(xt, u, p, k4, aux)
-        for i in range(N_STATES):
-            x[i] = x[i] + h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
-
-
-@_jit
-def _apply_mult(p_base: np.ndarray, p_out: np.ndarray, pidx: np.ndarray, mult: np.ndarray):
-    """p_out = p_base with p_out[pidx[j]] *= mult[j] (entries < 0 are unused slots)."""
-    for j in range(p_base.shape[0]):
-        p_out[j] = p_base[j]
-    for j in range(pidx.shape[0]):
-        if pidx[j] >= 0:
-            p_out[pidx[j]] = p_out[pidx[j]] * mult[j]
-
-
-@_jit
-def _noisy(y: float, z: float, std_abs: float, std_rel: float, scale: float) -> np.float32:
-    return np.float32(y + (scale * (std_abs + std_rel * abs(y))) * z)
-
-
-@_jit
-def noisy_kernel(
-    y: np.ndarray, z: np.ndarray, std_abs: np.ndarray, std_rel: np.ndarray, scale: float
-) -> np.ndarray:
-    """Noisy float32 measurement of one sample (the env's path; the batch kernel inlines it)."""
-    out = np.empty(y.shape[0], dtype=np.float32)
-    for i in range(y.shape[0]):
-        out[i] = _noisy(y[i], z[i], std_abs[i], std_rel[i], scale)
-    return out
-
-
-@_jit
-def step_kernel(
-    x: np.ndarray,
-    u: np.ndarray,
-    p_base: np.ndarray,
-    pidx: np.ndarray,
-    mult: np.ndarray,
-    h: float,
-    substeps: int,
-) -> None:
-    """One sample of one episode, in place on ``x`` (the env's step)."""
-    p = np.empty_like(p_base)
-    _apply_mult(p_base, p, pidx, mult)
-    work = np.empty((6, N_STATES))
-    _rk4_inplace(x, u, p, h, substeps, work, False)
-
-
-@_jit
-def measure_kernel(
-    x: np.ndarray, u: np.ndarray, p_base: np.ndarray, pidx: np.ndarray, mult: np.ndarray
-) -> np.ndarray:
-    p = np.empty_like(p_base)
-    _apply_mult(p_base, p, pidx, mult)
-    y = np.empty(N_MEASUREMENTS)
-    _measure_core(x, u, p, y)
-    return y
-
-
-@_jit
-def aux_kernel(
-    x: np.ndarray, u: np.ndarray, p_base: np.ndarray, pidx: np.ndarray, mult: np.ndarray
-) -> np.ndarray:
-    p = np.empty_like(p_base)
-    _apply_mult(p_base, p, pidx, mult)
-    dx = np.empty(N_STATES)
-    aux = np.empty(N_AUX)
-    _rhs_core(x, u, p, dx, aux)
-    return aux
-
-
-@numba.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
-def rhs_batch_kernel(X: np.ndarray, U: np.ndarray, P: np.ndarray, DX: np.ndarray, AUX: np.ndarray):
-    """RHS of B episodes at once: X (B, 11), U (B, 6), P (B, n_params) -> DX, AUX."""
-    for b in numba.prange(X.shape[0]):
-        _rhs_core(X[b], U[b], P[b], DX[b], AUX[b])
-
-
-@numba.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
-def simulate_kernel(
-    x0: np.ndarray,  # (B, N_STATES)
-    U: np.ndarray,  # (B, T, N_INPUTS) inputs held over each sample
-    p_base: np.ndarray,  # (B, N_PARAMS)
-    pidx: np.ndarray,  # (B, K) int, parameter indices scaled per sample (-1 = unused)
-    PM: np.ndarray,  # (B, T, K) multipliers of those parameters over each sample
-    h: float,
-    substeps: int,
-    Z: np.ndarray,  # (B, T, N_MEASUREMENTS) standard-normal noise draws
-    noise_abs: np.ndarray,  # (N_MEASUREMENTS,) absolute noise std
-    noise_rel: np.ndarray,  # (N_MEASUREMENTS,) noise std relative to the value
-    noise_scale: float,
-    Y: np.ndarray,  # (B, T, N_MEASUREMENTS) out: noise-free measurements
-    OBS: np.ndarray,  # (B, T, N_MEASUREMENTS) float32 out: noisy measurements
-    Xs: np.ndarray,  # (B, T, N_STATES) out: states
-    AUX: np.ndarray,  # (B, T, N_AUX) out
-    add_noise: bool,
-) -> None:
-    """Simulate B episodes of T samples; same arithmetic as :func:`step_kernel` per episode.
-
-    With ``add_noise=False`` OBS is left untouched (the caller transforms Y first).
-    """
-    B, T = U.shape[0], U.shape[1]
-    for b in numba.prange(B):
-        x = x0[b].copy()
-        p = np.empty_like(p_base[b])
-        work = np.empty((6, N_STATES))
-        aux = work[5]
-        for k in range(T):
-            u = U[b, k]
-            _apply_mult(p_base[b], p, pidx[b], PM[b, k])
-            # One RHS evaluation gives the first RK4 stage, the info quantities and T_rx (the
-            # same riser solve the measurement would repeat).
-            _rhs_core(x, u, p, work[0], aux)
-            measurements_into(x, u, aux[0], Y[b, k])
-            if add_noise:
-                for i in range(N_MEASUREMENTS):
-                    OBS[b, k, i] = _noisy(
-                        Y[b, k, i], Z[b, k, i], noise_abs[i], noise_rel[i], noise_scale
-                    )
-            for i in range(N_STATES):
-                Xs[b, k, i] = x[i]
-            for i in range(N_AUX):
-                AUX[b, k, i] = aux[i]
-            if k + 1 < T:
-                _rk4_inplace(x, u, p, h, substeps, work, True)
-
-
-@numba.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
-def noisy_batch_kernel(Y, Z, noise_abs, noise_rel, noise_scale, OBS):
-    """OBS = noisy float32 Y, element for element as :func:`noisy_kernel`."""
-    for b in numba.prange(Y.shape[0]):
-        for k in range(Y.shape[1]):
-            for i in range(Y.shape[2]):
-                OBS[b, k, i] = _noisy(
-                    Y[b, k, i], Z[b, k, i], noise_abs[i], noise_rel[i], noise_scale
-                )
-
-
 # ---- Python-level pure functions ---------------------------------------------------------------
-def _as_param_array(p: FCCParams | np.ndarray) -> np.ndarray:
+def as_param_array(p: FCCParams | np.ndarray) -> np.ndarray:
     return p.as_array() if isinstance(p, FCCParams) else np.asarray(p, dtype=np.float64)
 
 
@@ -516,10 +362,10 @@ def rhs(t: float, x: np.ndarray, u: np.ndarray, p: FCCParams) -> np.ndarray:
     """
     dx = np.empty(N_STATES)
     aux = np.empty(N_AUX)
-    _rhs_core(
+    rhs_core(
         np.ascontiguousarray(x, dtype=np.float64),
         np.ascontiguousarray(u, dtype=np.float64),
-        _as_param_array(p),
+        as_param_array(p),
         dx,
         aux,
     )
@@ -530,27 +376,16 @@ def rhs_aux(x: np.ndarray, u: np.ndarray, p: FCCParams) -> dict[str, float]:
     """Algebraic quantities at (x, u): T_rx, F_rc, F_sc, X, O2 fractions, C_2 in wt%."""
     dx = np.empty(N_STATES)
     aux = np.empty(N_AUX)
-    _rhs_core(np.asarray(x, float), np.asarray(u, float), _as_param_array(p), dx, aux)
+    rhs_core(np.asarray(x, float), np.asarray(u, float), as_param_array(p), dx, aux)
     return dict(zip(AUX_NAMES, aux.tolist(), strict=True))
 
 
 def measure(x: np.ndarray, u: np.ndarray, p: FCCParams) -> np.ndarray:
     """Noise-free Table 1 measurements ``[R_ar, T_ar, T_fp, T_rx, T_rg1, T_rg2, T_d1, T_dg]``."""
     y = np.empty(N_MEASUREMENTS)
-    _measure_core(np.asarray(x, float), np.asarray(u, float), _as_param_array(p), y)
+    measure_core(np.asarray(x, float), np.asarray(u, float), as_param_array(p), y)
     return y
 
-
-def integrate_step(x: np.ndarray, u: np.ndarray, dt_s: float, p: FCCParams, substeps: int = 1):
-    """Pure RK4 step: the state after ``dt_s`` seconds with inputs and parameters held."""
-    x_next = np.array(x, dtype=np.float64)
-    step_kernel(
-        x_next, np.asarray(u, float), _as_param_array(p), NO_FAULT, 1.0, dt_s / substeps, substeps
-    )
-    return x_next
-
-
-NO_FAULT = np.array([-1, -1], dtype=np.int64)
 
 # Scaling of the steady-state unknowns (spec §6): kg/1e4, kg/kg/1e-3, °C/100.
 _SCALE = np.array([1e4, 1e-3, 1e4, 1e-3, 100.0, 1e4, 1e-3, 100.0, 1e4, 100.0, 100.0])

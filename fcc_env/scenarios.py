@@ -28,8 +28,8 @@ from typing import Any
 
 import numpy as np
 
-from fcc_env.params import NOMINAL_INPUTS, PARAM_INDEX
-from fcc_env.validation import Constraint, Integer, Options, Real, check, check_params, invalid
+from fcc_common.validation import Integer, Options, Real, check, invalid
+from fcc_env.params import PARAM_INDEX
 
 
 class Scenario(StrEnum):
@@ -136,17 +136,12 @@ def fault_time_range(horizon: int | None) -> Integer:
     return Integer(0, high, closed="left", why="a sample index inside the episode")
 
 
-def parse_scenario(value: Any) -> Scenario:
-    return Scenario(check("scenario", value, Options(Scenario)))
-
-
-def parse_profile(value: Any) -> FaultProfile:
-    return check("fault_profile", value, Options(FaultProfile))
-
-
 @dataclass(frozen=True)
-class FaultConfig:
-    """A resolved fault for one episode (``scenario == nominal`` means none)."""
+class EpisodeFault:
+    """The fault of one episode, resolved by :meth:`FaultSpec.resolve` (``nominal``: none).
+
+    What the physics reads: which parameter slots the fault scales and by how much per sample.
+    """
 
     scenario: Scenario
     onset: int = -1  # sample index at which the parameter switches; -1 = never
@@ -190,56 +185,35 @@ class FaultConfig:
         return self.scenario is not Scenario.NOMINAL and 0 <= self.onset <= k
 
 
-def resolve_fault(
-    scenario: Any,
-    fault_time: Any = None,
-    fault_magnitude: Any = None,
-    fault_profile: Any = "abrupt",
-    ramp_samples: Any = None,
-    horizon: int | None = None,
-) -> FaultConfig:
-    """Validate fault options and fill the paper's defaults; errors name the value and the range."""
-    sc = parse_scenario(scenario)
-    profile = parse_profile(fault_profile)
-    if sc is Scenario.NOMINAL:
-        return FaultConfig(Scenario.NOMINAL)
-    definition = FAULTS[sc]
-    onset = definition.default_onset if fault_time is None else fault_time
-    onset = check("fault_time", onset, fault_time_range(horizon))
-    mag = definition.default_magnitude if fault_magnitude is None else fault_magnitude
-    mag = check("fault_magnitude", mag, FAULT_MAGNITUDE_RANGE)
-    mag = check(
-        "fault_magnitude",
-        mag,
-        Real(0.0, definition.max_magnitude, why=f"for {sc.value}: {definition.max_reason}"),
-    )
-    ramp = 0
-    if profile is FaultProfile.INCIPIENT:
-        ramp = DEFAULT_RAMP_SAMPLES if ramp_samples is None else ramp_samples
-        ramp = check("ramp_samples", ramp, RAMP_SAMPLES_RANGE)
-    elif ramp_samples not in (None, 0):
-        raise ValueError(f"ramp_samples={ramp_samples!r} only applies to fault_profile='incipient'")
-    return FaultConfig(sc, onset, mag, profile, ramp)
+#: The env's keyword names for the :class:`FaultSpec` fields (``gym.make`` kwargs, ``reset``
+#: options, :func:`fcc_env.simulate_episodes`, the ``generate`` CLI): ``{keyword: field}``.
+ENV_FAULT_KEYWORDS: dict[str, str] = {
+    "scenario": "scenario",
+    "fault_time": "onset",
+    "fault_magnitude": "magnitude",
+    "fault_profile": "profile",
+    "ramp_samples": "ramp_samples",
+}
 
 
-#: ``(make/reset option name, FaultSpec field)``: the env's historical keyword names.
-FAULT_OPTION_FIELDS: tuple[tuple[str, str], ...] = (
-    ("scenario", "scenario"),
-    ("fault_time", "onset"),
-    ("fault_magnitude", "magnitude"),
-    ("fault_profile", "profile"),
-    ("ramp_samples", "ramp_samples"),
-)
+def _checked_magnitude(scenario: Scenario, magnitude: float) -> float:
+    """``magnitude`` of fault ``scenario``, within what the plant carries (the one check)."""
+    d = FAULTS[scenario]
+    why = f"for {scenario.value}: {d.max_reason}"
+    return check("fault_magnitude", magnitude, Real(0.0, d.max_magnitude, why=why))
 
 
 @dataclass(frozen=True, kw_only=True)
 class FaultSpec:
     """The fault an episode is asked for, before the horizon and any random draw resolve it.
 
-    This is the one typed scenario that the env (``make`` kwargs and ``reset`` options),
-    :func:`fcc_env.simulate_episodes`, the harness's data source, the leaderboard and the
-    ``generate`` CLI pass around; :meth:`resolve` turns it into the :class:`FaultConfig` of one
-    episode. ``None`` means the fault's own default (the table above, the paper's set-up).
+    The one typed fault that the env, :func:`fcc_env.simulate_episodes`, the harness's data
+    sources, the tracks and the ``generate`` CLI pass whole; it is validated once, here, on
+    construction, and :meth:`resolve` turns it into the :class:`EpisodeFault` of one episode
+    (what the physics reads). ``None`` means the fault's own default (the table above, the
+    paper's set-up). The env's keywords (``fault_time``, ``fault_magnitude``, ``fault_profile``)
+    name the fields ``onset``, ``magnitude``, ``profile`` (:data:`ENV_FAULT_KEYWORDS`); errors use
+    the env's names.
 
     Attributes:
         scenario: ``"nominal"``, ``"f1"``–``"f4"`` or ``"random"`` (scenario uniform over all
@@ -257,6 +231,10 @@ class FaultSpec:
     0.1
     >>> FaultSpec(scenario="f3", magnitude_scale=0.5).resolve(horizon=4000).magnitude
     0.05
+    >>> FaultSpec(scenario="f1", magnitude=0.5)
+    Traceback (most recent call last):
+    ...
+    ValueError: fault_magnitude=0.5 is outside the allowed range: a number in [0, 0.13] (for f1: ...)
     """
 
     scenario: str = Scenario.NOMINAL.value
@@ -267,9 +245,8 @@ class FaultSpec:
     magnitude_scale: float = 1.0
 
     def __post_init__(self) -> None:
-        sc = check("scenario", self.scenario, SCENARIO_OPTIONS)
         set_ = object.__setattr__
-        set_(self, "scenario", str(sc))
+        set_(self, "scenario", str(check("scenario", self.scenario, SCENARIO_OPTIONS)))
         set_(self, "onset", check("fault_time", self.onset, fault_time_range(None), None))
         set_(
             self,
@@ -289,67 +266,32 @@ class FaultSpec:
             "magnitude_scale",
             check("magnitude_scale", self.magnitude_scale, MAGNITUDE_SCALE_RANGE),
         )
+        if self.scenario in FAULTS:  # a fixed fault: its size is known now (a drawn one later)
+            sc = Scenario(self.scenario)
+            _checked_magnitude(sc, self._scaled(sc, self.magnitude))
 
-    @classmethod
-    def from_options(cls, options: Mapping[str, Any]) -> FaultSpec:
-        """Build from env-style options (``scenario``, ``fault_time``, ``fault_magnitude``,
-        ``fault_profile``, ``ramp_samples``); missing or ``None`` options take the defaults."""
-        kwargs = {
-            field: options[opt]
-            for opt, field in FAULT_OPTION_FIELDS
-            if options.get(opt) is not None
-        }
-        return cls(**kwargs)
+    def with_env_options(self, options: Mapping[str, Any]) -> FaultSpec:
+        """This spec with the env's keywords (:data:`ENV_FAULT_KEYWORDS`) applied; ``None``
+        gives a field its default. The one bridge from the env's keyword surface:
+        ``FaultSpec().with_env_options(make_kwargs)``, and ``reset(options=...)`` over the
+        ``make`` fault.
 
-    @classmethod
-    def from_request(
-        cls, fault: FaultSpec | None = None, options: Mapping[str, Any] | None = None
-    ) -> FaultSpec:
-        """The spec asked for by ``fault=`` and/or the env-style option names in ``options``.
-
-        Options that are ``None`` are not given. With both, every given option must agree with
-        ``fault`` (a clash raises, so a stale keyword never silently loses or wins).
+        >>> FaultSpec().with_env_options({"scenario": "f2", "fault_time": 100}).onset
+        100
         """
-        given = {k: v for k, v in (options or {}).items() if v is not None}
-        unknown = sorted(set(given) - {opt for opt, _ in FAULT_OPTION_FIELDS})
+        unknown = sorted(set(options) - set(ENV_FAULT_KEYWORDS))
         if unknown:
-            allowed = [opt for opt, _ in FAULT_OPTION_FIELDS]
-            raise ValueError(f"Unknown fault option(s) {unknown}. Allowed: {allowed}")
-        if fault is None:
-            return cls.from_options(given)
-        if not isinstance(fault, FaultSpec):
-            raise invalid("fault", fault, "a FaultSpec or None")
-        current = fault.to_options()
-        clash = {k: v for k, v in given.items() if current[k] != v}
-        if clash:
             raise ValueError(
-                f"fault={fault!r} conflicts with {clash}: pass the fault either as "
-                "fault=FaultSpec(...) or as the keywords "
-                f"{[opt for opt, _ in FAULT_OPTION_FIELDS]}, not both"
+                f"Unknown fault option(s) {unknown}. Allowed: {list(ENV_FAULT_KEYWORDS)}"
             )
-        return fault
-
-    def with_options(self, options: Mapping[str, Any]) -> FaultSpec:
-        """This spec with env-style options overriding it (``None`` restores a field's default),
-        as ``reset(options=...)`` overrides the ``make`` kwargs."""
-        fields = dict(FAULT_OPTION_FIELDS)
-        unknown = sorted(set(options) - set(fields))
-        if unknown:
-            raise ValueError(f"Unknown fault option(s) {unknown}. Allowed: {list(fields)}")
+        if not options:
+            return self
         defaults = {f.name: f.default for f in dataclasses.fields(self)}
-        changes = {
-            fields[opt]: defaults[fields[opt]] if v is None else v for opt, v in options.items()
-        }
-        return self.replace(**changes) if changes else self
-
-    def to_options(self) -> dict[str, Any]:
-        """The inverse of :meth:`from_options` (JSON-serialisable; ``magnitude_scale`` applied
-        to the magnitude only by :meth:`resolve`, so it is not an option)."""
-        return {
-            opt: (str(v) if isinstance(v, StrEnum) else v)
-            for opt, field in FAULT_OPTION_FIELDS
-            for v in [getattr(self, field)]
-        }
+        changes = {}
+        for opt, value in options.items():
+            name = ENV_FAULT_KEYWORDS[opt]
+            changes[name] = defaults[name] if value is None else value
+        return self.replace(**changes)
 
     def replace(self, **changes: Any) -> FaultSpec:
         return dataclasses.replace(self, **changes)
@@ -364,23 +306,22 @@ class FaultSpec:
             "magnitude_scale": self.magnitude_scale,
         }
 
-    def magnitude_for(self, scenario: Scenario, magnitude: float | None = None) -> float | None:
-        """The magnitude passed on for ``scenario`` (``magnitude`` or this spec's, ``None`` for
-        the fault's default) with ``magnitude_scale`` applied."""
-        magnitude = self.magnitude if magnitude is None else magnitude
-        if self.magnitude_scale == 1.0 or scenario not in FAULTS:
-            return magnitude
+    def _scaled(self, scenario: Scenario, magnitude: float | None) -> float:
+        """The magnitude of fault ``scenario`` (``None``: its paper default) × ``magnitude_scale``."""
         base = FAULTS[scenario].default_magnitude if magnitude is None else magnitude
-        return base * self.magnitude_scale
+        # unscaled values pass untouched, so a magnitude given is the magnitude simulated
+        return base if self.magnitude_scale == 1.0 else base * self.magnitude_scale
 
-    def resolve(self, horizon: int, rng: np.random.Generator | None = None) -> FaultConfig:
+    def resolve(self, horizon: int, rng: np.random.Generator | None = None) -> EpisodeFault:
         """The fault of one episode of ``horizon`` samples; ``rng`` draws a random scenario.
 
         The random draws always consume the same numbers of ``rng``, so the rest of the episode
-        does not depend on them. Errors name the value and the allowed range.
+        does not depend on them. Only what depends on the horizon or the draw is checked here
+        (the onset inside the episode, a drawn fault's size); errors name the value and the range.
         """
         sc_name, onset, magnitude = self.scenario, self.onset, self.magnitude
-        if sc_name == RANDOM_SCENARIO:
+        drawn = sc_name == RANDOM_SCENARIO
+        if drawn:
             if rng is None:
                 raise ValueError("scenario='random' needs a random generator to draw from")
             sc = list(Scenario)[int(rng.integers(len(Scenario)))]
@@ -394,140 +335,31 @@ class FaultSpec:
                     d = FAULTS[sc]
                     magnitude = min(d.default_magnitude * scale, d.max_magnitude)
         sc = Scenario(sc_name)
-        return resolve_fault(
-            sc,
-            onset,
-            self.magnitude_for(sc, magnitude),
-            self.profile,
-            self.ramp_samples,
-            horizon=horizon,
+        if sc is Scenario.NOMINAL:
+            return EpisodeFault(Scenario.NOMINAL)
+        onset = FAULTS[sc].default_onset if onset is None else onset
+        onset = check("fault_time", onset, fault_time_range(horizon))
+        magnitude = self._scaled(sc, magnitude)
+        if drawn:
+            magnitude = _checked_magnitude(sc, magnitude)
+        ramp = 0
+        if self.profile is FaultProfile.INCIPIENT:
+            ramp = DEFAULT_RAMP_SAMPLES if self.ramp_samples is None else self.ramp_samples
+        return EpisodeFault(sc, onset, magnitude, self.profile, ramp)
+
+
+def fault_from_request(fault: FaultSpec | None, keywords: Mapping[str, Any]) -> FaultSpec:
+    """``fault``, or the fault of the env's ``keywords`` (:data:`ENV_FAULT_KEYWORDS`; ``None`` =
+    not given); both at once raise, so a stale keyword never silently loses or wins."""
+    given = {k: v for k, v in keywords.items() if v is not None}
+    if fault is None:
+        return FaultSpec().with_env_options(given)
+    if not isinstance(fault, FaultSpec):
+        raise invalid("fault", fault, "a FaultSpec or None")
+    if given:
+        raise ValueError(
+            f"fault={fault!r} and the fault keyword(s) {sorted(given)} were both given: pass the "
+            f"fault either as fault=FaultSpec(...) or as the keywords {list(ENV_FAULT_KEYWORDS)}, "
+            "not both"
         )
-
-
-# ---- operating program (spec §7.5) -------------------------------------------------------------
-@dataclass(frozen=True)
-class Excitation:
-    """Amplitude-modulated pseudo-random steps (APRBS) on T_fp, T_ar and R_ar (spec §7.5).
-
-    Each new level is uniform in nominal ± half-range and is held for an integer number of samples
-    drawn uniformly from ``[hold_min, hold_max]``; the first ``warmup_samples`` stay at nominal.
-    The catalyst valve is held (exciting it would make the T_rx relation unidentifiable, spec §5).
-    """
-
-    T_fp_halfrange_C: float = 10.0
-    T_ar_halfrange_C: float = 10.0
-    R_ar_halfrange_rel: float = 0.05
-    hold_min: int = 20
-    hold_max: int = 200
-    warmup_samples: int = 100
-
-    @classmethod
-    def from_option(cls, value: Any) -> Excitation | None:
-        """``True``/``None`` → defaults, ``False`` → no excitation, a mapping → overrides."""
-        if value is None or value is True:
-            return cls()
-        if value is False:
-            return None
-        if isinstance(value, Excitation):
-            return value
-        if isinstance(value, Mapping):
-            allowed = set(cls.__dataclass_fields__)
-            unknown = sorted(set(value) - allowed)
-            if unknown:
-                raise ValueError(
-                    f"Unknown excitation option(s) {unknown}. Allowed: {sorted(allowed)}"
-                )
-            exc = cls(**value)
-            exc.validate()
-            return exc
-        raise invalid(
-            "excitation", value, "True, False, None, an Excitation or a mapping of its fields"
-        )
-
-    def validate(self) -> None:
-        check_params({name: getattr(self, name) for name in EXCITATION_RANGES}, EXCITATION_RANGES)
-        if self.hold_max < self.hold_min:
-            raise invalid(
-                "hold_max", self.hold_max, f"an integer >= hold_min={self.hold_min}", "hold range"
-            )
-
-
-#: Allowed values of the :class:`Excitation` fields.
-EXCITATION_RANGES: dict[str, Constraint] = {
-    "T_fp_halfrange_C": Real(0.0, 50.0, unit="°C"),
-    "T_ar_halfrange_C": Real(0.0, 50.0, unit="°C"),
-    "R_ar_halfrange_rel": Real(
-        0.0, 0.07, why="larger air moves leave the hot-state envelope, spec §4"
-    ),
-    "hold_min": Integer(1),
-    "hold_max": Integer(1),
-    "warmup_samples": Integer(0),
-}
-
-
-class ProgramGenerator:
-    """Streams the operating program: inputs ``(n, 6)`` per sample, chunk by chunk.
-
-    Each excited channel draws from its own generator, in blocks of ``_BLOCK`` levels and hold
-    times (one numpy call each instead of two per segment), so the program does not depend on
-    how it is chunked, and a seed gives the same program whatever the scenario.
-    """
-
-    _CHANNELS = (3, 2, 1)  # T_fp, T_ar, R_ar columns of the input vector
-    _BLOCK = 64
-
-    def __init__(self, excitation: Excitation | None, rngs: list[np.random.Generator]):
-        self.excitation = excitation
-        self.rngs = rngs
-        self.k = 0
-        self._level = NOMINAL_INPUTS[list(self._CHANNELS)].copy()
-        self._left = np.zeros(3, dtype=np.int64)
-        self._draws: list[tuple[np.ndarray, np.ndarray]] = [(np.empty(0), np.empty(0))] * 3
-        self._next = [0, 0, 0]
-
-    def _segment(self, c: int) -> tuple[float, int]:
-        """Next (offset in [-1, 1), hold samples) of channel c."""
-        ex = self.excitation
-        assert ex is not None
-        if self._next[c] >= self._draws[c][0].shape[0]:
-            rng = self.rngs[c]
-            offsets = rng.uniform(-1.0, 1.0, size=self._BLOCK)
-            holds = rng.integers(ex.hold_min, ex.hold_max, size=self._BLOCK, endpoint=True)
-            self._draws[c] = (offsets, holds)
-            self._next[c] = 0
-        j = self._next[c]
-        self._next[c] += 1
-        return float(self._draws[c][0][j]), int(self._draws[c][1][j])
-
-    def take(self, n: int) -> np.ndarray:
-        out = np.empty((n, NOMINAL_INPUTS.shape[0]))
-        out[:] = NOMINAL_INPUTS
-        ex = self.excitation
-        if ex is None:
-            self.k += n
-            return out
-        half = (
-            ex.T_fp_halfrange_C,
-            ex.T_ar_halfrange_C,
-            ex.R_ar_halfrange_rel * NOMINAL_INPUTS[1],
-        )
-        for c, col in enumerate(self._CHANNELS):
-            centre = NOMINAL_INPUTS[col]
-            i = max(0, min(n, ex.warmup_samples - self.k))  # warm-up samples stay at nominal
-            while i < n:
-                if self._left[c] == 0:
-                    offset, hold = self._segment(c)
-                    self._level[c] = centre + half[c] * offset
-                    self._left[c] = hold
-                m = int(min(self._left[c], n - i))
-                out[i : i + m, col] = self._level[c]
-                self._left[c] -= m
-                i += m
-        self.k += n
-        return out
-
-
-def episode_generators(rng: np.random.Generator) -> dict[str, Any]:
-    """Split an episode's generator into independent streams (program, noise, random fault)."""
-    children = rng.spawn(5)
-    return {"program": children[:3], "noise": children[3], "fault": children[4]}
+    return fault

@@ -65,11 +65,8 @@ A 1 % coking-factor step moves T_rx by about +0.9 Â°C and the dilute phases by â
 to invisible (the heat losses are a few kW against ~0.5 MW/K of catalyst heat flow); it is there
 to make the benchmark honest about it, not to be detected.
 
-Per-episode effect parameters cannot share one :func:`fcc_env.simulate_episodes` call (one effect
-object serves the whole batch and is not told the episode), and neither can per-episode
-parameters; :func:`simulate_drawn_episodes` therefore runs one call per seed, or one batch call
-once the simulator takes ``params`` per seed and ``episode_effects``
-(``scripts/simulation_per_episode.patch``), with identical numbers.
+Pass it to :func:`fcc_env.simulate_episodes` (``plant_uncertainty=PlantUncertainty()``): each
+seed's plant (parameters and effects) is drawn and simulated in the same batch.
 
 >>> draw = PlantUncertainty().draw(7)
 >>> draw == PlantUncertainty().draw(7)
@@ -81,14 +78,13 @@ True
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from fcc_common.validation import Integer, Real, check, invalid
 from fcc_env.params import FCCParams
-from fcc_env.validation import Integer, Real, check, invalid
 
 __all__ = [
     "GROUP_FIELDS",
@@ -98,8 +94,6 @@ __all__ = [
     "FeedQualityDrift",
     "PlantDraw",
     "PlantUncertainty",
-    "concatenate_results",
-    "simulate_drawn_episodes",
 ]
 
 #: Second word of the draw's seed sequence: keeps the plant stream apart from every episode stream.
@@ -279,49 +273,3 @@ class PlantUncertainty:
         out: dict[str, Any] = {k: getattr(self, k) for k in self.__dataclass_fields__}
         out["feed_drift_period_h"] = list(self.feed_drift_period_h)
         return out
-
-
-def concatenate_results(results: Sequence[Any]) -> Any:
-    """One :class:`fcc_env.BatchResult` from several (same n_samples and sample time)."""
-    from fcc_env.simulation import BatchResult
-
-    first = results[0]
-    arrays = ("observations", "y_clean", "fault_active", "inputs", "states", "aux")
-    kw: dict[str, Any] = {a: np.concatenate([getattr(r, a) for r in results]) for a in arrays}
-    for name in ("seeds", "scenarios", "fault_onsets", "fault_magnitudes", "termination_reasons"):
-        kw[name] = tuple(v for r in results for v in getattr(r, name))
-    kw["terminated_at"] = np.concatenate([r.terminated_at for r in results])
-    return BatchResult(**kw, sample_time_s=first.sample_time_s, aux_names=first.aux_names)
-
-
-def simulate_drawn_episodes(
-    seeds: Sequence[int],
-    n_samples: int = 4000,
-    *,
-    uncertainty: PlantUncertainty | None = None,
-    scenario: str | Sequence[str] = "nominal",
-    params: FCCParams | None = None,
-    plant_effects: Sequence[Any] = (),
-    **kwargs: Any,
-) -> Any:
-    """:func:`fcc_env.simulate_episodes` with each seed's drawn plant.
-
-    One batch call when the simulator takes per-episode ``params`` and ``episode_effects``
-    (``scripts/simulation_per_episode.patch``), else one call per seed; the numbers are the same.
-
-    ``uncertainty`` defaults to the ``uncertain`` track's :class:`PlantUncertainty`; ``params`` is
-    the base the draw scales; ``plant_effects`` are added to the drawn effects; other keywords go
-    to :func:`fcc_env.simulate_episodes` unchanged.
-    """
-    from fcc_env.simulation import simulate_episodes
-
-    unc = PlantUncertainty() if uncertainty is None else uncertainty
-    return simulate_episodes(
-        list(seeds),
-        n_samples,
-        scenario=scenario,
-        params=params,
-        plant_effects=list(plant_effects),
-        plant_uncertainty=unc,
-        **kwargs,
-    )

@@ -10,15 +10,13 @@ import sys
 import time
 from pathlib import Path
 
-import gymnasium as gym
 import numpy as np
 import pytest
 
 import fcc_env
 from diagnosers import Diagnoser, Episode, diagnoser_class, make
-from evaluation.store import ResultStore, StoreError
+from evaluation.sweep.store import ResultStore, StoreError
 from fcc_env import simulate_episodes
-from fcc_env.simulation import DEFAULT_MEMORY_BUDGET_BYTES, batch_nbytes
 
 CH = tuple(fcc_env.MEASUREMENT_NAMES)
 
@@ -32,75 +30,6 @@ def episodes() -> list[Episode]:
 @pytest.fixture(scope="module")
 def pca(episodes) -> Diagnoser:
     return make("pca").fit(episodes)
-
-
-# ---- item 7: memory budget -------------------------------------------------------------------
-def test_simulate_refuses_a_request_over_the_memory_budget() -> None:
-    with pytest.raises(ValueError) as e:
-        simulate_episodes(range(10**9), 2)
-    msg = str(e.value)
-    assert "1000000000 episodes x 2 samples" in msg and "643 GiB" in msg and "4 GiB" in msg
-    with pytest.raises(ValueError, match=r"2 episodes x 5 samples .* budget of 1e-06 GiB"):
-        simulate_episodes([0, 1], 5, memory_budget_bytes=2**30 * 1e-6)
-    assert DEFAULT_MEMORY_BUDGET_BYTES == 4 * 2**30
-    b = simulate_episodes([0], 3)
-    arrays = (b.observations, b.y_clean, b.fault_active, b.inputs, b.states, b.aux)
-    assert sum(a.nbytes for a in arrays) == batch_nbytes(1, 3)
-
-
-def test_generate_cli_refuses_before_building_the_seed_list(tmp_path, capsys) -> None:
-    from fcc_env.generate import main
-
-    t0 = time.perf_counter()
-    with pytest.raises(SystemExit) as e:
-        main(["--seeds", "0-999999999", "--samples", "2", "--out", str(tmp_path / "x.csv")])
-    assert e.value.code == 2 and time.perf_counter() - t0 < 5
-    err = capsys.readouterr().err
-    assert "--seeds 0-999999999 --samples 2" in err and "GiB" in err and "budget of 4 GiB" in err
-    with pytest.raises(SystemExit):
-        main(["--seeds", "0", "--out", str(tmp_path / "y.csv"), "--memory-budget-gib", "-1"])
-    assert "--memory-budget-gib=-1.0" in capsys.readouterr().err
-    assert not list(tmp_path.iterdir())
-
-
-# ---- items 9-10: the environment and the batch simulator -------------------------------------
-ENV_ID = "fcc/FCC-v0" if "fcc/FCC-v0" in gym.registry else "FCC-v0"
-
-
-@pytest.mark.parametrize(
-    ("call", "match"),
-    [
-        (lambda env: env.reset(options="f1"), r"options='f1' is outside .* a dict"),
-        (lambda env: env.reset(seed=1.5), r"seed=1\.5 is outside the allowed range"),
-        (lambda env: env.step(["a", "b"]), r"action=\['a', 'b'\] is outside .*dtype <U1"),
-        (lambda env: env.step(np.array([1j, 0])), r"action=array\(\[0\.\+1\.j.*complex128"),
-        (lambda env: env.step(None), r"action=None is outside"),
-    ],
-)
-def test_env_bad_calls(call, match) -> None:
-    env = gym.make(ENV_ID, horizon=10)
-    env.reset(seed=0)
-    with pytest.raises(ValueError, match=match):
-        call(env)
-
-
-def test_random_scenario_with_an_onset_beyond_the_horizon_fails_at_make() -> None:
-    with pytest.raises(ValueError, match=r"fault_time=50 is outside .* \[0, 20\)"):
-        gym.make(ENV_ID, scenario="random", fault_time=50, horizon=20)
-
-
-@pytest.mark.parametrize(
-    ("seeds", "match"),
-    [
-        ([1.5], r"seeds=\[1\.5\] .* \(1\.5 is not\)"),
-        (3, r"seeds=3 is outside"),
-        ("12", r"seeds='12' is outside"),
-        (None, r"seeds=None is outside"),
-    ],
-)
-def test_simulate_bad_seeds(seeds, match) -> None:
-    with pytest.raises(ValueError, match=match):
-        simulate_episodes(seeds, 3)
 
 
 # ---- items 8-10: diagnosers ------------------------------------------------------------------
@@ -273,7 +202,7 @@ def test_stale_tmp_files_are_removed_on_open(tmp_path) -> None:
 
 # ---- items 8, 10, 11: the sweep and the leaderboard CLI --------------------------------------
 def _small_sweep():
-    from evaluation.harness import SimulatedData, SweepConfig, default_specs
+    from evaluation.sweep import SimulatedData, SweepConfig, default_specs
 
     return SweepConfig(
         diagnosers=default_specs(("limits",)),
@@ -284,7 +213,7 @@ def _small_sweep():
 
 
 def test_wrong_type_in_a_cell_file_is_reported_before_any_work(tmp_path, monkeypatch) -> None:
-    from evaluation import sweep
+    from evaluation.sweep import runner as sweep
 
     cfg = _small_sweep()
     sweep.run_sweep(cfg, tmp_path / "s", n_workers=0, progress=False)
@@ -300,8 +229,8 @@ def test_wrong_type_in_a_cell_file_is_reported_before_any_work(tmp_path, monkeyp
 
 
 def test_bad_hyperparameter_fails_before_training(tmp_path, monkeypatch) -> None:
-    from evaluation import sweep
-    from evaluation.harness import DiagnoserSpec
+    from evaluation.sweep import DiagnoserSpec
+    from evaluation.sweep import runner as sweep
 
     cfg = _small_sweep()
     cfg = type(cfg)(diagnosers=(DiagnoserSpec("pca", {"alpha": 5}),), data=cfg.data)
@@ -342,12 +271,12 @@ def test_cli_backend_ray_without_ray(tmp_path, capsys, monkeypatch) -> None:
 
 
 def test_cli_store_error_does_not_say_rerun(tmp_path, capsys, monkeypatch) -> None:
-    import evaluation.leaderboard as lb
+    from evaluation.leaderboard import paper
 
     def corrupted(opts):
         raise StoreError("/x/cells/seed-0.json is not valid JSON: delete it to recompute")
 
-    monkeypatch.setattr(lb, "run", corrupted)
+    monkeypatch.setattr(paper, "run", corrupted)
     code, err = _cli(["--quick", "--out", str(tmp_path / "o")], capsys)
     assert code == 1 and "seed-0.json is not valid JSON" in err and "re-run" not in err
 
@@ -383,7 +312,7 @@ def _manifest(tmp_path: Path, **changes) -> Path:
     ],
 )
 def test_bad_manifest(tmp_path, changes, match) -> None:
-    from evaluation.external import load_manifest
+    from evaluation.sweep.dataset_loaders import load_manifest
 
     with pytest.raises(ValueError, match=match):
         load_manifest(_manifest(tmp_path, **changes))
@@ -409,7 +338,7 @@ def _lab_refuses(script: str, args: list[str], message: str) -> None:
     checked before any bank is loaded or episode simulated."""
     root = Path(__file__).resolve().parents[1]
     done = subprocess.run(
-        [sys.executable, str(root / "scripts" / script), *args],
+        [sys.executable, str(root / "lab" / script), *args],
         capture_output=True,
         text=True,
         cwd=root,

@@ -2,8 +2,7 @@
 
 ``python -m evaluation.discover --data PATH.csv --out DIR [--candidates id,id] [--train-fraction 0.6]
 [--max-effects 3]`` or, as a library, :func:`discover`, which returns a frozen
-:class:`DiscoveryReport` (``report.to_json()`` is the dict that ``DIR/report.json`` holds, and
-what ``discover`` returned before this package was split).
+:class:`DiscoveryReport` (``report.to_json()`` is the dict that ``DIR/report.json`` holds).
 
 The package, one room per concern:
 
@@ -12,18 +11,18 @@ The package, one room per concern:
                           ``commanded`` columns of a dataset (truth columns are never parsed)
 ``base``                  the adapter protocol: :class:`ModelAdapter`, :class:`Candidate`,
                           :class:`ParamInfo`, :class:`FitResult`
-``physics``               :class:`PhysicsModel` (the compiled FCC model; candidates: the effects
+``physics_model``         :class:`PhysicsModel` (the compiled FCC model; candidates: the effects
                           of :mod:`fcc_env.effects` and user :class:`PhysicsCandidate`)
 ``arx``                   :class:`ARXModel` and the :class:`MissingInput` candidates
-``lrgf``                  :class:`~evaluation.discover.lrgf.LRGFModel` (imported on demand: torch)
+``lrgf_model``            :class:`~evaluation.discover.lrgf_model.LRGFModel` (imported on demand: torch)
 ``fitting``               :func:`fit_effects`: bounded simulation-error least squares
 ``scoring``               :func:`heldout_comparison`, :func:`structure_statistics`
 ``loop``                  :func:`discover`
 ``report``                :class:`DiscoveryReport`, residual tests and plots of the report
+``residual_tests``        whiteness, bias, drift and correlation tests of a residual
 ``cli``                   ``python -m evaluation.discover``
+``loop_speed``            ``python -m evaluation.discover.loop_speed``: wall time of the loop
 ========================  =========================================================================
-
-The residual tests themselves live in :mod:`evaluation.residual_tests`.
 
 Limitations (stated, not hidden): a first-order *sensor lag on a model input channel* (T_ar,
 T_fp) cannot be inverted without differentiating noise, so those candidates are not offered
@@ -51,7 +50,7 @@ from evaluation.discover.data import (
 )
 from evaluation.discover.fitting import ar1_inflation, fit_effects
 from evaluation.discover.loop import TRAIN_FRACTION_RANGE, discover
-from evaluation.discover.physics import (
+from evaluation.discover.physics_model import (
     PHYSICS_INPUT_CHANNELS,
     PHYSICS_OUTPUT_CHANNELS,
     PhysicsCandidate,
@@ -59,7 +58,7 @@ from evaluation.discover.physics import (
     first_order_lag,
     library_candidates,
 )
-from evaluation.discover.report import AcceptedEffect, DiscoveryReport, write_json_atomic
+from evaluation.discover.report import AcceptedEffect, DiscoveryReport
 from evaluation.discover.scoring import (
     LF_LIMIT,
     LF_WINDOW,
@@ -105,5 +104,4 @@ __all__ = [
     "missing_input_candidates",
     "noise_levels",
     "structure_statistics",
-    "write_json_atomic",
 ]

@@ -2,7 +2,7 @@
 
 :class:`MissingInputAdapter` is the shared part (declared inputs per output, candidate channels
 and delays); :class:`ARXModel` is a linear ARX model per output channel fitted on the training
-part; the LRGF adapter (:mod:`evaluation.discover.lrgf`) builds on the same base.
+part; the LRGF adapter (:mod:`evaluation.discover.lrgf_model`) builds on the same base.
 """
 
 from __future__ import annotations
@@ -16,7 +16,7 @@ from scipy import signal
 from evaluation.discover.base import Candidate, FitResult, ParamInfo
 from evaluation.discover.data import MeasuredData
 from evaluation.discover.fitting import ar1_inflation
-from fcc_env.validation import Integer, check
+from fcc_common.validation import Integer, check
 
 __all__ = ["ARXModel", "MissingInput", "MissingInputAdapter", "missing_input_candidates"]
 

@@ -8,12 +8,11 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Protocol, runtime_checkable
+from typing import Protocol, runtime_checkable
 
 import numpy as np
 
-if TYPE_CHECKING:
-    from evaluation.discover.data import MeasuredData
+from evaluation.discover.data import MeasuredData
 
 __all__ = ["Candidate", "FitResult", "ModelAdapter", "ParamInfo"]
 

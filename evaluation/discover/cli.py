@@ -4,9 +4,9 @@ DIR/dataset.json) --out DIR [--candidates id,id] [--train-fraction 0.6] [--max-e
 
 ``--data`` reads a dataset with this project's JSON sidecar (CSV or Parquet). ``--external`` and
 ``--manifest`` read a user's directory through its manifest
-(:func:`evaluation.external.load_manifest`: inputs, outputs, sample time, the healthy
+(:func:`evaluation.sweep.external_data.load_manifest`: inputs, outputs, sample time, the healthy
 ``train_files``). When the manifest's channels include those of the FCC physics model
-(:class:`~evaluation.discover.physics.PhysicsModel`) it is used; otherwise the declared model is
+(:class:`~evaluation.discover.physics_model.PhysicsModel`) it is used; otherwise the declared model is
 a linear ARX model of each output from the manifest's inputs
 (:class:`~evaluation.discover.arx.ARXModel`), whose candidates are missing measured inputs.
 """
@@ -18,8 +18,12 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from evaluation.discover.arx import ARXModel
+from evaluation.discover.data import from_external
 from evaluation.discover.loop import discover
+from evaluation.discover.physics_model import PHYSICS_INPUT_CHANNELS, PHYSICS_OUTPUT_CHANNELS
 from evaluation.discover.report import REPORT_FILE
+from evaluation.sweep.dataset_loaders import load_manifest
 
 __all__ = ["main"]
 
@@ -29,11 +33,6 @@ def _source(args: argparse.Namespace) -> tuple[Any, Any]:
     the physics model (if its channels allow) or an ARX model of its outputs from its inputs."""
     if args.data is not None:
         return args.data, None
-    from evaluation.discover.arx import ARXModel
-    from evaluation.discover.data import from_external
-    from evaluation.discover.physics import PHYSICS_INPUT_CHANNELS, PHYSICS_OUTPUT_CHANNELS
-    from evaluation.external import load_manifest
-
     ext, _ = load_manifest(args.external if args.external is not None else args.manifest)
     data = from_external(ext)
     needed = {"cmd_u_F", "cmd_R_ar", *PHYSICS_INPUT_CHANNELS, *PHYSICS_OUTPUT_CHANNELS}

@@ -17,9 +17,9 @@ from typing import Any
 
 import numpy as np
 
+from fcc_common.io import read_columns, read_header
+from fcc_common.validation import Real, check
 from fcc_env.generate import DATASET_FORMAT, DATASET_SUFFIXES, read_sidecar
-from fcc_env.io import read_columns, read_header
-from fcc_env.validation import Real, check
 
 __all__ = [
     "DATASET_FORMAT",
@@ -145,8 +145,8 @@ def load_measured(path: str | os.PathLike) -> MeasuredData:
 
 
 def from_external(data: Any) -> MeasuredData:
-    """The healthy training records of an :class:`evaluation.external.ExternalData` (e.g. from
-    :func:`evaluation.external.load_manifest`): its ``inputs`` and ``outputs`` channels, one
+    """The healthy training records of an :class:`evaluation.sweep.external_data.ExternalData` (e.g. from
+    :func:`evaluation.sweep.external_data.load_manifest`): its ``inputs`` and ``outputs`` channels, one
     episode per record (a file's ``episode`` column splits it), at its ``sample_time_s``.
 
     The loop needs equal-length episodes: longer records are cut to the shortest one's length.

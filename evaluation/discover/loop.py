@@ -3,7 +3,7 @@
 1. *Residual*: the model is simulated on the measured inputs (output error, never one-step
    prediction); the residual of every output channel is split in time into a training part (the
    first ``train_fraction`` of every episode) and a held-out part (the rest).
-2. *Diagnose*: per channel, :func:`evaluation.residual_tests.diagnose`, before and after, on the
+2. *Diagnose*: per channel, :func:`evaluation.discover.residual_tests.diagnose`, before and after, on the
    held-out part.
 3. *Trace*: every candidate effect is fitted on the training part by simulation-error least
    squares (:func:`~evaluation.discover.fitting.fit_effects`) with the channels weighted by
@@ -37,7 +37,7 @@ import numpy as np
 from evaluation.discover.base import Candidate, ModelAdapter
 from evaluation.discover.data import MeasuredData, load_measured
 from evaluation.discover.fitting import fit_effects
-from evaluation.discover.physics import PhysicsModel
+from evaluation.discover.physics_model import PhysicsModel
 from evaluation.discover.report import (
     AcceptedEffect,
     DiscoveryReport,
@@ -55,7 +55,7 @@ from evaluation.discover.scoring import (
     noise_levels,
     structure_statistics,
 )
-from fcc_env.validation import Integer, Real, check
+from fcc_common.validation import Integer, Real, check
 
 __all__ = ["ALPHA", "MAX_EFFECTS", "TRAIN_FRACTION", "TRAIN_FRACTION_RANGE", "discover"]
 

@@ -11,18 +11,19 @@ from __future__ import annotations
 import copy
 import math
 import os
-import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
 
-from evaluation import residual_tests as rt
+from evaluation.discover import residual_tests as rt
 from evaluation.discover.base import Candidate
 from evaluation.discover.data import MeasuredData
-from fcc_env.io import atomic_write_json
+from fcc_common.io import atomic_write_json
 
 __all__ = [
     "REPORT_FILE",
@@ -33,7 +34,6 @@ __all__ = [
     "per_channel",
     "plot_residuals",
     "residual_diagnostics",
-    "write_json_atomic",
 ]
 
 REPORT_FILE = "report.json"
@@ -84,9 +84,7 @@ class DiscoveryReport:
     """What :func:`~evaluation.discover.discover` found, with typed fields.
 
     Per-channel values are ``{channel: value}`` mappings (``None`` for a non-finite value).
-    :meth:`to_json` gives the plain dict that ``report.json`` holds, key for key; callers of the
-    earlier ``discover`` (which returned that dict) get it with ``discover(...).to_json()``.
-    ``report["key"]`` still works for one release but is deprecated.
+    :meth:`to_json` gives the plain dict that ``report.json`` holds, key for key.
     """
 
     tool: str = "evaluation.discover"
@@ -107,7 +105,7 @@ class DiscoveryReport:
     structure_before: Mapping[str, Mapping[str, float | None]]  # "ratio", "lf" per channel
     structure_after: Mapping[str, Mapping[str, float | None]]
     structure_limits: Mapping[str, float]
-    tests_before: Mapping[str, Any]  # evaluation.residual_tests.diagnose per channel
+    tests_before: Mapping[str, Any]  # evaluation.discover.residual_tests.diagnose per channel
     tests_after: Mapping[str, Any]
     rounds: tuple[Mapping[str, Any], ...]  # every round's candidate table
     skipped_candidates: Mapping[str, str]
@@ -154,20 +152,6 @@ class DiscoveryReport:
         """Write :meth:`to_json` to ``out_dir/report.json`` atomically; returns the path."""
         return atomic_write_json(Path(out_dir) / REPORT_FILE, self.to_json())
 
-    def __getitem__(self, key: str) -> Any:
-        warnings.warn(
-            "indexing the discovery report like a dict is deprecated; use its attributes or "
-            "report.to_json()[key]",
-            DeprecationWarning,
-            stacklevel=2,
-        )
-        return self.to_json()[key]
-
-
-def write_json_atomic(path: str | os.PathLike, obj: Any) -> None:
-    """Write JSON atomically (kept for old callers; use :func:`fcc_env.io.atomic_write_json`)."""
-    atomic_write_json(path, obj)
-
 
 def residual_diagnostics(
     data: MeasuredData, E: np.ndarray, n_train: int, chans: Sequence[str], others: Sequence[str],
@@ -191,9 +175,6 @@ def plot_residuals(
     out: Path, data: MeasuredData, E0: np.ndarray, E1: np.ndarray, n_train: int,
     chans: Sequence[str], max_lag: int,
 ) -> list[str]:  # fmt: skip
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
     t_h = data.t_s / 3600.0
     fig = Figure(figsize=(10, 2.0 * len(chans)), constrained_layout=True)
     FigureCanvasAgg(fig)

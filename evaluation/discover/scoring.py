@@ -28,7 +28,7 @@ from __future__ import annotations
 import numpy as np
 from scipy import stats
 
-from evaluation import residual_tests as rt
+from evaluation.discover import residual_tests as rt
 
 __all__ = [
     "LF_LIMIT",

@@ -1,0 +1,174 @@
+"""The class every diagnoser derives from: the contract, plus saving and loading.
+
+:class:`Diagnoser` adds persistence to :class:`diagnosers.contract.DiagnoserContract`: a fitted
+diagnoser is written as a directory (``config.json`` + ``state.npz``, and ``weights.pt`` for
+torch modules) and read back through the registry, so a file never runs code.
+
+Why two classes: :meth:`Diagnoser.load` builds the saved diagnoser by its registered name, so
+persistence sits above :mod:`diagnosers.registry`, which itself needs only the contract.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from abc import abstractmethod
+from pathlib import Path
+
+import numpy as np
+
+from diagnosers.contract import DiagnoserContract
+from diagnosers.registry import make
+from fcc_common.io import atomic_open, atomic_write
+
+__all__ = ["SAVE_FORMAT", "SAVE_FORMAT_VERSION", "Diagnoser"]
+
+SAVE_FORMAT = "fcc-diagnoser"
+SAVE_FORMAT_VERSION = 1
+
+
+class Diagnoser(DiagnoserContract):
+    """Base class of every diagnoser: :class:`~diagnosers.contract.DiagnoserContract` plus
+    :meth:`save` and :meth:`load` (and the state hooks they use).
+
+    Conventions follow scikit-learn's estimators: ``__init__`` stores keyword hyperparameters
+    verbatim and does nothing else, ``fit`` validates them and returns ``self``, learned
+    attributes end in ``_``.
+    """
+
+    # ---- persistence ---------------------------------------------------------------------------
+    def save(self, path: str | os.PathLike) -> Path:
+        """Write the fitted diagnoser to directory ``path``: ``config.json`` + ``state.npz``.
+
+        ``state.npz`` holds plain numeric arrays (``allow_pickle=False`` on load); subclasses with
+        torch modules also write ``weights.pt``, a state dict loaded with ``weights_only=True``.
+        Files are written to temporaries and renamed, so an interrupted save leaves no torn file.
+        """
+        self._check_fitted()
+        out = Path(path)
+        out.mkdir(parents=True, exist_ok=True)
+        config = {
+            "format": SAVE_FORMAT,
+            "format_version": SAVE_FORMAT_VERSION,
+            "diagnoser": self.name,
+            "class": f"{type(self).__module__}.{type(self).__qualname__}",
+            "params": self.get_params(),
+            "channels": list(self.channels_),
+            "sample_time_s": self.sample_time_s_,
+        }
+        state = {k: np.asarray(v) for k, v in self._get_state().items()}
+        with atomic_open(out / "state.npz", "wb") as fh:
+            np.savez(fh, **state)
+        self._save_extra(out)
+        # config.json last: its presence marks a complete save
+        atomic_write(out / "config.json", json.dumps(config, indent=2))
+        return out
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> Diagnoser:
+        """Load a diagnoser written by :meth:`save`; never executes code from the files."""
+        src = Path(path)
+        cfg_path = src / "config.json"
+        if not cfg_path.is_file():
+            raise ValueError(f"{src} is not a saved diagnoser: {cfg_path.name} is missing")
+        try:
+            config = json.loads(cfg_path.read_text())
+        except (json.JSONDecodeError, UnicodeDecodeError) as e:
+            raise ValueError(f"{cfg_path} is not valid JSON: {e}") from e
+        if not isinstance(config, dict) or config.get("format") != SAVE_FORMAT:
+            raise ValueError(
+                f"{cfg_path} is not a saved diagnoser of this library "
+                f"(expected format {SAVE_FORMAT!r}, got "
+                f"{config.get('format') if isinstance(config, dict) else config!r})"
+            )
+        if config.get("format_version") != SAVE_FORMAT_VERSION:
+            raise ValueError(
+                f"{cfg_path}: format_version {config.get('format_version')!r} is not supported "
+                f"(this library reads version {SAVE_FORMAT_VERSION})"
+            )
+        # A config with the right format tag can still be hand-edited or truncated: check the
+        # fields used below so that it fails with ValueError, not KeyError/TypeError.
+        for key, kind in (
+            ("diagnoser", str),
+            ("params", dict),
+            ("channels", list),
+            ("sample_time_s", (int, float)),
+        ):
+            if not isinstance(config.get(key), kind):
+                raise ValueError(
+                    f"{cfg_path}: field {key!r} is missing or of the wrong type "
+                    f"(got {config.get(key)!r}); the file is corrupted"
+                )
+        if not all(isinstance(c, str) for c in config["channels"]):
+            raise ValueError(f"{cfg_path}: channels must be names (str), got {config['channels']}")
+        try:
+            obj = make(config["diagnoser"], **config["params"])
+            # a saved config is checked like constructor arguments: a hand-edited alpha=5 fails
+            obj._validate_params()
+        except (ValueError, TypeError) as e:
+            raise ValueError(f"{cfg_path}: {e}") from e
+        saved_class = config.get("class")
+        actual_class = f"{type(obj).__module__}.{type(obj).__qualname__}"
+        if saved_class is not None and saved_class != actual_class:
+            raise ValueError(
+                f"{cfg_path}: diagnoser {config['diagnoser']!r} is a {actual_class}, but the "
+                f"file was saved by a {saved_class!r}; the config was edited or relabelled"
+            )
+        if cls is not Diagnoser and not isinstance(obj, cls):
+            raise ValueError(
+                f"{src} holds a {config['diagnoser']!r} diagnoser, not a {cls.__name__}"
+            )
+        state_path = src / "state.npz"
+        try:
+            with np.load(state_path, allow_pickle=False) as data:
+                state = {k: data[k] for k in data.files}
+        except Exception as e:  # BadZipFile, EOFError, zlib.error...: one clear message
+            raise ValueError(
+                f"{state_path} is missing, truncated or not a numeric state file "
+                f"({type(e).__name__}); the saved diagnoser is corrupted: save it again"
+            ) from e
+        obj.channels_ = tuple(config["channels"])
+        obj.sample_time_s_ = float(config["sample_time_s"])
+        try:
+            obj._set_state(state)
+        except KeyError as e:
+            raise ValueError(
+                f"{state_path} lacks the array {e} that a {config['diagnoser']!r} "
+                "diagnoser needs; the directory is corrupted or from another version"
+            ) from e
+        except (ValueError, TypeError, IndexError) as e:
+            raise ValueError(
+                f"{state_path} does not fit a {config['diagnoser']!r} diagnoser with the saved "
+                f"settings ({e}); the directory is corrupted, edited or relabelled"
+            ) from e
+        obj._load_extra(src)
+        obj._fitted_ = True
+        obj.reset()
+        return obj
+
+    # ---- hooks ---------------------------------------------------------------------------------
+    # A subclass implements _get_state and _set_state; _save_extra and _load_extra are optional.
+    @abstractmethod
+    def _get_state(self) -> dict[str, np.ndarray]:
+        """Learned numeric state as named arrays (everything ``_update`` needs besides params).
+
+        Called by :meth:`save` on a fitted diagnoser. Returns ``{name: array}`` of plain numbers
+        (no objects: the file is read with ``allow_pickle=False``); scalars become 0-d arrays.
+        Streaming state (filter memories) is not learned state and stays out.
+        """
+
+    @abstractmethod
+    def _set_state(self, state: dict[str, np.ndarray]) -> None:
+        """Inverse of :meth:`_get_state`: restore the learned attributes from ``state``.
+
+        Called by :meth:`load` on a fresh instance built with the saved hyperparameters, after
+        ``channels_`` and ``sample_time_s_`` are set; must also set ``signal_names_``. Returns
+        nothing; a missing key raises ``KeyError`` (reported by ``load`` as a corrupted file).
+        :meth:`load` calls :meth:`~diagnosers.contract.DiagnoserContract.reset` afterwards.
+        """
+
+    def _save_extra(self, directory: Path) -> None:
+        """Write extra files (e.g. torch ``weights.pt``) into ``directory``."""
+
+    def _load_extra(self, directory: Path) -> None:
+        """Read what :meth:`_save_extra` wrote; torch files with ``weights_only=True``."""

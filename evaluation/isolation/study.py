@@ -1,0 +1,275 @@
+"""The isolation benchmark of one track: goal figures, confusion matrices, unknown faults.
+
+``python -m evaluation.isolation.study --track paper --seeds test --out results/isolation``
+
+1. The inner ``lrgf-mem`` is trained on the track's healthy training episodes (or loaded with
+   ``--detector DIR``: a saved ``lrgf-mem`` trained on them), exactly as the leaderboard trains
+   ``lrgf-mem``; the isolators compose it, so their alarms are its alarms.
+2. The isolators (``lrgf-iso``, ``lrgf-lda``) learn the labelled training faults
+   (:meth:`TrackData.train_fault_episodes`, training seeds 1000+).
+3. They are scored on faulty episodes of ``--seeds validation`` (5000+, for tuning) or
+   ``test`` (the track's faulty test cells, seeds 0+; run once at the end), plus the unknown
+   faults of :mod:`evaluation.isolation.unknown_faults` on the same seeds.
+
+Each lrgf-mem detection is computed once and shared by the isolators
+(an isolator's ``diagnose_detection`` of the inner detection equals its ``detect``).
+Outputs: ``<out>/<track>-<seeds>.md|json`` and ``<out>/figures/<track>-<seeds>-<isolator>.png``
+(confusion matrix). Intervals: 95 % BCa bootstrap over episodes (:mod:`evaluation.metrics.intervals`).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+import torch
+
+import diagnosers
+from diagnosers.detection import Detection
+from diagnosers.diagnoser import Diagnoser
+from diagnosers.episode import Episode
+from diagnosers.lrgf_mem import LRGFMEM
+from evaluation.isolation.unknown_faults import unknown_fault_episodes
+from evaluation.metrics.detection_metrics import r_td, t_dt
+from evaluation.metrics.intervals import bootstrap_ci
+from evaluation.metrics.isolation_metrics import UNKNOWN, confusion_matrix, isolation_scores
+from evaluation.reports.plots import confusion_figure
+from evaluation.tracks.catalogue import TRACKS
+from evaluation.tracks.track_data import TrackData
+
+__all__ = ["ISOLATORS", "Isolator", "episode_rows", "main", "summarise"]
+
+
+class Isolator(Protocol):
+    """What the study needs of an isolating diagnoser (``isolates = True``): its classes, fitting
+    on labelled faulty episodes with their inner detections, and a diagnosis of a detection."""
+
+    isolates: bool
+    classes_: tuple[str, ...]
+
+    def fit_isolation(self, episodes: Sequence[Episode], dets: Sequence[Detection]) -> Any: ...
+
+    def diagnose_detection(self, det: Detection) -> Detection: ...
+
+
+#: the isolators scored, with their hyperparameters (defaults)
+ISOLATORS: dict[str, dict[str, Any]] = {"lrgf-iso": {}, "lrgf-lda": {}}
+#: the goal's allowance of isolation after detection [samples]
+T_IT_ALLOWANCE = 30
+
+
+def _ci(values: Sequence[float]) -> tuple[float, float, float]:
+    v = [x for x in values if not math.isnan(x)]
+    if not v:
+        return (math.nan, math.nan, math.nan)
+    if len(set(v)) == 1:
+        return (v[0], v[0], v[0])
+    iv = bootstrap_ci(v, rng=0)
+    return (iv.estimate, iv.low, iv.high)
+
+
+def episode_rows(
+    isolator: Isolator, episodes: Sequence[Episode], dets: Sequence[Detection]
+) -> list[dict[str, Any]]:
+    """One row of scores per faulty episode (truth: its class, or "unknown" if not trained)."""
+    rows = []
+    for ep, inner in zip(episodes, dets, strict=True):
+        assert ep.fault_onset is not None
+        det = isolator.diagnose_detection(inner)
+        assert det.diagnosis is not None
+        truth = ep.scenario if ep.scenario in isolator.classes_ else UNKNOWN
+        sc = isolation_scores(det.diagnosis, truth, ep.fault_onset)
+        alarmed = det.diagnosis[ep.fault_onset :] != ""
+        rows.append(
+            {
+                "scenario": ep.scenario,
+                "seed": ep.seed,
+                "truth": truth,
+                "t_dt": t_dt(det.alarm, ep.fault_onset),
+                "r_td": r_td(det.alarm, ep.fault_onset),
+                "n_alarmed": int(np.count_nonzero(alarmed)),
+                **sc,
+            }
+        )
+    return rows
+
+
+def summarise(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
+    """Per scenario: means with intervals, and the goal checks."""
+    out = []
+    for sc in dict.fromkeys(r["scenario"] for r in rows):
+        rs = [r for r in rows if r["scenario"] == sc]
+        gap = [r["t_it"] - r["t_dt"] for r in rs]
+        within = [not math.isnan(g) and g <= T_IT_ALLOWANCE for g in gap]
+        n_al = sum(r["n_alarmed"] for r in rs)
+        pooled = sum(r["cdr"] * r["n_alarmed"] for r in rs if r["n_alarmed"]) / n_al if n_al else 0
+        out.append(
+            {
+                "scenario": sc,
+                "truth": rs[0]["truth"],
+                "n": len(rs),
+                "cdr": _ci([r["cdr"] for r in rs]),
+                "cdr_pooled": pooled,
+                "r_ti": _ci([r["r_ti"] for r in rs]),
+                "r_fi": _ci([r["r_fi"] for r in rs]),
+                "t_dt": _ci([r["t_dt"] for r in rs]),
+                "t_it": _ci([r["t_it"] for r in rs]),
+                "t_it_median": float(np.nanmedian([r["t_it"] for r in rs]))
+                if any(not math.isnan(r["t_it"]) for r in rs)
+                else math.nan,
+                "t_it_minus_t_dt_median": float(np.nanmedian(gap))
+                if any(not math.isnan(g) for g in gap)
+                else math.nan,
+                "share_t_it_within": float(np.mean(within)),
+                "n_not_isolated": sum(math.isnan(r["t_it"]) for r in rs),
+            }
+        )
+    return out
+
+
+def _fmt(t: tuple[float, float, float], digits: int = 3) -> str:
+    est, lo, hi = t
+    if math.isnan(est):
+        return "—"
+    return f"{est:.{digits}f} [{lo:.{digits}f}, {hi:.{digits}f}]"
+
+
+def markdown(track: str, seeds: str, results: dict[str, Any]) -> str:
+    lines = [f"## Isolation, track `{track}`, {seeds} seeds", ""]
+    for name, res in results["isolators"].items():
+        lines += [
+            f"### {name}",
+            "",
+            "| fault | n | CDR | r_ti | r_fi | t_dt | t_it | median t_it − t_dt | "
+            f"t_it ≤ t_dt + {T_IT_ALLOWANCE} | not isolated |",
+            "|---|---|---|---|---|---|---|---|---|---|",
+        ]
+        for s in res["summary"]:
+            lines.append(
+                f"| {s['scenario']} ({s['truth']}) | {s['n']} | {_fmt(s['cdr'])} | "
+                f"{_fmt(s['r_ti'])} | {_fmt(s['r_fi'])} | {_fmt(s['t_dt'], 1)} | "
+                f"{_fmt(s['t_it'], 1)} | {s['t_it_minus_t_dt_median']:.0f} | "
+                f"{s['share_t_it_within']:.0%} | {s['n_not_isolated']} |"
+            )
+        rows, cols, m = res["confusion"]
+        lines += ["", "Confusion (episodes; rows: true, columns: diagnosis):", ""]
+        lines += ["| true \\ diagnosis | " + " | ".join(cols) + " |", "|---|" + "---|" * len(cols)]
+        for r, counts in zip(rows, m, strict=True):
+            lines.append(f"| {r} | " + " | ".join(str(c) for c in counts) + " |")
+        u = res["unknown_share"]
+        lines += [
+            "",
+            f"Unknown faults called 'unknown': {u:.1%} of their alarmed samples (pooled).",
+            "",
+        ]
+    return "\n".join(lines)
+
+
+def run(
+    track: str,
+    seeds: str,
+    *,
+    n_seeds: int = 20,
+    n_unknown: int = 10,
+    detector: str | None = None,
+    out: Path = Path("results/isolation"),
+    isolators: dict[str, dict[str, Any]] | None = None,
+) -> dict[str, Any]:
+    """Train (or load) the inner detector, fit the isolators, score them; write the outputs."""
+    torch.set_num_threads(1)
+    if track not in TRACKS:
+        raise ValueError(f"Unknown track {track!r}. Available: {sorted(TRACKS)}")
+    if seeds not in ("validation", "test"):
+        raise ValueError(f"seeds={seeds!r} must be 'validation' or 'test'")
+    tr = TRACKS[track]
+    data = TrackData(track=tr)
+    t0 = time.perf_counter()
+    if detector is not None:
+        inner = Diagnoser.load(detector)
+        if not isinstance(inner, LRGFMEM):
+            raise ValueError(f"{detector} holds a {inner.name!r}, not an lrgf-mem")
+    else:
+        inner = LRGFMEM().fit(data.train_episodes())
+    train_f = data.train_fault_episodes()
+    train_dets = [inner.detect(ep) for ep in train_f]
+    start = tr.validation_seed_start if seeds == "validation" else tr.test_seed_start
+    seed_list = list(range(start, start + n_seeds))
+    test = [
+        data.simulate([s], tr.fault_spec(f, s))[0].episode for f in tr.faults for s in seed_list
+    ]
+    test = [ep for ep in test if ep.fault_onset is not None]
+    test += [le.episode for le in unknown_fault_episodes(data, seed_list[:n_unknown])]
+    dets = [inner.detect(ep) for ep in test]
+    results: dict[str, Any] = {"track": track, "seeds": seeds, "seed_list": seed_list}
+    results["isolators"] = {}
+    for name, params in (isolators or ISOLATORS).items():
+        params = dict(params)  # a label other than a registry name gives {"name": ..., ...}
+        iso = diagnosers.make(params.pop("name", name), **params)
+        assert iso.isolates and hasattr(iso, "fit_isolation"), name
+        iso.detector_ = inner
+        iso.channels_, iso.sample_time_s_ = inner.channels_, inner.sample_time_s_
+        iso.fit_isolation(train_f, train_dets)
+        iso._fitted_ = True
+        rows = episode_rows(iso, test, dets)
+        truths = [r["truth"] for r in rows]
+        conf = confusion_matrix(truths, [r["label"] for r in rows], iso.classes_)
+        unk = [r for r in rows if r["truth"] == UNKNOWN]
+        n_al = sum(r["n_alarmed"] for r in unk)
+        share = sum(r["cdr"] * r["n_alarmed"] for r in unk if r["n_alarmed"]) / n_al if n_al else 0
+        results["isolators"][name] = {
+            "params": iso.get_params(),
+            "rows": rows,
+            "summary": summarise(rows),
+            "confusion": (conf[0], conf[1], conf[2].tolist()),
+            "unknown_share": share,
+        }
+        confusion_figure(
+            conf[0],
+            conf[1],
+            conf[2],
+            f"{name}, track {track}, {seeds} seeds",
+            out / "figures" / f"{track}-{seeds}-{name}.png",
+        )
+    results["wall_s"] = time.perf_counter() - t0
+    out.mkdir(parents=True, exist_ok=True)
+    text = markdown(track, seeds, results)
+    (out / f"{track}-{seeds}.md").write_text(text)
+    (out / f"{track}-{seeds}.json").write_text(json.dumps(results, indent=1, default=float))
+    print(text)
+    return results
+
+
+def main(argv: Sequence[str] | None = None) -> None:
+    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p.add_argument("--track", default="paper", help="comma-separated track names")
+    p.add_argument("--seeds", default="validation", choices=["validation", "test"])
+    p.add_argument("--n-seeds", type=int, default=20, help="faulty episodes per fault")
+    p.add_argument("--n-unknown", type=int, default=10, help="episodes per unknown fault")
+    p.add_argument("--detector", help="directory of a saved lrgf-mem (trained on the track)")
+    p.add_argument("--out", type=Path, default=Path("results/isolation"))
+    p.add_argument(
+        "--isolators",
+        help='JSON {"label": {"name": registry name, params...}} (default: the registered two)',
+    )
+    a = p.parse_args(argv)
+    isolators = json.loads(a.isolators) if a.isolators else None
+    for track in [t.strip() for t in a.track.split(",")]:
+        run(
+            track,
+            a.seeds,
+            n_seeds=a.n_seeds,
+            n_unknown=a.n_unknown,
+            detector=a.detector,
+            out=a.out,
+            isolators=isolators,
+        )
+
+
+if __name__ == "__main__":
+    main()

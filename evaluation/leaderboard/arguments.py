@@ -1,0 +1,280 @@
+"""The leaderboard's command line: its parser and the checks both modes share.
+
+``python -m evaluation.leaderboard`` runs the paper leaderboard (:mod:`evaluation.leaderboard.paper`)
+or, with ``--track``, the benchmark tracks (:mod:`evaluation.leaderboard.track_runs`); both parse
+with :func:`build_parser` and refuse a bad ``--out``, ``--backend`` or ``--import`` here, before
+any work.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import sys
+from collections.abc import Callable
+from pathlib import Path
+from typing import NoReturn
+
+from diagnosers.registry import import_modules
+from evaluation.leaderboard.paper import (
+    DEFAULT_OUT,
+    DEFAULT_SEEDS,
+    DEFAULT_TRAIN_EPISODES,
+    QUICK_SEEDS,
+    QUICK_TRAIN_EPISODES,
+    VALIDATION_FAULT_SCALE,
+    VALIDATION_OUT,
+    VALIDATION_SEED_BASE,
+    VALIDATION_SEEDS,
+)
+from evaluation.sweep.backends import BACKENDS
+from evaluation.sweep.config import BASELINES
+from evaluation.sweep.sources import TRAIN_SEED_BASE
+from evaluation.sweep.store import StoreError
+
+__all__ = [
+    "build_parser",
+    "check_backend",
+    "check_out_dir",
+    "exit_on_failure",
+    "import_user_modules",
+    "user_imports",
+]
+
+
+def _csv_list(text: str) -> tuple[str, ...]:
+    items = tuple(t.strip() for t in text.split(",") if t.strip())
+    if not items:
+        raise argparse.ArgumentTypeError(f"expected a comma-separated list, got {text!r}")
+    return items
+
+
+def _int_at_least(low: int) -> Callable[[str], int]:
+    """An argparse type: an integer >= ``low``, refused by value otherwise."""
+
+    def parse(text: str) -> int:
+        try:
+            v = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected an integer, got {text!r}") from None
+        if v < low:
+            raise argparse.ArgumentTypeError(f"must be >= {low}, got {v}")
+        return v
+
+    return parse
+
+
+_positive_int = _int_at_least(1)
+_non_negative_int = _int_at_least(0)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="python -m evaluation.leaderboard",
+        description=(
+            "Train diagnosers on healthy FCC-v0 episodes (training seeds 1000.., never tested), "
+            "score them on every scenario over test seeds 0..N-1, and print a Markdown "
+            "leaderboard (r_fd on healthy episodes; r_td and t_dt per fault; mean ± std over "
+            "seeds; missed faults). Writes leaderboard.md/.csv, raw per-seed results and "
+            "figures to --out. Re-running the same command resumes from the result store."
+        ),
+    )
+    p.add_argument(
+        "--quick",
+        action="store_true",
+        help=f"fast check: the baselines ({', '.join(BASELINES)}), {QUICK_SEEDS} test seeds per "
+        f"scenario, {QUICK_TRAIN_EPISODES} training episodes (explicit flags still win)",
+    )
+    p.add_argument(
+        "--validation",
+        action="store_true",
+        help=f"the validation protocol hyperparameters are chosen on: seeds "
+        f"{VALIDATION_SEED_BASE}.. ({VALIDATION_SEEDS} per scenario unless --seeds), faults at "
+        f"{VALIDATION_FAULT_SCALE}x the paper's magnitudes, --out default {VALIDATION_OUT}; "
+        "never the test seeds",
+    )
+    p.add_argument(
+        "--import",
+        dest="imports",
+        type=_csv_list,
+        action="append",
+        default=[],
+        metavar="MODULE[,MODULE]",
+        help="import these modules first (repeatable): modules that register diagnosers of "
+        "your own with @diagnosers.register, then named in --diagnosers. Imported (not run), "
+        "from the current directory or the installed packages, here and in every worker",
+    )
+    p.add_argument(
+        "--diagnosers",
+        type=_csv_list,
+        default=None,
+        metavar="A,B",
+        help="comma-separated registry names (default: every registered diagnoser; "
+        "--quick: the baselines)",
+    )
+    p.add_argument(
+        "--scenarios",
+        type=_csv_list,
+        default=None,
+        metavar="S,...",
+        help="comma-separated scenarios, from nominal,f1,f2,f3,f4 (default: all); with "
+        "--external, test-file names",
+    )
+    p.add_argument(
+        "--seeds",
+        type=_positive_int,
+        default=None,
+        metavar="N",
+        help=f"test seeds per scenario, 0..N-1 (default {DEFAULT_SEEDS}; --quick {QUICK_SEEDS}; "
+        f"--validation {VALIDATION_SEEDS}, from {VALIDATION_SEED_BASE})",
+    )
+    p.add_argument(
+        "--train-episodes",
+        type=_positive_int,
+        default=None,
+        metavar="N",
+        help=f"healthy training episodes, seeds {TRAIN_SEED_BASE}.. (default "
+        f"{DEFAULT_TRAIN_EPISODES}; --quick {QUICK_TRAIN_EPISODES}); with --track, every track's "
+        "(default 9, --quick 3)",
+    )
+    p.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help=f"output directory (default {DEFAULT_OUT}; --validation {VALIDATION_OUT})",
+    )
+    p.add_argument(
+        "--backend",
+        choices=BACKENDS,
+        default="local",
+        help="local: process pool on this machine (default); ray: Ray tasks (needs the ray extra)",
+    )
+    p.add_argument(
+        "--ray-address",
+        default=None,
+        metavar="ADDR",
+        help="address of a running Ray cluster for --backend ray (default: start a local one)",
+    )
+    p.add_argument(
+        "--workers",
+        type=int,
+        default=None,
+        metavar="N",
+        help="worker processes (default: all cores; 0 runs in this process)",
+    )
+    p.add_argument(
+        "--n-samples",
+        type=_positive_int,
+        default=4000,
+        metavar="T",
+        help="samples per simulated episode (default 4000, the paper's horizon)",
+    )
+    p.add_argument(
+        "--fault-time",
+        type=int,
+        default=None,
+        metavar="K",
+        help="onset sample of every fault (default: the paper's onsets 1900/1900/2020/2000)",
+    )
+    p.add_argument(
+        "--fault-profile",
+        choices=("abrupt", "incipient"),
+        default="abrupt",
+        help="abrupt: the parameter jumps at the onset (default, the paper's); incipient: it "
+        "ramps linearly to the full magnitude over --ramp-samples",
+    )
+    p.add_argument(
+        "--ramp-samples",
+        type=_positive_int,
+        default=None,
+        metavar="N",
+        help="samples an incipient fault takes to reach its magnitude (default 500)",
+    )
+    p.add_argument(
+        "--external",
+        type=Path,
+        default=None,
+        metavar="DIR",
+        help="score recorded data in DIR instead of simulated episodes: a directory with a "
+        "dataset.json manifest (see evaluation.sweep.external_data.load_manifest) or the Santander FCCU "
+        "data set (layout of shared/data/fccu-santander-mlpse); --seeds is ignored",
+    )
+    p.add_argument(
+        "--track",
+        metavar="NAME[,NAME...]",
+        help=(
+            "benchmark v2: run the named tracks (paper, small, incipient, noisy, uncertain, "
+            "random, or all) with the physical-limit and measured-input reference rows and 95%% "
+            "bootstrap intervals; writes <out>/<track>/ and <out>/summary.md (default --out "
+            "results/tracks). With --quick: the baselines on 6 healthy and 3 faulty episodes per "
+            "fault"
+        ),
+    )
+    p.add_argument(
+        "--test-seed-start",
+        type=_non_negative_int,
+        default=None,
+        metavar="N",
+        help=(
+            "with --track: score every track on test seeds from N instead of 0 (a private range "
+            "no tuning loop has seen, e.g. 100000; the training and validation seeds and the "
+            "trained models stay the same). It must keep clear of the training (1000..) and "
+            "validation (5000..) seeds"
+        ),
+    )
+    p.add_argument("--no-figures", action="store_true", help="skip the PNG figures")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
+    return p
+
+
+def check_out_dir(out: Path) -> None:
+    """Refuse an output directory that is, or lies under, an existing non-directory."""
+    for p in (out, *out.parents):
+        if p.exists():
+            if not p.is_dir():
+                where = "is" if p == out else f"lies under {str(p)!r}, which is"
+                raise ValueError(
+                    f"--out {str(out)!r} {where} a regular file, not a directory; "
+                    "choose another output directory"
+                )
+            return
+
+
+def check_backend(backend: str) -> None:
+    """``--backend ray`` needs Ray: say so before any work, not in a traceback."""
+    if backend == "ray":
+        try:
+            import ray  # noqa: F401
+        except ImportError:
+            raise ValueError(
+                "--backend ray needs Ray, which is not installed: "
+                "pip install 'fcc-fault-diagnosis[ray]', or use --backend local"
+            ) from None
+
+
+def exit_on_failure(parser: argparse.ArgumentParser, e: Exception) -> NoReturn:
+    """Exit on a store or run failure; suggest re-running only where it can succeed."""
+    if isinstance(e, StoreError):  # a re-run meets the same file: the message says what to do
+        parser.exit(1, f"{parser.prog}: {e}\n")
+    parser.exit(1, f"{parser.prog}: {e}\nFinished cells are stored; re-run to resume.\n")
+
+
+def user_imports(args: argparse.Namespace) -> tuple[str, ...]:
+    """The ``--import`` modules, flattened, in order, without repeats."""
+    return tuple(dict.fromkeys(m for group in args.imports for m in group))
+
+
+def import_user_modules(args: argparse.Namespace, parser: argparse.ArgumentParser) -> None:
+    """Import the ``--import`` modules, as ``python -m`` would find them: the current directory
+    first (a console script does not put it on ``sys.path``; local workers inherit the path)."""
+    modules = user_imports(args)
+    if not modules:
+        return
+    cwd = os.getcwd()
+    if cwd not in sys.path and "" not in sys.path:
+        sys.path.insert(0, cwd)
+    try:
+        import_modules(modules)
+    except ValueError as e:
+        parser.error(f"--import: {e}")

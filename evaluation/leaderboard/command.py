@@ -1,0 +1,180 @@
+"""Leaderboard CLI: ``python -m evaluation.leaderboard [--quick] [...]``.
+
+Runs a sweep (:func:`evaluation.sweep.run_sweep`), then writes into ``--out``
+(default ``results/leaderboard``):
+
+* ``leaderboard.md`` - the Markdown table printed to stdout (its legend,
+  :func:`~evaluation.reports.tables.table_legend`, is
+  in the file's header and printed to stderr): one row per diagnoser plus the
+  paper's Table 2 as a reference row; columns ``r_fd`` on healthy episodes, then ``r_td`` and
+  ``t_dt`` for each fault, each mean ± standard deviation over test seeds, with the miss count.
+* ``leaderboard.csv`` - one row per diagnoser × scenario: ``diagnoser, scenario, n_seeds, r_fd,
+  r_fd_std, r_td, r_td_std, t_dt, t_dt_std, t_dt_s, t_dt_s_std, misses, n_detected,
+  n_terminated, data, package_version``. For a fault scenario ``r_fd`` is the false detection
+  rate *before the onset*; for a healthy one it covers the whole episode.
+* ``results.csv`` / ``results.json`` - the raw per-seed cells (JSON adds the sweep description).
+* ``figures/<scenario>/<diagnoser>.png`` - Fig. 3/4-style plots on the first test seed.
+* ``store/<hash>/`` - the resumable result store (re-running the same command resumes; a
+  sweep with other data options gets another hash, so ``--quick`` and the full sweep coexist).
+
+Units: ``t_dt`` in samples (``Ts`` = 10 s for FCC-v0; the CSV also has ``t_dt_s`` in seconds), as
+in the paper's Table 2. Mean ``t_dt`` is over detected faults only; ``misses`` counts the test
+episodes whose fault was never detected. Standard deviations use ``ddof=1`` (``–`` with one seed).
+
+Diagnosers of your own: ``--import MODULE[,MODULE]`` imports modules that register them
+(``@diagnosers.register``) before any name is resolved, here and in every worker
+(:attr:`evaluation.sweep.SweepConfig.imports`); installed packages can use the
+``fcc_fault_diagnosis.diagnosers`` entry-point group instead (:mod:`diagnosers.registry`).
+
+Table formatting (:mod:`evaluation.reports.tables`) is separate from computation
+(:func:`evaluation.leaderboard.paper.run`), from writing the files (:mod:`evaluation.reports.outputs`)
+and from the command line (:func:`main`), the only place that prints.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from collections.abc import Sequence
+
+import fcc_env
+from diagnosers.registry import available, diagnoser_class
+from evaluation.leaderboard import paper
+from evaluation.leaderboard.arguments import (
+    build_parser,
+    check_backend,
+    check_out_dir,
+    exit_on_failure,
+    import_user_modules,
+    user_imports,
+)
+from evaluation.leaderboard.paper import (
+    DEFAULT_OUT,
+    DEFAULT_SEEDS,
+    DEFAULT_TRAIN_EPISODES,
+    QUICK_SEEDS,
+    QUICK_TRAIN_EPISODES,
+    VALIDATION_FAULT_SCALE,
+    VALIDATION_OUT,
+    VALIDATION_SEED_BASE,
+    VALIDATION_SEEDS,
+    LeaderboardOptions,
+)
+from evaluation.leaderboard.track_runs import main_tracks
+from evaluation.reports.outputs import write_outputs
+from evaluation.reports.tables import markdown_table, reference_row, sample_time, table_legend
+from evaluation.sweep.config import BASELINES
+from evaluation.sweep.dataset_loaders import load_external
+from fcc_env.scenarios import FaultSpec
+
+__all__ = ["main", "resolve_options"]
+
+
+def resolve_options(
+    args: argparse.Namespace, parser: argparse.ArgumentParser
+) -> LeaderboardOptions:
+    """Fill defaults (``--quick`` or full) and check names against the allowed sets."""
+    if args.test_seed_start is not None:
+        parser.error(
+            f"--test-seed-start {args.test_seed_start} applies to --track; the paper "
+            "leaderboard's test seeds are 0..--seeds−1 (--validation: 5000..)"
+        )
+
+    avail = available()
+    if args.diagnosers is not None:
+        diags = args.diagnosers
+    elif args.quick:
+        diags = tuple(d for d in BASELINES if d in avail)
+    else:
+        diags = tuple(avail)
+        if args.external is not None:  # recorded data have no labelled training faults
+            diags = tuple(d for d in diags if not diagnoser_class(d).isolates)
+    unknown = [d for d in diags if d not in avail]
+    if unknown:
+        parser.error(f"unknown diagnoser(s) {unknown}. Available: {avail}")
+    if args.external is not None:
+        try:
+            allowed = [tf.key for tf in load_external(args.external)[0].test_files]
+        except ValueError as e:
+            parser.error(f"--external {args.external}: {e}")
+    else:
+        allowed = list(fcc_env.SCENARIOS)
+    scenarios = args.scenarios if args.scenarios is not None else tuple(allowed)
+    bad = [s for s in scenarios if s not in allowed]
+    if bad:
+        parser.error(f"unknown scenario(s) {bad}. Allowed: {allowed}")
+    if len(set(scenarios)) != len(scenarios):
+        parser.error(f"--scenarios repeats a name: {list(scenarios)}")
+    if args.workers is not None and args.workers < 0:
+        parser.error(f"--workers must be >= 0, got {args.workers}")
+    if args.ray_address is not None and args.backend != "ray":
+        parser.error("--ray-address needs --backend ray")
+    if args.ramp_samples is not None and args.fault_profile != "incipient":
+        parser.error("--ramp-samples needs --fault-profile incipient")
+    if args.validation and (args.quick or args.external is not None):
+        parser.error("--validation cannot be combined with --quick or --external")
+    try:
+        check_backend(args.backend)
+        check_out_dir(args.out or (VALIDATION_OUT if args.validation else DEFAULT_OUT))
+    except ValueError as e:
+        parser.error(str(e))
+    if args.validation:
+        seeds = args.seeds or VALIDATION_SEEDS
+    else:
+        seeds = args.seeds or (QUICK_SEEDS if args.quick else DEFAULT_SEEDS)
+    train = args.train_episodes or (QUICK_TRAIN_EPISODES if args.quick else DEFAULT_TRAIN_EPISODES)
+    try:
+        fault = FaultSpec(
+            onset=args.fault_time,
+            magnitude_scale=VALIDATION_FAULT_SCALE if args.validation else 1.0,
+            profile=args.fault_profile,
+            ramp_samples=args.ramp_samples,
+        )
+    except ValueError as e:
+        parser.error(str(e))
+    return LeaderboardOptions(
+        diagnosers=diags,
+        scenarios=scenarios,
+        seeds=seeds,
+        train_episodes=train,
+        out=args.out or (VALIDATION_OUT if args.validation else DEFAULT_OUT),
+        backend=args.backend,
+        workers=args.workers,
+        ray_address=args.ray_address,
+        n_samples=args.n_samples,
+        fault=fault,
+        external=args.external,
+        figures=not args.no_figures,
+        progress=not args.no_progress,
+        seed_base=VALIDATION_SEED_BASE if args.validation else 0,
+        imports=user_imports(args),
+    )
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    import_user_modules(args, parser)  # before any name is resolved
+    if args.track is not None:
+        return main_tracks(args, parser)
+    opts = resolve_options(args, parser)
+    t0 = time.perf_counter()
+    try:
+        results = paper.run(opts)
+    except ValueError as e:  # bad configuration: say what and exit like argparse does
+        parser.error(str(e))
+    except RuntimeError as e:  # a diagnoser failed to train or score: finished cells are kept
+        exit_on_failure(parser, e)
+    written = write_outputs(results, opts.out, figures=opts.figures)
+    reference = reference_row(results.config)
+    print(markdown_table(results.summary(), reference=reference), end="", flush=True)
+    # stdout stays the bare table (to pipe or paste); its legend follows on stderr
+    print(table_legend(sample_time(results)), file=sys.stderr)
+    print(
+        f"{results.n_computed} cells computed, {results.n_reused} reused, "
+        f"{results.n_trained} diagnosers trained in {time.perf_counter() - t0:.1f} s; "
+        f"wrote {len(written)} files to {opts.out}",
+        file=sys.stderr,
+    )
+    return 0

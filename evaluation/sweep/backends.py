@@ -1,0 +1,160 @@
+"""Execution backends of a sweep: local processes (default), Ray, or this process.
+
+``"local"`` runs tasks in a :class:`~concurrent.futures.ProcessPoolExecutor` with the ``spawn``
+start method (numba and torch thread pools do not survive ``fork`` reliably); each worker limits
+numba and torch to one thread, since parallelism comes from the processes. ``"ray"`` runs the
+same task functions as Ray tasks (``ray.init(address=...)`` when an address is given, else a
+local instance with one CPU per worker). ``n_workers=0`` runs every task in the calling process
+(:class:`SerialBackend`), for debugging and fast tests. Results always travel back to the driver,
+which alone writes the store, so remote Ray nodes need no shared file system.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Callable, Iterator
+from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from pathlib import Path
+from typing import Any, Protocol
+
+# the worker set-up is shared with diagnosers.parallel (fcc_common.workers)
+from fcc_common.workers import cpu_count, init_worker
+
+#: Execution backends accepted by :func:`evaluation.sweep.run_sweep`.
+BACKENDS: tuple[str, ...] = ("local", "ray")
+
+
+class Backend(Protocol):
+    passes_paths: bool
+
+    def put(self, obj: Any) -> Any: ...
+
+    def submit(self, fn: Callable[..., Any], *args: Any) -> Any: ...
+
+    def completed(self, handles: list[Any]) -> Iterator[tuple[Any, Any]]: ...
+
+    def close(self, cancel: bool) -> None: ...
+
+
+class LocalBackend:
+    passes_paths = True
+
+    def __init__(self, n_workers: int) -> None:
+        import multiprocessing
+
+        self._pool = ProcessPoolExecutor(
+            max_workers=n_workers,
+            mp_context=multiprocessing.get_context("spawn"),
+            initializer=init_worker,
+            initargs=(os.getpid(),),
+        )
+
+    def put(self, obj: Any) -> Any:
+        return obj
+
+    def submit(self, fn: Callable[..., Any], *args: Any) -> Future:
+        return self._pool.submit(fn, *args)
+
+    def completed(self, handles: list[Future]) -> Iterator[tuple[Future, Any]]:
+        pending = set(handles)
+        while pending:
+            done, pending = wait(pending, return_when=FIRST_COMPLETED)
+            for fut in done:
+                yield fut, fut.result()
+
+    def close(self, cancel: bool) -> None:
+        self._pool.shutdown(wait=not cancel, cancel_futures=cancel)
+
+
+def ray_runtime_env() -> dict[str, Any]:
+    """Runtime environment that lets local Ray workers import this repository's packages."""
+    root = str(Path(__file__).resolve().parents[1])
+    path = os.pathsep.join([root, *filter(None, [os.environ.get("PYTHONPATH", "")])])
+    return {"env_vars": {"PYTHONPATH": path, "OMP_NUM_THREADS": "1"}}
+
+
+class RayBackend:
+    passes_paths = False
+
+    def __init__(self, n_workers: int, address: str | None) -> None:
+        try:
+            import ray
+        except ImportError as e:
+            raise ImportError(
+                "backend='ray' needs Ray: pip install 'fcc-fault-diagnosis[ray]'"
+            ) from e
+        self._ray = ray
+        self._owned = False
+        if not ray.is_initialized():
+            if address is not None:
+                ray.init(address=address)
+            else:
+                ray.init(
+                    num_cpus=n_workers,
+                    include_dashboard=False,
+                    runtime_env=ray_runtime_env(),
+                    log_to_driver=False,
+                )
+            self._owned = True
+        self._remote: dict[Callable[..., Any], Any] = {}
+
+    def put(self, obj: Any) -> Any:
+        return self._ray.put(obj)
+
+    def submit(self, fn: Callable[..., Any], *args: Any) -> Any:
+        if fn not in self._remote:
+            self._remote[fn] = self._ray.remote(num_cpus=1)(fn)
+        return self._remote[fn].remote(*args)
+
+    def completed(self, handles: list[Any]) -> Iterator[tuple[Any, Any]]:
+        pending = list(handles)
+        while pending:
+            done, pending = self._ray.wait(pending, num_returns=1)
+            for ref in done:
+                yield ref, self._ray.get(ref)
+
+    def close(self, cancel: bool) -> None:
+        if self._owned:
+            self._ray.shutdown()
+
+
+class SerialBackend:
+    """Runs each task in the calling process when its result is collected (``n_workers=0``).
+
+    For debugging and fast tests: no process start-up, exceptions with their full traceback. The
+    caller's thread settings are left alone (``limit_threads`` is a worker-only measure).
+    """
+
+    passes_paths = True
+
+    def put(self, obj: Any) -> Any:
+        return obj
+
+    class _Deferred:
+        """A task not run yet (hashable by identity, like a Future)."""
+
+        def __init__(self, fn: Callable[..., Any], args: tuple) -> None:
+            self.fn, self.args = fn, args
+
+    def submit(self, fn: Callable[..., Any], *args: Any) -> SerialBackend._Deferred:
+        return self._Deferred(fn, args)
+
+    def completed(self, handles: list[Any]) -> Iterator[tuple[Any, Any]]:
+        for h in handles:
+            yield h, h.fn(*h.args, _serial=True)
+
+    def close(self, cancel: bool) -> None:
+        pass
+
+
+def make_backend(
+    backend: str, n_workers: int | None, n_tasks: int, ray_address: str | None = None
+) -> Backend:
+    """The backend that runs ``n_tasks`` tasks: ``n_workers=0`` runs them in this process;
+    otherwise ``n_workers`` (default: all cores) capped at the number of tasks."""
+    if n_workers == 0:
+        return SerialBackend()
+    workers = min(n_workers or cpu_count(), max(n_tasks, 1))
+    if backend == "local":
+        return LocalBackend(workers)
+    return RayBackend(workers, ray_address)

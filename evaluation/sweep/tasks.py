@@ -1,0 +1,168 @@
+"""The sweep's tasks, as a worker process runs them: train one diagnoser, score one episode.
+
+Tasks travel to worker processes (or Ray nodes), so they take and return plain data: a trained
+model goes back as its saved files (:func:`dir_files`), and a worker loads each model once
+(:func:`load_model`, cached per process by model hash).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import tempfile
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from diagnosers.diagnoser import Diagnoser
+from diagnosers.registry import diagnoser_class, import_modules
+from evaluation.sweep.config import DiagnoserSpec
+from evaluation.sweep.records import (
+    detect_and_score,
+    pack_detection,
+)
+from evaluation.sweep.sources import DataSource
+from fcc_common.workers import limit_threads
+
+__all__ = ["EpisodeTask", "dir_files", "episode_task", "load_model", "train_task", "training_jobs"]
+
+_MODEL_CACHE: dict[str, Diagnoser] = {}
+_MODEL_CACHE_SIZE = 8
+
+
+def dir_files(path: Path) -> dict[str, bytes]:
+    """Every file under ``path`` as ``{relative POSIX path: bytes}`` (a model shipped whole)."""
+    return {
+        p.relative_to(path).as_posix(): p.read_bytes()
+        for p in sorted(path.rglob("*"))
+        if p.is_file()
+    }
+
+
+def load_model(model_hash: str, source: str | Mapping[str, bytes]) -> Diagnoser:
+    """Load a stored model (a directory path, or its files as bytes), cached per process.
+
+    The cache is keyed by the model hash, so a worker that scores many episodes loads each model
+    once. ``Diagnoser.detect`` resets the diagnoser before and after, so reuse is safe.
+    """
+    diag = _MODEL_CACHE.get(model_hash)
+    if diag is not None:
+        return diag
+    if isinstance(source, str):
+        diag = Diagnoser.load(source)
+    else:
+        with tempfile.TemporaryDirectory(prefix="fcc-model-") as d:
+            for rel, data in source.items():
+                target = Path(d) / rel
+                target.parent.mkdir(parents=True, exist_ok=True)
+                target.write_bytes(data)
+            diag = Diagnoser.load(d)
+    if len(_MODEL_CACHE) >= _MODEL_CACHE_SIZE:
+        _MODEL_CACHE.pop(next(iter(_MODEL_CACHE)))
+    _MODEL_CACHE[model_hash] = diag
+    return diag
+
+
+def training_jobs(to_train: Sequence[DiagnoserSpec], cores: int) -> dict[str, int]:
+    """``n_jobs`` for each diagnoser of ``to_train`` that has the parameter and leaves it unset.
+
+    The cores are shared among those trainings (the ones with worker processes of their own, the
+    long ones): a bank that trains alone gets them all, and several never get more than the
+    cores between them. Baselines train in seconds beside them. ``n_jobs`` is an execution
+    parameter: it changes no model hash.
+    """
+    own = [
+        s.key
+        for s in to_train
+        if "n_jobs" in diagnoser_class(s.name)._param_names() and s.params.get("n_jobs") is None
+    ]
+    return {key: max(1, cores // len(own)) for key in own}
+
+
+def train_task(
+    spec: DiagnoserSpec,
+    data: DataSource,
+    imports: tuple[str, ...] = (),
+    n_jobs: int | None = None,
+    _serial: bool = False,
+) -> tuple[dict[str, bytes], dict[str, Any]]:
+    """Fit one diagnoser on the healthy training episodes; return its saved files and facts.
+
+    ``n_jobs``: set on the diagnoser (see :func:`training_jobs`) unless ``None``.
+    """
+    if not _serial:
+        limit_threads()
+    import_modules(imports)  # a fresh worker has not seen the user's registrations
+    t0 = time.perf_counter()
+    episodes = data.train_episodes()
+    if spec.build().isolates:
+        # an isolating diagnoser also learns labelled faults (training seeds only)
+        faulty = getattr(data, "train_fault_episodes", None)
+        if faulty is None:
+            raise RuntimeError(
+                f"training {spec.key}: it isolates faults, but the data source "
+                f"{type(data).__name__} has no labelled training faults (train_fault_episodes)"
+            )
+        episodes = episodes + faulty()
+    diag = spec.build()
+    if n_jobs is not None:
+        diag.set_params(n_jobs=n_jobs)
+    try:
+        diag.fit(episodes)
+    except Exception as e:
+        raise RuntimeError(f"training {spec.key}: {type(e).__name__}: {e}") from e
+    wall = time.perf_counter() - t0
+    with tempfile.TemporaryDirectory(prefix="fcc-train-") as d:
+        diag.save(d)
+        files = dir_files(Path(d))
+    info = {
+        "train_wall_s": wall,
+        "n_train_episodes": len(episodes),
+        "n_train_samples": int(sum(ep.n_samples for ep in episodes)),
+    }
+    return files, info
+
+
+@dataclass(frozen=True)
+class EpisodeTask:
+    """Score the diagnosers ``labels`` on episode ``(scenario, seed)`` of ``data``."""
+
+    data: DataSource
+    scenario: str
+    seed: int
+    t_on: int
+    labels: tuple[str, ...]
+    model_hashes: tuple[str, ...]
+    model_paths: tuple[str, ...] | None  # local backend; None when models come as bytes
+    keep: tuple[bool, ...] = ()  # per label: return the whole detection (a figure cell)
+    imports: tuple[str, ...] = ()  # SweepConfig.imports, imported in the worker
+
+
+def episode_task(
+    task: EpisodeTask, *model_files: Mapping[str, bytes], _serial: bool = False
+) -> list[tuple[dict[str, Any], dict[str, Any] | None]]:
+    """``(record, detection arrays or None)`` per label of the task."""
+    if not _serial:
+        limit_threads()
+    import_modules(task.imports)
+    loaded = task.data.load_test(task.scenario, task.seed)
+    out = []
+    keep = task.keep or (False,) * len(task.labels)
+    for i, (label, mhash) in enumerate(zip(task.labels, task.model_hashes, strict=True)):
+        source = task.model_paths[i] if task.model_paths is not None else model_files[i]
+        try:
+            diag = load_model(mhash, source)
+            rec, det = detect_and_score(diag, loaded, label=label, t_on=task.t_on)
+            arrays = (
+                pack_detection(loaded, det, diag.band_view(loaded.episode)) if keep[i] else None
+            )
+        except Exception as e:
+            # Name the cell: the traceback of a worker process does not reach the user.
+            raise RuntimeError(
+                f"{label} on {task.scenario}, seed {task.seed}: {type(e).__name__}: {e}"
+            ) from e
+        # External data name the episode by file; keep the sweep's cell key as given.
+        rec = dataclasses.replace(rec, scenario=task.scenario, seed=task.seed)
+        out.append((rec.to_json(), arrays))
+    return out

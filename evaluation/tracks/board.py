@@ -1,0 +1,147 @@
+"""Benchmark v2: the leaderboard per track, with the physical-limit row and 95 % intervals.
+
+``python -m evaluation.leaderboard --track paper,small`` (or ``--track all``) runs, for each
+track of :mod:`evaluation.tracks`, a sweep of the chosen diagnosers over the track's test cells
+(:class:`evaluation.tracks.track_data.TrackData`), scores the physical-limit observer
+(:mod:`evaluation.tracks.oracle`) on the same cells, and writes into ``<out>/<track>/``:
+
+* ``leaderboard.md`` / ``.csv`` / ``.json`` — one row per diagnoser plus three reference rows
+  (:data:`evaluation.tracks.oracle.DEFAULT_REFERENCES`), the ``oracle`` (physical limit), the
+  ``perfect model (measured inputs)`` and the ``perfect model + lrgf-glr stage (measured
+  inputs)``:
+  r_fd with its 95 % bootstrap interval over healthy episodes, the share of healthy episodes
+  with any alarm and the worst one; per fault r_td and t_dt with intervals, the ratio
+  ``(t_dt + 1) / (oracle t_dt + 1)`` with its paired interval, misses and early terminations;
+  ranks per fault on r_td that mark ties when intervals overlap;
+* ``results.csv`` / ``results.json`` — every per-seed record (the oracle's too);
+* ``figures/`` — as the classic leaderboard.
+
+and ``<out>/summary.md`` / ``.csv`` / ``.json``: diagnosers × tracks (r_fd with interval, mean
+r_td over faults, mean t_dt / oracle ratio, the faults at the physical limit and whether r_fd's
+upper end holds the goal, :func:`~evaluation.tracks.goal.limit_goal`) and the wall time per track.
+:func:`run_track` runs a track; :mod:`evaluation.tracks.board_tables` writes those files.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+import time
+from collections.abc import Sequence
+from pathlib import Path
+
+from diagnosers.registry import import_modules
+from evaluation.reports.outputs import figure_cells, write_figures
+from evaluation.sweep.config import DiagnoserSpec, SweepConfig, default_specs
+from evaluation.sweep.runner import run_sweep
+from evaluation.sweep.store import ResultStore, canonical_hash
+from evaluation.sweep.tasks import dir_files
+from evaluation.tracks.oracle import DEFAULT_REFERENCES, reference_records
+from evaluation.tracks.rows import TrackRun, track_rows
+from evaluation.tracks.track import Track
+from evaluation.tracks.track_data import TrackData
+
+__all__ = ["run_track"]
+
+
+def run_track(
+    track: Track,
+    diagnosers: Sequence[str],
+    out: Path,
+    *,
+    backend: str = "local",
+    workers: int | None = None,
+    ray_address: str | None = None,
+    progress: bool = True,
+    figures: bool = True,
+    model_cache: Path | None = None,
+    imports: Sequence[str] = (),
+) -> TrackRun:
+    """Sweep ``diagnosers`` over ``track`` and add the physical-limit row (resumable).
+
+    ``model_cache``: a directory of trained models shared by tracks; a track whose training
+    episodes equal another's (:meth:`TrackData.training_key`: same seeds, noise and plant
+    variation) reuses that track's models instead of training again. ``imports``: modules
+    that register diagnosers of your own (:attr:`SweepConfig.imports`).
+    """
+    t0 = time.perf_counter()
+    data = TrackData(track=track)
+    import_modules(imports)
+    config = SweepConfig(diagnosers=default_specs(diagnosers), data=data, imports=tuple(imports))
+    config.validate()
+    for reference in DEFAULT_REFERENCES:  # refuse seed clashes before any work, not after it
+        reference.calibration_seeds(track)
+    store = out / "store" / canonical_hash(data.store_key())[:12]
+    n_reused_models = 0
+    if model_cache is not None:
+        n_reused_models = _models_from_cache(config, store, model_cache)
+    results = run_sweep(
+        config,
+        store,
+        backend=backend,
+        n_workers=workers,
+        ray_address=ray_address,
+        progress=progress,
+        figure_cells=figure_cells(config) if figures else (),
+    )
+    if model_cache is not None:
+        _models_to_cache(config, store, model_cache)
+    records = (*results.records, *reference_records(data, DEFAULT_REFERENCES))
+    rows = track_rows(records, [s.key for s in config.diagnosers], track.faults)
+    if figures:
+        write_figures(results, out / "figures")
+    return TrackRun(
+        track=track,
+        records=records,
+        rows=tuple(rows),
+        wall_s=time.perf_counter() - t0,
+        n_computed=results.n_computed,
+        n_reused=results.n_reused,
+        n_trained=results.n_trained,
+        n_reused_models=n_reused_models,
+    )
+
+
+def _cache_dir(config: SweepConfig, spec: DiagnoserSpec, cache: Path) -> Path:
+    data = config.data
+    assert isinstance(data, TrackData)
+    # model_hash with a constant data part: the package version and the resolved settings
+    key = {"training": data.training_key(), "model": config.model_hash(spec, "training-key")}
+    if spec.build().isolates:  # it also learns the track's labelled faults
+        key["faults"] = data.fault_training_key()
+    return cache / spec.key / canonical_hash(key)[:16]
+
+
+def _models_from_cache(config: SweepConfig, store_dir: Path, cache: Path) -> int:
+    """Copy cached models of an equal training set into the track's store; how many."""
+    store = ResultStore.open(store_dir, config.data.store_key())
+    n = 0
+    for spec in config.diagnosers:
+        mhash = config.model_hash(spec, store.data_hash)
+        src = _cache_dir(config, spec, cache)
+        if not store.has_model(spec.key, mhash) and (src / "model").is_dir():
+            files = dir_files(src / "model")
+            store.write_model(spec.key, mhash, files, {**spec.to_json(), "from_cache": str(src)})
+            n += 1
+    return n
+
+
+def _models_to_cache(config: SweepConfig, store_dir: Path, cache: Path) -> None:
+    """Offer the track's trained models to the cache (atomic: a renamed temporary copy)."""
+    store = ResultStore.open(store_dir, config.data.store_key())
+    for spec in config.diagnosers:
+        dst = _cache_dir(config, spec, cache)
+        if (dst / "model").is_dir():
+            continue
+        dst.mkdir(parents=True, exist_ok=True)
+        tmp = Path(tempfile.mkdtemp(dir=dst, prefix=".model.", suffix=".tmp"))
+        shutil.copytree(store.model_dir(spec.key), tmp, dirs_exist_ok=True, ignore=_spec_json)
+        try:
+            os.rename(tmp, dst / "model")
+        except OSError:  # another run cached it first
+            shutil.rmtree(tmp, ignore_errors=True)
+
+
+def _spec_json(directory: str, names: list[str]) -> list[str]:
+    return ["spec.json"] if "spec.json" in names else []

@@ -1,0 +1,137 @@
+"""The published tracks (:data:`TRACKS`) and how a command line names them.
+
+>>> t = TRACKS["incipient"]
+>>> t.test_cells()[:2], len(t.test_cells())
+([('nominal', 0), ('nominal', 1)], 280)
+>>> spec = t.fault_spec("f2", seed=3)
+>>> spec == t.fault_spec("f2", seed=3), spec.profile.value, spec.onset + spec.ramp_samples <= 3800
+(True, 'incipient', True)
+>>> [t.name for t in parse_tracks("paper, small")]
+['paper', 'small']
+"""
+
+from __future__ import annotations
+
+from evaluation.tracks.distributions import Choice, Distribution, Fixed, Uniform
+from evaluation.tracks.track import FAULT_NAMES, RAMP_LENGTHS, Track
+from fcc_common.validation import Options, check, invalid
+from fcc_env.scenarios import FAULTS, FaultProfile, Scenario
+
+__all__ = ["SMALL_MAGNITUDES", "TRACKS", "parse_tracks", "tracks_markdown"]
+
+
+def _paper_scaled(low: float, high: float) -> dict[str, Distribution]:
+    return {
+        f: Uniform(
+            low * FAULTS[Scenario(f)].default_magnitude,
+            high * FAULTS[Scenario(f)].default_magnitude,
+        )
+        for f in FAULT_NAMES
+    }
+
+
+#: Near-detectability magnitudes of the ``small`` track: the sizes at which the physical-limit
+#: row's r_td is about 0.85-0.93, measured on 12 episodes with seeds 7000+ (never test seeds):
+#: f1 0.005 → 0.93, f2 0.03 → 0.88, f3 0.012 → 0.92, f4 0.01 → 0.87
+#: (``python scripts/small_track_calibration.py``). About 1.1-1.5 noise stds of the most affected
+#: temperature 50-200 samples after onset.
+SMALL_MAGNITUDES: dict[str, float] = {"f1": 0.005, "f2": 0.03, "f3": 0.012, "f4": 0.01}
+
+_TRACK_LIST = (
+    Track(
+        name="paper",
+        description=(
+            "The paper's set-up: each fault abrupt, at its paper magnitude and onset. Tests "
+            "whether a detector reproduces the published comparison; the reference column."
+        ),
+    ),
+    Track(
+        name="small",
+        description=(
+            "Each fault abrupt at a size near its detectability limit (f1 0.5 %, f2 3 %, "
+            "f3 1.2 %, f4 1 %: the physical-limit row's r_td is about 0.85-0.93), paper onsets. "
+            "Tests sensitivity: the paper's faults are large enough that most detectors find "
+            "them; small ones separate the good from the lucky."
+        ),
+        magnitudes={f: Fixed(m) for f, m in SMALL_MAGNITUDES.items()},
+    ),
+    Track(
+        name="incipient",
+        description=(
+            "Paper magnitudes reached by a linear ramp of 500, 1000, 1500 or 2000 samples, onset "
+            "uniform in 1000-1500 so every ramp completes. Tests drifting faults, which hide "
+            "inside the slow operating changes a residual threshold must tolerate."
+        ),
+        onset=Uniform(1000, 1500),
+        profiles=(FaultProfile.INCIPIENT,),
+        ramp=Choice(RAMP_LENGTHS),
+    ),
+    Track(
+        name="noisy",
+        description=(
+            "Paper faults with twice the measurement noise, in training and test. Tests whether "
+            "detection survives poorer sensors without a flood of false alarms."
+        ),
+        noise_scale=2.0,
+    ),
+    Track(
+        name="uncertain",
+        description=(
+            "Paper faults on a plant drawn per episode, training and test alike: kinetics ±2 %, "
+            "heat-loss coefficients ±10 %, feed properties ±0.5 %, valve gain ±1 %, a slow "
+            "feed-quality drift and a daily ambient cycle (fcc_env.uncertainty). Tests "
+            "robustness to model mismatch, the paper's own subject: a detector that learns one "
+            "plant may take another for a fault."
+        ),
+        plant_variation=True,
+    ),
+    Track(
+        name="random",
+        description=(
+            "Per faulty episode, fault type, size (uniform in 0.3-1.3 x paper), onset (uniform "
+            "in 1000-3000) and profile (abrupt, or incipient with a ramp that completes) are "
+            "drawn. Tests generalisation beyond the fixed cases a detector could be tuned to."
+        ),
+        magnitudes=_paper_scaled(0.3, 1.3),
+        onset=Uniform(1000, 3000),
+        profiles=(FaultProfile.ABRUPT, FaultProfile.INCIPIENT),
+        ramp=Choice(RAMP_LENGTHS),
+        draw_fault=True,
+    ),
+)
+
+#: The published tracks by name.
+TRACKS: dict[str, Track] = {t.name: t for t in _TRACK_LIST}
+
+
+def parse_tracks(text: str) -> tuple[Track, ...]:
+    """Tracks named in a CLI value: comma-separated names (``"paper,small"``) or ``"all"``.
+
+    Unknown or empty names are rejected naming the value and the allowed set; repeats are
+    dropped, the order of first mention is kept.
+    """
+    if not isinstance(text, str):
+        raise invalid("tracks", text, f"a comma-separated string of {sorted(TRACKS)} or 'all'")
+    if text.strip() == "all":
+        return tuple(TRACKS.values())
+    out: dict[str, Track] = {}
+    for part in text.split(","):
+        name = check("track", part.strip(), Options([*sorted(TRACKS), "all"]))
+        if name == "all":
+            raise invalid("tracks", text, "'all' alone or a list of track names")
+        out.setdefault(name, TRACKS[name])
+    return tuple(out.values())
+
+
+def tracks_markdown(tracks: tuple[Track, ...] | None = None) -> str:
+    """A Markdown table of tracks (name, episodes, description) for the README's "Tracks" section.
+
+    >>> print(tracks_markdown((TRACKS["paper"],)).splitlines()[2][:38])
+    | `paper` | 200 healthy, 80 faulty | T
+    """
+    tracks = tuple(TRACKS.values()) if tracks is None else tracks
+    lines = ["| track | test episodes | what it tests |", "|---|---|---|"]
+    for t in tracks:
+        episodes = f"{t.n_healthy} healthy, {t.n_faulty_total} faulty"
+        lines.append(f"| `{t.name}` | {episodes} | {t.description} |")
+    return "\n".join(lines)

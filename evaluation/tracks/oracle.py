@@ -1,0 +1,391 @@
+"""The physical-limit row: an observer that knows the healthy plant exactly.
+
+It is not a diagnoser: it reads what no diagnoser may, the same seed's noise-free output of the
+healthy plant (same inputs, same plant). Its residual on each temperature is therefore pure
+measurement noise until the fault acts, and its detection time is the earliest a detector with
+a perfect model could reach at the same false-alarm rate. Every diagnoser's ``t_dt`` is reported
+against it as ``(t_dt + 1) / (oracle t_dt + 1)`` (:func:`evaluation.metrics.intervals.limit_ratio`).
+
+The statistic (the same alarm stage as ``lrgf-mem``, :mod:`diagnosers.alarm`):
+
+1. residual r_k = (y_k − y_ref,k) / σ on the five temperatures T_rx, T_rg1, T_rg2, T_d1, T_dg,
+   σ the channel's noise standard deviation times the track's noise scale;
+2. an EWMA of weight λ (default 0.3, ``lrgf-mem``'s) per channel;
+3. Hotelling's T² of the EWMA vector, its mean and covariance fitted on calibration episodes;
+4. an alarm when T² exceeds the ``chi2-tail`` limit at the false-alarm target (default 0.002),
+   calibrated on healthy episodes of the track's *validation* seeds, never the test seeds.
+
+**A second reference row**, ``perfect model (measured inputs)`` (``OracleConfig(inputs=
+"measured")``): the same observer, but its reference is the healthy plant driven sample by sample
+by the episode's *measured* inputs (R_ar with 0.5 % noise, T_ar and T_fp with 0.3 °C;
+:meth:`evaluation.tracks.track_data.TrackData.reference`), which is all a simulation-residual detector can
+read. The gap between the two rows is what knowing the true inputs is worth; the gap between a
+diagnoser and the second row is its model error (and its alarm stage). On `paper` (validation
+seeds) the measured inputs add an independent 0.17 °C to the T_rg1 residual and move f3 from 12
+to 20 samples. Both rows use the same stage, which is not the best possible one: a detector
+with a better stage can beat either on slow or small faults (it is a reference, not a bound).
+
+**A third reference row**, ``perfect model + lrgf-glr stage (measured inputs)``
+(``OracleConfig(inputs="measured", stage="directional")``): the same perfect model on the
+measured inputs, evaluated by ``lrgf-glr``'s alarm stage instead of the T², through
+``lrgf-glr``'s own parts (:class:`diagnosers.directional_stage.DirectionalStage` and
+:class:`diagnosers.fault_directions.FaultDirections` on the reference's residual): fault directions from the noise-free signatures of the training faults (seeds
+1000-1002, as the detector's), a fast and a slow EWMA scale projected on them, an omnibus T²,
+calibrated on :data:`DIRECTIONAL_CALIBRATION` (100) healthy episodes from the track's first
+validation seed. It is what a detector of that family
+would reach with a perfect model, from what a detector can read: where it misses the
+physical-limit row's bounds, no model improvement can close the gap with that stage. Its
+declared target is :data:`DIRECTIONAL_TARGET` (0.005), chosen so that it realises about what
+``lrgf-glr`` realises on validation seeds: on 200 healthy episodes of ``paper`` (seeds
+5000-5199, calibration from 9000) 0.0041 with the worst episode 5.6 % in alarm, against
+``lrgf-glr``'s 0.0045 and 4.6 % (the stage's union bound and the normal tail keep the realised
+rate under the declared one). The slow EWMA scale's limit rests on few effectively independent
+samples per episode, so this row calibrates on five times the T² rows' 20 episodes: at a
+declared 0.004, 20 calibration episodes realised 0.0049 with one episode 7.3 % in alarm and
+block-of-50 interval upper ends up to 0.0126; 100 realised 0.0034, the worst episode 5.2 %, the
+upper ends all under 0.0082.
+
+>>> OracleConfig().channels
+('T_rx', 'T_rg1', 'T_rg2', 'T_d1', 'T_dg')
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from enum import StrEnum
+from typing import Any
+
+import numpy as np
+
+from diagnosers.alarm import EWMA, HotellingT2, LimitMethod, calibrate_limit
+from diagnosers.detection import Detection
+from diagnosers.directional_stage import DirectionalStage
+from diagnosers.episode import Episode
+from diagnosers.fault_directions import FaultDirections
+from diagnosers.registry import diagnoser_class
+from evaluation.sweep.records import CellResult, score_episode
+from evaluation.sweep.sources import LoadedEpisode
+from evaluation.tracks.track import Track
+from evaluation.tracks.track_data import TrackData
+from fcc_common.validation import Integer, Options, Real, check
+from fcc_env.params import MEASUREMENT_NAMES, MEASUREMENTS
+
+__all__ = [
+    "DEFAULT_REFERENCES",
+    "DIRECTIONAL_CALIBRATION",
+    "DIRECTIONAL_TARGET",
+    "MEASURED_INPUTS_LABEL",
+    "ORACLE_LABEL",
+    "REFERENCE_LABELS",
+    "STAGE_LABEL",
+    "OracleConfig",
+    "OracleInputs",
+    "OracleStage",
+    "PhysicalLimit",
+    "oracle_records",
+    "reference_records",
+]
+
+#: The row's label in tables (never a registry name).
+ORACLE_LABEL = "oracle (physical limit)"
+#: The label of the perfect model driven by the measured inputs.
+MEASURED_INPUTS_LABEL = "perfect model (measured inputs)"
+
+
+class OracleInputs(StrEnum):
+    """Which inputs drive the observer's healthy reference (see the module docstring)."""
+
+    TRUE = "true"
+    MEASURED = "measured"
+
+
+class OracleStage(StrEnum):
+    """Which alarm stage evaluates the reference's residual (see the module docstring)."""
+
+    T2 = "t2"
+    DIRECTIONAL = "directional"
+
+
+#: The label of the perfect model on measured inputs with lrgf-glr's alarm stage.
+STAGE_LABEL = "perfect model + lrgf-glr stage (measured inputs)"
+#: The declared false-alarm target of the directional stage (its T² rows keep ``target``).
+DIRECTIONAL_TARGET = 0.005
+#: Healthy calibration episodes of the directional stage (the T² rows: the track's validation
+#: seeds, 20 by default).
+DIRECTIONAL_CALIBRATION = 100
+
+#: every reference row's label, by (inputs, stage), in table order
+REFERENCE_LABELS = {
+    (OracleInputs.TRUE, OracleStage.T2): ORACLE_LABEL,
+    (OracleInputs.MEASURED, OracleStage.T2): MEASURED_INPUTS_LABEL,
+    (OracleInputs.MEASURED, OracleStage.DIRECTIONAL): STAGE_LABEL,
+    (OracleInputs.TRUE, OracleStage.DIRECTIONAL): "perfect model + lrgf-glr stage (true inputs)",
+}
+
+
+@dataclass(frozen=True, kw_only=True)
+class OracleConfig:
+    """Settings of the physical-limit observer (see the module docstring)."""
+
+    channels: tuple[str, ...] = ("T_rx", "T_rg1", "T_rg2", "T_d1", "T_dg")
+    ewma_lambda: float = 0.3
+    #: declared false-alarm target; ``None``: 0.002 for the T², DIRECTIONAL_TARGET otherwise
+    target: float | None = None
+    inputs: str = "true"
+    stage: str = "t2"
+    #: healthy calibration episodes from the first validation seed; ``None``: the track's
+    #: validation seeds for the T², DIRECTIONAL_CALIBRATION otherwise
+    n_calibration: int | None = None
+
+    def __post_init__(self) -> None:
+        check("ewma_lambda", self.ewma_lambda, Real(0.0, 1.0, closed="right"))
+        if self.target is not None:
+            check("target", self.target, Real(0.0, 0.5, closed="neither"))
+        if self.n_calibration is not None:
+            check("n_calibration", self.n_calibration, Integer(1))
+        check("inputs", self.inputs, Options(OracleInputs))
+        check("stage", self.stage, Options(OracleStage))
+
+    @property
+    def false_alarm_target(self) -> float:
+        """The declared target the stage is calibrated to."""
+        if self.target is not None:
+            return self.target
+        return 0.002 if self.stage == OracleStage.T2 else DIRECTIONAL_TARGET
+
+    def calibration_seeds(self, track: Track) -> range:
+        """The healthy episodes the stage is calibrated on (validation seeds of ``track``).
+
+        Raises:
+            ValueError: when ``n_calibration`` reaches into the track's test or training seeds.
+        """
+        n = self.n_calibration
+        if n is None and self.stage == OracleStage.T2:
+            return track.validation_seeds
+        n = DIRECTIONAL_CALIBRATION if n is None else n
+        seeds = range(track.validation_seed_start, track.validation_seed_start + n)
+        for name, other in (("test", track.test_seeds), ("training", track.train_seeds)):
+            if set(seeds) & set(other):
+                raise ValueError(
+                    f"n_calibration={n} puts calibration seeds {seeds.start}..{seeds.stop - 1} "
+                    f"into the track's {name} seeds {other.start}..{other.stop - 1}; allowed: "
+                    "a count that stays clear of them"
+                )
+        return seeds
+
+    @property
+    def label(self) -> str:
+        """The row's label in tables."""
+        return REFERENCE_LABELS[OracleInputs(self.inputs), OracleStage(self.stage)]
+
+
+#: the reference rows every track table carries, in order
+DEFAULT_REFERENCES = (
+    OracleConfig(),
+    OracleConfig(inputs="measured"),
+    OracleConfig(inputs="measured", stage="directional"),
+)
+
+
+class PhysicalLimit:
+    """The observer of one track: :meth:`fit` calibrates on validation seeds, then scores.
+
+    It follows the detection contract only as far as scoring needs (``detect`` returns a
+    :class:`Detection`), but it is built from references, not trained on episodes.
+    """
+
+    name = ORACLE_LABEL
+
+    def __init__(
+        self,
+        data: TrackData,
+        config: OracleConfig | None = None,
+        *,
+        simulations: _Simulations | None = None,
+    ) -> None:
+        self.data = data
+        self.config = config or OracleConfig()
+        # rows scored together share their simulations (healthy episodes and references)
+        self._sims = simulations or _Simulations(data)
+        self.name = self.config.label
+        idx = [MEASUREMENT_NAMES.index(c) for c in self.config.channels]
+        self._idx = np.array(idx)
+        noise = np.array([MEASUREMENTS[i].noise_std for i in idx])
+        #: noise std [channel unit] of each monitored channel on this track
+        self.noise_std = noise * data.track.noise_scale
+
+    def _reference(self, y: np.ndarray, seed: int) -> np.ndarray:
+        measured = y if self.config.inputs == OracleInputs.MEASURED else None
+        return self._sims.reference(seed, measured)
+
+    def _statistic(self, y: np.ndarray, seed: int) -> tuple[np.ndarray, np.ndarray]:
+        y_ref = self._reference(y, seed)
+        r = (y[:, self._idx] - y_ref[: y.shape[0], self._idx]) / self.noise_std
+        return r, EWMA(self.config.ewma_lambda).filter(r)
+
+    def fit(self, seeds: Sequence[int] | None = None) -> PhysicalLimit:
+        """Calibrate the stage on healthy episodes of ``seeds`` (default:
+        :meth:`OracleConfig.calibration_seeds`, validation seeds of the track)."""
+        seeds = list(self.config.calibration_seeds(self.data.track) if seeds is None else seeds)
+        healthy = [self._sims.healthy(s) for s in seeds]
+        if self.config.stage == OracleStage.DIRECTIONAL:
+            self.stage_ = _PerfectModelStage(
+                self._reference,
+                self.config.channels,
+                false_alarm_target=self.config.false_alarm_target,
+                ewma_lambda=self.config.ewma_lambda,
+            ).fit(healthy)
+            return self
+        Z = np.concatenate([self._statistic(ep.y, int(ep.seed))[1] for ep in healthy])  # type: ignore[arg-type]
+        self.t2_ = HotellingT2().fit(Z)
+        stat = np.asarray(self.t2_.score(Z))
+        self.limit_ = float(
+            calibrate_limit(
+                stat[:, None],
+                self.config.false_alarm_target,
+                method=LimitMethod.CHI2_TAIL,
+                dof=len(self._idx),
+            )[0]
+        )
+        return self
+
+    def detect(self, episode: Episode) -> Detection:
+        assert episode.seed is not None, "the physical limit needs the episode's seed"
+        if self.config.stage == OracleStage.DIRECTIONAL:
+            return self.stage_.detect(episode)
+        r, z = self._statistic(episode.y, episode.seed)
+        stat = np.asarray(self.t2_.score(z)).reshape(-1, 1)
+        upper = np.full_like(stat, self.limit_)
+        return Detection(
+            alarm=stat[:, 0] > self.limit_,
+            signal=stat,
+            lower=np.full_like(stat, -np.inf),
+            upper=upper,
+            residual=np.linalg.norm(r, axis=1, keepdims=True),
+            signal_names=("T2[oracle]" if self.name == ORACLE_LABEL else "T2[measured inputs]",),
+        )
+
+
+class _PerfectModelStage:
+    """``lrgf-glr``'s alarm stage on a reference trajectory instead of a trained bank.
+
+    Everything after the residual (scale, fault directions, EWMA scales, projections, omnibus
+    T², limits, alarm logic) is the detector's own parts,
+    :class:`~diagnosers.fault_directions.FaultDirections` and
+    :class:`~diagnosers.directional_stage.DirectionalStage` with ``lrgf-glr``'s defaults, so the
+    row measures that stage on a perfect model. ``reference_of(y, seed)`` gives the reference
+    of a record; ``monitored`` the channels. Batch only (``detect``). Not a diagnoser: it reads
+    what no diagnoser may.
+    """
+
+    def __init__(
+        self,
+        reference_of: Callable[[np.ndarray, int], np.ndarray],
+        monitored: tuple[str, ...],
+        *,
+        false_alarm_target: float,
+        ewma_lambda: float,
+    ) -> None:
+        self.reference_of = reference_of
+        self.monitored = monitored
+        glr = diagnoser_class("lrgf-glr").DEFAULTS  # type: ignore[attr-defined]
+        self.steady_window = int(glr["steady_window"])
+        self.directions = FaultDirections(
+            glr["fault_scenarios"], glr["fault_seeds"], glr["direction_window"]
+        )
+        self.faults = self.directions.faults
+        stage_params = {k: glr[k] for k in DirectionalStage.PARAMETERS}
+        stage_params.update(false_alarm_target=false_alarm_target, ewma_lambda=ewma_lambda)
+        self.stage = DirectionalStage(**stage_params)
+
+    @property
+    def false_alarm_target(self) -> float:
+        return self.stage.false_alarm_target
+
+    def _centre_of(self, y: np.ndarray, seed: int | None) -> np.ndarray:
+        assert seed is not None, "the reference needs the episode's seed"
+        return self.reference_of(y, seed)[: y.shape[0]][:, self.out_idx_]
+
+    def fit(self, episodes: Sequence[Episode]) -> _PerfectModelStage:
+        channels = episodes[0].channels
+        self.out_idx_ = np.array([channels.index(c) for c in self.monitored])
+        w = self.steady_window
+        rem = [(ep.y[:, self.out_idx_] - self._centre_of(ep.y, ep.seed))[w:] for ep in episodes]
+        self.v_residual_ = np.maximum(np.sqrt(np.mean(np.concatenate(rem) ** 2, axis=0)), 1e-9)
+        self.directions_ = self.directions.learn(channels, len(self.out_idx_), self._signature)
+        self.stage.fit([r / self.v_residual_ for r in rem], self.directions_)
+        self.signal_names_ = self.stage.signal_names(self.faults)
+        return self
+
+    def _signature(self, faulty: Any, healthy: Any, b: int, end: int) -> np.ndarray:
+        """The training fault's noise-free signature: the faulty plant's clean output minus its
+        healthy twin's, normalised (what a perfect model's residual difference is)."""
+        d = np.asarray(faulty.y_clean[b][:end], dtype=np.float64) - healthy.y_clean[b][:end]
+        return d[:, self.out_idx_] / self.v_residual_
+
+    def detect(self, episode: Episode) -> Detection:
+        y = episode.y
+        resid = y[:, self.out_idx_] - self._centre_of(y, episode.seed)
+        w = self.steady_window
+        e = resid / self.v_residual_
+        e[:w] = 0.0
+        self.stage.reset()
+        sig = self.stage.signals(e, w)
+        return Detection.from_decisions(
+            [self.stage.decision(resid[k], sig[k], k < w) for k in range(y.shape[0])],
+            self.signal_names_,
+        )
+
+    def update(self, y: np.ndarray) -> Any:
+        raise NotImplementedError(
+            "the perfect-model stage scores whole episodes with detect(), whose seed gives the "
+            "reference; a single sample carries no seed"
+        )
+
+
+class _Simulations:
+    """Healthy episodes and references of one track, each simulated once for every row that
+    asks (the T² and directional rows calibrate on the same first validation episodes, and
+    the two measured-input rows replay the same records)."""
+
+    def __init__(self, data: TrackData) -> None:
+        self.data = data
+        self._healthy: dict[int, Episode] = {}
+        self._references: dict[tuple[int, bytes | None], np.ndarray] = {}
+
+    def healthy(self, seed: int) -> Episode:
+        if seed not in self._healthy:
+            self._healthy[seed] = self.data.load_test("nominal", seed).episode
+        return self._healthy[seed]
+
+    def reference(self, seed: int, measured: np.ndarray | None) -> np.ndarray:
+        key = (seed, None if measured is None else hashlib.sha1(measured.tobytes()).digest())
+        if key not in self._references:
+            self._references[key] = self.data.reference(seed, measured)
+        return self._references[key]
+
+
+def oracle_records(
+    data: TrackData, config: OracleConfig | None = None, *, t_on: int = 0
+) -> list[CellResult]:
+    """A reference row's records on every test cell of ``data`` (pure computation): the
+    physical limit's, or with ``config.inputs="measured"`` the perfect model's on measured
+    inputs."""
+    return reference_records(data, [config or OracleConfig()], t_on=t_on)
+
+
+def reference_records(
+    data: TrackData, configs: Sequence[OracleConfig], *, t_on: int = 0
+) -> list[CellResult]:
+    """The records of several reference rows (one per config), each test cell simulated once."""
+    sims = _Simulations(data)
+    observers = [PhysicalLimit(data, c, simulations=sims).fit() for c in configs]
+    out = []
+    for sc, seed in data.cells():
+        loaded: LoadedEpisode = data.load_test(sc, seed)
+        for obs in observers:
+            # score_episode only calls .detect and reads .name, which the observer has.
+            out.append(score_episode(obs, loaded, label=obs.name, t_on=t_on))  # type: ignore[arg-type]
+    return out

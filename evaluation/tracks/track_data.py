@@ -1,0 +1,177 @@
+"""A benchmark track's episodes as a sweep's data source (:class:`TrackData`).
+
+The physical-limit rows also need the healthy plant's output driven by what a detector reads:
+:class:`MeasuredInputs` replays an episode's measured inputs into the simulator.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+import fcc_env
+from diagnosers.episode import Episode
+from evaluation.sweep.sources import DataDescription, LoadedEpisode, simulate_loaded
+from evaluation.tracks.track import Track
+from fcc_common.validation import invalid
+from fcc_env.params import INPUT_NAMES, MEASUREMENT_NAMES
+from fcc_env.scenarios import FaultSpec
+from fcc_env.uncertainty import PlantUncertainty
+
+#: the tracks' sample time [s] (the env's default)
+TRACK_SAMPLE_TIME_S = 10.0
+
+#: the plant inputs that are also measured (Table 1), as (input index, measurement index)
+_MEASURED_INPUTS = tuple(
+    (INPUT_NAMES.index(c), MEASUREMENT_NAMES.index(c))
+    for c in INPUT_NAMES
+    if c in MEASUREMENT_NAMES
+)
+
+
+class MeasuredInputs:
+    """Plant effect (``transform_inputs``): the process sees the measured inputs of ``y``.
+
+    ``y`` holds an episode's measurements ``(T, 8)``; at sample ``k`` the inputs that Table 1
+    measures (R_ar, T_ar, T_fp) are replaced by ``y[k]``'s values, the others are left alone.
+    Replaying an episode's noise-free measurements reproduces it exactly (tested).
+    """
+
+    def __init__(self, y: np.ndarray, sample_time_s: float) -> None:
+        y = np.asarray(y, dtype=np.float64)
+        n_meas = len(MEASUREMENT_NAMES)
+        if y.ndim != 2 or y.shape[0] < 1 or y.shape[1] != n_meas:
+            raise ValueError(
+                f"measured has shape {y.shape}; allowed: (T, {n_meas}) with T >= 1, the columns "
+                f"{', '.join(MEASUREMENT_NAMES)}"
+            )
+        if not np.isfinite(y).all():
+            raise ValueError("measured contains NaN or inf; allowed: finite values")
+        self.y = y
+        self.sample_time_s = float(sample_time_s)
+
+    def transform_inputs(self, t_s: np.ndarray, u: np.ndarray) -> np.ndarray:
+        k = np.rint(np.asarray(t_s) / self.sample_time_s).astype(np.int64)
+        k = np.clip(k, 0, self.y.shape[0] - 1)
+        out = np.array(u, dtype=np.float64, copy=True)
+        for i_in, i_meas in _MEASURED_INPUTS:
+            out[..., i_in] = self.y[k, i_meas]
+        return out
+
+
+@dataclass(frozen=True, kw_only=True)
+class TrackData:
+    """The episodes of a benchmark track (:mod:`evaluation.tracks`) as a sweep's data source.
+
+    Training: ``track.n_train`` healthy episodes from the track's training seeds, with the
+    track's noise scale. Test: :meth:`Track.test_cells`, each with its own
+    :meth:`Track.fault_spec` (every field explicit, drawn from the seed). The store key is the
+    track's definition without its test counts, so a sweep extended with more test episodes
+    reuses the stored cells and models.
+    """
+
+    track: Track
+
+    def validate(self) -> None:
+        if not isinstance(self.track, Track):
+            raise invalid("track", self.track, "an evaluation.tracks.Track")
+
+    def store_key(self) -> dict[str, Any]:
+        key = self.track.to_json()
+        del key["n_healthy"], key["n_faulty"], key["description"]
+        return {"kind": "track", "model_version": fcc_env.MODEL_VERSION, "track": key}
+
+    def cells(self) -> list[tuple[str, int]]:
+        return self.track.test_cells()
+
+    def training_key(self) -> dict[str, Any]:
+        """What the training episodes depend on: tracks with equal keys train equal models."""
+        t = self.track
+        return {
+            "model_version": fcc_env.MODEL_VERSION,
+            "n_samples": t.n_samples,
+            "noise_scale": t.noise_scale,
+            "plant_variation": t.plant_variation,
+            "train_seeds": [t.train_seeds.start, t.train_seeds.stop],
+        }
+
+    def simulate(self, seeds: Sequence[int], spec: FaultSpec) -> list[LoadedEpisode]:
+        """Episodes of ``seeds`` with the fault ``spec``, under the track's noise and plant."""
+        return simulate_loaded(
+            seeds,
+            self.track.n_samples,
+            spec,
+            noise_scale=self.track.noise_scale,
+            plant_uncertainty=PlantUncertainty() if self.track.plant_variation else None,
+        )
+
+    def train_episodes(self) -> list[Episode]:
+        loaded = self.simulate(list(self.track.train_seeds), FaultSpec())
+        return [le.episode for le in loaded if le.episode.n_samples >= 2]
+
+    def train_fault_episodes(self) -> list[Episode]:
+        """Labelled faulty training episodes, for diagnosers that isolate (``isolates``).
+
+        Every fault of the track on every training seed, its size, onset and profile drawn from
+        the track's distributions with that training seed (:meth:`Track.fault_spec`): the same
+        seeds as the healthy training episodes, never a test or validation seed. An episode that
+        ended before its onset has no faulty sample and is dropped.
+        """
+        out = []
+        for fault in self.track.faults:
+            for seed in self.track.train_fault_seeds:
+                ep = self.simulate([seed], self.track.fault_spec(fault, seed))[0].episode
+                if ep.fault_onset is not None and ep.n_samples - ep.fault_onset >= 2:
+                    out.append(ep)
+        return out
+
+    def fault_training_key(self) -> dict[str, Any]:
+        """What the labelled training faults depend on besides :meth:`training_key`: the
+        track's fault distributions (tracks sharing healthy training may differ here)."""
+        key = self.track.to_json()
+        for k in ("n_healthy", "n_faulty", "description", "test_seed_start"):
+            key.pop(k, None)
+        return key
+
+    def load_test(self, scenario: str, seed: int) -> LoadedEpisode:
+        return self.simulate([seed], self.track.fault_spec(scenario, seed))[0]
+
+    def reference(self, seed: int, measured: np.ndarray | None = None) -> np.ndarray:
+        """The healthy plant's noise-free measurements of ``seed`` (same plant): what the
+        physical-limit rows compare with (no diagnoser may read it).
+
+        Without ``measured`` the plant sees its true inputs. With ``measured`` (an episode's
+        measurements, ``(T, 8)``) it sees, sample by sample, the *measured* values of the
+        inputs that are measured (R_ar, T_ar, T_fp; noise included) in place of the true ones:
+        the output of a perfect model driven by what a detector reads. Returns ``(T', 8)``.
+        """
+        if measured is None:
+            ep = self.simulate([seed], FaultSpec())[0].episode
+            assert ep.y_clean is not None
+            return ep.y_clean
+        replay = MeasuredInputs(measured, TRACK_SAMPLE_TIME_S)  # checks the shape and values
+        res = fcc_env.simulate_episodes(
+            [seed],
+            replay.y.shape[0],
+            plant_effects=[replay],
+            noise_scale=self.track.noise_scale,
+            sample_time_s=TRACK_SAMPLE_TIME_S,
+            plant_uncertainty=PlantUncertainty() if self.track.plant_variation else None,
+        )
+        return np.asarray(res.y_clean[0], dtype=np.float64)
+
+    def describe(self) -> DataDescription:
+        t = self.track
+        return DataDescription(
+            label=f"{fcc_env.ENV_ID} ({fcc_env.MODEL_VERSION}), track {t.name}",
+            lines=(
+                t.description,
+                f"{t.n_healthy} healthy and {t.n_faulty_total} faulty test episodes (seeds from "
+                f"{t.test_seed_start}), training on {t.n_train} healthy episodes (seeds from "
+                f"{t.train_seed_start}), {t.n_samples} samples each.",
+            ),
+            paper_setup=t.name == "paper",
+        )

@@ -1,0 +1,8 @@
+"""Utilities shared by the three packages (``fcc_env``, ``diagnosers``, ``evaluation``).
+
+- :mod:`fcc_common.validation`: declarative parameter constraints with one error format;
+- :mod:`fcc_common.io`: the atomic file writer, the JSON scrubber and the table readers;
+- :mod:`fcc_common.workers`: the set-up of every worker process (one thread, exit with parent).
+
+It depends on nothing of the project, so any package may import it without a cycle.
+"""

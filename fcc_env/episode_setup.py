@@ -1,0 +1,267 @@
+"""One episode's set-up, shared by the env (chunk by chunk) and batch simulation (whole episodes).
+
+Both paths build an episode from one seeded generator in the same order (program, noise and
+random-fault streams spawned from it) and change the plant through the same
+:class:`PlantSchedule`, so :func:`fcc_env.simulate_episodes` reproduces ``FCC-v0`` episodes with
+the same seed and options sample for sample (zero actions).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from fcc_env import effects as fx
+from fcc_env.excitation import ProgramGenerator, episode_generators
+from fcc_env.integrator import (
+    aux_kernel,
+    measure_kernel,
+    noisy_kernel,
+    rhs_batch_kernel,
+    step_kernel,
+)
+from fcc_env.params import N_INPUTS, N_MEASUREMENTS, N_STATES, PARAM_INDEX, FCCParams
+from fcc_env.physics import N_AUX, measure_batch_kernel
+from fcc_env.plant import NOISE_STD_ABS, NOISE_STD_REL, PlantConfig
+from fcc_env.scenarios import EpisodeFault, FaultSpec
+
+#: Samples of program, noise and multipliers an :class:`EpisodeStream` draws at a time.
+CHUNK_SAMPLES = 512
+
+
+class PlantSchedule:
+    """What changes the plant over an episode: the fault and the undeclared plant effects.
+
+    Parameter changes (the fault's and the library process effects') become per-sample
+    multipliers of parameter slots ``pidx``; input effects transform the operating program;
+    ``measure`` effects transform the noise-free measurements; ``d_state`` effects need the
+    generic (Python-level RK4) path. Every method is elementwise in the sample index, so the env
+    (chunk by chunk) and batch simulation (whole episodes) compute the same numbers.
+    """
+
+    def __init__(
+        self, fault: EpisodeFault, effects: list[Any], params: FCCParams, sample_time_s: float
+    ):
+        self.fault = fault
+        self.params = params
+        self.sample_time_s = sample_time_s
+        self.param_effects = [e for e in effects if fx.has_hook(e, "param_multipliers")]
+        self.input_effects = [e for e in effects if fx.has_hook(e, "transform_inputs")]
+        self.measure_effects = [e for e in effects if fx.has_hook(e, "measure")]
+        self.state_effects = [e for e in effects if fx.has_hook(e, "d_state")]
+        names: list[str] = []
+        for e in self.param_effects:
+            names.extend(e.param_multipliers(np.zeros(1), params))
+        self.pidx = np.concatenate(
+            [fault.param_indices, np.array([PARAM_INDEX[n] for n in names], dtype=np.int64)]
+        )
+
+    @property
+    def generic(self) -> bool:
+        """True when a user effect adds to the state derivative (Python-level integration)."""
+        return bool(self.state_effects)
+
+    def multipliers(self, k: np.ndarray) -> np.ndarray:
+        """Parameter multipliers over samples ``k``: shape (n, len(pidx))."""
+        cols = [self.fault.multipliers(k)]
+        t = np.asarray(k) * self.sample_time_s
+        for e in self.param_effects:
+            for v in e.param_multipliers(t, self.params).values():
+                cols.append(np.asarray(v, dtype=np.float64).reshape(-1, 1))
+        return np.concatenate(cols, axis=1)
+
+    def inputs(self, k: np.ndarray, u: np.ndarray) -> np.ndarray:
+        t = np.asarray(k) * self.sample_time_s
+        for e in self.input_effects:
+            u = e.transform_inputs(t, u)
+        return u
+
+    def measure(self, k: int, y: np.ndarray) -> np.ndarray:
+        t = k * self.sample_time_s
+        for e in self.measure_effects:
+            y = np.asarray(e.measure(t, y), dtype=np.float64)
+        return y
+
+    def d_state(self, t: float, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        total = np.zeros_like(x)
+        for e in self.state_effects:
+            total = total + np.asarray(e.d_state(t, x, u, self.params), dtype=np.float64)
+        return total
+
+
+def apply_multipliers(p_base: np.ndarray, pidx: np.ndarray, mult: np.ndarray) -> np.ndarray:
+    """Numpy twin of the kernels' parameter scaling: p_base (B, n_p), pidx (B, K), mult (B, K)."""
+    p = p_base.copy()
+    rows = np.arange(p.shape[0])
+    for j in range(pidx.shape[1]):
+        ok = pidx[:, j] >= 0
+        p[rows[ok], pidx[ok, j]] = p[rows[ok], pidx[ok, j]] * mult[ok, j]
+    return p
+
+
+def generic_sample(
+    x: np.ndarray,
+    u: np.ndarray,
+    p: np.ndarray,
+    k: int,
+    schedule: PlantSchedule,
+    sample_time_s: float,
+    substeps: int,
+    advance: bool = True,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One sample of B episodes with ``d_state`` effects: RK4 in numpy over the compiled RHS.
+
+    Returns (measurement, aux, next state) at sample k; x, u: (B, ·), p: (B, n_params).
+
+    Why a numpy twin of the compiled RK4 (``integrator.step_kernel``): a user effect's ``d_state`` is
+    arbitrary Python, which compiled code cannot call, so the stages are combined here around one
+    compiled RHS call per stage (:func:`fcc_env.integrator.rhs_batch_kernel`). Everything else is
+    shared: the RHS, the measurement map (:func:`fcc_env.physics.measure_batch_kernel`) and the
+    stage arithmetic, written in the same order as the compiled loop so that both give the same
+    numbers (``tests/fcc_env/test_effects.py`` checks env = batch on this path).
+    """
+    B = x.shape[0]
+    h = sample_time_s / substeps
+    t0 = k * sample_time_s
+
+    def f(t: float, xx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        dx = np.empty((B, N_STATES))
+        aux = np.empty((B, N_AUX))
+        rhs_batch_kernel(np.ascontiguousarray(xx), u, p, dx, aux)
+        return dx + schedule.d_state(t, xx, u), aux
+
+    k1, aux = f(t0, x)
+    y = np.empty((B, N_MEASUREMENTS))
+    measure_batch_kernel(np.ascontiguousarray(x), u, aux, y)
+    if not advance:
+        return y, aux, x
+    xn = x.copy()
+    for j in range(substeps):
+        t = t0 + j * h
+        if j > 0:
+            k1, _ = f(t, xn)
+        k2, _ = f(t + 0.5 * h, xn + 0.5 * h * k1)
+        k3, _ = f(t + 0.5 * h, xn + 0.5 * h * k2)
+        k4, _ = f(t + h, xn + h * k3)
+        xn = xn + h / 6.0 * (k1 + 2.0 * k2 + 2.0 * k3 + k4)
+    return y, aux, xn
+
+
+@dataclass
+class EpisodeSetup:
+    fault: EpisodeFault
+    program: ProgramGenerator
+    noise_rng: np.random.Generator
+    schedule: PlantSchedule
+
+
+def setup_episode(
+    rng: np.random.Generator,
+    config: PlantConfig,
+    fault: FaultSpec,
+    horizon: int,
+    plant_effects: list[Any] | None = None,
+) -> EpisodeSetup:
+    """Set up one episode from its seeded generator (the env's and batch simulation's order)."""
+    gens = episode_generators(rng)
+    resolved = fault.resolve(horizon, gens["fault"])
+    effects = plant_effects or []
+    fx.reset_all(effects)
+    schedule = PlantSchedule(resolved, effects, config.params, config.sample_time_s)
+    return EpisodeSetup(
+        resolved, ProgramGenerator(config.excitation, gens["program"]), gens["noise"], schedule
+    )
+
+
+def add_noise(y_clean: np.ndarray, z: np.ndarray, noise_scale: float) -> np.ndarray:
+    """float32 measurement = clean + noise_scale·std·z, for one sample (shape (8,))."""
+    return noisy_kernel(
+        np.asarray(y_clean, np.float64),
+        np.asarray(z, np.float64),
+        NOISE_STD_ABS,
+        NOISE_STD_REL,
+        float(noise_scale),
+    )
+
+
+class EpisodeStream:
+    """One episode's plant sample by sample (the env's path; batch simulation runs whole arrays).
+
+    Draws the operating program, the measurement noise and the parameter multipliers in chunks
+    of :data:`CHUNK_SAMPLES` as the episode reaches them, and integrates or measures one sample
+    with the same kernels (or the same numpy twin, with ``d_state`` effects) as the batch.
+    """
+
+    def __init__(self, setup: EpisodeSetup, config: PlantConfig, p_base: np.ndarray) -> None:
+        self.fault = setup.fault
+        self.schedule = setup.schedule
+        self.config = config
+        self._p_base = p_base
+        self._pidx = setup.schedule.pidx
+        self._program = setup.program
+        self._noise_rng = setup.noise_rng
+        self._u_prog = np.empty((0, N_INPUTS))
+        self._z = np.empty((0, N_MEASUREMENTS))
+        self._pm = np.empty((0, self._pidx.shape[0]))
+
+    def _ensure(self, k: int) -> None:
+        while self._u_prog.shape[0] <= k:
+            ks = np.arange(self._u_prog.shape[0], self._u_prog.shape[0] + CHUNK_SAMPLES)
+            chunk = self.schedule.inputs(ks, self._program.take(CHUNK_SAMPLES))
+            self._u_prog = np.concatenate([self._u_prog, chunk])
+            self._z = np.concatenate(
+                [self._z, self._noise_rng.standard_normal((CHUNK_SAMPLES, N_MEASUREMENTS))]
+            )
+            self._pm = np.concatenate([self._pm, self.schedule.multipliers(ks)])
+
+    def program(self, k: int) -> np.ndarray:
+        """The operating program's inputs at sample ``k`` (after input effects), shape (6,)."""
+        self._ensure(k)
+        return self._u_prog[k]
+
+    def noise(self, k: int) -> np.ndarray:
+        """The standard-normal draws of the measurement noise at sample ``k``, shape (8,)."""
+        self._ensure(k)
+        return self._z[k]
+
+    def multipliers(self, k: int) -> np.ndarray:
+        """The parameter multipliers in force over sample ``k``."""
+        self._ensure(k)
+        return self._pm[k]
+
+    def _params(self, k: int) -> np.ndarray:
+        return apply_multipliers(self._p_base[None], self._pidx[None], self.multipliers(k)[None])
+
+    def advance(self, x: np.ndarray, u: np.ndarray, k: int) -> np.ndarray:
+        """The state after sample ``k`` from state ``x`` with input ``u`` held."""
+        cfg = self.config
+        if self.schedule.generic:
+            _, _, xn = generic_sample(
+                x[None], u[None], self._params(k), k, self.schedule, cfg.sample_time_s,
+                cfg.rk4_substeps,
+            )  # fmt: skip
+            return xn[0]
+        x_next = x.copy()
+        step_kernel(
+            x_next, u, self._p_base, self._pidx, self.multipliers(k),
+            cfg.sample_time_s / cfg.rk4_substeps, cfg.rk4_substeps,
+        )  # fmt: skip
+        return x_next
+
+    def measure(self, x: np.ndarray, u: np.ndarray, k: int) -> np.ndarray:
+        """Noise-free measurement of sample ``k`` (state, held input, plant effects)."""
+        if self.schedule.generic:
+            y, _, _ = generic_sample(
+                x[None], u[None], self._params(k), k, self.schedule, self.config.sample_time_s,
+                self.config.rk4_substeps, advance=False,
+            )  # fmt: skip
+            y = y[0]
+        else:
+            y = measure_kernel(x, u, self._p_base, self._pidx, self.multipliers(k))
+        return self.schedule.measure(k, y) if self.schedule.measure_effects else y
+
+    def aux(self, x: np.ndarray, u: np.ndarray, k: int) -> np.ndarray:
+        """The auxiliary variables (:data:`fcc_env.physics.AUX_NAMES`) at sample ``k``."""
+        return aux_kernel(x, u, self._p_base, self._pidx, self.multipliers(k))

@@ -1,0 +1,69 @@
+"""Speed of the FCC simulator: ``python -m fcc_env.simulator_speed [--episodes 1024]``.
+
+Prints single-env steps per second through ``gymnasium.make`` (with its default wrappers), the
+wall time of one 4000-sample episode, and batch samples per second. Figures, not assertions.
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import gymnasium as gym
+import numpy as np
+
+import fcc_env
+
+
+def bench_single_env(n_steps: int = 20_000) -> tuple[float, float]:
+    env = gym.make("FCC-v0", scenario="f1")
+    action = np.zeros(2, dtype=np.float32)
+    env.reset(seed=0)
+    for _ in range(200):  # warm-up: JIT cache load, first-call overheads
+        env.step(action)
+    steps, t0 = 0, time.perf_counter()
+    while steps < n_steps:
+        env.reset(seed=steps)
+        trunc = term = False
+        while not (trunc or term) and steps < n_steps:
+            _, _, term, trunc, _ = env.step(action)
+            steps += 1
+    rate = steps / (time.perf_counter() - t0)
+    t0 = time.perf_counter()
+    env.reset(seed=1)
+    trunc = term = False
+    while not (trunc or term):
+        _, _, term, trunc, _ = env.step(action)
+    return rate, time.perf_counter() - t0
+
+
+def bench_batch(
+    n_episodes: int, n_samples: int = fcc_env.DEFAULT_N_SAMPLES, repeats: int = 2
+) -> float:
+    fcc_env.simulate_episodes([0, 1], 50)  # warm-up
+    best = np.inf
+    for r in range(repeats):
+        seeds = list(range(r * n_episodes, (r + 1) * n_episodes))
+        t0 = time.perf_counter()
+        fcc_env.simulate_episodes(seeds, n_samples, scenario="f2")
+        best = min(best, time.perf_counter() - t0)
+    return n_episodes * n_samples / best
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog="python -m fcc_env.simulator_speed", description=__doc__)
+    parser.add_argument("--episodes", type=int, default=1024, help="batch size (1024)")
+    parser.add_argument("--steps", type=int, default=20_000, help="single-env steps (20000)")
+    args = parser.parse_args(argv)
+    rate, episode_s = bench_single_env(args.steps)
+    print(f"single env via gymnasium.make: {rate:,.0f} steps/s (goal >= 5,000)")
+    print(f"one {fcc_env.DEFAULT_N_SAMPLES}-sample episode:        {episode_s:.3f} s (goal <= 1 s)")
+    batch_rate = bench_batch(args.episodes)
+    print(
+        f"batch of {args.episodes} episodes:        {batch_rate:,.0f} samples/s (goal >= 500,000)"
+    )
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

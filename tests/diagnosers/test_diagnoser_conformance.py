@@ -1,0 +1,278 @@
+"""Every registered diagnoser goes through the same contract checks (see diagnosers/contract.py).
+
+Each diagnoser class's ``fast_params()`` classmethod gives small, fast hyperparameters for these
+tests (e.g. few epochs for a neural model); the base class returns ``{}`` (the defaults).
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from synthetic import inject_step_fault, make_episode
+
+import diagnosers
+from diagnosers import Detection, Diagnoser, Episode, NotFittedError, make
+
+NAMES = diagnosers.available()
+
+
+def _params(name: str) -> dict:
+    return dict(diagnosers.diagnoser_class(name).fast_params())
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_fast_params_are_public(name: str) -> None:
+    cls = diagnosers.diagnoser_class(name)
+    assert cls is type(make(name))
+    assert set(cls.fast_params()) <= set(cls._param_names())
+
+
+def test_diagnoser_class_unknown_name() -> None:
+    with pytest.raises(ValueError, match=r"Unknown diagnoser 'nope'\. Available: \[.*'limits'"):
+        diagnosers.diagnoser_class("nope")
+
+
+def _build(name: str) -> Diagnoser:
+    return make(name, **_params(name))
+
+
+@pytest.fixture(scope="module")
+def train() -> list[Episode]:
+    return [make_episode(1500, seed=s) for s in (1, 2)]
+
+
+@pytest.fixture(scope="module")
+def test_episode() -> Episode:
+    return inject_step_fault(make_episode(1200, seed=3), onset=800, magnitude=3.0)
+
+
+@pytest.fixture(scope="module")
+def train_faults() -> list[Episode]:
+    """Labelled faulty training episodes for the diagnosers that isolate (two classes)."""
+    return [
+        inject_step_fault(make_episode(1200, seed=s), onset=600, magnitude=3.0, channel=ch)
+        for ch in ("T_rx", "T_rg1")
+        for s in (11, 12)
+    ]
+
+
+def _training(name: str, train: list[Episode], train_faults: list[Episode]) -> list[Episode]:
+    """What the harness trains ``name`` on: healthy episodes, plus labelled faults if it isolates."""
+    return train + train_faults if diagnosers.diagnoser_class(name).isolates else train
+
+
+@pytest.fixture(scope="module")
+def fitted(train: list[Episode], train_faults: list[Episode]) -> dict[str, Diagnoser]:
+    """One fitted instance per diagnoser, shared by the read-only checks."""
+    return {name: _build(name).fit(_training(name, train, train_faults)) for name in NAMES}
+
+
+def _assert_same(a: Detection, b: Detection, *, atol: float = 1e-9) -> None:
+    np.testing.assert_array_equal(a.alarm, b.alarm)
+    assert a.signal_names == b.signal_names
+    for field in ("signal", "lower", "upper", "residual"):
+        x, y = getattr(a, field), getattr(b, field)
+        assert x.shape == y.shape, field
+        np.testing.assert_allclose(x, y, rtol=1e-12, atol=atol, err_msg=field)
+    # isolating diagnosers: the same diagnosis on every sample, the same class scores
+    assert a.class_names == b.class_names
+    assert (a.diagnosis is None) == (b.diagnosis is None)
+    if a.diagnosis is not None:
+        np.testing.assert_array_equal(a.diagnosis, b.diagnosis)
+        assert a.class_scores is not None and b.class_scores is not None
+        np.testing.assert_allclose(a.class_scores, b.class_scores, rtol=1e-12, atol=atol)
+
+
+def test_baselines_are_registered() -> None:
+    assert {"limits", "pca", "arx-band"} <= set(NAMES)
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_not_fitted_errors(name: str, test_episode: Episode, tmp_path: Path) -> None:
+    d = _build(name)
+    with pytest.raises(NotFittedError, match="not fitted"):
+        d.reset()
+    with pytest.raises(NotFittedError, match="not fitted"):
+        d.update(test_episode.y[0])
+    with pytest.raises(NotFittedError, match="not fitted"):
+        d.detect(test_episode)
+    with pytest.raises(NotFittedError, match="not fitted"):
+        d.save(tmp_path / "model")
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_fit_returns_self_and_params_roundtrip(name: str, train: list[Episode]) -> None:
+    d = _build(name)
+    assert d.fit(train) is d
+    assert d.name == name
+    # get_params gives back exactly what was passed, and rebuilds an equal configuration.
+    assert make(name, **d.get_params()).get_params() == d.get_params()
+    json.dumps(d.get_params())  # must be JSON-serialisable for save()
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_detection_shapes_and_types(
+    name: str, fitted: dict[str, Diagnoser], test_episode: Episode
+) -> None:
+    d = fitted[name]
+    det = d.detect(test_episode)
+    n, k = test_episode.n_samples, len(d.signal_names_)
+    assert det.alarm.shape == (n,) and det.alarm.dtype == np.bool_
+    for field in ("signal", "lower", "upper"):
+        assert getattr(det, field).shape == (n, k), field
+    # residuals are per model relation; a combined statistic (T²) may have fewer signal columns
+    assert det.residual.ndim == 2 and det.residual.shape[0] == n and det.residual.shape[1] >= 1
+    assert det.signal_names == d.signal_names_
+    assert np.all(det.lower <= det.upper)
+    _assert_alarm_is_outside(det)
+    bands = d.band_view(test_episode)  # optional paper-style view, same conventions
+    if bands is not None:
+        assert bands.alarm.shape == (n,) and bands.signal.shape == bands.lower.shape
+        _assert_alarm_is_outside(bands)
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_diagnosis_conventions(
+    name: str, fitted: dict[str, Diagnoser], test_episode: Episode
+) -> None:
+    d = fitted[name]
+    det = d.detect(test_episode)
+    n = test_episode.n_samples
+    if not d.isolates:
+        assert det.diagnosis is None and det.class_scores is None and det.class_names == ()
+        return
+    classes = d.classes_  # type: ignore[attr-defined]
+    assert classes == ("step_T_rg1", "step_T_rx")  # the labelled training faults
+    assert det.class_names == classes
+    assert det.diagnosis is not None and det.diagnosis.shape == (n,)
+    np.testing.assert_array_equal(det.diagnosis != "", det.alarm)  # "" exactly when not alarmed
+    assert set(det.diagnosis[det.alarm].tolist()) <= {*classes, diagnosers.UNKNOWN}
+    assert det.class_scores is not None and det.class_scores.shape == (n, len(classes))
+
+
+def _assert_alarm_is_outside(det: Detection) -> None:
+    outside = np.any((det.signal < det.lower) | (det.signal > det.upper), axis=1)
+    np.testing.assert_array_equal(det.alarm, outside)
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_deterministic(
+    name: str, train: list[Episode], train_faults: list[Episode], test_episode: Episode
+) -> None:
+    a = _build(name).fit(_training(name, train, train_faults)).detect(test_episode)
+    b = _build(name).fit(_training(name, train, train_faults)).detect(test_episode)
+    _assert_same(a, b, atol=0.0)
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_detect_equals_streaming(
+    name: str, fitted: dict[str, Diagnoser], test_episode: Episode
+) -> None:
+    d = fitted[name]
+    batch = d.detect(test_episode)
+    d.reset()
+    decisions = [d.update(row) for row in test_episode.y]
+    classes = d.classes_ if d.isolates else None  # type: ignore[attr-defined]
+    _assert_same(batch, Detection.from_decisions(decisions, d.signal_names_, classes))
+    # detect() must leave no streaming state behind, and reset() must really reset.
+    d.reset()
+    again = [d.update(row) for row in test_episode.y[:50]]
+    for k, dec in enumerate(again):
+        assert dec.alarm == decisions[k].alarm
+        assert dec.diagnosis == decisions[k].diagnosis
+        np.testing.assert_allclose(dec.signal, decisions[k].signal, rtol=1e-12, atol=1e-9)
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_save_load_roundtrip(
+    name: str, fitted: dict[str, Diagnoser], test_episode: Episode, tmp_path: Path
+) -> None:
+    d = fitted[name]
+    d.save(tmp_path / "model")
+    loaded = Diagnoser.load(tmp_path / "model")
+    assert type(loaded) is type(d)
+    assert loaded.channels_ == d.channels_
+    assert loaded.sample_time_s_ == d.sample_time_s_
+    _assert_same(d.detect(test_episode), loaded.detect(test_episode), atol=0.0)
+    # Loading through the concrete class works too.
+    _assert_same(d.detect(test_episode), type(d).load(tmp_path / "model").detect(test_episode))
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_load_rejects_foreign_or_corrupted_directories(
+    name: str, fitted: dict[str, Diagnoser], tmp_path: Path
+) -> None:
+    path = fitted[name].save(tmp_path / "model")
+    cfg = path / "config.json"
+    good = json.loads(cfg.read_text())
+
+    cfg.write_text(json.dumps({"format": "someone-elses-model", "weights": [1, 2]}))
+    with pytest.raises(ValueError, match="not a saved diagnoser of this library"):
+        Diagnoser.load(path)
+
+    cfg.write_text('{"format": "fcc-diagnoser", "format_ver')  # truncated
+    with pytest.raises(ValueError, match="not valid JSON"):
+        Diagnoser.load(path)
+
+    cfg.write_bytes(b"\xff\xfe\x00garbage")
+    with pytest.raises(ValueError, match="not valid JSON"):
+        Diagnoser.load(path)
+
+    cfg.write_text(json.dumps({**good, "format_version": 999}))
+    with pytest.raises(ValueError, match="format_version 999 is not supported"):
+        Diagnoser.load(path)
+
+    cfg.write_text(json.dumps({k: v for k, v in good.items() if k != "params"}))
+    with pytest.raises(ValueError, match="'params' is missing"):
+        Diagnoser.load(path)
+
+    cfg.write_text(json.dumps({**good, "diagnoser": "no-such-diagnoser"}))
+    with pytest.raises(ValueError, match="Unknown diagnoser 'no-such-diagnoser'"):
+        Diagnoser.load(path)
+
+    cfg.write_text(json.dumps(good))
+    (path / "state.npz").write_bytes(b"not a zip file")
+    with pytest.raises(ValueError, match="not a numeric state file"):
+        Diagnoser.load(path)
+
+    with pytest.raises(ValueError, match=r"config\.json is missing"):
+        Diagnoser.load(tmp_path / "empty")
+
+
+def test_load_through_the_wrong_class_raises(fitted: dict[str, Diagnoser], tmp_path: Path) -> None:
+    path = fitted["limits"].save(tmp_path / "model")
+    with pytest.raises(ValueError, match="holds a 'limits' diagnoser, not a PCADetector"):
+        type(fitted["pca"]).load(path)
+
+
+def test_make_rejects_unknown_name() -> None:
+    with pytest.raises(ValueError, match=r"Unknown diagnoser 'nope'\. Available: \[.*'limits'"):
+        make("nope")
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_make_rejects_unknown_hyperparameter(name: str) -> None:
+    with pytest.raises(ValueError, match=r"Unknown hyperparameter\(s\) \['not_a_param'\]"):
+        make(name, not_a_param=1)
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_rejects_mismatched_channels(
+    name: str, fitted: dict[str, Diagnoser], test_episode: Episode
+) -> None:
+    d = fitted[name]
+    swapped = Episode(
+        y=test_episode.y[:, ::-1],
+        channels=test_episode.channels[::-1],
+        sample_time_s=test_episode.sample_time_s,
+    )
+    with pytest.raises(ValueError, match="differ from the training channels"):
+        d.detect(swapped)
+    with pytest.raises(ValueError, match="differ from the training channels"):
+        d.band_view(swapped)
+    with pytest.raises(ValueError, match="measurement must have shape"):
+        d.update(test_episode.y[0, :3])
+    d.reset()

@@ -1,0 +1,133 @@
+"""The package layout's rules, checked on the source (issue 30): rooms stay small and one-way.
+
+* no module over :data:`MAX_MODULE_LINES` lines and no class over :data:`MAX_CLASS_LINES`;
+* no private name (``_x``) imported from another module;
+* no module basename twice across the packages (a file name is a job);
+* no import cycle between modules, counting imports inside functions (a deferred import is
+  how a cycle hides).
+"""
+
+from __future__ import annotations
+
+import ast
+from collections import Counter
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGES = ("fcc_common", "fcc_env", "diagnosers", "evaluation")
+MAX_MODULE_LINES = 500
+MAX_CLASS_LINES = 300
+
+
+def _modules() -> list[Path]:
+    return sorted(p for pkg in PACKAGES for p in (ROOT / pkg).rglob("*.py"))
+
+
+def _tree(path: Path) -> ast.Module:
+    return ast.parse(path.read_text(encoding="utf-8"), filename=str(path))
+
+
+def _rel(path: Path) -> str:
+    return str(path.relative_to(ROOT))
+
+
+def test_the_packages_exist() -> None:
+    # guards the checks below against passing on an empty tree
+    assert len(_modules()) > 50
+
+
+def test_no_module_over_the_line_limit() -> None:
+    long = {
+        _rel(p): n
+        for p in _modules()
+        if (n := len(p.read_text(encoding="utf-8").splitlines())) > MAX_MODULE_LINES
+    }
+    assert not long, f"modules over {MAX_MODULE_LINES} lines: {long}"
+
+
+def test_no_class_over_the_line_limit() -> None:
+    big = {}
+    for p in _modules():
+        for node in ast.walk(_tree(p)):
+            if isinstance(node, ast.ClassDef):
+                n = node.end_lineno - node.lineno + 1
+                if n > MAX_CLASS_LINES:
+                    big[f"{_rel(p)}:{node.name}"] = n
+    assert not big, f"classes over {MAX_CLASS_LINES} lines: {big}"
+
+
+def test_no_private_name_imported_across_modules() -> None:
+    crossing = []
+    for p in _modules():
+        for node in ast.walk(_tree(p)):
+            if isinstance(node, ast.ImportFrom) and node.module:
+                for alias in node.names:
+                    if alias.name.startswith("_") and not alias.name.startswith("__"):
+                        crossing.append(f"{_rel(p)}: from {node.module} import {alias.name}")
+    assert not crossing, "private names imported across modules:\n" + "\n".join(crossing)
+
+
+def test_no_module_name_twice() -> None:
+    names = Counter(p.stem for p in _modules() if p.stem not in {"__init__", "__main__"})
+    twice = sorted(n for n, c in names.items() if c > 1)
+    assert not twice, f"module names used more than once: {twice}"
+
+
+def _module_name(path: Path) -> str:
+    parts = list(path.relative_to(ROOT).with_suffix("").parts)
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def _import_graph() -> dict[str, set[str]]:
+    """Module -> the project modules it imports, at the top or inside a function alike.
+
+    A package's ``__init__`` is left out of the graph: it gathers its modules' names, and a
+    module importing its own package is a convenience, not a dependency between two jobs.
+    """
+    paths = {_module_name(p): p for p in _modules() if p.name != "__init__.py"}
+    graph: dict[str, set[str]] = {}
+    for name, p in paths.items():
+        edges = set()
+        for node in ast.walk(_tree(p)):
+            targets = []
+            if isinstance(node, ast.Import):
+                targets = [a.name for a in node.names]
+            elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+                targets = [f"{node.module}.{a.name}" for a in node.names] + [node.module]
+            edges |= {t for t in targets if t in paths and t != name}
+        graph[name] = edges
+    return graph
+
+
+def test_no_import_cycle() -> None:
+    # A cycle hidden behind a deferred import is still a cycle: two modules that need each
+    # other are one job in two files.
+    graph = _import_graph()
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    cycles: list[list[str]] = []
+
+    def strongconnect(v: str) -> None:  # Tarjan's strongly connected components
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        for w in graph[v]:
+            if w not in index:
+                strongconnect(w)
+                low[v] = min(low[v], low[w])
+            elif w in stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            comp = []
+            while True:
+                w = stack.pop()
+                comp.append(w)
+                if w == v:
+                    break
+            if len(comp) > 1:
+                cycles.append(sorted(comp))
+
+    for v in sorted(graph):
+        if v not in index:
+            strongconnect(v)
+    assert not cycles, f"import cycles: {cycles}"
