@@ -5,33 +5,9 @@
 :class:`diagnosers.relation_bank.RelationBank` (``bank_``), trains it, saves and loads it, and
 shows its bands (:meth:`BankDetector.band_view`). A family adds its alarm stage and declares
 its hyperparameters as ``{**BANK_DEFAULTS, ...}``; the registered names are presets of the
-families (:func:`diagnosers.presets.preset`).
-
-The bank's hyperparameters (:data:`BANK_DEFAULTS`, constraints :data:`BANK_CONSTRAINTS`):
-
-* ``relations``: ``[[output, [inputs...]], ...]`` in the channels' names; ``None`` is the
-  preset's relations (:attr:`BankDetector.DEFAULT_RELATIONS`:
-  :data:`diagnosers.relations.BANK_RELATIONS`; ``lrgf-mem-paper``: the paper's one relation).
-* ``n_hidden``: one network size for every relation, a list with one size per relation, or
-  ``None``: sizes by output (:data:`HIDDEN_BY_OUTPUT`: 10 neurons for T_rg1, the slow
-  high-gain relation that alone carries f3; :data:`DEFAULT_HIDDEN` for the others).
-* ``order``: the neurons' filter order; ``n_linear``: how many of each network's neurons are
-  linear (at most the smallest network's size).
-* ``steady_window`` W: the networks start at steady state for the mean of the first W inputs,
-  and the detector is silent for those W samples (its statistics start at sample W).
-* ``mem_hidden``, ``mem_input_delays``, ``mem_output_delays``, ``mem_output_activation``: the
-  NNARX error model; ``mem_max_epochs`` its training epochs; ``mem_select``: ``"always"`` keeps
-  every error model, ``"if_better"`` only those that lower the calibration error.
-* ``method``, ``lr``, ``max_epochs``, ``val_fraction``: the networks' training (optimiser,
-  learning rate, epochs, the share of each training episode held out for early stopping; ``0``
-  trains on every sample and keeps the lowest training loss).
-* ``band_alpha``: the two-sided level of the drawn band ``y_m + y_e ± t_α v`` of
-  :meth:`BankDetector.band_view` (and of ``lrgf-mem-paper``'s band alarm); it moves no alarm of
-  a detector with an alarm stage.
-* ``seed``: every network's seed (relation ``j`` uses ``seed + 101 j``).
-* ``progress`` (a training progress bar; ``None``: when interactive) and ``n_jobs`` (worker
-  processes that train the relations at once; ``None``: 1) say how to compute, never what
-  (:attr:`diagnosers.base.Diagnoser.execution_params`).
+families (:func:`diagnosers.presets.preset`). The bank's hyperparameters are documented on
+:class:`BankDetector` (defaults :data:`BANK_DEFAULTS` and :data:`RUN_DEFAULTS`, constraints
+:data:`BANK_CONSTRAINTS`).
 """
 
 from __future__ import annotations
@@ -141,9 +117,76 @@ def holdout_split(episodes: list[Episode]) -> tuple[list[np.ndarray], list[np.nd
 class BankDetector(Diagnoser):
     """A detector built on a :class:`RelationBank` (the shared part of the LRGF families).
 
+    For each monitored relation ``output = s(inputs)`` a locally recurrent globally
+    feed-forward network (:class:`diagnosers.lrgf_net.LRGF`) models the healthy process in
+    simulation mode (it never sees the measured output), and an NNARX model-error model
+    (:class:`diagnosers.mem_net.NNARXErrorModel`, driven by the same inputs) models what the
+    network misses. The band of the paper (eqs 10-11) is ``y_m + y_e ± t_α·v``.
+
     A family sets ``DEFAULTS`` and ``__init__ = keyword_init(DEFAULTS)``, and implements
     ``_fit`` (calling :meth:`_new_bank` and :meth:`_train_banks`), its alarm stage and
-    ``_finish``; ``v_`` (the drawn band's scale) is set by the family.
+    ``_finish``; ``v_`` (the drawn band's scale) is set by the family. Every family has the
+    hyperparameters below (defaults: ``lrgf-mem``'s; a family or preset may set others, see
+    the detector reference's table).
+
+    Args:
+        relations: the monitored relations, ``[[output, [inputs...]], ...]`` in the channels'
+            names. Default ``None``: the preset's relations (:attr:`DEFAULT_RELATIONS`,
+            :data:`diagnosers.relations.BANK_RELATIONS`: three relations; ``lrgf-mem-paper``:
+            the paper's one relation T_rx = s1(T_rg2, T_fp)).
+        n_hidden: neurons of each relation's network: an integer in [1, 64] for every
+            relation, a list with one size per relation (e.g. ``[5, 10, 5]``), or ``None``:
+            sizes by output (:data:`HIDDEN_BY_OUTPUT`: 10 for T_rg1, the slow, high-gain
+            relation that alone carries f3; :data:`DEFAULT_HIDDEN` (5) for the others), which
+            follows a user's own ``relations``. Default 5 (``lrgf-glr``: ``None``). Larger
+            networks fit more and train longer.
+        order: order of each neuron's IIR filter, an integer in [1, 8]; default 2.
+        n_linear: how many of each network's neurons are linear (no tanh), an integer from 0
+            to the smallest network's size; default 0.
+        steady_window: the start-up window W [samples], in [1, 100000]; default 100. The
+            networks start at steady state for the mean of the first W inputs
+            (:class:`diagnosers.lrgf_net.InitialState`) and the detector is silent for those
+            W samples (no alarm; its statistics start at sample W; calibration skips them).
+            100 matches FCC-v0, whose inputs stay at nominal for the first 100 samples.
+        mem_hidden: hidden neurons of each NNARX error model, in [1, 256]; default 5.
+        mem_input_delays: the error model's input delays [samples], in [1, 100]; default 15.
+        mem_output_delays: the error model's output delays [samples], in [1, 100]; default 15.
+        mem_output_activation: the error model's output, ``"linear"`` (default) or ``"tanh"``.
+        mem_max_epochs: the error model's training epochs, in [1, 100000]; default 200.
+        mem_select: which relations keep their error model: ``"always"``, or ``"if_better"``
+            (default): only where it lowers the RMS of the remaining error on the calibration
+            episodes (an NNARX that does not generalise adds its own error to the centre).
+        method: the networks' optimiser, ``"adam"`` (default, backpropagation through time)
+            or ``"spsa"`` (the paper's) (:class:`diagnosers.optimisers.Method`).
+        lr: the networks' learning rate, in (0, 1]; default 0.03.
+        max_epochs: the networks' training epochs, in [1, 100000]; default 3000.
+        val_fraction: the share at the end of every training episode that each network holds
+            out to choose its epoch (early stopping, :func:`diagnosers.training.fit_lrgf`),
+            in [0, 1); default 0.25. ``0`` trains on every sample for ``max_epochs`` and keeps
+            the parameters of the lowest training loss, at the same cost per epoch
+            (``lrgf-glr-adaptive`` uses 0).
+        band_alpha: α, the two-sided level of the band ``y_m + y_e ± t_α·v`` (t_α the
+            standard normal quantile for 1 − α; 2.576 at 0.01), in (0, 0.5); default 0.01. It
+            sets the band :meth:`band_view` draws and the band ``lrgf-mem-paper``'s rule
+            (``alarm_filter="none"``) alarms on; with an alarm stage it moves no alarm
+            (``false_alarm_target`` does).
+        seed: every network's seed, an integer ≥ 0 (relation ``j`` uses ``seed + 101 j``);
+            default 0.
+        progress: a tqdm bar over the training epochs: ``None`` (default) when run
+            interactively (standard error a terminal, in the main process;
+            :func:`diagnosers.optimisers.auto_progress`), ``True``/``False`` to force it.
+            It does not change the fit.
+        n_jobs: worker processes that train the relations (and ``lrgf-glr``'s cross-fit
+            folds) at once (:mod:`diagnosers.parallel`), an integer ≥ 1 or ``None`` (default,
+            meaning 1, as in scikit-learn). Each relation trains with its own seed and one
+            thread, so the models are the same bits for every ``n_jobs``. The default is 1
+            because the leaderboard's sweep already trains diagnosers in parallel worker
+            processes (:func:`evaluation.sweep.tasks.training_jobs` gives the cores to the
+            banks it trains); ``python -m diagnosers.detector_speed --bank`` uses 2.
+
+    ``progress`` and ``n_jobs`` say how to compute, never what
+    (:attr:`~diagnosers.contract.DiagnoserContract.execution_params`): the result store's
+    model hash leaves both out, so changing them reuses a stored model.
     """
 
     DEFAULTS: ClassVar[dict[str, Any]] = {**BANK_DEFAULTS, **RUN_DEFAULTS}

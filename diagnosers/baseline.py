@@ -5,7 +5,7 @@ A learned relation meets a plant that is not quite the one it was trained on: an
 the kinetics and heat losses (the ``uncertain`` track), or, on a fixed plant, an operating
 region where the network's error has a local linear trend. Within one episode that mismatch is
 mostly a linear dynamic function of the relation's inputs: on 30 healthy ``uncertain``
-validation episodes (``scripts/plant_mismatch_lab.py``, a bank trained with ``val_fraction=0``),
+validation episodes (``lab/plant_mismatch_lab.py``, a bank trained with ``val_fraction=0``),
 a causal fit of this form brings the error of T_rx / T_rg1 / T_rg2 from 0.49 / 0.94 / 0.37 °C
 RMS (each episode's mean removed) to 0.34 / 0.47 / 0.32, near the fixed plant's 0.33 / 0.40 /
 0.33; on the paper track T_rg1 goes from 0.40 to 0.37 °C.

@@ -100,7 +100,8 @@ class DiagnoserContract(ABC):
 
     # ---- scikit-learn style parameter handling -------------------------------------------------
     @classmethod
-    def _param_names(cls) -> list[str]:
+    def param_names(cls) -> list[str]:
+        """The hyperparameters' names, from the keyword-only parameters of ``__init__``."""
         sig = inspect.signature(cls.__init__)
         return [
             p.name for p in sig.parameters.values() if p.name != "self" and p.kind is p.KEYWORD_ONLY
@@ -116,9 +117,9 @@ class DiagnoserContract(ABC):
         return {}
 
     @classmethod
-    def _check_param_names(cls, names: Iterable[str]) -> None:
+    def check_param_names(cls, names: Iterable[str]) -> None:
         """Raise ``ValueError`` naming any of ``names`` that ``__init__`` does not accept."""
-        allowed = cls._param_names()
+        allowed = cls.param_names()
         unknown = sorted(set(names) - set(allowed))
         if unknown:
             label = cls.name or cls.__name__
@@ -126,9 +127,14 @@ class DiagnoserContract(ABC):
                 f"Unknown hyperparameter(s) {unknown} for diagnoser {label!r}. Allowed: {allowed}"
             )
 
+    def validate_params(self) -> None:
+        """Check the hyperparameters now (``fit`` does too); raise ``ValueError`` naming the
+        value and the allowed range. Lets a sweep refuse a bad configuration before training."""
+        self._validate_params()
+
     def get_params(self) -> dict[str, Any]:
         """Hyperparameters as passed to ``__init__`` (JSON-serialisable by convention)."""
-        return {k: getattr(self, k) for k in self._param_names()}
+        return {k: getattr(self, k) for k in self.param_names()}
 
     def result_params(self) -> dict[str, Any]:
         """:meth:`get_params` without :attr:`execution_params`: what the fitted model depends on."""
@@ -146,7 +152,7 @@ class DiagnoserContract(ABC):
         >>> diagnosers.make("limits").set_params(alpha=0.05).get_params()["alpha"]
         0.05
         """
-        self._check_param_names(params)
+        self.check_param_names(params)
         for k, v in params.items():
             setattr(self, k, v)
         if params:
@@ -301,6 +307,10 @@ class DiagnoserContract(ABC):
         tests compare with the streaming path).
         """
         return Detection.from_decisions([self._update(row) for row in y], self.signal_names_)
+
+    def check_is_fitted(self) -> None:
+        """Raise :class:`NotFittedError` unless :meth:`fit` (or ``load``) has completed."""
+        self._check_fitted()
 
     def _check_fitted(self) -> None:
         if not getattr(self, "_fitted_", False):

@@ -19,18 +19,8 @@ before the alarm began (an alarm begins after ``alarm_gap`` quiet samples): the 
 error of the slow averages cancels. Signatures turn as a fault propagates, so each *age* of the
 alarm (samples since it began, bins :data:`AGE_EDGES`) has its own classifier.
 
-* ``lrgf-iso`` (structured residuals, nearest direction): per age bin and fault, a few prototype
-  directions (spherical k-means of the training samples' unit features); the score of a fault
-  is the best cosine with its prototypes (the GLR of a known direction with unknown size under
-  white noise ranks hypotheses the same way). "unknown" when the best fault's cosine is below its
-  threshold: the ``unknown_quantile`` quantile of its own training cosines, and never an angle
-  tighter than ``min_angle_deg``.
-* ``lrgf-lda`` (data-driven baseline): linear discriminant analysis per age bin (fitted by
-  scikit-learn's :class:`~sklearn.discriminant_analysis.LinearDiscriminantAnalysis`); "unknown"
-  when the Mahalanobis distance (pooled covariance) to the chosen class's mean exceeds the
-  ``1 − unknown_quantile`` quantile of that class's training distances, and never less than the
-  χ² quantile of the Gaussian model. Only the fitted arrays (class means, pooled precision,
-  priors, thresholds) are stored; prediction is computed from them, so loading never unpickles.
+The classifiers are the registered isolators of :mod:`diagnosers.isolators`: ``lrgf-iso``
+(nearest signature direction) and ``lrgf-lda`` (linear discriminant analysis).
 
 **Decision.** Per-sample scores and acceptance flags are smoothed over the samples of one alarm
 by an EWMA of weight ``score_lambda`` (sequential evidence: one odd sample does not flip the
@@ -46,7 +36,7 @@ from __future__ import annotations
 
 from abc import abstractmethod
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import Any, ClassVar, Self
 
 import numpy as np
 
@@ -58,7 +48,13 @@ from diagnosers.episode import Episode
 from diagnosers.registry import diagnoser_class, make
 from fcc_common.validation import Integer, Real, check_params, invalid
 
-__all__ = ["AGE_EDGES", "FEATURE_LAMBDAS", "MIN_CLASS_SAMPLES", "IsolatingDetector"]
+__all__ = [
+    "AGE_EDGES",
+    "FEATURE_LAMBDAS",
+    "MIN_CLASS_SAMPLES",
+    "IsolatingDetector",
+    "bank_detector_class",
+]
 
 #: EWMA weights of the exponential windows of the residuals (features of both isolators)
 FEATURE_LAMBDAS: tuple[float, ...] = (0.3, 0.1, 0.03, 0.01)
@@ -68,13 +64,29 @@ AGE_EDGES: tuple[int, ...] = (0, 10, 30, 100, 300, 1000)
 MIN_CLASS_SAMPLES = 10
 
 
+def bank_detector_class(name: str) -> type[BankDetector]:
+    """The registered LRGF detector class ``name``; ``ValueError`` naming it otherwise."""
+    try:
+        cls = diagnoser_class(name)
+    except ValueError:
+        cls = None
+    if cls is None or not issubclass(cls, BankDetector):
+        raise invalid(
+            "detector_name",
+            name,
+            "the registry name of an LRGF detector (lrgf-mem, lrgf-mem-paper, lrgf-glr, "
+            "lrgf-glr-adaptive)",
+        )
+    return cls
+
+
 class IsolatingDetector(Diagnoser):
     """An isolator around any LRGF detector: alarm-relative features, per-age classifiers.
 
     Hyperparameters shared by the isolators: ``detector_name`` (a registered
     :class:`~diagnosers.bank_detector.BankDetector`, default ``"lrgf-mem"``), ``detector`` (its
     hyperparameters; None: its defaults), ``unknown_quantile``, ``alarm_gap``, ``score_lambda``
-    and ``seed`` (module docstring).
+    and ``seed``, documented on each isolator (:mod:`diagnosers.isolators`).
     """
 
     isolates: ClassVar[bool] = True
@@ -96,26 +108,12 @@ class IsolatingDetector(Diagnoser):
     def fast_params(cls) -> dict[str, Any]:
         return {"detector": diagnoser_class("lrgf-mem").fast_params()}
 
-    def _detector_class(self) -> type[BankDetector]:
-        try:
-            cls = diagnoser_class(self.detector_name)
-        except ValueError:
-            cls = None
-        if cls is None or not issubclass(cls, BankDetector):
-            raise invalid(
-                "detector_name",
-                self.detector_name,
-                "the registry name of an LRGF detector (lrgf-mem, lrgf-mem-paper, lrgf-glr, "
-                "lrgf-glr-adaptive)",
-            )
-        return cls
-
     def result_params(self) -> dict[str, Any]:
         # the inner detector's execution parameters (n_jobs, progress) do not change the fit
         # either; without them an empty dict is the default detector, as in _fit
         params = super().result_params()
         if isinstance(self.detector, dict):
-            skip = self._detector_class().execution_params
+            skip = bank_detector_class(self.detector_name).execution_params
             inner = {k: v for k, v in self.detector.items() if k not in skip}
             params["detector"] = inner or None
         return params
@@ -128,8 +126,8 @@ class IsolatingDetector(Diagnoser):
             raise invalid(
                 "detector", self.detector, f"a dict of {self.detector_name} hyperparameters or None"
             )
-        self._detector_class()
-        make(self.detector_name, **(self.detector or {}))._validate_params()
+        bank_detector_class(self.detector_name)
+        make(self.detector_name, **(self.detector or {})).validate_params()
 
     # ---- features ------------------------------------------------------------------------------
     def _n_features_in(self) -> int:
@@ -206,14 +204,41 @@ class IsolatingDetector(Diagnoser):
         self.detector_ = detector.fit(healthy)
         self.fit_isolation([e for e in episodes if e.fault_onset is not None])
 
+    def fit_on_detector(
+        self,
+        detector: BankDetector,
+        faulty: list[Episode],
+        detections: list[Detection] | None = None,
+    ) -> Self:
+        """Fit the isolation on an already fitted ``detector`` and return ``self``.
+
+        What :meth:`fit` does after training its own detector: lets a study or a benchmark
+        train one bank and isolate with it in several isolators. ``detections``: the
+        detector's detections of ``faulty``, if already computed (else they are computed).
+        """
+        self.validate_params()
+        if not isinstance(detector, bank_detector_class(self.detector_name)):
+            raise ValueError(
+                f"detector must be a fitted {self.detector_name!r}, got {type(detector).__name__}"
+            )
+        detector.check_is_fitted()
+        if detections is not None and len(detections) != len(faulty):
+            raise ValueError(
+                f"detections must match faulty: got {len(detections)} and {len(faulty)} episodes"
+            )
+        self._fitted_ = False
+        self.detector_ = detector
+        self.sample_time_s_ = detector.sample_time_s_
+        self.fit_isolation(faulty, detections)
+        self._fitted_ = True
+        self.reset()
+        return self
+
     def fit_isolation(
         self, faulty: list[Episode], detections: list[Detection] | None = None
     ) -> None:
-        """Learn the fault classes from labelled faulty episodes (``detector_`` already fitted).
-
-        Public so that a trained detector can be reused: set ``detector_``, call this
-        (``detections``: the inner detector's detections of ``faulty``, if already computed).
-        """
+        """Learn the fault classes from labelled faulty episodes (``detector_`` already fitted;
+        :meth:`fit_on_detector` is the public way in)."""
         per: dict[str, list[tuple[np.ndarray, np.ndarray]]] = {}
         for i, ep in enumerate(faulty):
             det = self.detector_.detect(ep) if detections is None else detections[i]

@@ -50,7 +50,36 @@ def spherical_kmeans(u: np.ndarray, k: int, *, seed: int = 0, n_iter: int = 50) 
 
 @register("lrgf-iso")
 class LRGFISO(IsolatingDetector):
-    """A detector + nearest signature direction of the bank's residuals (module docstring)."""
+    """A detector + nearest signature direction of the bank's residuals (structured residuals).
+
+    Per age bin and fault, a few prototype directions (:func:`spherical_kmeans` of the
+    training samples' unit features, :mod:`diagnosers.isolation`); the score of a fault is the
+    best cosine with its prototypes (the GLR of a known direction with unknown size under white
+    noise ranks hypotheses the same way). "unknown" when the best fault's cosine is below its
+    threshold. The hyperparameters were chosen on validation seeds of the paper track
+    (``python -m evaluation.isolation.study --seeds validation``).
+
+    Args:
+        detector_name: the registry name of the inner LRGF detector, whose alarms are the
+            isolator's alarms sample for sample (a
+            :class:`~diagnosers.bank_detector.BankDetector`: ``"lrgf-mem"`` (default),
+            ``"lrgf-mem-paper"``, ``"lrgf-glr"`` or ``"lrgf-glr-adaptive"``).
+        detector: that detector's hyperparameters as a dict, or ``None`` (default): its
+            defaults. It is trained on the healthy training episodes exactly as alone.
+        n_prototypes: prototype directions per fault and age bin, in [1, 10]; default 2. More
+            follow a signature that turns within a bin, each from fewer samples.
+        unknown_quantile: a fault's cosine threshold is this quantile of its own training
+            cosines, in (0, 0.5); default 0.02. Larger: more samples called "unknown".
+        min_angle_deg: the threshold is never an angle tighter than this [degrees], in
+            [0, 90]; default 20.0.
+        alarm_gap: quiet samples [samples] after which the next alarmed sample begins a new
+            alarm (its features restart from the value just before it, its age from 0), in
+            [1, 100000]; default 100.
+        score_lambda: weight of the EWMA that smooths the per-sample scores and acceptance
+            flags over one alarm, in (0, 1]; default 0.1. Smaller: a steadier label that
+            settles later.
+        seed: the seed of the prototypes' k-means, an integer ≥ 0; default 0.
+    """
 
     CONSTRAINTS: ClassVar[dict[str, Any]] = {
         **IsolatingDetector.CONSTRAINTS,
@@ -115,7 +144,34 @@ class LRGFISO(IsolatingDetector):
 
 @register("lrgf-lda")
 class LRGFLDA(IsolatingDetector):
-    """A detector + linear discriminant analysis of exponential residual windows (baseline)."""
+    """A detector + linear discriminant analysis of exponential residual windows (baseline).
+
+    Per age bin, linear discriminant analysis of the alarm-relative features
+    (:mod:`diagnosers.isolation`), fitted by scikit-learn's
+    :class:`~sklearn.discriminant_analysis.LinearDiscriminantAnalysis`; only the fitted arrays
+    (class means, pooled precision, priors, thresholds) are stored and prediction is computed
+    from them, so loading never unpickles. The data-driven baseline of the isolators.
+
+    Args:
+        detector_name: the registry name of the inner LRGF detector, whose alarms are the
+            isolator's alarms sample for sample (a
+            :class:`~diagnosers.bank_detector.BankDetector`: ``"lrgf-mem"`` (default),
+            ``"lrgf-mem-paper"``, ``"lrgf-glr"`` or ``"lrgf-glr-adaptive"``).
+        detector: that detector's hyperparameters as a dict, or ``None`` (default): its
+            defaults. It is trained on the healthy training episodes exactly as alone.
+        unknown_quantile: "unknown" when the Mahalanobis distance (pooled covariance) to the
+            chosen class's mean exceeds the ``1 − unknown_quantile`` quantile of that class's
+            training distances (never less than the χ² quantile of the Gaussian model), in
+            (0, 0.5); default 0.01. Larger: more samples called "unknown".
+        alarm_gap: quiet samples [samples] after which the next alarmed sample begins a new
+            alarm (its features restart from the value just before it, its age from 0), in
+            [1, 100000]; default 100.
+        score_lambda: weight of the EWMA that smooths the per-sample scores and acceptance
+            flags over one alarm, in (0, 1]; default 0.03. Smaller: a steadier label that
+            settles later.
+        seed: an integer ≥ 0, default 0; the discriminant analysis is deterministic and does
+            not read it (the isolators share the hyperparameter).
+    """
 
     def __init__(
         self,
@@ -135,7 +191,7 @@ class LRGFLDA(IsolatingDetector):
         self.seed = seed
 
     def _fit_classes(self, binned: dict[int, dict[str, np.ndarray]]) -> None:
-        # scikit-learn fits; only its arrays are kept (see the module docstring)
+        # scikit-learn fits; only its arrays are kept (see the class docstring)
         from sklearn.discriminant_analysis import LinearDiscriminantAnalysis
 
         B, C, d = len(AGE_EDGES), len(self.classes_), self._n_features_in()

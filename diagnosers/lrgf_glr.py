@@ -1,95 +1,22 @@
 """``lrgf-glr``: the ``lrgf-mem`` bank with a cross-fitted limit and tests along fault directions.
 
-The models are ``lrgf-mem``'s (a bank of LRGF relations, error models kept where they help, the
-band scale from held-out remaining error); what changes is the residual evaluation and how its
-limit is calibrated:
+:class:`LRGFGLR` keeps ``lrgf-mem``'s models (a bank of LRGF relations, error models kept where
+they help, the band scale from held-out remaining error) and changes two things:
 
-* **Cross-fitted calibration** (``calibration="cross-fit"``). The healthy episodes are split into
-  ``n_folds`` folds; for each fold the bank is trained on the other folds and its remaining
-  error on the fold is kept (out-of-fold residuals). The error-model choice, the band scale, the
-  covariances and every alarm limit come from the out-of-fold residuals of *all* episodes, and
-  the detector's models are then trained on all episodes. ``lrgf-mem`` trains on two thirds and
-  calibrates on the last third (three episodes by default), so its limit rests on a few
-  autocorrelated excursions; here it rests on every episode, and the models see every episode
-  too. ``calibration="holdout"`` is ``lrgf-mem``'s split. With ``refit_epochs`` (default
-  ``None``: from scratch) the detector's networks start from the first fold's and train for
-  that many epochs: on the tracks' 9 episodes, 1000 epochs cut the bank's training from about
-  380 to 315 s on 2 cores, but on validation seeds that bank realised r_fd 0.0050 (one healthy
-  episode 5.7 % in alarm) against 0.0031 and found paper f3 after 53 samples against 47, so it
-  is an option, not the default.
-* **Fault directions** (``fault_scenarios``). A fault moves the normalised remaining errors of
+* **where the limits are calibrated**: cross-fitted, on the out-of-fold remaining errors of
+  every healthy episode, instead of on the last third of them, so a limit rests on every
+  episode and the detector's models see every episode too;
+* **how the remaining error is evaluated**: a fault moves the normalised remaining errors of
   the relations in its own direction (f2 and f4 pull T_rx down and T_rg2 up; f3 cools the
-  regenerator). In ``fit`` the trained bank is run on training faults simulated with the
-  training seeds ``fault_seeds`` (never test or validation seeds), each paired with the
-  healthy episode of the same seed, so the difference of their remaining errors is the fault's
-  signature without noise. Its mean over the first ``direction_window`` samples after the onset,
-  made a unit vector, is the fault's direction ``d_f``.
-* **Residual evaluation** (``statistic``; the stage is
-  :class:`diagnosers.directional_stage.DirectionalStage`):
+  regenerator), learned in ``fit`` from training faults; the alarm stage
+  (:class:`diagnosers.directional_stage.DirectionalStage`) tests along each direction on a
+  fast and a slow EWMA scale, beside an omnibus Hotelling T² for faults outside them.
 
-  - ``"directional"``: the EWMA vector ``z`` (weight ``ewma_lambda``) is projected on each
-    direction with :class:`diagnosers.alarm.DirectionalProjection`, the one-sided score
-    ``d_fᵀ S⁻¹ z / sqrt(d_fᵀ S⁻¹ d_f)`` of a mean shift along ``d_f`` (S the healthy covariance
-    of ``z``): a 1-dof test per fault instead of the T²'s k dof.
-  - ``"glr"``: :class:`diagnosers.alarm.DirectionalGLR` on the projections of the normalised
-    remaining error itself, onset searched over ``glr_window`` samples.
-  - ``"cusum"``: :class:`diagnosers.alarm.CUSUM` on the same projections, drift
-    ``cusum_drift``.
-
-  ``slow_ewma_lambda > 0`` (default 0.02; ``statistic="directional"`` only) adds a second EWMA
-  of that weight beside ``z``, with its own covariance and its own projections on the same
-  directions: a small or slow fault whose shift stays under the fast EWMA's noise builds up in
-  the slow one, which averages the white part of the remaining error away (its low-frequency
-  model error stays). The slow scale gets ``slow_share`` of the directional target, the fast
-  one the rest. A list of weights adds one scale each (signals ``directional-slow1[f]``, ...),
-  which split ``slow_share`` equally; on validation seeds a middle scale (λ 0.08 or 0.12 beside
-  0.02) never alarmed before the fast one and cost the slow one r_td, so the default is one.
-
-  Beside the directional tests an omnibus Hotelling T² of ``z`` (as in ``lrgf-mem``) keeps
-  faults outside the learned directions detectable; it gets ``omnibus_share`` of the false-alarm
-  target and the directional tests share the rest equally (a union bound, so the realised rate
-  stays at or below the target). ``statistic="t2"`` is ``lrgf-mem``'s stage alone.
-
-Limits: T² ``chi2-tail`` as in ``lrgf-mem``; the directional scores
-:func:`diagnosers.alarm.normal_tail_limit`; GLR and CUSUM statistics the empirical quantile of
-the out-of-fold calibration statistic (no reference distribution fits an autocorrelated input).
-``false_alarm_target`` is the declared share of healthy samples in alarm. The default 0.025
-(0.03 until 2026-11-26) was chosen on 1000 healthy validation episodes of the paper bank
-(seeds 5000-5999, ``scripts/fd_tail_lab.py --tag=_nov --n-healthy 1000 --block 200``): at 0.03
-one block of 200 (a track's size) has its r_fd interval's upper end at 0.0102, over the
-benchmark's 0.01; at 0.025 the five blocks reach at most 0.0091, for the same detection times
-within 5 samples on the paper, small, incipient and random validation faults.
-
-**Held baseline** (``baseline_lambda > 0``; ``lrgf-glr-adaptive``). A running estimate ``b``
-of each relation's normalised remaining error is subtracted before the EWMA. ``b`` follows the
-error with gain λ (the running mean's 1/n at first), always during the ``baseline_settle``
-samples after the warm-up, later only while every statistic stays below ``baseline_hold`` × its
-limit, so a growing fault is not learned. The limits are calibrated on the out-of-fold records
-run through the same recursion. The slow scale sees the baseline-removed error too, settling
-transient included, and so do its limits (``lrgf-glr-adaptive`` keeps the slow scale: with
-λ = 1e-4 the baseline is a running mean that settles within its first few hundred samples,
-where a faster λ used to leave a transient for 1/λ samples). It learns a unit's own offset
-from the model (a plant unlike the training plants) and loses small, slow faults that stay
-under the hold level. With ``baseline_filters`` (time constants in samples; ridge
-``baseline_ridge``) the baseline is a regression instead of a mean: per relation an online
-exponentially weighted ridge regression of the normalised error on a constant and low-pass
-filters of the relation's inputs and network output (:mod:`diagnosers.baseline`), which learns
-another plant's gains as well as its offset (``lrgf-glr-adaptive``).
-
-**Operating points outside the training data** (``novelty_gain``, default 5). Where the
-bank's own prediction of a relation with exogenous inputs only (T_rg1's) leaves the range of
-its training predictions by ``d`` training standard deviations (:mod:`diagnosers.novelty`),
-every relation's normalised error is divided by ``1 + novelty_gain · d``: the networks
-extrapolate there, and the healthy false-alarm streaks sat there. The calibration sees the same
-division, with each out-of-fold record measured against its own fold bank's training range (a
-fold bank has seen fewer operating points, as the detector meets new ones on fresh episodes).
-``0`` turns it off.
-
-``signal`` is ``[T², score_f1, ...]`` with ``upper`` their limits; alarm when any exceeds its
-limit after the silent warm-up, for ``on_delay`` samples in a row (an alarm system's on-delay,
-as in ISA-18.2; the same or different statistics). The limits stay per sample: an on-delay of
-d removes exceedances shorter than d samples (most healthy ones are single samples) and
-delays every alarm by d − 1 samples, so it is chosen together with ``false_alarm_target``.
+Optional parts, built from hyperparameters: a held baseline (:mod:`diagnosers.baseline`, the
+``lrgf-glr-adaptive`` preset of :mod:`diagnosers.lrgf_presets`) and a novelty scale
+(:mod:`diagnosers.novelty`). Every hyperparameter is documented on :class:`LRGFGLR` and
+:class:`~diagnosers.bank_detector.BankDetector`; defaults :data:`GLR_DEFAULTS`, constraints
+:data:`GLR_CONSTRAINTS`.
 """
 
 from __future__ import annotations
@@ -120,13 +47,13 @@ from diagnosers.registry import register
 from diagnosers.relation_bank import RelationBank
 from fcc_common.validation import Integer, Options, Real, RealSequence, check_params
 
-__all__ = ["GLR_CONSTRAINTS", "LRGFGLR", "Calibration"]
+__all__ = ["GLR_CONSTRAINTS", "GLR_DEFAULTS", "LRGFGLR", "Calibration"]
 
 from enum import StrEnum
 
 
 class Calibration(StrEnum):
-    """Where the limits are calibrated (see the module docstring)."""
+    """Where the limits are calibrated (``LRGFGLR``'s ``calibration``)."""
 
     CROSS_FIT = "cross-fit"
     HOLDOUT = "holdout"
@@ -158,52 +85,107 @@ GLR_CONSTRAINTS: dict[str, Any] = {
 }
 
 
+#: :class:`LRGFGLR`'s hyperparameters and their defaults, in signature order
+GLR_DEFAULTS: dict[str, Any] = {
+    **BANK_DEFAULTS,
+    "n_hidden": None,
+    # the alarm stage
+    "false_alarm_target": 0.025,
+    "statistic": "directional",
+    "ewma_lambda": 0.3,
+    "slow_ewma_lambda": 0.02,
+    "slow_share": 0.5,
+    "omnibus_share": 0.2,
+    "glr_window": 200,
+    "cusum_drift": 0.5,
+    "limit_method": "chi2-tail",
+    "threshold_margin": 1.0,
+    "on_delay": 1,
+    # where the limits are calibrated
+    "calibration": "cross-fit",
+    "n_folds": 3,
+    "refit_epochs": None,
+    # the optional parts
+    "fault_scenarios": None,
+    "fault_seeds": None,
+    "direction_window": 300,
+    "baseline_lambda": 0.0,
+    "baseline_hold": 0.5,
+    "baseline_settle": 200,
+    "baseline_filters": None,
+    "baseline_ridge": 1.0,
+    "novelty_gain": 5.0,
+    **RUN_DEFAULTS,
+    "progress": False,
+}
+
+
 @register("lrgf-glr")
 class LRGFGLR(BankDetector):
     """A bank of LRGF relations, a cross-fitted limit and tests along learned fault directions.
 
-    Composition: the model bank (:class:`~diagnosers.relation_bank.RelationBank`, ``bank_``),
-    the alarm stage (:class:`~diagnosers.directional_stage.DirectionalStage`, ``stage_``,
-    which owns ``false_alarm_target``) and the optional parts, each built from its
-    hyperparameters: the fault directions (:class:`~diagnosers.fault_directions.
-    FaultDirections`: ``fault_scenarios``, ``fault_seeds``, ``direction_window``), the held
-    baseline (:class:`~diagnosers.baseline.HeldBaseline`: ``baseline_*``, off at
-    ``baseline_lambda=0``) and the novelty scale (:class:`~diagnosers.novelty.NoveltyScale`:
-    ``novelty_gain``, off at 0). See the module docstring for each.
+    For the earliest detection on a plant like the training plants (it leads most tracks);
+    ``lrgf-glr-adaptive`` is its preset for a plant that may differ from them. The bank's
+    hyperparameters are :class:`~diagnosers.bank_detector.BankDetector`'s (``n_hidden=None``,
+    ``progress=False`` here). The alarm stage
+    (:class:`~diagnosers.directional_stage.DirectionalStage`, ``stage_``) owns
+    ``false_alarm_target``; the optional parts are the fault directions
+    (:class:`~diagnosers.fault_directions.FaultDirections`), the held baseline
+    (:class:`~diagnosers.baseline.HeldBaseline`) and the novelty scale
+    (:class:`~diagnosers.novelty.NoveltyScale`). ``signal`` is ``[T², score_f1, ...]``,
+    ``upper`` their limits; an alarm when any is over its limit after the silent warm-up.
+
+    Args:
+        false_alarm_target: declared share of healthy samples in alarm, in (0, 0.5); default
+            0.025. Split over the statistics by a union bound (realised rate ≤ target).
+        statistic: the directional test: ``"directional"`` (default; the EWMA vector ``z``
+            projected on each direction d, score ``dᵀS⁻¹z / sqrt(dᵀS⁻¹d)``, a 1-dof test),
+            ``"glr"`` or ``"cusum"`` (on the projections of the normalised error), ``"t2"``
+            (the omnibus T² alone, ``lrgf-mem``'s stage).
+        ewma_lambda: weight of the fast EWMA ``z``, in (0, 1]; default 0.3.
+        slow_ewma_lambda: weight of a slow EWMA scale beside ``z`` (``"directional"`` only),
+            in which a small or slow fault builds up; in [0, 1) (0: none) or a list of
+            weights, one scale each; default 0.02.
+        slow_share: the slow scales' share of the directional target, in (0, 1); default 0.5.
+        omnibus_share: the omnibus T²'s share of the target (it keeps faults outside the
+            learned directions detectable), in (0, 1]; default 0.2. The directions share the rest.
+        glr_window: the GLR's onset search window [samples], in [1, 5000]; default 200.
+        cusum_drift: the CUSUM's drift [normalised error], ≥ 0; default 0.5.
+        limit_method: the T² limit, ``"chi2-tail"`` (default) or ``"empirical"`` (as
+            ``lrgf-mem``); directional scores use a normal tail, GLR and CUSUM the empirical one.
+        threshold_margin: factor on every limit, in [0.5, 10]; default 1.0.
+        on_delay: samples in a row over a limit before an alarm (ISA-18.2's on-delay), in
+            [1, 1000]; default 1. Removes shorter exceedances; delays each alarm by it − 1.
+        calibration: ``"cross-fit"`` (default): the healthy episodes in ``n_folds`` folds, a
+            bank trained without each, every limit, scale and error-model choice taken from
+            the out-of-fold errors, the detector's models then trained on all; ``"holdout"``:
+            ``lrgf-mem``'s split (also used with fewer episodes than folds).
+        n_folds: cross-fit folds, in [2, 20]; default 3. Each trains one more bank.
+        refit_epochs: ``None`` (default): the final bank trains from scratch; an integer in
+            [1, 100000]: it starts from the first fold's networks for that many epochs
+            (faster, more false alarms on validation seeds).
+        fault_scenarios: faults whose directions are learned; default ``None``: f1-f4. Each
+            is simulated with the healthy episode of the same seed; their normalised error
+            difference, averaged and made a unit vector, is its direction.
+        fault_seeds: training seeds the faults are simulated on (1000-4999 only); default
+            ``None``: 1000-1002.
+        direction_window: samples after the onset averaged, in [1, 2000]; default 300.
+        baseline_lambda: gain of a held baseline of each relation's normalised error,
+            subtracted before the EWMAs: it learns a unit's own offset from the model and
+            loses small, slow faults under the hold level; in [0, 1), default 0 (off).
+        baseline_hold: the baseline learns after settling only while every statistic is
+            below ``baseline_hold`` × its limit, in (0, 1]; default 0.5.
+        baseline_settle: samples after the warm-up it always learns, in [0, 100000]; default 200.
+        baseline_filters: ``None`` (default): a running mean; time constants [samples, ≥ 1]:
+            a ridge regression on low-pass filters of each relation's inputs and output, which
+            learns another plant's gains too. Needs ``baseline_lambda > 0``.
+        baseline_ridge: the regression's ridge ρ > 0; default 1.0.
+        novelty_gain: where T_rg1's prediction (exogenous inputs only) leaves its training
+            range by ``d`` standard deviations, every normalised error is divided by
+            ``1 + novelty_gain·d`` (the networks extrapolate there); ≥ 0, default 5, 0 off.
     """
 
-    DEFAULTS: ClassVar[dict[str, Any]] = {
-        **BANK_DEFAULTS,
-        "n_hidden": None,
-        # the alarm stage
-        "false_alarm_target": 0.025,
-        "statistic": "directional",
-        "ewma_lambda": 0.3,
-        "slow_ewma_lambda": 0.02,
-        "slow_share": 0.5,
-        "omnibus_share": 0.2,
-        "glr_window": 200,
-        "cusum_drift": 0.5,
-        "limit_method": "chi2-tail",
-        "threshold_margin": 1.0,
-        "on_delay": 1,
-        # where the limits are calibrated
-        "calibration": "cross-fit",
-        "n_folds": 3,
-        "refit_epochs": None,
-        # the optional parts
-        "fault_scenarios": None,
-        "fault_seeds": None,
-        "direction_window": 300,
-        "baseline_lambda": 0.0,
-        "baseline_hold": 0.5,
-        "baseline_settle": 200,
-        "baseline_filters": None,
-        "baseline_ridge": 1.0,
-        "novelty_gain": 5.0,
-        **RUN_DEFAULTS,
-        "progress": False,
-    }
+    DEFAULTS: ClassVar[dict[str, Any]] = GLR_DEFAULTS
     __init__ = keyword_init(DEFAULTS)
 
     false_alarm_target: float

@@ -1,116 +1,12 @@
-"""The paper's detector: LRGF nominal models + neural model-error models (NNARX) + bands.
+"""``lrgf-mem``: the paper's detector (LRGF nominal models + NNARX model-error models + bands)
+with an alarm stage.
 
-For each monitored relation ``output = s(inputs)`` a locally recurrent globally feed-forward
-network (:class:`diagnosers.lrgf.LRGF`) models the healthy process in simulation mode (it never
-sees the measured output), and an NNARX model-error model (:class:`diagnosers.mem.NNARXErrorModel`,
-also in simulation mode, driven by the same inputs) models what the nominal model misses. The
-uncertainty band is (paper eqs 10–11)
-
-    y_m + y_e ± t_α · v,   t_α two-sided standard normal quantile for 1 − α (2.576 at α = 0.01)
-
-with α the hyperparameter ``band_alpha``: it sets the band the paper's rule (``alarm_filter=
-"none"``) alarms on and the band :meth:`~diagnosers.bank_detector.BankDetector.band_view` draws;
-with an alarm stage (``"ewma"``, ``"ewma-t2"``) it moves no alarm, ``false_alarm_target`` does.
-
-Two definitions of ``v``:
-
-* ``"paper"`` — the paper's literal text: the standard deviation of y_e on the training data.
-  It measures how much the error model moves, not how far the output strays from the centre, so
-  its coverage is not 1 − α in general.
-* ``"residual"`` — the spread of what remains, RMS of y − y_m − y_e on held-out healthy episodes
-  (RMS about zero, because the band is centred on y_m + y_e): a band that covers 1 − α of healthy
-  samples when the remaining error is roughly normal.
-
-Alarm logic (``alarm_filter``):
-
-* ``"none"`` — the paper's rule: alarm when a measured output leaves its band. ``signal`` is the
-  measured output, ``lower``/``upper`` the band.
-* ``"ewma"`` — persistence: an exponentially weighted moving average (weight ``ewma_lambda``) of
-  each relation's normalised remaining error (y − y_m − y_e)/v; alarm when one leaves ±h, with h
-  set on held-out healthy episodes for a share ``false_alarm_target / n_relations`` of healthy
-  samples beyond h per relation (see ``limit_method`` below). ``signal`` is that statistic,
-  ``lower``/``upper`` are ∓h.
-* ``"ewma-t2"`` — the EWMA vector of all relations combined into Hotelling's T² with the
-  covariance of the EWMAs on the calibration episodes; alarm when T² exceeds h (set for a share
-  ``false_alarm_target`` of healthy samples, see ``limit_method``). The healthy
-  model errors of different relations are correlated (they share inputs and hidden states) while
-  a fault moves the relations in its own direction (f2 and f4: s1 down and s2 up), which T² sees
-  and per-relation limits do not. ``signal`` is T², ``upper`` is h.
-
-Alarm limit (``limit_method``, times ``threshold_margin``): ``"empirical"`` takes the calibration
-quantile at 1 − target; ``"chi2-tail"`` takes the reference distribution's quantile (χ²_k for T²,
-the normal for one EWMA) scaled by the calibration's tail inflation measured at its 0.99 quantile,
-because the empirical 0.998 quantile of a few autocorrelated calibration episodes rests on one or
-two excursions (see :meth:`diagnosers.ewma_stage.EWMAStage.limit`).
-
-Start-up (``steady_window`` W): the networks start at steady state for the mean of the first W
-inputs (:class:`diagnosers.lrgf.InitialState`), and during those W samples the detector is silent
-(no alarm; the EWMA starts at sample W; calibration skips them): there the model output is the
-steady level still being estimated, not a prediction. W = 100 matches FCC-v0, whose inputs stay at
-nominal for the first 100 samples. With W = 1 (the first sample alone) the noise of one air-flow
-sample left a start-up error of 1.6 °C RMS on T_rg1 over the first 200 samples of every episode,
-which set the alarm limits and the false alarms of earlier versions.
-
-Two registered presets of :class:`LRGFMEM` (:func:`diagnosers.presets.preset`):
-
-* ``lrgf-mem-paper`` — the paper's configuration (Sec. 5): relation T_rx = s1(T_rg2, T_fp), 3
-  hidden neurons with 2nd-order filters, NNARX 5 tanh hidden neurons with 15 input and 15 output
-  delays, α = 0.01, ``v = "paper"``, no persistence. The start-up convention (W = 100, silent
-  warm-up) is ours, shared with ``lrgf-mem``; the paper does not say how its filters start.
-* ``lrgf-mem`` — our best: a bank of three relations (the paper's (14)–(16) with the inputs the
-  model's physics needs, see :data:`BANK_RELATIONS`) of 5 neurons each (2nd-order filters, 3000
-  Adam epochs at learning rate 0.03), ``v = "residual"``, error models kept only where they
-  help, EWMA (λ = 0.3) persistence combined by T², limit ``"chi2-tail"`` at a false-alarm target
-  of 0.002 with margin 1.0. Hyperparameters (network size, epochs, the relations, λ, the target,
-  margin and limit method, the alarm combination, the learning rate, W) were chosen on healthy
-  validation episodes (seeds 5000–5039) and on faults with seeds 5000–5019 and magnitudes 0.7×
-  the paper's, which the benchmark's test sweep (seeds 0–N, training seeds 1000+) never uses.
-  The rule: the fastest f3 detection with a false detection rate ≤ 0.01 on the 40 healthy
-  validation seeds and r_td ≥ 0.9 on the other faults, preferring the smaller target where the
-  gain was a few samples. On validation: r_fd 0.0028; f1 1.000/0, f2 0.997/6, f3 0.952/66,
-  f4 0.994/11 (r_td / mean t_dt in samples). Why λ = 0.3 and not a long average: the remaining
-  error of the T_rg1 relation, which alone carries f3, is low-frequency model error (0.33 °C
-  after an EWMA of 0.05, against 0.05 °C for its white noise), so long averaging removes little
-  error and only delays the alarm.
-
-``n_hidden`` is one network size for every relation, or a list with one size per relation
-(e.g. ``[5, 10, 5]`` for :data:`~diagnosers.relations.BANK_RELATIONS`): the slow, high-gain
-regenerator relation T_rg1 gains from a larger network more than the others do, and a
-per-relation size keeps the others' training time. One size and that size repeated give the
-same networks. ``None`` takes the sizes by output (10 neurons for a relation whose output is
-T_rg1, 5 for the others, :data:`diagnosers.bank_detector.HIDDEN_BY_OUTPUT`), so it follows a
-user's own ``relations``.
-
-``mem_select="if_better"`` (``lrgf-mem``) keeps a relation's error model only when it lowers the
-RMS of the remaining error on the calibration episodes: an NNARX that does not generalise adds its
-own error to the band centre (seen on this plant for several relations).
-
-``val_fraction`` (default 0.25): the share at the end of every training episode that each LRGF
-network holds out to choose its epoch (early stopping, :func:`diagnosers.training.fit_lrgf`).
-``0`` trains on every sample for ``max_epochs`` and keeps the parameters of the lowest training
-loss, at the same cost per epoch (the network runs over the whole episode either way).
-``lrgf-mem``, ``lrgf-mem-paper`` and ``lrgf-glr`` keep 0.25, the setting they were validated
-with; ``lrgf-glr-adaptive`` uses 0 (:data:`diagnosers.lrgf_presets.LRGFGLRAdaptive` says why).
-
-Training data split: the healthy episodes passed to ``fit`` are divided into a training part (the
-first ``n − max(1, n // 3)`` episodes) for the nominal and error models, and a calibration part
-(the rest) for ``v`` and h. With a single episode, the nominal and error models are trained on its
-first 70 % and calibrated on the remaining 30 % (simulated over the whole episode).
-
-``progress`` (default ``None``): a tqdm bar over the training epochs when run interactively
-(standard error is a terminal, in the main process; :func:`diagnosers.base.auto_progress`),
-``True``/``False`` to force it. It does not change the fit.
-
-``n_jobs`` (default ``None``, meaning 1, as in scikit-learn): worker processes that train the
-relations (and ``lrgf-glr``'s cross-fit folds) at once, :mod:`diagnosers.parallel`. Each relation
-trains with its own seed and one thread, so the models are the same bits for every ``n_jobs``.
-The default is 1 because the leaderboard's sweep already trains the diagnosers in parallel
-worker processes, one core each: a pool inside each would oversubscribe the cores. Where a bank
-trains alone it pays: the sweep gives the banks it trains the cores between them
-(:func:`evaluation.sweep.training_jobs`: all of them to a bank that trains alone), and
-``python -m diagnosers.benchmark --bank`` uses 2. Like ``progress`` it is an execution parameter
-(:attr:`diagnosers.base.Diagnoser.execution_params`): the result store's model hash leaves both
-out, so changing them reuses a stored model.
+:class:`LRGFMEM` is the paper's method as a bank of relations
+(:class:`~diagnosers.bank_detector.BankDetector`) whose remaining errors go to
+:class:`~diagnosers.ewma_stage.EWMAStage`: the paper's band rule, or EWMA persistence combined
+by Hotelling's T² with a calibrated limit. ``lrgf-mem-paper``, the paper's configuration, is a
+preset of it (:mod:`diagnosers.lrgf_presets`). :data:`PARAMETER_CONSTRAINTS` holds the
+constraints of its hyperparameters, documented on the class.
 """
 
 from __future__ import annotations
@@ -158,12 +54,58 @@ PARAMETER_CONSTRAINTS: dict[str, Any] = {
 
 @register("lrgf-mem")
 class LRGFMEM(BankDetector):
-    """Our LRGF + model-error-model detector: a bank of relations, band scale from held-out
-    remaining error, EWMA persistence combined by Hotelling's T² (see the module docstring).
+    """The paper's LRGF + model-error-model detector with an alarm stage.
 
-    Hyperparameters: the bank's (:mod:`diagnosers.bank_detector`) and the alarm stage's
-    ``band_definition``, ``alarm_filter``, ``ewma_lambda``, ``false_alarm_target``,
-    ``threshold_margin`` and ``limit_method`` (module docstring).
+    Use it for the paper's method on a bank of relations; ``lrgf-glr`` (same bank, a
+    cross-fitted limit and tests along fault directions) detects earlier on most tracks, and
+    ``lrgf-mem-paper`` is the paper's configuration (one relation, the band rule).
+
+    The bank (:class:`~diagnosers.bank_detector.BankDetector`, whose hyperparameters it
+    inherits) gives each relation's centre ``y_m + y_e``; the remaining error
+    ``y − y_m − y_e``, divided by the band scale ``v``, goes to the alarm stage
+    (:class:`~diagnosers.ewma_stage.EWMAStage`, ``stage_``, which owns
+    ``false_alarm_target``). ``lrgf-mem``'s defaults: a bank of three relations
+    (:data:`~diagnosers.relations.BANK_RELATIONS`) of 5 neurons each, ``v`` from held-out
+    remaining error, error models kept only where they help, EWMA persistence (λ = 0.3)
+    combined by T², limit ``"chi2-tail"`` at a target of 0.002 (chosen on validation seeds,
+    lab/detector-lab.md).
+
+    Training data: the healthy episodes passed to ``fit`` are divided into a training part
+    (the first ``n − max(1, n // 3)`` episodes) for the networks and error models and a
+    calibration part (the rest) for ``v`` and the limits; a single episode trains on its first
+    70 % and calibrates on the rest (simulated over the whole episode).
+
+    Args:
+        band_definition: the band scale ``v``: ``"residual"`` (default), the RMS of
+            ``y − y_m − y_e`` on the held-out healthy episodes (about zero, because the band
+            is centred on ``y_m + y_e``), a band that covers 1 − α of healthy samples when the
+            remaining error is roughly normal; or ``"paper"``, the paper's literal text, the
+            standard deviation of ``y_e`` on the training data (how much the error model
+            moves, not how far the output strays, so its coverage is not 1 − α in general)
+            (:class:`diagnosers.band.BandScale`).
+        alarm_filter: the alarm logic (:class:`~diagnosers.ewma_stage.AlarmFilter`):
+            ``"none"``, the paper's rule, an alarm when a measured output leaves its band
+            (``signal`` the output, ``lower``/``upper`` the band); ``"ewma"``, an EWMA of each
+            relation's normalised remaining error, an alarm when one leaves ±h (``signal``
+            the EWMAs, ``lower``/``upper`` ∓h), each h set for ``false_alarm_target / k`` of
+            healthy samples (k relations); ``"ewma-t2"`` (default), the EWMA vector combined
+            into Hotelling's T² with the calibration covariance, an alarm when T² exceeds h
+            set for ``false_alarm_target`` (``signal`` T², ``upper`` h). The relations' healthy
+            errors are correlated while a fault moves them in its own direction, which T²
+            sees and per-relation limits do not.
+        ewma_lambda: the EWMA's weight λ, in (0, 1]; default 0.3. Smaller averages longer:
+            less white noise, later alarms (the remaining error that carries f3 is mostly
+            low-frequency model error, which averaging does not remove).
+        false_alarm_target: the declared share of healthy samples in alarm, in (0, 0.5);
+            default 0.002. It sets the limits h (``alarm_filter`` ``"ewma"``/``"ewma-t2"``);
+            with ``"none"`` it moves no alarm (``band_alpha`` does).
+        threshold_margin: a factor on every limit, in [0.5, 10]; default 1.0.
+        limit_method: how a limit is set from the calibration statistic
+            (:func:`diagnosers.alarm.calibrate_limit`): ``"empirical"``, its quantile at
+            1 − target; ``"chi2-tail"`` (default), the reference distribution's quantile (χ²_k
+            for T², the normal for one EWMA) scaled by the calibration's tail inflation at its
+            0.99 quantile, because an empirical 0.998 quantile of a few autocorrelated
+            episodes rests on one or two excursions.
     """
 
     DEFAULTS: ClassVar[dict[str, Any]] = {

@@ -41,8 +41,9 @@ def paper_lrgf(*, seed: int = 0, **overrides: Any) -> LRGF:
 def paper_mem(*, seed: int = 0, **overrides: Any) -> NNARXErrorModel:
     """The paper's model error model (Sec. 5.2): 5 tanh hidden neurons, 15 input and output delays.
 
-    The output activation stays linear by default (see :class:`diagnosers.mem.OutputActivation`);
-    pass ``output_activation="tanh"`` for the paper's literal choice.
+    The output activation stays linear by default (see
+    :class:`diagnosers.mem_net.OutputActivation`); pass ``output_activation="tanh"`` for the
+    paper's literal choice.
     """
     kwargs: dict[str, Any] = {
         "n_inputs": 2,

@@ -2,7 +2,7 @@
 
 A detector family declares its hyperparameters in one table (name -> default) and gets its
 keyword-only ``__init__`` from :func:`keyword_init`: it stores every value verbatim, as the
-estimator contract of :mod:`diagnosers.base` asks, and carries a real signature for
+estimator contract of :mod:`diagnosers.contract` asks, and carries a real signature for
 ``get_params``, ``make`` and the documentation. :func:`preset` registers the same class under
 another name with other defaults (``lrgf-mem-paper`` is ``lrgf-mem`` with the paper's settings,
 ``lrgf-glr-adaptive`` is ``lrgf-glr`` with its baseline on): the one way a variant is made.

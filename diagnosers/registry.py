@@ -125,5 +125,5 @@ def diagnoser_class(name: str) -> type[DiagnoserContract]:
 def make(name: str, **hyperparameters: Any) -> DiagnoserContract:
     """Build the diagnoser registered as ``name`` with the given hyperparameters."""
     cls = diagnoser_class(name)
-    cls._check_param_names(hyperparameters)
+    cls.check_param_names(hyperparameters)
     return cls(**hyperparameters)

@@ -1,12 +1,13 @@
 """The model bank of the LRGF detectors: per relation a nominal network and an error model.
 
 For each monitored relation ``output = s(inputs)`` a locally recurrent globally feed-forward
-network (:class:`diagnosers.lrgf.LRGF`) models the healthy process in simulation mode (it never
-sees the measured output), and an NNARX model-error model (:class:`diagnosers.mem.NNARXErrorModel`,
-driven by the same inputs) models what the network misses. :class:`RelationBank` holds the
-trained modules with the channels they read and computes, over a record or sample by sample, the
-networks' outputs ``y_m`` and the band centre ``y_m + y_e`` (``y_e`` only where the error model
-is kept, :attr:`RelationBank.use_mem`). It knows nothing of alarms: the detectors
+network (:class:`diagnosers.lrgf_net.LRGF`) models the healthy process in simulation mode (it
+never sees the measured output), and an NNARX model-error model
+(:class:`diagnosers.mem_net.NNARXErrorModel`, driven by the same inputs) models what the
+network misses. :class:`RelationBank` holds the trained modules with the channels they read and
+computes, over a record or sample by sample, the networks' outputs ``y_m`` and the band
+centre ``y_m + y_e`` (``y_e`` only where the error model is kept,
+:attr:`RelationBank.use_mem`). It knows nothing of alarms: the detectors
 (:mod:`diagnosers.lrgf_mem`, :mod:`diagnosers.lrgf_glr`) put their alarm stage after it.
 """
 

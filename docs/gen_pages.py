@@ -110,6 +110,30 @@ def detector_reference() -> str:
             "      members: false",
             "",
         ]
+    # The hyperparameters a family shares are documented once, on the family's base class
+    # (e.g. the relation bank of every LRGF detector): render each such base once.
+    registered = set(by_class)
+    bases = dict.fromkeys(
+        base
+        for cls in by_class
+        for base in cls.__mro__[1:]
+        if base not in registered
+        and issubclass(base, diagnosers.Diagnoser)
+        and base is not diagnosers.Diagnoser
+        and base.__module__.startswith("diagnosers.")
+        and vars(base).get("__doc__")
+        and base.__module__ not in ("diagnosers.diagnoser", "diagnosers.contract")
+    )
+    if bases:
+        lines += ["## Shared by a family", ""]
+        for base in bases:
+            lines += [
+                f"::: {base.__module__}.{base.__qualname__}",
+                "    options:",
+                "      heading_level: 3",
+                "      members: false",
+                "",
+            ]
     return "\n".join(lines)
 
 

@@ -43,12 +43,12 @@ class FCCEnv(gym.Env):
     """Fluid catalytic cracking converter (riser, reactor/stripper, two-stage regenerator).
 
     ## Description
-    The plant of ``shared/fcc-model.md`` (after Moro & Odloak, 1995): an 11-state model integrated
-    with RK4 at the sample period, in open loop apart from the reactor level loop, with slide-valve
-    hydraulics (``valve_beta = 0.3``). An operating program excites feed temperature, air
-    temperature and air flow with random steps; the catalyst valve is held. A scenario may switch a
-    fault (f1–f4 of Patan et al., 2005) on at a given sample. The env is a plant to diagnose, not a
-    control task: the reward is always 0.
+    The plant of the FCC model specification, fcc-model.md (after Moro & Odloak, 1995): an
+    11-state model integrated with RK4 at the sample period, in open loop apart from the reactor
+    level loop, with slide-valve hydraulics (``valve_beta = 0.3``). An operating program excites
+    feed temperature, air temperature and air flow with random steps; the catalyst valve is held.
+    A scenario may switch a fault (f1–f4 of Patan et al., 2005) on at a given sample. The env is
+    a plant to diagnose, not a control task: the reward is always 0.
 
     ## Action Space
     ``Box(-1, 1, (2,))`` float32: moves of the manipulated variables relative to the operating

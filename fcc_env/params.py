@@ -1,4 +1,5 @@
-"""Parameters and variable names of the FCC converter model (``shared/fcc-model.md`` §1, §2.9).
+"""Parameters and variable names of the FCC converter model (the FCC model specification,
+fcc-model.md, §1 and §2.9).
 
 Every number of the model lives in :class:`FCCParams`, one field per row of the specification's §2.9
 table, with its unit in the field comment. The nominal inputs are in :data:`NOMINAL_INPUTS`.
@@ -9,7 +10,7 @@ Departures from the table, each deliberate:
   "= W_rx,0/ρ_b,0 exactly", and the rounded value would give a 40 000.2 kg set point.
 * ``K_w1``/``K_w2`` are the table's formula ``416.6667 / (600·0.5^1.5)`` (1.964186) rather than the
   rounded 1.96419, so that the nominal crest is 0.5 m exactly and W_1 = W_2 = 90 000 kg, as in the
-  verification run (``shared/fcc-reference/meta.json``).
+  verification run (the golden reference data's ``meta.json``).
 * The nominal valve command is 416.6667 kg/s (the golden data's value; the table rounds to 416.667).
 """
 

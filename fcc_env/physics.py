@@ -1,10 +1,10 @@
 """FCC converter physics: a pure right-hand side, the riser solve, the measurement map and the
 steady state (RK4 stepping of it is :mod:`fcc_env.integrator`).
 
-The model is ``shared/fcc-model.md`` §2 (riser, reactor/stripper with level loop, weirs, well and
-slide valve, two dense beds, two dilute phases). One scalar implementation is compiled with numba
-and used everywhere (the Gymnasium env, batch simulation, the steady-state solve and the scipy
-reference), so every path computes the same numbers.
+The model is the FCC model specification (fcc-model.md) §2 (riser, reactor/stripper with level
+loop, weirs, well and slide valve, two dense beds, two dilute phases). One scalar implementation
+is compiled with numba and used everywhere (the Gymnasium env, batch simulation, the
+steady-state solve and the scipy reference), so every path computes the same numbers.
 
 Why numba: the riser temperature is the root of an implicit energy balance inside every RHS call
 (Newton, spec §2.1); in numpy the per-call overhead dominates (the spec's prototype managed 700
@@ -22,9 +22,10 @@ Choices the specification leaves open (and why):
 * Measurement timing: the measurement of sample k uses the state at t_k, the input held over
   [t_k, t_k+1) (so T_rx feeds through from T_fp and u_F, spec §2.8) and the parameters in force
   over that interval, so the f1 density jump shows in T_rx at the onset sample (spec §7.6, "@ 0").
-* Correction to the reference data: ``shared/fcc-reference/f1.csv`` reports T_rx computed with the
-  *nominal* catalyst density in the slide-valve law while its states evolve with the faulty one
-  (its T_rx sits 5.97 °C below the riser temperature its own dynamics use, from the onset on).
+* Correction to the reference data: the golden reference data's ``f1.csv`` reports T_rx
+  computed with the *nominal* catalyst density in the slide-valve law while its states evolve
+  with the faulty one (its T_rx sits 5.97 °C below the riser temperature its own dynamics use,
+  from the onset on).
   We measure the riser the dynamics see; ``tests/fcc_env/test_physics.py`` proves the explanation by
   reproducing the reference's f1 T_rx from its states with the nominal density.
 * ``max(0, ·)`` guards of the spec are kept as written (weir crest, level-loop flow, valve head).

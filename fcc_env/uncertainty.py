@@ -2,71 +2,17 @@
 
 In the ``uncertain`` track every episode (training and test alike) runs on its own plant: the
 physical constants of :class:`~fcc_env.params.FCCParams` drawn within the relative half-ranges
-below, plus two benign, slow, undeclared disturbances. Nothing of the draw appears in the
+of :class:`PlantUncertainty`, plus two benign, slow, undeclared disturbances
+(:class:`FeedQualityDrift`, :class:`AmbientCycle`). Nothing of the draw appears in the
 observations; the healthy and the faulty episode of one seed share the same plant, and the draw
 uses its own random stream (``np.random.default_rng([seed, PLANT_STREAM])``), so it does not
 depend on the scenario and leaves the episode's program, noise and fault streams unchanged.
 
-Every drawn multiplier is ``1 + h·v`` with ``v`` uniform in [−1, 1] and ``h`` the group's
-half-range; the numbers consumed do not depend on the ranges (a zero range draws and ignores
-its number), so changing one group leaves the others' values unchanged.
-
-Ranges are calibration residuals of a model fitted at the unit's operating point, not the
-textbook spread of each constant: the burn is O2-limited, so every term of the riser and
-regenerator energy balances moves T_rx/T_rg1/T_rg2 almost one to one (a ±3 % feed heat capacity
-alone moves them by ±10 °C), and the healthy excited plant already comes within ~12 °C of the
-afterburn limit (max T_d1 − T_rg1 = 67.7 °C over 20 nominal seeds), so anything that cuts the
-coke make (lower A_cr, y_cat, y_ccr) must stay small. Sensitivities are the RMS over an episode
-of drawn − nominal (noise-free, 20 seeds, ``scripts/field_sensitivity.py``).
-
-==============  ==========================  =========  =================================================
-group           FCCParams field(s)          default h  reason (sensitivity at the spec's suggested size)
-==============  ==========================  =========  =================================================
-``kinetics``    ``A_cr`` (cracking          ±2 %       activity of the equilibrium catalyst; A_cr −5 %
-                pre-exp.), ``k_cb`` (coke              ends 2/20 healthy episodes in an afterburn (O2
-                burning pre-exp.)                      slip), ±2 % keeps the envelope. Activation
-                                                       energies are *not* drawn: 1 % of E is 10–20 %
-                                                       of the rate through exp(−E/RT)
-``heat_loss``   ``UA_1``, ``UA_2``,         ±10 %      insulation state and wind, each vessel apart;
-                ``UA_d1``, ``UA_dg``                   UA_1 +20 % moves T_rg by 2.4 °C and ended 1/20
-                                                       episodes (afterburn)
-``feed``        ``cp_fe``, ``dH_v``,        ±0.5 %     gas-oil properties as calibrated: ±0.5 % of
-                ``dH_cr``, ``y_ccr``                   cp_fe is ±1.7 °C on T_rx/T_rg; ±3 % would be
-                                                       ±10 °C and 12/20 afterburns
-``valve``       slide-valve gain 1 + δ:     ±1 %       flow coefficient of a calibrated valve: 1 % of
-                ``rho_b0`` × (1 + δ)⁻²                 circulation moves T_rg1/T_rg2 by ≈1.2 °C
-==============  ==========================  =========  =================================================
-
-Measured with the defaults over 100 seeds (``scripts/uncertainty_measure.py 100 all``): no
-healthy episode terminates (over 600 healthy ``uncertain`` validation episodes, seeds
-5000-5599, two do: seeds 5359 and 5534 end in an afterburn after 1897 and 863 samples);
-RMS(drawn − nominal) median / p90 in °C: T_rx 1.0 / 2.3, T_rg1 1.2 / 3.6, T_rg2 1.3 / 3.4,
-T_d1 1.6 / 3.0, T_dg 1.7 / 3.4, i.e. about 4 noise σ on the temperatures at the median
-(mostly a constant offset: the drawn plant has its own steady state).
-
-Fault parameters (``rho_b``, ``K_w1``/``K_w2``, ``k_sigma``, ``V_rx_sp_m3``) are never drawn, so a
-fault's size keeps its meaning. ``beta_sv`` is not drawn because ``valve_beta`` sets it. In flow
-mode (``valve_beta=0``) the valve draw has no effect (the density factor is dropped there).
-
-Benign disturbances (effect objects with the :mod:`fcc_env.effects` protocol, ``param_multipliers``
-only, so the compiled simulator applies them exactly). Both start at zero at t = 0, so the episode
-starts at the drawn plant's steady state:
-
-=======================  ==================================================  =====================
-effect                   what it does                                        default size
-=======================  ==================================================  =====================
-:class:`FeedQualityDrift`  coke yields ``y_ccr``, ``y_cat`` (i.e. the feed    amplitude 0.4 %, period
-                         coking factor) × (1 + a·(sin(2πt/P + φ) − sin φ))   2–8 h, phase uniform
-:class:`AmbientCycle`      ``T_amb_C`` + A·(sin(2πt/P + φ) − sin φ)           A = 8 °C, P = 24 h
-=======================  ==================================================  =====================
-
-A 1 % coking-factor step moves T_rx by about +0.9 °C and the dilute phases by −1 to −1.4 °C (spec
-§5, scaled from the 5 % row), so 0.4 % stays within about 1–2 noise σ. The ambient cycle is close
-to invisible (the heat losses are a few kW against ~0.5 MW/K of catalyst heat flow); it is there
-to make the benchmark honest about it, not to be detected.
-
-Pass it to :func:`fcc_env.simulate_episodes` (``plant_uncertainty=PlantUncertainty()``): each
-seed's plant (parameters and effects) is drawn and simulated in the same batch.
+The disturbances are effect objects with the :mod:`fcc_env.effects` protocol
+(``param_multipliers`` only, so the compiled simulator applies them exactly). Pass a
+:class:`PlantUncertainty` to :func:`fcc_env.simulate_episodes`
+(``plant_uncertainty=PlantUncertainty()``): each seed's plant (parameters and effects) is drawn
+and simulated in the same batch.
 
 >>> draw = PlantUncertainty().draw(7)
 >>> draw == PlantUncertainty().draw(7)
@@ -201,6 +147,48 @@ class PlantUncertainty:
 
     ``PlantUncertainty()`` is the benchmark's ``uncertain`` track; ``PlantUncertainty.none()``
     draws the nominal plant (with the same stream consumption).
+
+    Every drawn multiplier is ``1 + h·v`` with ``v`` uniform in [−1, 1] and ``h`` the group's
+    half-range; the numbers consumed do not depend on the ranges (a zero range draws and
+    ignores its number), so changing one group leaves the others' values unchanged. The ranges
+    are calibration residuals of a model fitted at the unit's operating point, not the textbook
+    spread of each constant: the burn is O2-limited, so every term of the riser and regenerator
+    energy balances moves T_rx/T_rg1/T_rg2 almost one to one, and the healthy excited plant
+    already comes within about 12 °C of the afterburn limit, so anything that cuts the coke make
+    (lower A_cr, y_cat, y_ccr) must stay small. With the defaults a healthy episode rarely ends
+    in an afterburn, and the drawn plant's temperatures sit about 4 noise σ from the nominal
+    plant's at the median, mostly a constant offset (the drawn plant has its own steady state;
+    the measurements are in the lab record, lab/detector-lab.md).
+
+    Fault parameters (``rho_b``, ``K_w1``/``K_w2``, ``k_sigma``, ``V_rx_sp_m3``) are never
+    drawn, so a fault's size keeps its meaning; ``beta_sv`` is not drawn because ``valve_beta``
+    sets it. Both disturbances are zero at t = 0, so an episode starts at the drawn plant's
+    steady state.
+
+    Args:
+        kinetics: relative half-range of ``A_cr`` (cracking pre-exponential) and ``k_cb``
+            (coke-burning pre-exponential), the activity of the equilibrium catalyst; in
+            [0, 0.2], default 0.02. Activation energies are not drawn: 1 % of E is 10-20 % of
+            the rate through exp(−E/RT).
+        heat_loss: relative half-range of ``UA_1``, ``UA_2``, ``UA_d1``, ``UA_dg``, each vessel
+            apart (insulation state and wind); in [0, 0.5], default 0.10.
+        feed: relative half-range of ``cp_fe``, ``dH_v``, ``dH_cr``, ``y_ccr`` (gas-oil
+            properties as calibrated: ±0.5 % of ``cp_fe`` is about ±1.7 °C on T_rx/T_rg); in
+            [0, 0.1], default 0.005.
+        valve: relative half-range of the slide-valve gain 1 + δ (the flow coefficient of a
+            calibrated valve), applied as ``rho_b0`` × (1 + δ)⁻²; in [0, 0.05], default 0.01.
+            No effect in flow mode (``valve_beta=0``), where the density factor is dropped.
+        feed_drift: relative amplitude a of :class:`FeedQualityDrift`, the coke yields
+            ``y_ccr`` and ``y_cat`` (the feed coking factor) × (1 + a·(sin(2πt/P + φ) − sin φ));
+            in [0, 0.05], default 0.004, about 1-2 noise σ (a 1 % coking-factor step moves T_rx
+            by about +0.9 °C and the dilute phases by −1 to −1.4 °C, spec §5).
+        feed_drift_period_h: the range ``(low, high)`` [h] the drift's period P is drawn from
+            uniformly (phase φ uniform), each in [1, 240]; default ``(2.0, 8.0)``.
+        ambient_amplitude_C: amplitude A [°C] of :class:`AmbientCycle`, ``T_amb_C`` +
+            A·(sin(2πt/P + φ) − sin φ); in [0, 20], default 8.0. Close to invisible (the heat
+            losses are a few kW against about 0.5 MW/K of catalyst heat flow): it is there to
+            make the benchmark honest about it, not to be detected.
+        ambient_period_h: the ambient cycle's period P [h], in [1, 240]; default 24.0.
     """
 
     kinetics: float = 0.02

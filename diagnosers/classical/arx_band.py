@@ -56,13 +56,16 @@ class ARXBand(Diagnoser):
     possible) and the simulation starts from those values.
 
     Args:
-        output: name of the modelled output channel.
-        inputs: names of the input channels.
-        na: number of output lags (``0 <= na <= 50``; ``0`` gives an FIR model).
-        nb: number of lags per input (``1 <= nb <= 200``).
+        output: name of the modelled output channel; default ``"T_rx"``.
+        inputs: names of the input channels, distinct; default ``("T_rg2", "T_fp")`` (with
+            ``T_rx``, the paper's relation (14)).
+        na: number of output lags (``0 <= na <= 50``; ``0`` gives an FIR model); default 2.
+        nb: number of lags per input (``1 <= nb <= 200``); default 10. More lags fit slower
+            input dynamics and lengthen the warm-up.
         nk: input delay in samples (``0 <= nk <= 100``); the default 0 lets the model use the
             current input samples, which are measured together with the output.
-        alpha: significance level in (0, 1).
+        alpha: significance level in (0, 1), default 0.01: the band is ``y_m ± t_α·σ``, so a
+            smaller ``alpha`` widens it (fewer false alarms, later detection).
 
     Decision arrays (one entry, named ``output``, °C for ``T_rx``):
         signal = measured output, lower/upper = band, residual = ``y - y_m``.

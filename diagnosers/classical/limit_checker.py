@@ -33,8 +33,9 @@ class LimitChecker(Diagnoser):
     to ``1 - (1 - alpha)^c``).
 
     Args:
-        alpha: significance level in (0, 1).
-        channels: names of the monitored channels, or ``None`` for all.
+        alpha: significance level in (0, 1), default 0.01 (as in the paper): the limits are
+            ``mean ± t_α·std``, so a smaller ``alpha`` widens them.
+        channels: names of the monitored channels (distinct), or ``None`` (default) for all.
 
     Decision arrays (one entry per monitored channel, named by ``signal_names_``):
         signal = measurement [physical units], lower/upper = limits, residual = ``y - mean_``.

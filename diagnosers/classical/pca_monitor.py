@@ -70,11 +70,13 @@ class PCADetector(Diagnoser):
     SPE > ``Q_lim``, both at level ``alpha``.
 
     Args:
-        alpha: significance level in (0, 1) for both limits.
+        alpha: significance level in (0, 1) for both limits; default 0.01. Smaller: higher
+            limits, fewer false alarms.
         variance_explained: target cumulative explained variance in (0, 1], used when
-            ``n_components`` is None.
-        n_components: number of retained components (``1 <= k <= m - 1``), or None.
-        channels: monitored channel names (at least 2), or None for all.
+            ``n_components`` is None; default 0.95. More components leave less to SPE.
+        n_components: number of retained components (``1 <= k <= m - 1``), or None
+            (default: chosen by ``variance_explained``).
+        channels: monitored channel names (at least 2), or None (default) for all.
 
     Decision arrays, names ``("T2", "SPE")`` (dimensionless, standardised units squared):
         signal = residual = ``[T², SPE]``, lower = ``[-inf, -inf]``, upper = ``[T2_lim, Q_lim]``.

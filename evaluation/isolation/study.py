@@ -53,7 +53,9 @@ class Isolator(Protocol):
     isolates: bool
     classes_: tuple[str, ...]
 
-    def fit_isolation(self, episodes: Sequence[Episode], dets: Sequence[Detection]) -> Any: ...
+    def fit_on_detector(
+        self, detector: Diagnoser, faulty: list[Episode], detections: list[Detection]
+    ) -> Any: ...
 
     def diagnose_detection(self, det: Detection) -> Detection: ...
 
@@ -211,11 +213,8 @@ def run(
     for name, params in (isolators or ISOLATORS).items():
         params = dict(params)  # a label other than a registry name gives {"name": ..., ...}
         iso = diagnosers.make(params.pop("name", name), **params)
-        assert iso.isolates and hasattr(iso, "fit_isolation"), name
-        iso.detector_ = inner
-        iso.channels_, iso.sample_time_s_ = inner.channels_, inner.sample_time_s_
-        iso.fit_isolation(train_f, train_dets)
-        iso._fitted_ = True
+        assert iso.isolates and hasattr(iso, "fit_on_detector"), name
+        iso.fit_on_detector(inner, train_f, train_dets)
         rows = episode_rows(iso, test, dets)
         truths = [r["truth"] for r in rows]
         conf = confusion_matrix(truths, [r["label"] for r in rows], iso.classes_)

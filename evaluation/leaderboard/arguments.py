@@ -198,7 +198,7 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="DIR",
         help="score recorded data in DIR instead of simulated episodes: a directory with a "
         "dataset.json manifest (see evaluation.sweep.external_data.load_manifest) or the Santander FCCU "
-        "data set (layout of shared/data/fccu-santander-mlpse); --seeds is ignored",
+        "data set (the Santander et al. (2022) dataset's layout); --seeds is ignored",
     )
     p.add_argument(
         "--track",

@@ -101,11 +101,12 @@ def figure_cells(config: SweepConfig) -> list[tuple[str, int]]:
 def write_figures(results: SweepResults, directory: Path) -> list[Path]:
     """One PNG per scenario × diagnoser on the scenario's first test seed.
 
-    Diagnosers with a :meth:`~diagnosers.base.Diagnoser.band_view` (``lrgf-mem``: one band per
-    relation around its measured output) get a second one, ``<label>-bands.png``, whose strip shows
-    the detector's alarms with the band exits as a separate row. The arrays come
-    from the scoring pass (``run_sweep(figure_cells=...)`` keeps them in the store); a cell whose
-    arrays are missing (a sweep run without figures) is skipped.
+    Diagnosers with a :meth:`~diagnosers.contract.DiagnoserContract.band_view` (``lrgf-mem``:
+    one band per relation around its measured output) get a second one,
+    ``<label>-bands.png``, whose strip shows the detector's alarms with the band exits as a
+    separate row. The arrays come from the scoring pass (``run_sweep(figure_cells=...)`` keeps
+    them in the store); a cell whose arrays are missing (a sweep run without figures) is
+    skipped.
     """
     cfg = results.config
     store = ResultStore.open(results.store_dir, cfg.data.store_key())

@@ -1,7 +1,7 @@
 """Figures in the style of the paper's Fig. 3 / Fig. 4: a monitored signal with its band or limit.
 
-Pure presentation: functions take an :class:`~diagnosers.base.Episode` and the
-:class:`~diagnosers.base.Detection` a diagnoser produced on it and return a
+Pure presentation: functions take an :class:`~diagnosers.episode.Episode` and the
+:class:`~diagnosers.detection.Detection` a diagnoser produced on it and return a
 :class:`matplotlib.figure.Figure` drawn on an Agg canvas. No pyplot (no global figure state, no
 ``show``), so it is safe in workers and tests; :func:`save_png` writes the file.
 
@@ -10,8 +10,9 @@ leave their band most often are shown, since they explain the alarms, and the su
 with the measured signal or statistic and its unit, its lower/upper limit (a band for two-sided
 checks), the fault onset as a dashed vertical line and the detector's alarms shaded. A last strip
 shows the detector's decision; when the panels show another view of the same models (a
-:meth:`~diagnosers.base.Diagnoser.band_view`), the view's own exits are a second, named row of
-the strip, never mistaken for alarms. One legend for the whole figure sits below the panels.
+:meth:`~diagnosers.contract.DiagnoserContract.band_view`), the view's own exits are a second,
+named row of the strip, never mistaken for alarms. One legend for the whole figure sits below
+the panels.
 """
 
 from __future__ import annotations

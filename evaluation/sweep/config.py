@@ -69,8 +69,8 @@ def default_specs(
 
     Args:
         names: registry names (all of :func:`diagnosers.available` when ``None``).
-        test: use each class's :meth:`~diagnosers.base.Diagnoser.fast_params` (small, fast
-            hyperparameters for smoke runs and tests) instead of the defaults.
+        test: use each class's :meth:`~diagnosers.contract.DiagnoserContract.fast_params`
+            (small, fast hyperparameters for smoke runs and tests) instead of the defaults.
     """
     names = available() if names is None else list(names)
     classes = [diagnoser_class(n) for n in names]  # unknown names: the registry's message
@@ -122,7 +122,7 @@ class SweepConfig:
             check_name("diagnoser label", spec.key)
             try:
                 # unknown name or hyperparameter, or a bad value: fail before any training
-                spec.build()._validate_params()
+                spec.build().validate_params()
             except (ValueError, TypeError) as e:
                 raise ValueError(f"diagnoser {spec.key!r}: {e}") from e
             canonical_hash(spec.to_json())  # params must be JSON-serialisable

@@ -218,7 +218,7 @@ def load_manifest(directory: str | Path) -> tuple[ExternalData, dict[str, dict[s
     for name, kw in params.items():  # bad settings fail here, before any training starts
         if name in available():
             try:
-                make(name, **kw)._validate_params()
+                make(name, **kw).validate_params()
             except (ValueError, TypeError) as e:
                 raise ValueError(f"{path}: diagnoser_params[{name!r}]: {e}") from e
     return data, params

@@ -75,7 +75,7 @@ def training_jobs(to_train: Sequence[DiagnoserSpec], cores: int) -> dict[str, in
     own = [
         s.key
         for s in to_train
-        if "n_jobs" in diagnoser_class(s.name)._param_names() and s.params.get("n_jobs") is None
+        if "n_jobs" in diagnoser_class(s.name).param_names() and s.params.get("n_jobs") is None
     ]
     return {key: max(1, cores // len(own)) for key in own}
 

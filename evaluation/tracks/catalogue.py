@@ -33,7 +33,7 @@ def _paper_scaled(low: float, high: float) -> dict[str, Distribution]:
 #: Near-detectability magnitudes of the ``small`` track: the sizes at which the physical-limit
 #: row's r_td is about 0.85-0.93, measured on 12 episodes with seeds 7000+ (never test seeds):
 #: f1 0.005 → 0.93, f2 0.03 → 0.88, f3 0.012 → 0.92, f4 0.01 → 0.87
-#: (``python scripts/small_track_calibration.py``). About 1.1-1.5 noise stds of the most affected
+#: (``python lab/small_track_calibration.py``). About 1.1-1.5 noise stds of the most affected
 #: temperature 50-200 samples after onset.
 SMALL_MAGNITUDES: dict[str, float] = {"f1": 0.005, "f2": 0.03, "f3": 0.012, "f4": 0.01}
 
@@ -124,7 +124,7 @@ def parse_tracks(text: str) -> tuple[Track, ...]:
 
 
 def tracks_markdown(tracks: tuple[Track, ...] | None = None) -> str:
-    """A Markdown table of tracks (name, episodes, description) for the README's "Tracks" section.
+    """A Markdown table of tracks (name, episodes, description) for the track catalogue page.
 
     >>> print(tracks_markdown((TRACKS["paper"],)).splitlines()[2][:38])
     | `paper` | 200 healthy, 80 faulty | T

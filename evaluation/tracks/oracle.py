@@ -15,35 +15,9 @@ The statistic (the same alarm stage as ``lrgf-mem``, :mod:`diagnosers.alarm`):
 4. an alarm when T² exceeds the ``chi2-tail`` limit at the false-alarm target (default 0.002),
    calibrated on healthy episodes of the track's *validation* seeds, never the test seeds.
 
-**A second reference row**, ``perfect model (measured inputs)`` (``OracleConfig(inputs=
-"measured")``): the same observer, but its reference is the healthy plant driven sample by sample
-by the episode's *measured* inputs (R_ar with 0.5 % noise, T_ar and T_fp with 0.3 °C;
-:meth:`evaluation.tracks.track_data.TrackData.reference`), which is all a simulation-residual detector can
-read. The gap between the two rows is what knowing the true inputs is worth; the gap between a
-diagnoser and the second row is its model error (and its alarm stage). On `paper` (validation
-seeds) the measured inputs add an independent 0.17 °C to the T_rg1 residual and move f3 from 12
-to 20 samples. Both rows use the same stage, which is not the best possible one: a detector
-with a better stage can beat either on slow or small faults (it is a reference, not a bound).
-
-**A third reference row**, ``perfect model + lrgf-glr stage (measured inputs)``
-(``OracleConfig(inputs="measured", stage="directional")``): the same perfect model on the
-measured inputs, evaluated by ``lrgf-glr``'s alarm stage instead of the T², through
-``lrgf-glr``'s own parts (:class:`diagnosers.directional_stage.DirectionalStage` and
-:class:`diagnosers.fault_directions.FaultDirections` on the reference's residual): fault directions from the noise-free signatures of the training faults (seeds
-1000-1002, as the detector's), a fast and a slow EWMA scale projected on them, an omnibus T²,
-calibrated on :data:`DIRECTIONAL_CALIBRATION` (100) healthy episodes from the track's first
-validation seed. It is what a detector of that family
-would reach with a perfect model, from what a detector can read: where it misses the
-physical-limit row's bounds, no model improvement can close the gap with that stage. Its
-declared target is :data:`DIRECTIONAL_TARGET` (0.005), chosen so that it realises about what
-``lrgf-glr`` realises on validation seeds: on 200 healthy episodes of ``paper`` (seeds
-5000-5199, calibration from 9000) 0.0041 with the worst episode 5.6 % in alarm, against
-``lrgf-glr``'s 0.0045 and 4.6 % (the stage's union bound and the normal tail keep the realised
-rate under the declared one). The slow EWMA scale's limit rests on few effectively independent
-samples per episode, so this row calibrates on five times the T² rows' 20 episodes: at a
-declared 0.004, 20 calibration episodes realised 0.0049 with one episode 7.3 % in alarm and
-block-of-50 interval upper ends up to 0.0126; 100 realised 0.0034, the worst episode 5.2 %, the
-upper ends all under 0.0082.
+Two more reference rows (:data:`DEFAULT_REFERENCES`, each an :class:`OracleConfig`, which says
+what each is for): the same observer driven by the *measured* inputs, and that perfect model
+evaluated by ``lrgf-glr``'s alarm stage.
 
 >>> OracleConfig().channels
 ('T_rx', 'T_rg1', 'T_rg2', 'T_d1', 'T_dg')
@@ -95,14 +69,14 @@ MEASURED_INPUTS_LABEL = "perfect model (measured inputs)"
 
 
 class OracleInputs(StrEnum):
-    """Which inputs drive the observer's healthy reference (see the module docstring)."""
+    """Which inputs drive the observer's healthy reference (see :class:`OracleConfig`)."""
 
     TRUE = "true"
     MEASURED = "measured"
 
 
 class OracleStage(StrEnum):
-    """Which alarm stage evaluates the reference's residual (see the module docstring)."""
+    """Which alarm stage evaluates the reference's residual (see :class:`OracleConfig`)."""
 
     T2 = "t2"
     DIRECTIONAL = "directional"
@@ -127,7 +101,46 @@ REFERENCE_LABELS = {
 
 @dataclass(frozen=True, kw_only=True)
 class OracleConfig:
-    """Settings of the physical-limit observer (see the module docstring)."""
+    """Settings of a reference row: which reference, which alarm stage, which target.
+
+    * ``OracleConfig()``: the physical limit (module docstring).
+    * ``OracleConfig(inputs="measured")``, ``perfect model (measured inputs)``: the same
+      observer, but its reference is the healthy plant driven sample by sample by the episode's
+      *measured* inputs (R_ar with 0.5 % noise, T_ar and T_fp with 0.3 °C;
+      :meth:`evaluation.tracks.track_data.TrackData.reference`), which is all a
+      simulation-residual detector can read. The gap between the two rows is what knowing the
+      true inputs is worth; the gap between a diagnoser and this row is its model error (and
+      its alarm stage). Both use the same stage, which is not the best possible one: a
+      detector with a better stage can beat either on slow or small faults (it is a reference,
+      not a bound).
+    * ``OracleConfig(inputs="measured", stage="directional")``, ``perfect model + lrgf-glr
+      stage (measured inputs)``: the same perfect model evaluated by ``lrgf-glr``'s own parts
+      (:class:`diagnosers.directional_stage.DirectionalStage` and
+      :class:`diagnosers.fault_directions.FaultDirections` on the reference's residual): fault
+      directions from the noise-free signatures of the training faults (seeds 1000-1002, as
+      the detector's), a fast and a slow EWMA scale projected on them, an omnibus T². It is
+      what a detector of that family would reach with a perfect model, from what a detector
+      can read: where it misses the physical-limit row's bounds, no model improvement can
+      close the gap with that stage.
+
+    Args:
+        channels: the monitored temperatures; default ``("T_rx", "T_rg1", "T_rg2", "T_d1",
+            "T_dg")``.
+        ewma_lambda: the EWMA's weight λ, in (0, 1]; default 0.3 (``lrgf-mem``'s).
+        target: the declared false-alarm target, in (0, 0.5); ``None`` (default): 0.002 for
+            the T² stage, :data:`DIRECTIONAL_TARGET` (0.005) for the directional one, chosen so
+            that it realises about what ``lrgf-glr`` realises on validation seeds
+            (lab/detector-lab.md).
+        inputs: what drives the reference (:class:`OracleInputs`): ``"true"`` (default) or
+            ``"measured"``.
+        stage: the alarm stage (:class:`OracleStage`): ``"t2"`` (default) or
+            ``"directional"``.
+        n_calibration: healthy calibration episodes from the track's first validation seed,
+            an integer ≥ 1 that stays clear of the test and training seeds; ``None`` (default):
+            the track's validation seeds for the T², :data:`DIRECTIONAL_CALIBRATION` (100)
+            for the directional stage, whose slow scale's limit rests on few effectively
+            independent samples per episode.
+    """
 
     channels: tuple[str, ...] = ("T_rx", "T_rg1", "T_rg2", "T_d1", "T_dg")
     ewma_lambda: float = 0.3

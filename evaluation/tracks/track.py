@@ -86,7 +86,7 @@ FAULT_NAMES: tuple[str, ...] = tuple(s.value for s in FAULTS)
 #: episode's alarms come in streaks, so the per-episode rates are heavy-tailed. On 400 healthy
 #: validation episodes of ``lrgf-glr`` (realised rate 0.0054), the upper end of the 95 % interval
 #: over blocks of 50 episodes ranged 0.0054-0.0113, over blocks of 200 0.0059-0.0071: with 50, an
-#: interval cannot tell a detector at 0.005 from one at 0.01 (``scripts/fd_tail_lab.py``).
+#: interval cannot tell a detector at 0.005 from one at 0.01 (``lab/fd_tail_lab.py``).
 MIN_HEALTHY = 200
 
 _NAME = re.compile(r"[a-z][a-z0-9_-]*\Z")
@@ -108,7 +108,7 @@ class Track:
 
     Attributes:
         name: lowercase identifier (letters, digits, ``-``, ``_``).
-        description: what the track tests and why (feeds the README's "Tracks" section).
+        description: what the track tests and why (feeds the documentation's track catalogue).
         faults: fault scenarios of the track, from ``f1``–``f4``.
         magnitudes: per fault, the distribution of the magnitude as an absolute relative change
             (0.1 = 10 %); ``None`` takes the paper's magnitudes (:data:`fcc_env.scenarios.FAULTS`).

@@ -27,7 +27,7 @@ def _params(name: str) -> dict:
 def test_fast_params_are_public(name: str) -> None:
     cls = diagnosers.diagnoser_class(name)
     assert cls is type(make(name))
-    assert set(cls.fast_params()) <= set(cls._param_names())
+    assert set(cls.fast_params()) <= set(cls.param_names())
 
 
 def test_diagnoser_class_unknown_name() -> None:

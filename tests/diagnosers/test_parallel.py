@@ -27,7 +27,7 @@ def test_n_jobs_outside_its_range_is_refused_by_name(name, bad, train) -> None:
 def test_isolators_check_the_inner_detectors_n_jobs(train) -> None:
     d = diagnosers.make("lrgf-iso", detector={"n_jobs": 0})
     with pytest.raises(ValueError, match=r"n_jobs=0 is outside the allowed range"):
-        d._validate_params()
+        d.validate_params()
 
 
 def test_n_jobs_2_trains_the_same_bits_as_n_jobs_1(train) -> None:

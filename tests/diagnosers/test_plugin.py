@@ -274,7 +274,7 @@ def test_lrgf_mem_progress_defaults_to_auto() -> None:
     assert det.get_params()["progress"] is None
     det.set_params(progress="yes")
     with pytest.raises(ValueError, match=r"progress='yes' is outside the allowed range"):
-        det._validate_params()
+        det.validate_params()
 
 
 def test_one_version_everywhere() -> None:

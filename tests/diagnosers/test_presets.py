@@ -24,7 +24,7 @@ def test_a_preset_is_its_family_with_other_defaults(name: str) -> None:
     assert isinstance(variant, family) and type(variant).__mro__[1] is family
     assert variant.get_params() == family(**PRESETS[name]).get_params()
     # the same hyperparameters in the same order, and the user's value still wins
-    assert type(variant)._param_names() == family._param_names()
+    assert type(variant).param_names() == family.param_names()
     first = next(iter(PRESETS[name]))
     assert diagnosers.make(name, **{first: None}).get_params()[first] is None
 
@@ -35,9 +35,9 @@ def test_every_lrgf_detector_has_a_real_keyword_signature(name: str) -> None:
     assert issubclass(cls, BankDetector)
     params = list(inspect.signature(cls.__init__).parameters.values())[1:]
     assert params and all(p.kind is p.KEYWORD_ONLY for p in params)
-    assert set(cls.fast_params()) <= set(cls._param_names())
+    assert set(cls.fast_params()) <= set(cls.param_names())
     # one word per concept: the drawn band's level says what it moves
-    assert "band_alpha" in cls._param_names() and "alpha" not in cls._param_names()
+    assert "band_alpha" in cls.param_names() and "alpha" not in cls.param_names()
 
 
 def test_false_alarm_target_is_one_hyperparameter_of_each_alarm_stage() -> None:
