@@ -5,6 +5,7 @@
 True
 """
 
+from diagnosers.conformance import ConformanceError, check_diagnoser
 from diagnosers.contract import NotFittedError
 from diagnosers.detection import UNKNOWN, Decision, Detection
 from diagnosers.diagnoser import Diagnoser
@@ -24,6 +25,7 @@ from diagnosers import (
 
 __all__ = [
     "UNKNOWN",
+    "ConformanceError",
     "Decision",
     "Detection",
     "Diagnoser",
@@ -31,6 +33,7 @@ __all__ = [
     "NotFittedError",
     "__version__",
     "available",
+    "check_diagnoser",
     "diagnoser_class",
     "import_modules",
     "make",

@@ -132,8 +132,13 @@ class DiagnoserContract(ABC):
         value and the allowed range. Lets a sweep refuse a bad configuration before training."""
         self._validate_params()
 
-    def get_params(self) -> dict[str, Any]:
-        """Hyperparameters as passed to ``__init__`` (JSON-serialisable by convention)."""
+    def get_params(self, deep: bool = True) -> dict[str, Any]:
+        """Hyperparameters as passed to ``__init__`` (JSON-serialisable by convention).
+
+        ``deep`` is scikit-learn's flag (so ``sklearn.base.clone`` works); it changes nothing
+        here because no hyperparameter is itself an estimator (an isolator's inner detector is
+        given by name and a dict of its hyperparameters).
+        """
         return {k: getattr(self, k) for k in self.param_names()}
 
     def result_params(self) -> dict[str, Any]:

@@ -57,6 +57,16 @@ def register(name: str) -> Callable[[type[DiagnoserContract]], type[DiagnoserCon
     return deco
 
 
+def unregister(name: str) -> None:
+    """Remove ``name`` from the registry (a no-op for an unknown name).
+
+    For code that registers a diagnoser for a while, e.g. a test of a deliberately broken one.
+    """
+    cls = _REGISTRY.pop(name, None)
+    if cls is not None and cls.name == name:
+        cls.name = ""
+
+
 def import_modules(modules: Iterable[str]) -> None:
     """Import ``modules`` (dotted names) so that the diagnosers they register become available.
 

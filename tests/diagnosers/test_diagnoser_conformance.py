@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from sklearn.base import clone
 from synthetic import inject_step_fault, make_episode
 
 import diagnosers
@@ -165,6 +166,24 @@ def test_deterministic(
     a = _build(name).fit(_training(name, train, train_faults)).detect(test_episode)
     b = _build(name).fit(_training(name, train, train_faults)).detect(test_episode)
     _assert_same(a, b, atol=0.0)
+
+
+@pytest.mark.parametrize("name", NAMES)
+def test_scikit_learn_clone_is_an_unfitted_twin(
+    name: str,
+    fitted: dict[str, Diagnoser],
+    train: list[Episode],
+    train_faults: list[Episode],
+    test_episode: Episode,
+) -> None:
+    # what GridSearchCV and pipelines do: clone, then fit the copy
+    twin = clone(fitted[name])
+    assert type(twin) is type(fitted[name]) and twin is not fitted[name]
+    assert twin.get_params(deep=True) == twin.get_params(deep=False) == fitted[name].get_params()
+    with pytest.raises(NotFittedError):
+        twin.detect(test_episode)
+    twin.fit(_training(name, train, train_faults))
+    _assert_same(twin.detect(test_episode), fitted[name].detect(test_episode), atol=0.0)
 
 
 @pytest.mark.parametrize("name", NAMES)
