@@ -18,6 +18,7 @@ import numpy as np
 from scipy import stats
 
 from diagnosers.isolation import AGE_EDGES, MIN_CLASS_SAMPLES, IsolatingDetector
+from diagnosers.presets import keyword_init
 from diagnosers.registry import register
 from fcc_common.validation import Integer, Real
 
@@ -87,26 +88,17 @@ class LRGFISO(IsolatingDetector):
         "min_angle_deg": Real(0, 90),
     }
 
-    def __init__(
-        self,
-        *,
-        detector_name: str = "lrgf-mem",
-        detector: dict[str, Any] | None = None,
-        n_prototypes: int = 2,
-        unknown_quantile: float = 0.02,
-        min_angle_deg: float = 20.0,
-        alarm_gap: int = 100,
-        score_lambda: float = 0.1,
-        seed: int = 0,
-    ) -> None:
-        self.detector_name = detector_name
-        self.detector = detector
-        self.n_prototypes = n_prototypes
-        self.unknown_quantile = unknown_quantile
-        self.min_angle_deg = min_angle_deg
-        self.alarm_gap = alarm_gap
-        self.score_lambda = score_lambda
-        self.seed = seed
+    DEFAULTS: ClassVar[dict[str, Any]] = {
+        "detector_name": "lrgf-mem",
+        "detector": None,
+        "n_prototypes": 2,
+        "unknown_quantile": 0.02,
+        "min_angle_deg": 20.0,
+        "alarm_gap": 100,
+        "score_lambda": 0.1,
+        "seed": 0,
+    }
+    __init__ = keyword_init(DEFAULTS)
 
     @staticmethod
     def _unit(F: np.ndarray) -> np.ndarray:
@@ -173,22 +165,15 @@ class LRGFLDA(IsolatingDetector):
             not read it (the isolators share the hyperparameter).
     """
 
-    def __init__(
-        self,
-        *,
-        detector_name: str = "lrgf-mem",
-        detector: dict[str, Any] | None = None,
-        unknown_quantile: float = 0.01,
-        alarm_gap: int = 100,
-        score_lambda: float = 0.03,
-        seed: int = 0,
-    ) -> None:
-        self.detector_name = detector_name
-        self.detector = detector
-        self.unknown_quantile = unknown_quantile
-        self.alarm_gap = alarm_gap
-        self.score_lambda = score_lambda
-        self.seed = seed
+    DEFAULTS: ClassVar[dict[str, Any]] = {
+        "detector_name": "lrgf-mem",
+        "detector": None,
+        "unknown_quantile": 0.01,
+        "alarm_gap": 100,
+        "score_lambda": 0.03,
+        "seed": 0,
+    }
+    __init__ = keyword_init(DEFAULTS)
 
     def _fit_classes(self, binned: dict[int, dict[str, np.ndarray]]) -> None:
         # scikit-learn fits; only its arrays are kept (see the class docstring)

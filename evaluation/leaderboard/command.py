@@ -114,9 +114,10 @@ def resolve_options(
         parser.error("--ramp-samples needs --fault-profile incipient")
     if args.validation and (args.quick or args.external is not None):
         parser.error("--validation cannot be combined with --quick or --external")
+    out = args.out or (VALIDATION_OUT if args.validation else DEFAULT_OUT)
     try:
         check_backend(args.backend)
-        check_out_dir(args.out or (VALIDATION_OUT if args.validation else DEFAULT_OUT))
+        check_out_dir(out)
     except ValueError as e:
         parser.error(str(e))
     if args.validation:
@@ -138,7 +139,7 @@ def resolve_options(
         scenarios=scenarios,
         seeds=seeds,
         train_episodes=train,
-        out=args.out or (VALIDATION_OUT if args.validation else DEFAULT_OUT),
+        out=out,
         backend=args.backend,
         workers=args.workers,
         ray_address=args.ray_address,
