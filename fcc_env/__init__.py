@@ -40,6 +40,7 @@ from fcc_env.params import (
 )
 from fcc_env.physics import measure, rhs, steady_state
 from fcc_env.plant import PlantConfig
+from fcc_env.regulatory import RegulatoryLayer, SetpointProgram
 from fcc_env.scenarios import (
     DEFAULT_N_SAMPLES,
     FAULTS,
@@ -54,14 +55,25 @@ ENV_ID = "FCC-v0"
 #: 3999 steps = 4000 samples including the reset observation (the paper's horizon).
 MAX_EPISODE_STEPS = DEFAULT_N_SAMPLES - 1
 
+#: The closed-loop plant: the regulatory layer of :class:`RegulatoryLayer` running.
+CLOSED_LOOP_ENV_ID = "FCC-closedloop-v0"
+
 if ENV_ID not in registry:
     register(id=ENV_ID, entry_point="fcc_env.env:FCCEnv", max_episode_steps=MAX_EPISODE_STEPS)
+if CLOSED_LOOP_ENV_ID not in registry:
+    register(
+        id=CLOSED_LOOP_ENV_ID,
+        entry_point="fcc_env.env:FCCEnv",
+        max_episode_steps=MAX_EPISODE_STEPS,
+        kwargs={"regulatory": True},
+    )
 
 __version__ = "0.1.0"
 #: Bumped whenever the simulated numbers change (written into generated datasets).
 MODEL_VERSION = "fcc-model-2026.1"
 
 __all__ = [
+    "CLOSED_LOOP_ENV_ID",
     "DEFAULT_N_SAMPLES",
     "ENV_ID",
     "FAULTS",
@@ -80,7 +92,9 @@ __all__ = [
     "FaultSpec",
     "Measurement",
     "PlantConfig",
+    "RegulatoryLayer",
     "Scenario",
+    "SetpointProgram",
     "integrate_step",
     "measure",
     "rhs",

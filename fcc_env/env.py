@@ -11,10 +11,18 @@ from gymnasium import spaces
 
 from fcc_common.validation import Integer, check, invalid
 from fcc_env import effects as fx
+from fcc_env.closed_loop import assemble_observation
 from fcc_env.episode_setup import EpisodeStream, add_noise, setup_episode
 from fcc_env.params import NOMINAL_INPUTS
 from fcc_env.physics import AUX_NAMES
 from fcc_env.plant import AFTERBURN_WARNING_C, PlantConfig, plant_from_request, termination_reason
+from fcc_env.regulatory import (
+    SETPOINT_RANGES,
+    apply_controller_outputs,
+    check_setpoints,
+    controller_update,
+    initial_controller_state,
+)
 from fcc_env.scenarios import (
     DEFAULT_N_SAMPLES,
     ENV_FAULT_KEYWORDS,
@@ -34,6 +42,15 @@ ACTION_SCALE = np.array([0.5 * NOMINAL_INPUTS[0], 0.15 * NOMINAL_INPUTS[1]])
 
 OBS_LOW = np.array([0.0] + [-100.0] * 7, dtype=np.float32)
 OBS_HIGH = np.array([500.0] + [1500.0] * 7, dtype=np.float32)
+#: Closed loop (``FCC-closedloop-v0``): Table 1, the valve command (kg/s), the set points (°C).
+CLOSED_OBS_LOW = np.concatenate(
+    [OBS_LOW, [0.0], [SETPOINT_RANGES[n].low for n in ("T_rx_sp", "T_rg1_sp")]]
+).astype(np.float32)
+CLOSED_OBS_HIGH = np.concatenate(
+    [OBS_HIGH, [1000.0], [SETPOINT_RANGES[n].high for n in ("T_rx_sp", "T_rg1_sp")]]
+).astype(np.float32)
+#: Closed loop: the set-point move of a unit action (°C), T_rx_sp and T_rg1_sp.
+SETPOINT_ACTION_SCALE = np.array([15.0, 20.0])
 
 #: The keys ``reset(options=...)`` takes.
 RESET_OPTION_NAMES = ("fault", *ENV_FAULT_KEYWORDS, "plant_effects")
@@ -149,6 +166,7 @@ class FCCEnv(gym.Env):
         rk4_substeps: int | None = None,
         excitation: Any = None,
         noise_scale: float | None = None,
+        regulatory: Any = None,
         horizon: int = DEFAULT_N_SAMPLES,
         plant_effects: Any = (),
         render_mode: str | None = None,
@@ -162,8 +180,10 @@ class FCCEnv(gym.Env):
                 "rk4_substeps": rk4_substeps,
                 "excitation": excitation,
                 "noise_scale": noise_scale,
+                "regulatory": regulatory,
             },
         )
+        self.closed_loop = self.config.closed_loop
         #: The fault every episode asks for unless ``reset(options=...)`` overrides it.
         self.fault_spec = fault_from_request(
             fault,
@@ -188,10 +208,13 @@ class FCCEnv(gym.Env):
                 f"{self.metadata['render_modes']} or None"
             )
         self.render_mode = render_mode
-        self.observation_space = spaces.Box(OBS_LOW, OBS_HIGH, dtype=np.float32)
+        low, high = (CLOSED_OBS_LOW, CLOSED_OBS_HIGH) if self.closed_loop else (OBS_LOW, OBS_HIGH)
+        self.observation_space = spaces.Box(low, high, dtype=np.float32)
         self.action_space = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
         self._p_base = self.config.params.as_array()
         self._x0 = self.config.initial_state()
+        if self.config.regulatory is not None:
+            self._gains = self.config.regulatory.gains(self.config.sample_time_s)
         self._history: list[np.ndarray] = []
 
     # ---- Gymnasium API -------------------------------------------------------------------------
@@ -235,6 +258,11 @@ class FCCEnv(gym.Env):
         self._action = np.zeros(2)
         self._saturated = False
         self._terminated_reason: str | None = None
+        if self.closed_loop:
+            self._ctrl = initial_controller_state(NOMINAL_INPUTS)
+            self._controller_saturated = False
+            self._setpoint_clipped = False
+            self._setpoints, _ = check_setpoints(self._episode.setpoints(0))
         self._u = self._inputs(0)
         self._y_clean = self._measure(0)
         self._obs = self._make_obs(0)
@@ -247,9 +275,21 @@ class FCCEnv(gym.Env):
         a = check_action(action)
         clipped = np.clip(a, -1.0, 1.0)
         self._saturated = bool((clipped != a).any())
-        self._action = clipped * ACTION_SCALE
         k = self._k
-        x_next = self._episode.advance(self._x, self._inputs(k), k)
+        if self.closed_loop:
+            # The supervisory move: set points of sample k; the controllers read sample k's
+            # observation and their outputs hold from sample k + 1 (fcc_env.regulatory).
+            self._setpoints, self._setpoint_clipped = check_setpoints(
+                self._episode.setpoints(k) + clipped * SETPOINT_ACTION_SCALE
+            )
+            self._action = clipped * SETPOINT_ACTION_SCALE
+            x_next = self._episode.advance(self._x, self._u, k)
+            self._controller_saturated = controller_update(
+                self._ctrl, self._setpoints, self._obs[:8], self._gains
+            )
+        else:
+            self._action = clipped * ACTION_SCALE
+            x_next = self._episode.advance(self._x, self._inputs(k), k)
         reason = termination_reason(x_next)
         self._k = k + 1
         if reason == "numerical_failure":
@@ -285,6 +325,10 @@ class FCCEnv(gym.Env):
 
     # ---- helpers -------------------------------------------------------------------------------
     def _inputs(self, k: int) -> np.ndarray:
+        if self.closed_loop:
+            u = self._episode.program(k).copy()
+            apply_controller_outputs(u, self._ctrl, self._gains)
+            return u
         u, saturated = actuator_inputs(self._episode.program(k), self._action)
         self._saturated = self._saturated or saturated
         return u
@@ -293,7 +337,18 @@ class FCCEnv(gym.Env):
         return self._episode.measure(self._x, self._u, k)
 
     def _make_obs(self, k: int) -> np.ndarray:
-        return add_noise(self._y_clean, self._episode.noise(k), self.config.noise_scale)
+        obs = add_noise(self._y_clean, self._episode.noise(k), self.config.noise_scale)
+        if not self.closed_loop:
+            return obs
+        self._sp_shown = self._shown_setpoints(k)
+        return assemble_observation(obs, self._u[0], self._sp_shown)
+
+    def _shown_setpoints(self, k: int) -> np.ndarray:
+        """Set points in force at sample ``k``: the program's plus the last action's move."""
+        if k == 0:
+            return self._setpoints
+        sp, _ = check_setpoints(self._episode.setpoints(k) + self._action)
+        return sp
 
     def _get_info(self) -> dict[str, Any]:
         aux = self._episode.aux(self._x, self._u, self._k)
@@ -304,13 +359,29 @@ class FCCEnv(gym.Env):
             "fault_active": self.fault.active(self._k),
             "fault_time": self.fault.onset if self.fault.scenario is not Scenario.NOMINAL else None,
             "fault_magnitude": self.fault.magnitude,
-            "y_clean": self._y_clean.copy(),
+            "y_clean": self._clean_observation(),
             "state": self._x.copy(),
             "inputs": self._u.copy(),
             "action_saturated": self._saturated,
             "afterburn_warning": bool(self._x[9] - self._x[4] > AFTERBURN_WARNING_C),
             "termination_reason": self._terminated_reason,
+            **self._closed_loop_info(),
             **{name: float(v) for name, v in zip(AUX_NAMES, aux, strict=True)},
+        }
+
+    def _clean_observation(self) -> np.ndarray:
+        """The noise-free observation (the channels of the observation)."""
+        if not self.closed_loop:
+            return self._y_clean.copy()
+        return assemble_observation(self._y_clean, self._u[0], self._sp_shown)
+
+    def _closed_loop_info(self) -> dict[str, Any]:
+        if not self.closed_loop:
+            return {}
+        return {
+            "controller_saturated": self._controller_saturated,
+            "setpoint_clipped": self._setpoint_clipped,
+            "setpoints": self._sp_shown.copy(),
         }
 
 

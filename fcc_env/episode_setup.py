@@ -25,6 +25,7 @@ from fcc_env.integrator import (
 from fcc_env.params import N_INPUTS, N_MEASUREMENTS, N_STATES, PARAM_INDEX, FCCParams
 from fcc_env.physics import N_AUX, measure_batch_kernel
 from fcc_env.plant import NOISE_STD_ABS, NOISE_STD_REL, PlantConfig
+from fcc_env.regulatory import SetpointStream
 from fcc_env.scenarios import EpisodeFault, FaultSpec
 
 #: Samples of program, noise and multipliers an :class:`EpisodeStream` draws at a time.
@@ -155,6 +156,16 @@ class EpisodeSetup:
     program: ProgramGenerator
     noise_rng: np.random.Generator
     schedule: PlantSchedule
+    setpoints: SetpointStream | None = None  # closed loop: the set-point program
+
+    def take_program(self, k: np.ndarray) -> tuple[np.ndarray, np.ndarray | None]:
+        """The next ``len(k)`` samples of the program: inputs (after input effects) and, in
+        closed loop, set points (else None). In closed loop the feed coking factor drifts."""
+        u = self.program.take(k.shape[0])
+        sp = None
+        if self.setpoints is not None:
+            sp, u[:, 5] = self.setpoints.take(k.shape[0])
+        return self.schedule.inputs(k, u), sp
 
 
 def setup_episode(
@@ -165,13 +176,22 @@ def setup_episode(
     plant_effects: list[Any] | None = None,
 ) -> EpisodeSetup:
     """Set up one episode from its seeded generator (the env's and batch simulation's order)."""
-    gens = episode_generators(rng)
+    gens = episode_generators(rng, closed_loop=config.closed_loop)
     resolved = fault.resolve(horizon, gens["fault"])
     effects = plant_effects or []
     fx.reset_all(effects)
     schedule = PlantSchedule(resolved, effects, config.params, config.sample_time_s)
+    setpoints = None
+    if config.regulatory is not None:
+        setpoints = SetpointStream(
+            config.regulatory.program, config.initial_setpoints(), gens["setpoints"]
+        )
     return EpisodeSetup(
-        resolved, ProgramGenerator(config.excitation, gens["program"]), gens["noise"], schedule
+        resolved,
+        ProgramGenerator(config.excitation, gens["program"]),
+        gens["noise"],
+        schedule,
+        setpoints,
     )
 
 
@@ -200,17 +220,20 @@ class EpisodeStream:
         self.config = config
         self._p_base = p_base
         self._pidx = setup.schedule.pidx
-        self._program = setup.program
+        self._setup = setup
         self._noise_rng = setup.noise_rng
         self._u_prog = np.empty((0, N_INPUTS))
+        self._sp = np.empty((0, 2))
         self._z = np.empty((0, N_MEASUREMENTS))
         self._pm = np.empty((0, self._pidx.shape[0]))
 
     def _ensure(self, k: int) -> None:
         while self._u_prog.shape[0] <= k:
             ks = np.arange(self._u_prog.shape[0], self._u_prog.shape[0] + CHUNK_SAMPLES)
-            chunk = self.schedule.inputs(ks, self._program.take(CHUNK_SAMPLES))
+            chunk, sp = self._setup.take_program(ks)
             self._u_prog = np.concatenate([self._u_prog, chunk])
+            if sp is not None:
+                self._sp = np.concatenate([self._sp, sp])
             self._z = np.concatenate(
                 [self._z, self._noise_rng.standard_normal((CHUNK_SAMPLES, N_MEASUREMENTS))]
             )
@@ -220,6 +243,11 @@ class EpisodeStream:
         """The operating program's inputs at sample ``k`` (after input effects), shape (6,)."""
         self._ensure(k)
         return self._u_prog[k]
+
+    def setpoints(self, k: int) -> np.ndarray:
+        """The program's set points at sample ``k`` (closed loop), shape (2,)."""
+        self._ensure(k)
+        return self._sp[k]
 
     def noise(self, k: int) -> np.ndarray:
         """The standard-normal draws of the measurement noise at sample ``k``, shape (8,)."""

@@ -70,69 +70,102 @@ class Excitation:
             )
 
 
+class APRBSChannel:
+    """One channel of amplitude-modulated pseudo-random steps, streamed chunk by chunk.
+
+    Levels are uniform in ``centre ± half`` and held an integer number of samples uniform in
+    ``[hold_min, hold_max]``; the first ``warmup_samples`` stay at ``centre``. Levels and holds
+    are drawn from the channel's own generator in blocks of ``_BLOCK`` (one numpy call each
+    instead of two per segment), so the stream does not depend on how it is chunked.
+    """
+
+    _BLOCK = 64
+
+    def __init__(
+        self,
+        centre: float,
+        half: float,
+        hold_min: int,
+        hold_max: int,
+        warmup_samples: int,
+        rng: np.random.Generator,
+    ) -> None:
+        self.centre, self.half = float(centre), float(half)
+        self.hold_min, self.hold_max, self.warmup = hold_min, hold_max, warmup_samples
+        self.rng = rng
+        self.k = 0
+        self._level = self.centre
+        self._left = 0
+        self._draws: tuple[np.ndarray, np.ndarray] = (np.empty(0), np.empty(0))
+        self._next = 0
+
+    def _segment(self) -> tuple[float, int]:
+        """Next (offset in [-1, 1), hold samples)."""
+        if self._next >= self._draws[0].shape[0]:
+            offsets = self.rng.uniform(-1.0, 1.0, size=self._BLOCK)
+            holds = self.rng.integers(self.hold_min, self.hold_max, size=self._BLOCK, endpoint=True)
+            self._draws = (offsets, holds)
+            self._next = 0
+        j = self._next
+        self._next += 1
+        return float(self._draws[0][j]), int(self._draws[1][j])
+
+    def take(self, n: int, out: np.ndarray) -> None:
+        """Write the next ``n`` samples into ``out`` (shape (n,); left as is during warm-up)."""
+        i = max(0, min(n, self.warmup - self.k))  # warm-up samples keep out's values
+        while i < n:
+            if self._left == 0:
+                offset, hold = self._segment()
+                self._level = self.centre + self.half * offset
+                self._left = hold
+            m = int(min(self._left, n - i))
+            out[i : i + m] = self._level
+            self._left -= m
+            i += m
+        self.k += n
+
+
 class ProgramGenerator:
     """Streams the operating program: inputs ``(n, 6)`` per sample, chunk by chunk.
 
-    Each excited channel draws from its own generator, in blocks of ``_BLOCK`` levels and hold
-    times (one numpy call each instead of two per segment), so the program does not depend on
-    how it is chunked, and a seed gives the same program whatever the scenario.
+    Each excited channel is an :class:`APRBSChannel` with its own generator, so the program
+    does not depend on how it is chunked, and a seed gives the same program whatever the
+    scenario.
     """
 
     _CHANNELS = (3, 2, 1)  # T_fp, T_ar, R_ar columns of the input vector
-    _BLOCK = 64
 
     def __init__(self, excitation: Excitation | None, rngs: list[np.random.Generator]):
         self.excitation = excitation
-        self.rngs = rngs
-        self.k = 0
-        self._level = NOMINAL_INPUTS[list(self._CHANNELS)].copy()
-        self._left = np.zeros(3, dtype=np.int64)
-        self._draws: list[tuple[np.ndarray, np.ndarray]] = [(np.empty(0), np.empty(0))] * 3
-        self._next = [0, 0, 0]
-
-    def _segment(self, c: int) -> tuple[float, int]:
-        """Next (offset in [-1, 1), hold samples) of channel c."""
-        ex = self.excitation
-        assert ex is not None
-        if self._next[c] >= self._draws[c][0].shape[0]:
-            rng = self.rngs[c]
-            offsets = rng.uniform(-1.0, 1.0, size=self._BLOCK)
-            holds = rng.integers(ex.hold_min, ex.hold_max, size=self._BLOCK, endpoint=True)
-            self._draws[c] = (offsets, holds)
-            self._next[c] = 0
-        j = self._next[c]
-        self._next[c] += 1
-        return float(self._draws[c][0][j]), int(self._draws[c][1][j])
+        self.channels: list[APRBSChannel] = []
+        if excitation is not None:
+            ex = excitation
+            half = (
+                ex.T_fp_halfrange_C,
+                ex.T_ar_halfrange_C,
+                ex.R_ar_halfrange_rel * NOMINAL_INPUTS[1],
+            )
+            self.channels = [
+                APRBSChannel(
+                    NOMINAL_INPUTS[col], h, ex.hold_min, ex.hold_max, ex.warmup_samples, rng
+                )
+                for col, h, rng in zip(self._CHANNELS, half, rngs, strict=True)
+            ]
 
     def take(self, n: int) -> np.ndarray:
         out = np.empty((n, NOMINAL_INPUTS.shape[0]))
         out[:] = NOMINAL_INPUTS
-        ex = self.excitation
-        if ex is None:
-            self.k += n
-            return out
-        half = (
-            ex.T_fp_halfrange_C,
-            ex.T_ar_halfrange_C,
-            ex.R_ar_halfrange_rel * NOMINAL_INPUTS[1],
-        )
-        for c, col in enumerate(self._CHANNELS):
-            centre = NOMINAL_INPUTS[col]
-            i = max(0, min(n, ex.warmup_samples - self.k))  # warm-up samples stay at nominal
-            while i < n:
-                if self._left[c] == 0:
-                    offset, hold = self._segment(c)
-                    self._level[c] = centre + half[c] * offset
-                    self._left[c] = hold
-                m = int(min(self._left[c], n - i))
-                out[i : i + m, col] = self._level[c]
-                self._left[c] -= m
-                i += m
-        self.k += n
+        for col, channel in zip(self._CHANNELS, self.channels, strict=False):
+            channel.take(n, out[:, col])
         return out
 
 
-def episode_generators(rng: np.random.Generator) -> dict[str, Any]:
-    """Split an episode's generator into independent streams (program, noise, random fault)."""
+def episode_generators(rng: np.random.Generator, closed_loop: bool = False) -> dict[str, Any]:
+    """Split an episode's generator into independent streams (program, noise, random fault;
+    in closed loop also the set-point program's three streams, spawned after the open-loop
+    ones so those are the same in both modes)."""
     children = rng.spawn(5)
-    return {"program": children[:3], "noise": children[3], "fault": children[4]}
+    gens = {"program": children[:3], "noise": children[3], "fault": children[4]}
+    if closed_loop:
+        gens["setpoints"] = rng.spawn(3)
+    return gens

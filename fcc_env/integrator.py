@@ -21,9 +21,24 @@ from fcc_env.physics import (
     njit_kernel,
     rhs_core,
 )
+from fcc_env.regulatory import (
+    CONTROLLER_STATE_SIZE,
+    apply_controller_outputs,
+    controller_update,
+)
 
 #: Parameter slots of "no fault" (entries < 0 are unused).
 NO_FAULT = np.array([-1, -1], dtype=np.int64)
+
+
+def open_loop_controller_args(B: int, T: int) -> tuple[np.ndarray, ...]:
+    """The controller arguments of :func:`simulate_kernel` for open-loop episodes (unused)."""
+    return (
+        np.zeros((B, CONTROLLER_STATE_SIZE)),
+        np.zeros((B, 1, 2)),
+        np.empty(0),
+        np.zeros((B, 1), dtype=np.bool_),
+    )
 
 
 @njit_kernel
@@ -142,19 +157,30 @@ def simulate_kernel(
     Xs: np.ndarray,  # (B, T, N_STATES) out: states
     AUX: np.ndarray,  # (B, T, N_AUX) out
     add_noise: bool,
+    C: np.ndarray,  # (B, CONTROLLER_STATE_SIZE) controller states, updated in place
+    SP: np.ndarray,  # (B, T, 2) set points (closed loop)
+    gains: np.ndarray,  # controller gains (RegulatoryLayer.gains); empty = open loop
+    SAT: np.ndarray,  # (B, T) bool out: a loop clamped at sample k (closed loop)
 ) -> None:
     """Simulate B episodes of T samples; same arithmetic as :func:`step_kernel` per episode.
 
-    With ``add_noise=False`` OBS is left untouched (the caller transforms Y first).
+    With ``add_noise=False`` OBS is left untouched (the caller transforms Y first). In closed
+    loop (``gains`` not empty, which needs ``add_noise``) the controllers' outputs replace
+    U[b, k, 0:2] (written back: U holds the applied inputs) and each sample's noisy observation
+    updates them for the next sample (:func:`fcc_env.regulatory.controller_update`).
     """
     B, T = U.shape[0], U.shape[1]
+    closed = gains.shape[0] > 0
     for b in numba.prange(B):
         x = x0[b].copy()
         p = np.empty_like(p_base[b])
         work = np.empty((6, N_STATES))
         aux = work[5]
+        c = C[b]
         for k in range(T):
             u = U[b, k]
+            if closed:  # a closed loop's output replaces the program's input
+                apply_controller_outputs(u, c, gains)
             _apply_mult(p_base[b], p, pidx[b], PM[b, k])
             # One RHS evaluation gives the first RK4 stage, the info quantities and T_rx (the
             # same riser solve the measurement would repeat).
@@ -169,6 +195,8 @@ def simulate_kernel(
                 Xs[b, k, i] = x[i]
             for i in range(N_AUX):
                 AUX[b, k, i] = aux[i]
+            if closed:
+                SAT[b, k] = controller_update(c, SP[b, k], OBS[b, k], gains)
             if k + 1 < T:
                 _rk4_inplace(x, u, p, h, substeps, work, True)
 

@@ -15,7 +15,8 @@ import numpy as np
 from fcc_common.validation import Integer, Real, check, invalid
 from fcc_env.excitation import Excitation
 from fcc_env.params import MEASUREMENTS, NOMINAL_INPUTS, FCCParams
-from fcc_env.physics import steady_state
+from fcc_env.physics import measure, steady_state
+from fcc_env.regulatory import RegulatoryLayer
 
 #: Noise std per channel: absolute (°C) and relative to the value (R_ar, 0.5 %), spec §1.1.
 NOISE_STD_ABS = np.array([0.0 if m.noise_relative else m.noise_std for m in MEASUREMENTS])
@@ -66,6 +67,8 @@ class PlantConfig:
     rk4_substeps: int = 1
     excitation: Excitation | None = field(default_factory=Excitation)
     noise_scale: float = 1.0
+    #: ``None``: open loop (the paper's plant); a :class:`RegulatoryLayer`: closed loop.
+    regulatory: RegulatoryLayer | None = None
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__
@@ -77,6 +80,8 @@ class PlantConfig:
         if self.excitation is not None and not isinstance(self.excitation, Excitation):
             raise invalid("excitation", self.excitation, "an Excitation or None (no excitation)")
         set_(self, "noise_scale", check("noise_scale", self.noise_scale, NOISE_SCALE_RANGE))
+        if self.regulatory is not None and not isinstance(self.regulatory, RegulatoryLayer):
+            raise invalid("regulatory", self.regulatory, "a RegulatoryLayer or None (open loop)")
 
     @classmethod
     def build(
@@ -88,12 +93,15 @@ class PlantConfig:
         excitation: Any = None,
         noise_scale: Any = None,
         params: FCCParams | None = None,
+        regulatory: Any = None,
     ) -> PlantConfig:
         """The plant of the env's keywords (``None`` = the default): the one bridge from them.
 
         ``valve_beta`` overrides ``params.beta_sv`` (default :data:`DEFAULT_VALVE_BETA`, also
         when ``params`` are given); ``excitation`` is ``True``/``None`` (the default program),
-        ``False`` (none), an :class:`Excitation` or a mapping of its fields.
+        ``False`` (none), an :class:`Excitation` or a mapping of its fields; ``regulatory`` is
+        ``None``/``False`` (open loop), ``True`` (the default layer), a
+        :class:`RegulatoryLayer` or a mapping of its fields.
         """
         if params is not None and not isinstance(params, FCCParams):
             raise invalid("params", params, "an FCCParams instance or None")
@@ -106,6 +114,7 @@ class PlantConfig:
         return cls(
             params=p,
             excitation=Excitation.from_option(excitation),
+            regulatory=RegulatoryLayer.from_option(regulatory),
             **{k: v for k, v in given.items() if v is not None},
         )
 
@@ -113,8 +122,17 @@ class PlantConfig:
     def valve_beta(self) -> float:
         return self.params.beta_sv
 
+    @property
+    def closed_loop(self) -> bool:
+        return self.regulatory is not None
+
     def initial_state(self) -> np.ndarray:
         return steady_state(self.params, NOMINAL_INPUTS)
+
+    def initial_setpoints(self) -> np.ndarray:
+        """T_rx and T_rg1 (°C) of the initial steady state: where the set points start."""
+        x0 = self.initial_state()
+        return np.array([measure(x0, NOMINAL_INPUTS, self.params)[3], x0[4]])
 
     def replace(self, **changes: Any) -> PlantConfig:
         return dataclasses.replace(self, **changes)
@@ -128,6 +146,7 @@ ENV_PLANT_KEYWORDS = (
     "excitation",
     "noise_scale",
     "params",
+    "regulatory",
 )
 
 

@@ -14,9 +14,22 @@ from gymnasium.utils import seeding
 
 from fcc_common.validation import Integer, IntegerSequence, Real, check, invalid
 from fcc_env import effects as fx
+from fcc_env.closed_loop import (
+    assemble_observation,
+    observation_channels,
+    simulate_closed_per_sample,
+)
 from fcc_env.episode_setup import apply_multipliers, generic_sample, setup_episode
-from fcc_env.integrator import noisy_batch_kernel, simulate_kernel
-from fcc_env.params import N_INPUTS, N_MEASUREMENTS, N_STATES, PARAM_INDEX, FCCParams
+from fcc_env.integrator import noisy_batch_kernel, open_loop_controller_args, simulate_kernel
+from fcc_env.params import (
+    MEASUREMENT_NAMES,
+    N_INPUTS,
+    N_MEASUREMENTS,
+    N_STATES,
+    NOMINAL_INPUTS,
+    PARAM_INDEX,
+    FCCParams,
+)
 from fcc_env.physics import AUX_NAMES, N_AUX, steady_state
 from fcc_env.plant import (
     NOISE_STD_ABS,
@@ -28,6 +41,7 @@ from fcc_env.plant import (
     envelope_codes,
     plant_from_request,
 )
+from fcc_env.regulatory import check_setpoints, initial_controller_state
 from fcc_env.scenarios import (
     DEFAULT_N_SAMPLES,
     EpisodeFault,
@@ -88,7 +102,9 @@ _PLANT_DEFAULTS = {f.name: f.default for f in dataclasses.fields(PlantConfig)}
 class BatchResult:
     """Arrays of a batch of episodes; leading axes ``(n_episodes, n_samples)``.
 
-    ``observations`` are exactly what ``FCC-v0`` returns (float32); the other arrays are float64.
+    ``observations`` are exactly what ``FCC-v0`` (or, on a closed-loop plant,
+    ``FCC-closedloop-v0``) returns (float32), channels :attr:`channels`; ``y_clean`` has the
+    same channels noise-free; the other arrays are float64.
     """
 
     observations: np.ndarray  # (B, T, 8) float32, noisy Table 1 measurements
@@ -106,6 +122,10 @@ class BatchResult:
     termination_reasons: tuple[str | None, ...]
     sample_time_s: float
     aux_names: tuple[str, ...] = AUX_NAMES
+    #: Observation channels: Table 1, or in closed loop Table 1 + u_F + set points.
+    channels: tuple[str, ...] = MEASUREMENT_NAMES
+    setpoints: np.ndarray | None = None  # (B, T, 2) closed loop: set points in force, °C
+    controller_saturated: np.ndarray | None = None  # (B, T) bool closed loop: a loop clamped
 
 
 def _episode_faults(
@@ -148,6 +168,7 @@ def simulate_episodes(
     excitation: Any = None,
     noise_scale: float | None = None,
     params: FCCParams | None = None,
+    regulatory: Any = None,
 ) -> BatchResult:
     """Simulate many seeded episodes at once, identical to ``FCC-v0`` with zero actions.
 
@@ -160,7 +181,9 @@ def simulate_episodes(
             per seed); never both.
         plant: the plant, a :class:`fcc_env.PlantConfig` (default: the paper's). Or the env's
             keywords ``valve_beta``, ``sample_time_s``, ``rk4_substeps``, ``excitation``,
-            ``noise_scale``, ``params`` (``None`` = not given); never both.
+            ``noise_scale``, ``params``, ``regulatory`` (``None`` = not given); never both. A
+            plant with a :class:`fcc_env.RegulatoryLayer` runs closed loop, as
+            ``FCC-closedloop-v0``.
         plant_effects: as for the env (:mod:`fcc_env.effects`); one effect object serves the
             whole batch, with a leading episode axis on its arrays.
         plant_uncertainty: each episode's plant drawn by seed
@@ -201,6 +224,7 @@ def simulate_episodes(
             "excitation": excitation,
             "noise_scale": noise_scale,
             "params": params,
+            "regulatory": regulatory,
         },
     )
     effects = fx.resolve(plant_effects)
@@ -213,6 +237,7 @@ def simulate_episodes(
         drawn = [list(d.effects) for d in draws]
     k = np.arange(T)
     U = np.empty((B, T, N_INPUTS))
+    SP = np.empty((B, T, 2)) if config.closed_loop else None
     Z = np.empty((B, T, N_MEASUREMENTS))
     faults: list[EpisodeFault] = []
     pidx_rows, pm_rows = [], []
@@ -221,7 +246,9 @@ def simulate_episodes(
         rng, _ = seeding.np_random(seed)
         setup = setup_episode(rng, configs[b], spec, T, [*effects, *drawn[b]])
         schedule = setup.schedule
-        U[b] = schedule.inputs(k, setup.program.take(T))
+        U[b], sp = setup.take_program(k)
+        if SP is not None:
+            SP[b], _ = check_setpoints(sp)
         Z[b] = setup.noise_rng.standard_normal((T, N_MEASUREMENTS))
         faults.append(setup.fault)
         pidx_rows.append(schedule.pidx)
@@ -240,7 +267,23 @@ def simulate_episodes(
     obs = np.empty((B, T, N_MEASUREMENTS), dtype=np.float32)
     X = np.empty((B, T, N_STATES))
     A = np.empty((B, T, N_AUX))
-    if schedule.generic:
+    SAT = None
+    if config.regulatory is not None:
+        assert SP is not None
+        C = np.tile(initial_controller_state(NOMINAL_INPUTS), (B, 1))
+        gains = config.regulatory.gains(config.sample_time_s)
+        if schedule.generic or schedule.measure_effects:
+            Y, obs, X, A, SAT = simulate_closed_per_sample(
+                x0, U, SP, C, gains, p_base, pidx, PM, Z, schedule, config
+            )
+        else:
+            SAT = np.zeros((B, T), dtype=np.bool_)
+            simulate_kernel(
+                x0, U, p_base, pidx, PM, config.sample_time_s / config.rk4_substeps,
+                config.rk4_substeps, Z, NOISE_STD_ABS, NOISE_STD_REL, config.noise_scale, Y,
+                obs, X, A, True, C, SP, gains, SAT,
+            )  # fmt: skip
+    elif schedule.generic:
         x = x0
         for kk in range(T):
             p = apply_multipliers(p_base, pidx, PM[:, kk])
@@ -254,9 +297,9 @@ def simulate_episodes(
         simulate_kernel(
             x0, U, p_base, pidx, PM, config.sample_time_s / config.rk4_substeps,
             config.rk4_substeps, Z, NOISE_STD_ABS, NOISE_STD_REL, config.noise_scale, Y, obs, X,
-            A, not schedule.measure_effects,
+            A, not schedule.measure_effects, *open_loop_controller_args(B, T),
         )  # fmt: skip
-    if schedule.generic or schedule.measure_effects:
+    if config.regulatory is None and (schedule.generic or schedule.measure_effects):
         for kk in range(T):
             Y[:, kk] = schedule.measure(kk, Y[:, kk])
         noisy_batch_kernel(Y, Z, NOISE_STD_ABS, NOISE_STD_REL, config.noise_scale, obs)
@@ -273,6 +316,9 @@ def simulate_episodes(
     reasons = tuple(
         TERMINATION_REASONS[codes[b, t]] if t >= 0 else None for b, t in enumerate(term_at)
     )
+    if SP is not None:  # what a control system records: the valve command and set points
+        obs = assemble_observation(obs, U[:, :, 0], SP)
+        Y = assemble_observation(Y, U[:, :, 0], SP)
     return BatchResult(
         observations=obs,
         y_clean=Y,
@@ -287,6 +333,9 @@ def simulate_episodes(
         terminated_at=term_at,
         termination_reasons=reasons,
         sample_time_s=config.sample_time_s,
+        channels=observation_channels(config),
+        setpoints=SP,
+        controller_saturated=SAT,
     )
 
 
@@ -355,6 +404,7 @@ def simulate_inputs(
         X0.copy(), np.ascontiguousarray(U), np.tile(p.as_array(), (B, 1)), pidx, PM,
         sample_time_s / rk4_substeps, rk4_substeps, np.empty((B, 1, N_MEASUREMENTS)),
         NOISE_STD_ABS, NOISE_STD_REL, 0.0, Y, dummy, X, A, False,
+        *open_loop_controller_args(B, T),
     )  # fmt: skip
     if single:
         return InputSimulation(Y[0], X[0], A[0])
