@@ -121,7 +121,7 @@ class Episode:
             out.append(
                 cls(
                     y=np.asarray(obs[b, :n_used], dtype=np.float64),
-                    channels=tuple(MEASUREMENT_NAMES),
+                    channels=tuple(getattr(batch, "channels", MEASUREMENT_NAMES)),
                     sample_time_s=float(batch.sample_time_s),
                     fault_onset=None if onset is None or onset >= n_used else int(onset),
                     scenario=str(batch.scenarios[b]),

@@ -247,8 +247,10 @@ def simulate_loaded(
     noise_scale: float = 1.0,
     sample_time_s: float = 10.0,  # the env's default sample time [s]
     plant_uncertainty: PlantUncertainty | None = None,
+    regulatory: bool = False,
 ) -> list[LoadedEpisode]:
-    """Simulate ``seeds`` with the fault ``spec`` and cut each at its termination sample."""
+    """Simulate ``seeds`` with the fault ``spec`` and cut each at its termination sample
+    (``regulatory``: on the closed-loop plant, :class:`fcc_env.RegulatoryLayer`)."""
     res = fcc_env.simulate_episodes(
         list(seeds),
         int(n_samples),
@@ -257,6 +259,7 @@ def simulate_loaded(
         noise_scale=noise_scale,
         sample_time_s=sample_time_s,
         plant_uncertainty=plant_uncertainty,
+        regulatory=regulatory or None,
     )
     out = []
     # Episode.from_batch cuts each episode at its termination and drops an onset it never reached

@@ -98,6 +98,30 @@ _TRACK_LIST = (
         ramp=Choice(RAMP_LENGTHS),
         draw_fault=True,
     ),
+    Track(
+        name="closed",
+        description=(
+            "The paper's faults, sizes and onsets on the closed-loop plant (FCC-closedloop-v0): "
+            "T_rx held by the slide valve, T_rg1 by the air, set points and the valve command "
+            "observed, excitation by disturbances and set-point moves. Tests diagnosis where "
+            "every real unit runs: the loops mask the faults in the temperatures and move them "
+            "into the valve and the air."
+        ),
+        closed_loop=True,
+    ),
+    Track(
+        name="closed-random",
+        description=(
+            "The random track's draws (type, size 0.3-1.3 x paper, onset 1000-3000, abrupt or "
+            "incipient) on the closed-loop plant. Tests generalisation under control."
+        ),
+        magnitudes=_paper_scaled(0.3, 1.3),
+        onset=Uniform(1000, 3000),
+        profiles=(FaultProfile.ABRUPT, FaultProfile.INCIPIENT),
+        ramp=Choice(RAMP_LENGTHS),
+        draw_fault=True,
+        closed_loop=True,
+    ),
 )
 
 #: The published tracks by name.

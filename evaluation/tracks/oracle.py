@@ -229,12 +229,18 @@ class PhysicalLimit:
         #: noise std [channel unit] of each monitored channel on this track
         self.noise_std = noise * data.track.noise_scale
 
-    def _reference(self, y: np.ndarray, seed: int) -> np.ndarray:
-        measured = y if self.config.inputs == OracleInputs.MEASURED else None
-        return self._sims.reference(seed, measured)
+    def _reference(self, episode: Episode) -> np.ndarray:
+        assert episode.seed is not None, "the reference needs the episode's seed"
+        measured = self.config.inputs == OracleInputs.MEASURED
+        if self.data.track.closed_loop:
+            # closed loop: the record of the episode's own manipulated variables drives the
+            # healthy model (TrackData.reference): noise-free (true) or observed (measured)
+            return self._sims.reference(episode.seed, episode.y if measured else episode.y_clean)
+        return self._sims.reference(episode.seed, episode.y if measured else None)
 
-    def _statistic(self, y: np.ndarray, seed: int) -> tuple[np.ndarray, np.ndarray]:
-        y_ref = self._reference(y, seed)
+    def _statistic(self, episode: Episode) -> tuple[np.ndarray, np.ndarray]:
+        y = episode.y
+        y_ref = self._reference(episode)
         r = (y[:, self._idx] - y_ref[: y.shape[0], self._idx]) / self.noise_std
         return r, EWMA(self.config.ewma_lambda).filter(r)
 
@@ -251,7 +257,7 @@ class PhysicalLimit:
                 ewma_lambda=self.config.ewma_lambda,
             ).fit(healthy)
             return self
-        Z = np.concatenate([self._statistic(ep.y, int(ep.seed))[1] for ep in healthy])  # type: ignore[arg-type]
+        Z = np.concatenate([self._statistic(ep)[1] for ep in healthy])
         self.t2_ = HotellingT2().fit(Z)
         stat = np.asarray(self.t2_.score(Z))
         self.limit_ = float(
@@ -268,7 +274,7 @@ class PhysicalLimit:
         assert episode.seed is not None, "the physical limit needs the episode's seed"
         if self.config.stage == OracleStage.DIRECTIONAL:
             return self.stage_.detect(episode)
-        r, z = self._statistic(episode.y, episode.seed)
+        r, z = self._statistic(episode)
         stat = np.asarray(self.t2_.score(z)).reshape(-1, 1)
         upper = np.full_like(stat, self.limit_)
         return Detection(
@@ -288,14 +294,14 @@ class _PerfectModelStage:
     T², limits, alarm logic) is the detector's own parts,
     :class:`~diagnosers.fault_directions.FaultDirections` and
     :class:`~diagnosers.directional_stage.DirectionalStage` with ``lrgf-glr``'s defaults, so the
-    row measures that stage on a perfect model. ``reference_of(y, seed)`` gives the reference
-    of a record; ``monitored`` the channels. Batch only (``detect``). Not a diagnoser: it reads
+    row measures that stage on a perfect model. ``reference_of(episode)`` gives the reference
+    of an episode; ``monitored`` the channels. Batch only (``detect``). Not a diagnoser: it reads
     what no diagnoser may.
     """
 
     def __init__(
         self,
-        reference_of: Callable[[np.ndarray, int], np.ndarray],
+        reference_of: Callable[[Episode], np.ndarray],
         monitored: tuple[str, ...],
         *,
         false_alarm_target: float,
@@ -317,15 +323,14 @@ class _PerfectModelStage:
     def false_alarm_target(self) -> float:
         return self.stage.false_alarm_target
 
-    def _centre_of(self, y: np.ndarray, seed: int | None) -> np.ndarray:
-        assert seed is not None, "the reference needs the episode's seed"
-        return self.reference_of(y, seed)[: y.shape[0]][:, self.out_idx_]
+    def _centre_of(self, episode: Episode) -> np.ndarray:
+        return self.reference_of(episode)[: episode.y.shape[0]][:, self.out_idx_]
 
     def fit(self, episodes: Sequence[Episode]) -> _PerfectModelStage:
         channels = episodes[0].channels
         self.out_idx_ = np.array([channels.index(c) for c in self.monitored])
         w = self.steady_window
-        rem = [(ep.y[:, self.out_idx_] - self._centre_of(ep.y, ep.seed))[w:] for ep in episodes]
+        rem = [(ep.y[:, self.out_idx_] - self._centre_of(ep))[w:] for ep in episodes]
         self.v_residual_ = np.maximum(np.sqrt(np.mean(np.concatenate(rem) ** 2, axis=0)), 1e-9)
         self.directions_ = self.directions.learn(channels, len(self.out_idx_), self._signature)
         self.stage.fit([r / self.v_residual_ for r in rem], self.directions_)
@@ -340,7 +345,7 @@ class _PerfectModelStage:
 
     def detect(self, episode: Episode) -> Detection:
         y = episode.y
-        resid = y[:, self.out_idx_] - self._centre_of(y, episode.seed)
+        resid = y[:, self.out_idx_] - self._centre_of(episode)
         w = self.steady_window
         e = resid / self.v_residual_
         e[:w] = 0.0

@@ -123,6 +123,10 @@ class Track:
         draw_fault: the fault type of each faulty test episode is drawn per seed (``random``).
         noise_scale: multiplier on the measurement noise, for training and test alike.
         plant_variation: each episode draws its plant parameters (drawn by the env).
+        closed_loop: the plant runs under its regulatory layer (``FCC-closedloop-v0``,
+            :class:`fcc_env.RegulatoryLayer`): episodes have 11 channels (Table 1, the valve
+            command, the set points). Not together with ``plant_variation`` (the closed-loop
+            reference rows replay a declared plant).
         n_samples: episode length [samples].
         n_healthy: healthy test episodes (the published tracks use at least :data:`MIN_HEALTHY`).
         n_faulty: faulty test episodes per fault.
@@ -145,6 +149,7 @@ class Track:
     draw_fault: bool = False
     noise_scale: float = 1.0
     plant_variation: bool = False
+    closed_loop: bool = False
     n_samples: int = DEFAULT_N_SAMPLES
     n_healthy: int = MIN_HEALTHY
     n_faulty: int = 20
@@ -187,6 +192,15 @@ class Track:
         )
         set_(self, "plant_variation", check("plant_variation", self.plant_variation, Boolean()))
         set_(self, "draw_fault", check("draw_fault", self.draw_fault, Boolean()))
+        set_(self, "closed_loop", check("closed_loop", self.closed_loop, Boolean()))
+        if self.closed_loop and self.plant_variation:
+            raise invalid(
+                "plant_variation",
+                True,
+                "False on a closed-loop track",
+                "the closed-loop reference rows replay the declared plant; drawn plants are "
+                "not built for closed loop",
+            )
         set_(self, "magnitudes", _checked_magnitudes(self.magnitudes, self.faults))
         last_onset = self.n_samples - RAMP_MARGIN
         if self.onset is not None:
@@ -359,6 +373,8 @@ class Track:
             "draw_fault": self.draw_fault,
             "noise_scale": self.noise_scale,
             "plant_variation": self.plant_variation,
+            # only when set, so that the open-loop tracks' store keys stay as they were
+            **({"closed_loop": True} if self.closed_loop else {}),
             "n_samples": self.n_samples,
             "n_healthy": self.n_healthy,
             "n_faulty": self.n_faulty,

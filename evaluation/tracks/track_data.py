@@ -17,7 +17,10 @@ from diagnosers.episode import Episode
 from evaluation.sweep.sources import DataDescription, LoadedEpisode, simulate_loaded
 from evaluation.tracks.track import Track
 from fcc_common.validation import invalid
+from fcc_env.closed_loop import CLOSED_LOOP_CHANNELS
 from fcc_env.params import INPUT_NAMES, MEASUREMENT_NAMES
+from fcc_env.plant import PlantConfig
+from fcc_env.simulation import simulate_inputs
 from fcc_env.scenarios import FaultSpec
 from fcc_env.uncertainty import PlantUncertainty
 
@@ -95,6 +98,7 @@ class TrackData:
             "n_samples": t.n_samples,
             "noise_scale": t.noise_scale,
             "plant_variation": t.plant_variation,
+            **({"closed_loop": True} if t.closed_loop else {}),
             "train_seeds": [t.train_seeds.start, t.train_seeds.stop],
         }
 
@@ -106,6 +110,7 @@ class TrackData:
             spec,
             noise_scale=self.track.noise_scale,
             plant_uncertainty=PlantUncertainty() if self.track.plant_variation else None,
+            regulatory=self.track.closed_loop,
         )
 
     def train_episodes(self) -> list[Episode]:
@@ -148,6 +153,8 @@ class TrackData:
         inputs that are measured (R_ar, T_ar, T_fp; noise included) in place of the true ones:
         the output of a perfect model driven by what a detector reads. Returns ``(T', 8)``.
         """
+        if self.track.closed_loop:
+            return self._closed_loop_reference(seed, measured)
         if measured is None:
             ep = self.simulate([seed], FaultSpec())[0].episode
             assert ep.y_clean is not None
@@ -163,10 +170,48 @@ class TrackData:
         )
         return np.asarray(res.y_clean[0], dtype=np.float64)
 
+    def _closed_loop_reference(self, seed: int, record: np.ndarray | None) -> np.ndarray:
+        """Closed loop: the healthy plant, in open loop, driven by an episode's own record of
+        the manipulated variables and the measured inputs.
+
+        A twin that ran its own controllers would share the episode's noise through them and
+        match its valve to the last bit until the fault, then differ by exactly the fault:
+        no detector can read that, and it is no limit. The healthy model fed the episode's
+        valve command, air, air and feed temperatures instead is what "the same inputs" means
+        under control: before the fault its temperatures differ from the episode's by the
+        measurement noise, after it by what the fault does at the inputs the controllers
+        chose. ``record`` (``(T, 11)``) is the episode's noise-free observation (true
+        inputs) or its observation (measured inputs: R_ar with 0.5 % noise, T_ar and T_fp
+        with 0.3 °C; the valve command is exact in both). The feed rate and the coking factor,
+        which nobody measures, are the seed's program (the same in the healthy twin). Returns
+        ``(T, 8)``, the Table 1 channels.
+        """
+        twin = fcc_env.simulate_episodes(
+            [seed], self.track.n_samples, noise_scale=0.0, regulatory=True
+        )
+        if record is None:
+            record = twin.y_clean[0]
+        record = np.asarray(record, dtype=np.float64)
+        T = record.shape[0]
+        if record.ndim != 2 or record.shape[1] != len(CLOSED_LOOP_CHANNELS):
+            raise ValueError(
+                f"record has shape {record.shape}; allowed: (T, {len(CLOSED_LOOP_CHANNELS)}) "
+                f"with the columns {', '.join(CLOSED_LOOP_CHANNELS)}"
+            )
+        u = np.array(twin.inputs[0, :T], dtype=np.float64)
+        for name in ("u_F", "R_ar", "T_ar", "T_fp"):
+            u[:, INPUT_NAMES.index(name)] = record[:, CLOSED_LOOP_CHANNELS.index(name)]
+        x0 = PlantConfig().initial_state()
+        sim = simulate_inputs(u, x0=x0, sample_time_s=TRACK_SAMPLE_TIME_S)
+        return np.asarray(sim.y_clean, dtype=np.float64)
+
     def describe(self) -> DataDescription:
         t = self.track
         return DataDescription(
-            label=f"{fcc_env.ENV_ID} ({fcc_env.MODEL_VERSION}), track {t.name}",
+            label=(
+                f"{fcc_env.CLOSED_LOOP_ENV_ID if t.closed_loop else fcc_env.ENV_ID} "
+                f"({fcc_env.MODEL_VERSION}), track {t.name}"
+            ),
             lines=(
                 t.description,
                 f"{t.n_healthy} healthy and {t.n_faulty_total} faulty test episodes (seeds from "
