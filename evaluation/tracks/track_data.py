@@ -20,8 +20,8 @@ from fcc_common.validation import invalid
 from fcc_env.closed_loop import CLOSED_LOOP_CHANNELS
 from fcc_env.params import INPUT_NAMES, MEASUREMENT_NAMES
 from fcc_env.plant import PlantConfig
-from fcc_env.simulation import simulate_inputs
 from fcc_env.scenarios import FaultSpec
+from fcc_env.simulation import simulate_inputs
 from fcc_env.uncertainty import PlantUncertainty
 
 #: the tracks' sample time [s] (the env's default)
