@@ -19,6 +19,7 @@ import tempfile
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -53,28 +54,41 @@ class ConformanceError(AssertionError):
 
 
 def default_episodes(
-    n_train: int = 1500, n_test: int = 1200
+    n_train: int = 1500, n_test: int = 1200, *, closed_loop: bool = False
 ) -> tuple[list[Episode], Episode, list[Episode]]:
     """Small FCC-v0 episodes: ``(healthy training, faulty test, labelled faulty training)``.
 
     Two healthy episodes (seeds 1000, 1001), a test episode with fault ``f1`` from two thirds of
     it (seed 3), and four labelled faulty episodes (``f1`` and ``f2``, seeds 11 and 12, onset at
     half) for the diagnosers that isolate. Simulating them takes well under a second.
+    ``closed_loop``: the same on the closed-loop plant (``FCC-closedloop-v0``).
     """
     import fcc_env  # here: the diagnosers package does not need the simulator to import
 
-    train = Episode.from_batch(fcc_env.simulate_episodes([1000, 1001], n_train))
-    [test] = Episode.from_batch(
-        fcc_env.simulate_episodes([3], n_test, scenario="f1", fault_time=2 * n_test // 3)
-    )
+    reg = True if closed_loop else None
+
+    def sim(seeds: list[int], n: int, **fault: Any) -> list[Episode]:
+        return Episode.from_batch(fcc_env.simulate_episodes(seeds, n, regulatory=reg, **fault))
+
+    train = sim([1000, 1001], n_train)
+    [test] = sim([3], n_test, scenario="f1", fault_time=2 * n_test // 3)
     faulty = [
         ep
         for scenario in ("f1", "f2")
-        for ep in Episode.from_batch(
-            fcc_env.simulate_episodes([11, 12], n_test, scenario=scenario, fault_time=n_test // 2)
-        )
+        for ep in sim([11, 12], n_test, scenario=scenario, fault_time=n_test // 2)
     ]
     return train, test, faulty
+
+
+def _relation_channels(d: Diagnoser) -> set[str]:
+    """The channels ``d``'s relations name (empty without relations)."""
+    from diagnosers.relations import parse_relations
+
+    params = d.get_params(deep=False)
+    rel = params.get("relations") or getattr(type(d), "DEFAULT_RELATIONS", None)
+    if "relations" not in params or not rel:
+        return set()
+    return {c for out, ins in parse_relations(rel) for c in (out, *ins)}
 
 
 def _label(d: object) -> str:
@@ -396,7 +410,10 @@ def check_diagnoser(
             "sklearn.base.clone(diagnoser) (or a new instance) instead"
         )
     if train is None or test is None or (diagnoser.isolates and faulty_train is None):
-        default_train, default_test, default_faulty = default_episodes()
+        # a diagnoser that reads the controllers' channels gets closed-loop episodes
+        default_train, default_test, default_faulty = default_episodes(
+            closed_loop="u_F" in _relation_channels(diagnoser)
+        )
         train = default_train if train is None else train
         test = default_test if test is None else test
         faulty_train = default_faulty if faulty_train is None else faulty_train

@@ -82,19 +82,25 @@ class FaultDirections:
 
         Each fault is simulated (paper magnitude and onset) on the training seeds together
         with the healthy episode of each seed; the direction is the mean of ``signature`` over
-        ``window`` samples after the onset. Empty when ``channels`` are not FCC-v0's.
+        ``window`` samples after the onset, on the plant the channels come from (FCC-v0's
+        Table 1, or the closed-loop plant's channels: the faults simulated under control).
+        Empty for other channels (external data).
         """
         import fcc_env
+        from fcc_env.closed_loop import CLOSED_LOOP_CHANNELS
 
-        if tuple(channels) != tuple(fcc_env.MEASUREMENT_NAMES) or not self.faults:
+        closed = tuple(channels) == CLOSED_LOOP_CHANNELS
+        if not self.faults or (tuple(channels) != tuple(fcc_env.MEASUREMENT_NAMES) and not closed):
             return np.zeros((0, n_relations))
         out = []
-        for diffs in self.differences(signature).values():
+        for diffs in self.differences(signature, closed_loop=closed).values():
             mean = np.mean([d.mean(axis=0) for d in diffs], axis=0)
             out.append(mean / np.linalg.norm(mean))
         return np.array(out)
 
-    def differences(self, signature: Signature) -> dict[str, list[np.ndarray]]:
+    def differences(
+        self, signature: Signature, closed_loop: bool = False
+    ) -> dict[str, list[np.ndarray]]:
         """Per fault, the ``signature`` of each training fault over the ``window`` samples
         from the onset: ``(window, k)`` arrays. Episodes that end inside the window are left
         out."""
@@ -102,11 +108,17 @@ class FaultDirections:
         from fcc_env.scenarios import FaultSpec
 
         window = self.window
-        healthy = fcc_env.simulate_episodes(self.seeds, fcc_env.DEFAULT_N_SAMPLES)
+        regulatory = True if closed_loop else None  # the plant the detector reads
+        healthy = fcc_env.simulate_episodes(
+            self.seeds, fcc_env.DEFAULT_N_SAMPLES, regulatory=regulatory
+        )
         out = {}
         for f in self.faults:
             res = fcc_env.simulate_episodes(
-                self.seeds, fcc_env.DEFAULT_N_SAMPLES, fault=FaultSpec(scenario=f)
+                self.seeds,
+                fcc_env.DEFAULT_N_SAMPLES,
+                fault=FaultSpec(scenario=f),
+                regulatory=regulatory,
             )
             diffs = []
             for b in range(len(self.seeds)):

@@ -15,9 +15,9 @@ from typing import Any
 from diagnosers.lrgf_glr import LRGFGLR
 from diagnosers.lrgf_mem import LRGFMEM
 from diagnosers.presets import preset
-from diagnosers.relations import PAPER_RELATIONS
+from diagnosers.relations import CLOSED_LOOP_RELATIONS, PAPER_RELATIONS
 
-__all__ = ["PRESETS", "LRGFGLRAdaptive", "LRGFMEMPaper"]
+__all__ = ["PRESETS", "LRGFGLRAdaptive", "LRGFGLRClosed", "LRGFMEMPaper"]
 
 #: each variant's defaults that differ from its family's
 PRESETS: dict[str, dict[str, Any]] = {
@@ -37,6 +37,7 @@ PRESETS: dict[str, dict[str, Any]] = {
         "false_alarm_target": 0.04,
         "val_fraction": 0.0,
     },
+    "lrgf-glr-closed": {},
 }
 
 LRGFMEMPaper = preset(
@@ -77,4 +78,18 @@ LRGFGLRAdaptive = preset(
     running-mean variant. The settings were chosen on validation seeds (lab/detector-lab.md).
     """,
     module=__name__,
+)
+
+LRGFGLRClosed = preset(
+    "lrgf-glr-closed",
+    LRGFGLR,
+    PRESETS["lrgf-glr-closed"],
+    """``lrgf-glr`` for the closed-loop plant (``FCC-closedloop-v0``, the ``closed`` tracks):
+    its relations read the manipulated variables (``relations=None`` is
+    :data:`diagnosers.relations.CLOSED_LOOP_RELATIONS`: T_rx from the valve command, T_rg2 and
+    T_fp; T_rg1 and T_rg2 with the air and the valve), and its fault directions are learned on
+    faults simulated under control. Everything else is ``lrgf-glr``'s. It needs the channels
+    ``u_F`` and ``R_ar``: on open-loop data (no ``u_F``) the harness skips it.""",
+    module=__name__,
+    attributes={"DEFAULT_RELATIONS": CLOSED_LOOP_RELATIONS},
 )

@@ -56,7 +56,9 @@ def fopdt_fit(y: np.ndarray) -> tuple[float, float, float]:
         return k * (1.0 - np.exp(-np.maximum(t - theta, 0.0) / tau)) * (t >= theta)
 
     z0 = [y[-1], 600.0, TS]  # noqa: F841 (start)
-    fit = least_squares(lambda z: model(z) - y, z0, bounds=([-np.inf, 1.0, 0.0], [np.inf, 1e5, 3000]))
+    fit = least_squares(
+        lambda z: model(z) - y, z0, bounds=([-np.inf, 1.0, 0.0], [np.inf, 1e5, 3000])
+    )
     return tuple(float(v) for v in fit.x)
 
 
@@ -73,15 +75,19 @@ def main() -> None:
     # changes within the hour, and must stay slower than the valve loop it enables.
     tau_c = tau / 4.0
     kc_rg, ti_rg = simc(k, tau, theta, tau_c)
-    print(f"T_rg1 <- R_ar: k={k:.3f} °C per t/h, tau={tau:.0f} s, theta={theta:.0f} s; "
-          f"tau_c={tau_c:.0f} s -> Kc={kc_rg:.3f} t/h/°C, tau_I={ti_rg:.0f} s")
+    print(
+        f"T_rg1 <- R_ar: k={k:.3f} °C per t/h, tau={tau:.0f} s, theta={theta:.0f} s; "
+        f"tau_c={tau_c:.0f} s -> Kc={kc_rg:.3f} t/h/°C, tau_I={ti_rg:.0f} s"
+    )
     # 2. Valve loop, air loop closed.
     layer = RegulatoryLayer(
         T_rg1_gain=kc_rg, T_rg1_integral_time_s=ti_rg, loops=("T_rg1",), program=None
     )
     y = response(0, 0.01 * NOMINAL_INPUTS[0], 3, layer)
-    print("T_rx per kg/s after 1, 3, 10, 30, 100, 300, 1000 samples:",
-          np.round(y[[0, 2, 9, 29, 99, 299, 999]], 4))
+    print(
+        "T_rx per kg/s after 1, 3, 10, 30, 100, 300, 1000 samples:",
+        np.round(y[[0, 2, 9, 29, 99, 299, 999]], 4),
+    )
     k, tau, theta = fopdt_fit(y)
     theta += TS
     # The riser is quasi-steady: τ ≪ θ (delay-dominant). Skogestad's improved SIMC replaces τ
@@ -91,8 +97,10 @@ def main() -> None:
     # 60 s is the middle of that trade.
     tau_c = 60.0
     kc_rx, ti_rx = simc(k, tau + theta / 3.0, theta, tau_c)
-    print(f"T_rx <- u_F (air loop closed): k={k:.3f} °C per kg/s, tau={tau:.0f} s, "
-          f"theta={theta:.0f} s; tau_c={tau_c:.0f} s -> Kc={kc_rx:.3f} kg/s/°C, tau_I={ti_rx:.0f} s")
+    print(
+        f"T_rx <- u_F (air loop closed): k={k:.3f} °C per kg/s, tau={tau:.0f} s, "
+        f"theta={theta:.0f} s; tau_c={tau_c:.0f} s -> Kc={kc_rx:.3f} kg/s/°C, tau_I={ti_rx:.0f} s"
+    )
 
 
 if __name__ == "__main__":

@@ -40,6 +40,7 @@ from collections.abc import Sequence
 
 import fcc_env
 from diagnosers.registry import available, diagnoser_class
+from diagnosers.relations import required_channels
 from evaluation.leaderboard import paper
 from evaluation.leaderboard.arguments import (
     build_parser,
@@ -90,6 +91,10 @@ def resolve_options(
         diags = tuple(avail)
         if args.external is not None:  # recorded data have no labelled training faults
             diags = tuple(d for d in diags if not diagnoser_class(d).isolates)
+        else:  # FCC-v0's channels: a closed-loop detector (it reads u_F) has nothing to read
+            diags = tuple(
+                d for d in diags if required_channels(d) <= set(fcc_env.MEASUREMENT_NAMES)
+            )
     unknown = [d for d in diags if d not in avail]
     if unknown:
         parser.error(f"unknown diagnoser(s) {unknown}. Available: {avail}")

@@ -26,12 +26,14 @@ from __future__ import annotations
 
 import os
 import shutil
+import sys
 import tempfile
 import time
 from collections.abc import Sequence
 from pathlib import Path
 
 from diagnosers.registry import import_modules
+from diagnosers.relations import required_channels
 from evaluation.reports.outputs import figure_cells, write_figures
 from evaluation.sweep.config import DiagnoserSpec, SweepConfig, default_specs
 from evaluation.sweep.runner import run_sweep
@@ -41,8 +43,25 @@ from evaluation.tracks.oracle import DEFAULT_REFERENCES, reference_records
 from evaluation.tracks.rows import TrackRun, track_rows
 from evaluation.tracks.track import Track
 from evaluation.tracks.track_data import TrackData
+from fcc_env.closed_loop import CLOSED_LOOP_CHANNELS
+from fcc_env.params import MEASUREMENT_NAMES
 
 __all__ = ["run_track"]
+
+
+def applicable(names: Sequence[str], track: Track) -> tuple[list[str], list[str]]:
+    """(the diagnosers that can read ``track``'s channels, one-line reasons for the others)."""
+    channels = set(CLOSED_LOOP_CHANNELS if track.closed_loop else MEASUREMENT_NAMES)
+    keep, skipped = [], []
+    for name in names:
+        missing = sorted(required_channels(name) - channels)
+        if missing:
+            skipped.append(
+                f"{name}: skipped on track {track.name} (no channel {', '.join(missing)})"
+            )
+        else:
+            keep.append(name)
+    return keep, skipped
 
 
 def run_track(
@@ -68,6 +87,9 @@ def run_track(
     t0 = time.perf_counter()
     data = TrackData(track=track)
     import_modules(imports)
+    diagnosers, skipped = applicable(diagnosers, track)
+    for line in skipped:
+        print(line, file=sys.stderr)
     config = SweepConfig(diagnosers=default_specs(diagnosers), data=data, imports=tuple(imports))
     config.validate()
     for reference in DEFAULT_REFERENCES:  # refuse seed clashes before any work, not after it

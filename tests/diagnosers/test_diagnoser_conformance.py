@@ -15,9 +15,15 @@ from sklearn.base import clone
 from synthetic import inject_step_fault, make_episode
 
 import diagnosers
+import fcc_env
 from diagnosers import Detection, Diagnoser, Episode, NotFittedError, make
+from diagnosers.relations import required_channels
 
-NAMES = diagnosers.available()
+#: every registered diagnoser that reads FCC-v0's channels (closed-loop ones: see
+#: tests/diagnosers/test_closed_loop_detector.py)
+NAMES = [
+    n for n in diagnosers.available() if required_channels(n) <= set(fcc_env.MEASUREMENT_NAMES)
+]
 
 
 def _params(name: str) -> dict:
