@@ -11,6 +11,11 @@
   ``python -m evaluation.leaderboard --track all``, ``results/leaderboard/leaderboard.md`` from
   ``python -m evaluation.leaderboard``); without them, a page saying how to produce them. The
   directory is ``results/`` or ``$FCC_RESULTS_DIR``. Figures are never typed into the docs.
+* ``closed-loop.md``: the page ``docs/closed-loop.md`` with its generated parts filled in where
+  it says ``<!-- generated: NAME -->``: the loops' tuning and the closed-loop observation, read
+  from their definitions, and the evidence :func:`fcc_env.closed_loop_report.build_report`
+  computes at every build (stability table, fault signatures, 500-episode termination count;
+  the figures go to ``reference/closed-loop/``, a generated and git-ignored folder).
 * ``changelog.md`` and ``lab/*.md``: the repository's ``CHANGELOG.md`` and its lab record
   (``lab/README.md`` and the ``lab/*.md`` it links to), copied as they are.
 """
@@ -28,6 +33,10 @@ import mkdocs_gen_files
 
 import diagnosers
 from evaluation.tracks import TRACKS, tracks_markdown
+from fcc_env.closed_loop import CLOSED_LOOP_CHANNELS, CLOSED_LOOP_ROLES, CLOSED_LOOP_UNITS
+from fcc_env.closed_loop_report import ReportConfig, build_report, signatures_note
+from fcc_env.params import MEASUREMENTS
+from fcc_env.regulatory import ACTUATOR_LIMITS, SETPOINT_RANGES, RegulatoryLayer
 
 ROOT = Path(__file__).resolve().parents[1]
 RESULTS = Path(os.environ.get("FCC_RESULTS_DIR", ROOT / "results"))
@@ -222,7 +231,97 @@ def results_page() -> str:
     return "\n".join(lines)
 
 
+def closed_loop_observation_table() -> str:
+    """The closed-loop observation's channels with unit, noise and role (from the definitions)."""
+    roles = {c: r for r, names in CLOSED_LOOP_ROLES.items() for c in names}
+    roles["R_ar"] = "measured, manipulated (the air loop's output)"
+    meas = {m.name: m for m in MEASUREMENTS}
+    exact = {
+        "u_F": "regenerated-catalyst slide-valve command (the T_rx loop's output)",
+        "T_rx_sp": "riser outlet temperature set point",
+        "T_rg1_sp": "stage-1 dense-bed temperature set point",
+    }
+    lines = ["| index | channel | unit | noise std | role | what |", "|---|---|---|---|---|---|"]
+    for i, c in enumerate(CLOSED_LOOP_CHANNELS):
+        if c in meas:
+            m = meas[c]
+            noise = f"{m.noise_std:.1%}" if m.noise_relative else f"{m.noise_std:g} {m.unit}"
+            unit, what = m.unit, m.description
+        else:
+            noise, unit, what = "none (exact)", CLOSED_LOOP_UNITS[c], exact[c]
+        lines.append(f"| {i} | `{c}` | {unit} | {noise} | {roles[c]} | {what} |")
+    return "\n".join(lines)
+
+
+def closed_loop_tuning_table() -> str:
+    """Each loop's pairing, PI tuning, actuator limits and set-point range (from the defaults)."""
+    layer = RegulatoryLayer()
+    lines = [
+        "| loop | manipulated | gain Kc | integral time τI | actuator limits | set-point range |",
+        "|---|---|---|---|---|---|",
+    ]
+    for j, (c, u, unit) in enumerate((("T_rx", "u_F", "kg/s"), ("T_rg1", "R_ar", "t/h"))):
+        lo, hi = ACTUATOR_LIMITS[j]
+        sp = SETPOINT_RANGES[f"{c}_sp"]
+        lines.append(
+            f"| `{c}` | `{u}` | {getattr(layer, f'{c}_gain'):g} {unit}/°C | "
+            f"{getattr(layer, f'{c}_integral_time_s'):g} s | {lo:.1f}–{hi:.1f} {unit} | "
+            f"{sp.low:g}–{sp.high:g} °C |"
+        )
+    return "\n".join(lines)
+
+
+#: Healthy excited episodes of the termination count on the closed-loop page (issue 31's 500).
+CLOSED_LOOP_TERMINATION_EPISODES = 500
+CLOSED_LOOP_FIGURES = "reference/closed-loop"
+
+
+def closed_loop_page() -> str:
+    """``docs/closed-loop.md`` with every ``<!-- generated: NAME -->`` marker filled in."""
+    config = ReportConfig()
+    report = build_report(config, terminations=CLOSED_LOOP_TERMINATION_EPISODES)
+    for name in ("responses", "closed_minus_open"):
+        with mkdocs_gen_files.open(f"{CLOSED_LOOP_FIGURES}/{name}.png", "wb") as f:
+            f.write(getattr(report, f"{name}_png"))
+    t = report.terminations or {}
+    terminations = "\n".join(
+        [
+            "| plant | healthy excited episodes | seeds | terminations | reasons |",
+            "|---|---|---|---|---|",
+            *(
+                f"| {loop} loop | {t['episodes']} | {t['seeds'][0]}–{t['seeds'][1]} | "
+                f"{t[f'{loop}_loop']['terminations']} | "
+                f"{', '.join(f'{k}: {v}' for k, v in t[f'{loop}_loop']['reasons'].items()) or '–'} |"
+                for loop in ("open", "closed")
+            ),
+        ]
+    )
+    parts = {
+        "tuning": closed_loop_tuning_table(),
+        "observation": closed_loop_observation_table(),
+        "stability": report.stability_md,
+        "responses": f"![Closed-loop responses]({CLOSED_LOOP_FIGURES}/responses.png)",
+        "signature-note": signatures_note(config),
+        "signatures": report.signatures_md,
+        "masking": report.masking_md,
+        "closed-minus-open": (
+            f"![Faulty − healthy, closed and open loop]({CLOSED_LOOP_FIGURES}/closed_minus_open.png)"
+        ),
+        "terminations": terminations,
+    }
+    page = (ROOT / "docs" / "closed-loop.md").read_text(encoding="utf-8")
+    for name, text in parts.items():
+        marker = f"<!-- generated: {name} -->"
+        if marker not in page:  # a silently missing table would look like a finished page
+            raise ValueError(f"docs/closed-loop.md lacks the marker {marker!r}")
+        page = page.replace(marker, text)
+    return page
+
+
 copy_repository_pages()
+with mkdocs_gen_files.open("closed-loop.md", "w") as f:
+    f.write(closed_loop_page())
+mkdocs_gen_files.set_edit_path("closed-loop.md", "docs/closed-loop.md")
 with mkdocs_gen_files.open("reference/detectors.md", "w") as f:
     f.write(detector_reference())
 with mkdocs_gen_files.open("reference/tracks.md", "w") as f:

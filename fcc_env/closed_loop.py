@@ -8,14 +8,23 @@ meter, 0.5 % noise) although the regenerator loop now sets it.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
 from fcc_env.episode_setup import PlantSchedule, apply_multipliers, generic_sample
 from fcc_env.integrator import aux_kernel, measure_kernel, noisy_batch_kernel, step_kernel
-from fcc_env.params import MEASUREMENT_NAMES, N_MEASUREMENTS, N_STATES
+from fcc_env.params import MEASUREMENT_NAMES, N_MEASUREMENTS, N_STATES, NOMINAL_INPUTS
 from fcc_env.physics import N_AUX
 from fcc_env.plant import NOISE_STD_ABS, NOISE_STD_REL, PlantConfig
-from fcc_env.regulatory import SETPOINT_NAMES, apply_controller_outputs, controller_update
+from fcc_env.regulatory import (
+    SETPOINT_NAMES,
+    SETPOINT_RANGES,
+    RegulatoryLayer,
+    apply_controller_outputs,
+    controller_update,
+    initial_controller_state,
+)
 
 __all__ = [
     "CLOSED_LOOP_CHANNELS",
@@ -47,10 +56,67 @@ def assemble_observation(table1: np.ndarray, u_F: np.ndarray, setpoints: np.ndar
     """The closed-loop observation: Table 1 values (..., 8), the command (...) and the set
     points (..., 2), joined along the last axis in :data:`CLOSED_LOOP_CHANNELS` order, in the
     dtype of ``table1``."""
-    dtype = table1.dtype
-    return np.concatenate(
-        [table1, np.asarray(u_F, dtype)[..., None], np.asarray(setpoints, dtype)], axis=-1
-    )
+    out = np.empty((*table1.shape[:-1], len(CLOSED_LOOP_CHANNELS)), dtype=table1.dtype)
+    out[..., :N_MEASUREMENTS] = table1
+    out[..., N_MEASUREMENTS] = u_F
+    out[..., N_MEASUREMENTS + 1 :] = setpoints
+    return out
+
+
+_SP_LOW = tuple(SETPOINT_RANGES[n].low for n in SETPOINT_NAMES)
+_SP_HIGH = tuple(SETPOINT_RANGES[n].high for n in SETPOINT_NAMES)
+
+
+def _clip_setpoints(sp: np.ndarray) -> tuple[np.ndarray, bool]:
+    """:func:`fcc_env.regulatory.check_setpoints` for one sample, in scalars (the env's
+    per-step path; the same arithmetic: min/max of the same floats)."""
+    a = min(max(float(sp[0]), _SP_LOW[0]), _SP_HIGH[0])
+    b = min(max(float(sp[1]), _SP_LOW[1]), _SP_HIGH[1])
+    return np.array([a, b]), bool(a != sp[0] or b != sp[1])
+
+
+class ControlSystem:
+    """One closed-loop episode's control system, sample by sample (the env's path).
+
+    Holds the controller state, the supervisory move (the last action, °C on each set point)
+    and the set points. ``program`` gives the operating program's set points of a sample
+    (:meth:`fcc_env.episode_setup.EpisodeStream.setpoints`).
+    """
+
+    def __init__(self, layer: RegulatoryLayer, sample_time_s: float, program: Any) -> None:
+        self.gains = layer.gains(sample_time_s)
+        self.program = program
+        self.c = initial_controller_state(NOMINAL_INPUTS)
+        self.move = np.zeros(2)
+        self.saturated = False
+        self.clipped = False
+        self.shown, _ = _clip_setpoints(program(0))
+        self._shown_at = 0
+
+    def inputs(self, u_program: np.ndarray) -> np.ndarray:
+        """The applied inputs: the program's, the closed loops' outputs in place."""
+        u = u_program.copy()
+        apply_controller_outputs(u, self.c, self.gains)
+        return u
+
+    def supervise(self, k: int, move: np.ndarray, table1: np.ndarray) -> None:
+        """Sample ``k``: the set points (program + ``move``, clipped to their ranges) and the
+        controllers' update from the observation's Table 1 part ``table1`` (float32)."""
+        self.move = move
+        setpoints, self.clipped = _clip_setpoints(self.program(k) + move)
+        self.saturated = controller_update(self.c, setpoints, table1, self.gains)
+
+    def observe(self, k: int, table1: np.ndarray, u_F: float) -> np.ndarray:
+        """The observation of sample ``k``: Table 1, the valve command and the set points in
+        force (the program's plus the last move) in ``table1``'s dtype."""
+        if k != self._shown_at:
+            self.shown, _ = _clip_setpoints(self.program(k) + self.move)
+            self._shown_at = k
+        out = np.empty(len(CLOSED_LOOP_CHANNELS), dtype=table1.dtype)
+        out[:N_MEASUREMENTS] = table1
+        out[N_MEASUREMENTS] = u_F
+        out[N_MEASUREMENTS + 1 :] = self.shown
+        return out
 
 
 def simulate_closed_per_sample(

@@ -38,24 +38,11 @@ from fcc_env.scenarios import FaultSpec
 from fcc_env.simulation import BatchResult, simulate_episodes
 
 __all__ = [
-    "SIGNATURE_CHANNELS",
-    "FaultDeltas",
-    "Report",
-    "ReportConfig",
-    "Signature",
-    "build_report",
-    "count_terminations",
-    "fault_deltas",
-    "masking_table",
-    "signature_rows",
-    "signatures_csv",
-    "signatures_note",
-    "signatures_table",
-    "step_responses",
-    "trace_signature",
-    "visibility_threshold",
-    "write_report",
-]
+    "SIGNATURE_CHANNELS", "FaultDeltas", "Report", "ReportConfig", "Signature", "build_report",
+    "count_terminations", "fault_deltas", "masking_table", "signature_rows", "signatures_csv",
+    "signatures_note", "signatures_table", "step_responses", "trace_signature",
+    "visibility_threshold", "write_report",
+]  # fmt: skip
 
 FAULT_NAMES: tuple[str, ...] = ("f1", "f2", "f3", "f4")
 LOOPS: tuple[str, ...] = ("open", "closed")
@@ -110,7 +97,6 @@ class ReportConfig:
         object.__setattr__(self, "onset", onset)
 
 
-# ---- fault signatures -------------------------------------------------------------------------
 @dataclass(frozen=True)
 class Signature:
     """A difference trace after onset: largest |Δ| (signed) and its sample after onset, the mean
@@ -170,13 +156,10 @@ def fault_deltas(fault: str, loop: str, config: ReportConfig) -> FaultDeltas:
     if loop not in LOOPS:
         raise invalid("loop", loop, f"one of {list(LOOPS)}")
     regulatory = True if loop == "closed" else None
-    common: dict[str, Any] = {"regulatory": regulatory}
-    healthy = simulate_episodes(list(config.seeds), config.horizon, **common)
+    healthy = simulate_episodes(list(config.seeds), config.horizon, regulatory=regulatory)
+    fault_spec = FaultSpec(scenario=fault, onset=config.onset)
     faulty = simulate_episodes(
-        list(config.seeds),
-        config.horizon,
-        fault=FaultSpec(scenario=fault, onset=config.onset),
-        **common,
+        list(config.seeds), config.horizon, fault=fault_spec, regulatory=regulatory
     )
     ok = (healthy.terminated_at < 0) & (faulty.terminated_at < 0)
     if not ok.any():
@@ -286,7 +269,6 @@ def masking_table(rows: list[SignatureRow]) -> str:
     return "\n".join(lines)
 
 
-# ---- responses --------------------------------------------------------------------------------
 class InputStep:
     """A plant effect: ``delta`` added to input ``name`` from ``at_s`` seconds on."""
 
@@ -401,7 +383,6 @@ def closed_minus_open_figure(runs: list[FaultDeltas]) -> bytes:
     return _finish(fig, axes, "Δ{c} [{unit}]", "time after onset [h]")
 
 
-# ---- terminations ----------------------------------------------------------------------------
 def count_terminations(
     n: int, *, first_seed: int = 5000, horizon: int = 4000, chunk: int = 50
 ) -> dict[str, Any]:
@@ -426,7 +407,6 @@ def count_terminations(
     }
 
 
-# ---- the report -------------------------------------------------------------------------------
 @dataclass(frozen=True)
 class Report:
     """Everything the report writes, as text and PNG bytes."""
@@ -504,7 +484,7 @@ def main(argv: list[str] | None = None) -> int:
         response_samples=args.response_samples,
     )  # fmt: skip
     if args.terminations < 0:
-        raise SystemExit(f"--terminations={args.terminations}: must be >= 0 (0 skips the count)")
+        ap.error(f"--terminations={args.terminations}: must be >= 0 (0 skips the count)")
     report = build_report(config, args.terminations)
     paths = write_report(args.out, report, config)
     print(f"stability: {'all stable' if report.all_stable else 'NOT all stable'}")

@@ -11,18 +11,12 @@ from gymnasium import spaces
 
 from fcc_common.validation import Integer, check, invalid
 from fcc_env import effects as fx
-from fcc_env.closed_loop import assemble_observation
+from fcc_env.closed_loop import ControlSystem
 from fcc_env.episode_setup import EpisodeStream, add_noise, setup_episode
 from fcc_env.params import NOMINAL_INPUTS
 from fcc_env.physics import AUX_NAMES
 from fcc_env.plant import AFTERBURN_WARNING_C, PlantConfig, plant_from_request, termination_reason
-from fcc_env.regulatory import (
-    SETPOINT_RANGES,
-    apply_controller_outputs,
-    check_setpoints,
-    controller_update,
-    initial_controller_state,
-)
+from fcc_env.regulatory import SETPOINT_RANGES, RegulatoryLayer
 from fcc_env.scenarios import (
     DEFAULT_N_SAMPLES,
     ENV_FAULT_KEYWORDS,
@@ -172,6 +166,11 @@ class FCCEnv(gym.Env):
         render_mode: str | None = None,
     ) -> None:
         self.horizon = check("horizon", horizon, N_SAMPLES_RANGE)
+        if plant is not None and regulatory is True and isinstance(plant, PlantConfig):
+            # FCC-closedloop-v0 registers regulatory=True: a plant given to it runs closed loop
+            if plant.regulatory is None:
+                plant = plant.replace(regulatory=RegulatoryLayer())
+            regulatory = None
         self.config = plant_from_request(
             plant,
             {
@@ -213,8 +212,6 @@ class FCCEnv(gym.Env):
         self.action_space = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
         self._p_base = self.config.params.as_array()
         self._x0 = self.config.initial_state()
-        if self.config.regulatory is not None:
-            self._gains = self.config.regulatory.gains(self.config.sample_time_s)
         self._history: list[np.ndarray] = []
 
     # ---- Gymnasium API -------------------------------------------------------------------------
@@ -258,11 +255,10 @@ class FCCEnv(gym.Env):
         self._action = np.zeros(2)
         self._saturated = False
         self._terminated_reason: str | None = None
-        if self.closed_loop:
-            self._ctrl = initial_controller_state(NOMINAL_INPUTS)
-            self._controller_saturated = False
-            self._setpoint_clipped = False
-            self._setpoints, _ = check_setpoints(self._episode.setpoints(0))
+        if self.config.regulatory is not None:
+            self._control = ControlSystem(
+                self.config.regulatory, self.config.sample_time_s, self._episode.setpoints
+            )
         self._u = self._inputs(0)
         self._y_clean = self._measure(0)
         self._obs = self._make_obs(0)
@@ -279,14 +275,9 @@ class FCCEnv(gym.Env):
         if self.closed_loop:
             # The supervisory move: set points of sample k; the controllers read sample k's
             # observation and their outputs hold from sample k + 1 (fcc_env.regulatory).
-            self._setpoints, self._setpoint_clipped = check_setpoints(
-                self._episode.setpoints(k) + clipped * SETPOINT_ACTION_SCALE
-            )
             self._action = clipped * SETPOINT_ACTION_SCALE
             x_next = self._episode.advance(self._x, self._u, k)
-            self._controller_saturated = controller_update(
-                self._ctrl, self._setpoints, self._obs[:8], self._gains
-            )
+            self._control.supervise(k, self._action, self._obs[:8])
         else:
             self._action = clipped * ACTION_SCALE
             x_next = self._episode.advance(self._x, self._inputs(k), k)
@@ -326,9 +317,7 @@ class FCCEnv(gym.Env):
     # ---- helpers -------------------------------------------------------------------------------
     def _inputs(self, k: int) -> np.ndarray:
         if self.closed_loop:
-            u = self._episode.program(k).copy()
-            apply_controller_outputs(u, self._ctrl, self._gains)
-            return u
+            return self._control.inputs(self._episode.program(k))
         u, saturated = actuator_inputs(self._episode.program(k), self._action)
         self._saturated = self._saturated or saturated
         return u
@@ -340,15 +329,7 @@ class FCCEnv(gym.Env):
         obs = add_noise(self._y_clean, self._episode.noise(k), self.config.noise_scale)
         if not self.closed_loop:
             return obs
-        self._sp_shown = self._shown_setpoints(k)
-        return assemble_observation(obs, self._u[0], self._sp_shown)
-
-    def _shown_setpoints(self, k: int) -> np.ndarray:
-        """Set points in force at sample ``k``: the program's plus the last action's move."""
-        if k == 0:
-            return self._setpoints
-        sp, _ = check_setpoints(self._episode.setpoints(k) + self._action)
-        return sp
+        return self._control.observe(k, obs, self._u[0])
 
     def _get_info(self) -> dict[str, Any]:
         aux = self._episode.aux(self._x, self._u, self._k)
@@ -373,15 +354,16 @@ class FCCEnv(gym.Env):
         """The noise-free observation (the channels of the observation)."""
         if not self.closed_loop:
             return self._y_clean.copy()
-        return assemble_observation(self._y_clean, self._u[0], self._sp_shown)
+        return self._control.observe(self._k, self._y_clean, self._u[0])
 
     def _closed_loop_info(self) -> dict[str, Any]:
         if not self.closed_loop:
             return {}
+        c = self._control
         return {
-            "controller_saturated": self._controller_saturated,
-            "setpoint_clipped": self._setpoint_clipped,
-            "setpoints": self._sp_shown.copy(),
+            "controller_saturated": c.saturated,
+            "setpoint_clipped": c.clipped,
+            "setpoints": c.shown.copy(),
         }
 
 

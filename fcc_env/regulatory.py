@@ -48,6 +48,7 @@ from typing import Any
 
 import numba
 import numpy as np
+from scipy.signal import lfilter
 
 from fcc_common.validation import Integer, Real, check_params, invalid
 from fcc_env.params import NOMINAL_INPUTS
@@ -288,7 +289,9 @@ class SetpointStream:
 
         self.program = program
         self.centre = np.asarray(centre, dtype=np.float64)
-        self._f = 1.0  # the lagged coking factor
+        # the lag's filter state: the previous coking factor 1.0, times (1 − a)
+        a = 1.0 / program.feed_quality_time_constant_samples if program is not None else 0.0
+        self._zi = np.array([1.0 - a])
         self.channels: list[APRBSChannel] = []
         if program is not None:
             pr = program
@@ -313,12 +316,8 @@ class SetpointStream:
         self.channels[1].take(n, sp[:, 1])
         self.channels[2].take(n, f_level)
         # Feed quality drifts: the coking factor follows its APRBS levels through a first-order
-        # lag (sequential, so chunking does not change it).
+        # lag, f_k = a·level_k + (1 − a)·f_k−1; the filter state carries over between chunks,
+        # so chunking does not change a bit.
         a = 1.0 / self.program.feed_quality_time_constant_samples
-        f = self._f
-        out = np.empty(n)
-        for i in range(n):
-            f = f + a * (f_level[i] - f)
-            out[i] = f
-        self._f = f
+        out, self._zi = lfilter([a], [1.0, -(1.0 - a)], f_level, zi=self._zi)
         return sp, out
