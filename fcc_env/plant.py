@@ -134,15 +134,15 @@ class PlantConfig:
         """T_rx and T_rg1 (°C) of the initial steady state: where the set points start."""
         return np.array(_initial_setpoints(self.params))
 
+    def replace(self, **changes: Any) -> PlantConfig:
+        return dataclasses.replace(self, **changes)
+
 
 @functools.lru_cache(maxsize=256)
 def _initial_setpoints(params: FCCParams) -> tuple[float, float]:
     # cached: every closed-loop episode of a batch starts from it
     x0 = steady_state(params, NOMINAL_INPUTS)
     return float(measure(x0, NOMINAL_INPUTS, params)[3]), float(x0[4])
-
-    def replace(self, **changes: Any) -> PlantConfig:
-        return dataclasses.replace(self, **changes)
 
 
 #: The env / :func:`fcc_env.simulate_episodes` keyword names that :meth:`PlantConfig.build` takes.

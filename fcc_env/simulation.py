@@ -125,7 +125,9 @@ class BatchResult:
     #: Observation channels: Table 1, or in closed loop Table 1 + u_F + set points.
     channels: tuple[str, ...] = MEASUREMENT_NAMES
     setpoints: np.ndarray | None = None  # (B, T, 2) closed loop: set points in force, °C
-    controller_saturated: np.ndarray | None = None  # (B, T) bool closed loop: a loop clamped
+    #: (B, T) bool, closed loop: the controller output in force over sample k was clamped at an
+    #: actuator limit (the env's ``info["controller_saturated"]`` of sample k)
+    controller_saturated: np.ndarray | None = None
 
 
 def _episode_faults(
@@ -316,6 +318,8 @@ def simulate_episodes(
     reasons = tuple(
         TERMINATION_REASONS[codes[b, t]] if t >= 0 else None for b, t in enumerate(term_at)
     )
+    if SAT is not None:  # the update at sample k sets the output of sample k + 1
+        SAT = np.concatenate([np.zeros((B, 1), dtype=np.bool_), SAT[:, :-1]], axis=1)
     if SP is not None:  # what a control system records: the valve command and set points
         obs = assemble_observation(obs, U[:, :, 0], SP)
         Y = assemble_observation(Y, U[:, :, 0], SP)

@@ -71,8 +71,8 @@ def assert_env_equals_batch(n, seeds, env_kwargs, batch_kwargs=None, per_seed_en
         np.testing.assert_array_equal([i["state"] for i in infos], batch.states[b, :m], t)
         np.testing.assert_array_equal([i["setpoints"] for i in infos], batch.setpoints[b, :m], t)
         # the env reports the clamp of the update made in the step that led to sample k
-        sat = [i["controller_saturated"] for i in infos[1:]]
-        np.testing.assert_array_equal(sat, batch.controller_saturated[b, : m - 1], t)
+        sat = [i["controller_saturated"] for i in infos]
+        np.testing.assert_array_equal(sat, batch.controller_saturated[b, :m], t)
         first_term = int(np.argmax(term)) if term.any() else -1
         assert first_term == batch.terminated_at[b], t
     return batch
