@@ -106,6 +106,14 @@ class ControlSystem:
         setpoints, self.clipped = _clip_setpoints(self.program(k) + move)
         self.saturated = controller_update(self.c, setpoints, table1, self.gains)
 
+    def info(self) -> dict[str, Any]:
+        """The env's closed-loop info keys."""
+        return {
+            "controller_saturated": self.saturated,
+            "setpoint_clipped": self.clipped,
+            "setpoints": self.shown.copy(),
+        }
+
     def observe(self, k: int, table1: np.ndarray, u_F: float) -> np.ndarray:
         """The observation of sample ``k``: Table 1, the valve command and the set points in
         force (the program's plus the last move) in ``table1``'s dtype."""

@@ -132,6 +132,12 @@ class FCCEnv(gym.Env):
     | render_mode | None | "rgb_array": a trend frame of the last 500 samples with the scenario, |
     |  |  | the time (sample and hours) and, once passed, the fault onset |
 
+    ## Closed loop (``FCC-closedloop-v0``, or ``regulatory=``)
+    The plant runs under :class:`fcc_env.RegulatoryLayer` (T_rx on the valve, T_rg1 on the air).
+    The observation adds ``u_F`` (kg/s) and the set points ``T_rx_sp``, ``T_rg1_sp`` (°C); the
+    action moves the set points (1.0 = +15 / +20 °C, clipped to their ranges); info adds
+    ``controller_saturated``, ``setpoint_clipped`` and ``setpoints`` (docs: Closed loop).
+
     ## Version History
     * v0: first release (spec revision with slide-valve hydraulics and entrainment return).
 
@@ -166,11 +172,7 @@ class FCCEnv(gym.Env):
         render_mode: str | None = None,
     ) -> None:
         self.horizon = check("horizon", horizon, N_SAMPLES_RANGE)
-        if plant is not None and regulatory is True and isinstance(plant, PlantConfig):
-            # FCC-closedloop-v0 registers regulatory=True: a plant given to it runs closed loop
-            if plant.regulatory is None:
-                plant = plant.replace(regulatory=RegulatoryLayer())
-            regulatory = None
+        plant, regulatory = _registered_closed_loop(plant, regulatory)
         self.config = plant_from_request(
             plant,
             {
@@ -301,18 +303,7 @@ class FCCEnv(gym.Env):
         return self._obs, 0.0, reason is not None, False, self._get_info()
 
     def render(self) -> np.ndarray | None:
-        if self.render_mode != "rgb_array":
-            return None
-        from fcc_env.plotting import trend_image  # matplotlib only when rendering
-
-        nominal = self.fault.scenario is Scenario.NOMINAL
-        return trend_image(
-            np.array(self._history[-500:]),
-            self._k,
-            self.config.sample_time_s,
-            scenario=self.fault.scenario.value,
-            fault_onset=None if nominal else self.fault.onset,
-        )
+        return _trend_frame(self) if self.render_mode == "rgb_array" else None
 
     # ---- helpers -------------------------------------------------------------------------------
     def _inputs(self, k: int) -> np.ndarray:
@@ -346,7 +337,7 @@ class FCCEnv(gym.Env):
             "action_saturated": self._saturated,
             "afterburn_warning": bool(self._x[9] - self._x[4] > AFTERBURN_WARNING_C),
             "termination_reason": self._terminated_reason,
-            **self._closed_loop_info(),
+            **(self._control.info() if self.closed_loop else {}),
             **{name: float(v) for name, v in zip(AUX_NAMES, aux, strict=True)},
         }
 
@@ -356,15 +347,28 @@ class FCCEnv(gym.Env):
             return self._y_clean.copy()
         return self._control.observe(self._k, self._y_clean, self._u[0])
 
-    def _closed_loop_info(self) -> dict[str, Any]:
-        if not self.closed_loop:
-            return {}
-        c = self._control
-        return {
-            "controller_saturated": c.saturated,
-            "setpoint_clipped": c.clipped,
-            "setpoints": c.shown.copy(),
-        }
+
+def _trend_frame(env: FCCEnv) -> np.ndarray:
+    """The ``rgb_array`` frame: the Table 1 trends of the last 500 samples."""
+    from fcc_env.plotting import trend_image  # matplotlib only when rendering
+
+    nominal = env.fault.scenario is Scenario.NOMINAL
+    return trend_image(
+        np.array(env._history[-500:])[:, :8],
+        env._k,
+        env.config.sample_time_s,
+        scenario=env.fault.scenario.value,
+        fault_onset=None if nominal else env.fault.onset,
+    )
+
+
+def _registered_closed_loop(plant: Any, regulatory: Any) -> tuple[Any, Any]:
+    """FCC-closedloop-v0 registers ``regulatory=True``: a plant given to it runs closed loop."""
+    if plant is not None and regulatory is True and isinstance(plant, PlantConfig):
+        if plant.regulatory is None:
+            plant = plant.replace(regulatory=RegulatoryLayer())
+        return plant, None
+    return plant, regulatory
 
 
 def episode_request(
