@@ -109,17 +109,15 @@ _TRACK_LIST = (
         ),
         closed_loop=True,
     ),
-    Track(
+)
+#: ``closed-random``: the ``random`` track's draws on the closed-loop plant.
+_TRACK_LIST += (
+    next(t for t in _TRACK_LIST if t.name == "random").replace(
         name="closed-random",
         description=(
             "The random track's draws (type, size 0.3-1.3 x paper, onset 1000-3000, abrupt or "
             "incipient) on the closed-loop plant. Tests generalisation under control."
         ),
-        magnitudes=_paper_scaled(0.3, 1.3),
-        onset=Uniform(1000, 3000),
-        profiles=(FaultProfile.ABRUPT, FaultProfile.INCIPIENT),
-        ramp=Choice(RAMP_LENGTHS),
-        draw_fault=True,
         closed_loop=True,
     ),
 )
