@@ -55,7 +55,7 @@ def fopdt_fit(y: np.ndarray) -> tuple[float, float, float]:
         k, tau, theta = z
         return k * (1.0 - np.exp(-np.maximum(t - theta, 0.0) / tau)) * (t >= theta)
 
-    z0 = [y[-1], 600.0, TS]  # noqa: F841 (start)
+    z0 = [y[-1], 600.0, TS]
     fit = least_squares(
         lambda z: model(z) - y, z0, bounds=([-np.inf, 1.0, 0.0], [np.inf, 1e5, 3000])
     )

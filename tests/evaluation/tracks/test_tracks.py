@@ -275,7 +275,10 @@ def test_parse_tracks() -> None:
     assert [t.name for t in parse_tracks("paper,small")] == ["paper", "small"]
     assert [t.name for t in parse_tracks(" noisy , paper, noisy")] == ["noisy", "paper"]
     assert parse_tracks("all") == tuple(TRACKS.values())
-    allowed = r"one of \['incipient', 'noisy', 'paper', 'random', 'small', 'uncertain', 'all'\]"
+    allowed = (
+        r"one of \['closed', 'closed-random', 'incipient', 'noisy', 'paper', 'random', 'small', "
+        r"'uncertain', 'all'\]"
+    )
     with pytest.raises(ValueError, match=rf"track='bogus' is outside the allowed range: {allowed}"):
         parse_tracks("paper,bogus")
     with pytest.raises(ValueError, match=rf"track='' is outside the allowed range: {allowed}"):
