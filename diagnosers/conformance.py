@@ -28,6 +28,7 @@ from diagnosers.detection import UNKNOWN, Detection
 from diagnosers.diagnoser import Diagnoser
 from diagnosers.episode import Episode
 from diagnosers.registry import diagnoser_class
+from diagnosers.relations import read_channels
 
 __all__ = ["CHECKS", "ConformanceError", "check_diagnoser", "default_episodes"]
 
@@ -78,17 +79,6 @@ def default_episodes(
         for ep in sim([11, 12], n_test, scenario=scenario, fault_time=n_test // 2)
     ]
     return train, test, faulty
-
-
-def _relation_channels(d: Diagnoser) -> set[str]:
-    """The channels ``d``'s relations name (empty without relations)."""
-    from diagnosers.relations import parse_relations
-
-    params = d.get_params(deep=False)
-    rel = params.get("relations") or getattr(type(d), "DEFAULT_RELATIONS", None)
-    if "relations" not in params or not rel:
-        return set()
-    return {c for out, ins in parse_relations(rel) for c in (out, *ins)}
 
 
 def _label(d: object) -> str:
@@ -412,7 +402,7 @@ def check_diagnoser(
     if train is None or test is None or (diagnoser.isolates and faulty_train is None):
         # a diagnoser that reads the controllers' channels gets closed-loop episodes
         default_train, default_test, default_faulty = default_episodes(
-            closed_loop="u_F" in _relation_channels(diagnoser)
+            closed_loop="u_F" in read_channels(diagnoser)
         )
         train = default_train if train is None else train
         test = default_test if test is None else test

@@ -18,6 +18,7 @@ __all__ = [
     "DILUTE_RELATIONS",
     "PAPER_RELATIONS",
     "parse_relations",
+    "read_channels",
     "required_channels",
 ]
 
@@ -98,9 +99,8 @@ def parse_relations(rel: Sequence[Any]) -> list[tuple[str, tuple[str, ...]]]:
 
 
 def required_channels(name: str) -> frozenset[str]:
-    """The channels registered diagnoser ``name`` reads by name with its defaults: its
-    relations' (the LRGF family, also behind an isolator's ``detector_name``), an ARX
-    relation's output and inputs; empty when it takes whatever channels it is given.
+    """The channels registered diagnoser ``name`` reads by name with its defaults
+    (:func:`read_channels` of a default instance).
 
     >>> sorted(required_channels("lrgf-mem-paper"))
     ['T_fp', 'T_rg2', 'T_rx']
@@ -109,16 +109,22 @@ def required_channels(name: str) -> frozenset[str]:
     """
     from diagnosers.registry import make  # the registry imports the diagnosers, which use this
 
-    det = make(name)
-    params = det.get_params(deep=False)
+    return read_channels(make(name))
+
+
+def read_channels(diagnoser: Any) -> frozenset[str]:
+    """The channels ``diagnoser`` reads by name: its relations' (the LRGF family, also behind
+    an isolator's ``detector_name``), an ARX relation's output and inputs; empty when it takes
+    whatever channels it is given."""
+    params = diagnoser.get_params(deep=False)
     need: set[str] = set()
     if "relations" in params:
-        rel = params["relations"] or getattr(type(det), "DEFAULT_RELATIONS", None)
-        for output, inputs in parse_relations(rel or []) if rel else []:
+        rel = params["relations"] or getattr(type(diagnoser), "DEFAULT_RELATIONS", None)
+        for output, inputs in parse_relations(rel) if rel else []:
             need |= {output, *inputs}
     if isinstance(params.get("output"), str) and params.get("inputs"):
         need |= {params["output"], *params["inputs"]}
     inner = params.get("detector_name")
-    if isinstance(inner, str) and inner != name:
+    if isinstance(inner, str) and inner != getattr(diagnoser, "name", None):
         need |= required_channels(inner)
     return frozenset(need)

@@ -26,8 +26,9 @@ ValueError: sample_time_s=0.1 is outside the allowed range: a number in [0.5, 60
 
 from __future__ import annotations
 
+import dataclasses
 import math
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from enum import Enum
 from typing import Any
@@ -45,6 +46,7 @@ __all__ = [
     "RealSequence",
     "check",
     "check_params",
+    "from_fields",
     "invalid",
 ]
 
@@ -290,3 +292,25 @@ def check_params(params: dict[str, Any], constraints: dict[str, Any]) -> dict[st
             cons = cons if isinstance(cons, tuple) else (cons,)
             out[name] = check(name, out[name], *cons)
     return out
+
+
+def from_fields(cls: type, value: Mapping[str, Any], what: str) -> Any:
+    """``cls(**value)`` for a dataclass ``cls``, refusing keys that are not its fields by name
+    (``what`` names the options in the message).
+
+    >>> from dataclasses import dataclass
+    >>> @dataclass
+    ... class Opts:
+    ...     a: int = 1
+    >>> from_fields(Opts, {"a": 2}, "demo")
+    Opts(a=2)
+    >>> from_fields(Opts, {"b": 2}, "demo")
+    Traceback (most recent call last):
+    ...
+    ValueError: Unknown demo option(s) ['b']. Allowed: ['a']
+    """
+    allowed = [f.name for f in dataclasses.fields(cls)]
+    unknown = sorted(set(value) - set(allowed))
+    if unknown:
+        raise ValueError(f"Unknown {what} option(s) {unknown}. Allowed: {allowed}")
+    return cls(**value)

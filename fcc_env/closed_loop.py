@@ -12,26 +12,36 @@ from typing import Any
 
 import numpy as np
 
+from fcc_common.validation import invalid
 from fcc_env.episode_setup import PlantSchedule, apply_multipliers, generic_sample
 from fcc_env.integrator import aux_kernel, measure_kernel, noisy_batch_kernel, step_kernel
-from fcc_env.params import MEASUREMENT_NAMES, N_MEASUREMENTS, N_STATES, NOMINAL_INPUTS
+from fcc_env.params import (
+    INPUT_NAMES,
+    MEASUREMENT_NAMES,
+    MEASUREMENTS,
+    N_MEASUREMENTS,
+    N_STATES,
+    NOMINAL_INPUTS,
+)
 from fcc_env.physics import N_AUX
 from fcc_env.plant import NOISE_STD_ABS, NOISE_STD_REL, PlantConfig
 from fcc_env.regulatory import (
     SETPOINT_NAMES,
-    SETPOINT_RANGES,
     RegulatoryLayer,
     apply_controller_outputs,
+    check_setpoints,
     controller_update,
     initial_controller_state,
 )
 
 __all__ = [
+    "CHANNEL_UNITS",
     "CLOSED_LOOP_CHANNELS",
     "CLOSED_LOOP_ROLES",
     "CLOSED_LOOP_UNITS",
     "assemble_observation",
     "observation_channels",
+    "visibility_threshold",
 ]
 
 #: Observation channels of the closed-loop plant, in order: Table 1, the valve command, the
@@ -39,6 +49,26 @@ __all__ = [
 CLOSED_LOOP_CHANNELS: tuple[str, ...] = (*MEASUREMENT_NAMES, "u_F", *SETPOINT_NAMES)
 #: Units of :data:`CLOSED_LOOP_CHANNELS` beyond Table 1.
 CLOSED_LOOP_UNITS: dict[str, str] = {"u_F": "kg/s", "T_rx_sp": "°C", "T_rg1_sp": "°C"}
+#: Units of every closed-loop channel.
+CHANNEL_UNITS: dict[str, str] = {**{m.name: m.unit for m in MEASUREMENTS}, **CLOSED_LOOP_UNITS}
+#: u_F is the controller's exact output (no noise): it counts as visible beyond 3 × 0.5 % of
+#: nominal, the air flow meter's relative resolution, so valve and air are judged alike.
+U_F_RELATIVE_RESOLUTION = 0.005
+
+
+def visibility_threshold(channel: str) -> float:
+    """3 × the channel's noise std (R_ar: relative to nominal 148.4 t/h; u_F: see
+    :data:`U_F_RELATIVE_RESOLUTION`), in the channel's unit: beyond it, a difference shows
+    in a single sample."""
+    if channel == "u_F":
+        return 3.0 * U_F_RELATIVE_RESOLUTION * float(NOMINAL_INPUTS[0])
+    for m in MEASUREMENTS:
+        if m.name == channel:
+            scale = float(NOMINAL_INPUTS[INPUT_NAMES.index(m.name)]) if m.noise_relative else 1.0
+            return 3.0 * m.noise_std * scale
+    raise invalid("channel", channel, f"one of {list(CHANNEL_UNITS)} but the set points")
+
+
 #: What each closed-loop channel is to a control system (the dataset sidecar's roles).
 CLOSED_LOOP_ROLES: dict[str, tuple[str, ...]] = {
     "measured": MEASUREMENT_NAMES,
@@ -63,18 +93,6 @@ def assemble_observation(table1: np.ndarray, u_F: np.ndarray, setpoints: np.ndar
     return out
 
 
-_SP_LOW = tuple(SETPOINT_RANGES[n].low for n in SETPOINT_NAMES)
-_SP_HIGH = tuple(SETPOINT_RANGES[n].high for n in SETPOINT_NAMES)
-
-
-def _clip_setpoints(sp: np.ndarray) -> tuple[np.ndarray, bool]:
-    """:func:`fcc_env.regulatory.check_setpoints` for one sample, in scalars (the env's
-    per-step path; the same arithmetic: min/max of the same floats)."""
-    a = min(max(float(sp[0]), _SP_LOW[0]), _SP_HIGH[0])
-    b = min(max(float(sp[1]), _SP_LOW[1]), _SP_HIGH[1])
-    return np.array([a, b]), bool(a != sp[0] or b != sp[1])
-
-
 class ControlSystem:
     """One closed-loop episode's control system, sample by sample (the env's path).
 
@@ -90,7 +108,7 @@ class ControlSystem:
         self.move = np.zeros(2)
         self.saturated = False
         self.clipped = False
-        self.shown, _ = _clip_setpoints(program(0))
+        self.shown, _ = check_setpoints(program(0))
         self._shown_at = 0
 
     def inputs(self, u_program: np.ndarray) -> np.ndarray:
@@ -103,7 +121,7 @@ class ControlSystem:
         """Sample ``k``: the set points (program + ``move``, clipped to their ranges) and the
         controllers' update from the observation's Table 1 part ``table1`` (float32)."""
         self.move = move
-        setpoints, self.clipped = _clip_setpoints(self.program(k) + move)
+        setpoints, self.clipped = check_setpoints(self.program(k) + move)
         self.saturated = controller_update(self.c, setpoints, table1, self.gains)
 
     def info(self) -> dict[str, Any]:
@@ -118,7 +136,7 @@ class ControlSystem:
         """The observation of sample ``k``: Table 1, the valve command and the set points in
         force (the program's plus the last move) in ``table1``'s dtype."""
         if k != self._shown_at:
-            self.shown, _ = _clip_setpoints(self.program(k) + self.move)
+            self.shown, _ = check_setpoints(self.program(k) + self.move)
             self._shown_at = k
         out = np.empty(len(CLOSED_LOOP_CHANNELS), dtype=table1.dtype)
         out[:N_MEASUREMENTS] = table1

@@ -14,7 +14,6 @@ closed loop). Library functions compute and return; only :func:`main` prints.
 from __future__ import annotations
 
 import argparse
-import io
 import json
 import time
 from collections import Counter
@@ -28,12 +27,12 @@ import numpy as np
 from fcc_common.io import atomic_write, atomic_write_json
 from fcc_common.validation import Integer, IntegerSequence, check_params, invalid
 from fcc_env import CLOSED_LOOP_ENV_ID
-from fcc_env.closed_loop import CLOSED_LOOP_CHANNELS, CLOSED_LOOP_UNITS
+from fcc_env.closed_loop import CHANNEL_UNITS, visibility_threshold
 from fcc_env.closed_loop_analysis import stability_cases, stability_table
+from fcc_env.closed_loop_figures import closed_minus_open_figure, responses_figure
 from fcc_env.env import SETPOINT_ACTION_SCALE
-from fcc_env.params import INPUT_NAMES, MEASUREMENTS, NOMINAL_INPUTS
+from fcc_env.params import INPUT_NAMES
 from fcc_env.plant import PlantConfig
-from fcc_env.regulatory import SETPOINT_NAMES
 from fcc_env.scenarios import FaultSpec
 from fcc_env.simulation import BatchResult, simulate_episodes
 
@@ -41,7 +40,7 @@ __all__ = [
     "SIGNATURE_CHANNELS", "FaultDeltas", "Report", "ReportConfig", "Signature", "build_report",
     "count_terminations", "fault_deltas", "masking_table", "signature_rows", "signatures_csv",
     "signatures_note", "signatures_table", "step_responses", "trace_signature",
-    "visibility_threshold", "write_report",
+    "write_report",
 ]  # fmt: skip
 
 FAULT_NAMES: tuple[str, ...] = ("f1", "f2", "f3", "f4")
@@ -49,26 +48,9 @@ LOOPS: tuple[str, ...] = ("open", "closed")
 #: The channels whose signature is reported: the temperatures that move, the air, the valve.
 SIGNATURE_CHANNELS: tuple[str, ...] = ("T_rx", "T_rg1", "T_rg2", "T_d1", "T_dg", "R_ar", "u_F")
 _TEMPERATURES = ("T_rx", "T_rg1", "T_rg2", "T_d1", "T_dg")
-_FIGURE_CHANNELS = ("T_rx", "T_rg1", "u_F", "R_ar")
-_UNITS = {**{m.name: m.unit for m in MEASUREMENTS}, **CLOSED_LOOP_UNITS}
-#: u_F is the controller's exact output (no noise): it counts as visible beyond 3 × 0.5 % of
-#: nominal, the air flow meter's relative resolution, so valve and air are judged alike.
-U_F_RELATIVE_RESOLUTION = 0.005
 #: Samples averaged for the "final" difference (the spec's §7.6).
 FINAL_WINDOW = 200
 _RESPONSE_STEP_AT = 60  # samples (10 min) of steady state before each step
-
-
-def visibility_threshold(channel: str) -> float:
-    """3 × the channel's noise std (R_ar: relative to nominal 148.4 t/h; u_F: see
-    :data:`U_F_RELATIVE_RESOLUTION`), in the channel's unit."""
-    if channel == "u_F":
-        return 3.0 * U_F_RELATIVE_RESOLUTION * float(NOMINAL_INPUTS[0])
-    for m in MEASUREMENTS:
-        if m.name == channel:
-            scale = float(NOMINAL_INPUTS[INPUT_NAMES.index(m.name)]) if m.noise_relative else 1.0
-            return 3.0 * m.noise_std * scale
-    raise invalid("channel", channel, f"one of {list(SIGNATURE_CHANNELS)}")
 
 
 _CONFIG_RANGES = {
@@ -212,7 +194,7 @@ def signatures_table(rows: list[SignatureRow]) -> str:
     ]
     for f in dict.fromkeys(r.fault for r in rows):
         for c in SIGNATURE_CHANNELS:
-            cells = [f, f"{c} [{_UNITS[c]}]", f"{by[(f, 'open', c)].threshold:.2f}"]
+            cells = [f, f"{c} [{CHANNEL_UNITS[c]}]", f"{by[(f, 'open', c)].threshold:.2f}"]
             for loop in LOOPS:
                 r = by[(f, loop, c)]
                 s = r.signature
@@ -234,7 +216,7 @@ def signatures_csv(rows: list[SignatureRow]) -> str:
         s = r.signature
         t3 = "" if s.t3sigma is None else str(s.t3sigma)
         out.append(
-            f"{r.fault},{r.loop},{r.channel},{_UNITS[r.channel]},{s.peak:.6g},{s.peak_at},"
+            f"{r.fault},{r.loop},{r.channel},{CHANNEL_UNITS[r.channel]},{s.peak:.6g},{s.peak_at},"
             f"{s.final:.6g},{r.final_sd:.4g},{t3},{r.threshold:.4g},{r.episodes}"
         )
     return "\n".join(out) + "\n"
@@ -257,9 +239,9 @@ def masking_table(rows: list[SignatureRow]) -> str:
         ratios = [abs(cl[c]) / max(abs(op[c]), 1e-12) for c in ("T_rx", "T_rg1")]
         masked = [c for c in _TEMPERATURES if abs(op[c]) > visibility_threshold(c) and seen[c] <= 1]
         carriers = sorted((c for c in SIGNATURE_CHANNELS if seen[c] > 1), key=lambda c: -seen[c])
-        carried = ", ".join(f"{c} {_num(cl[c], 1)} {_UNITS[c]}" for c in carriers)
+        carried = ", ".join(f"{c} {_num(cl[c], 1)} {CHANNEL_UNITS[c]}" for c in carriers)
         act = [
-            f"{_num(cl[c])} {_UNITS[c]}" + ("" if seen[c] > 1 else " (within 3σ)")
+            f"{_num(cl[c])} {CHANNEL_UNITS[c]}" + ("" if seen[c] > 1 else " (within 3σ)")
             for c in ("u_F", "R_ar")
         ]
         lines.append(
@@ -323,64 +305,6 @@ def step_responses(config: ReportConfig) -> list[Response]:
         env.close()
         out.append(Response(title, np.arange(n) * ts / 3600.0, np.array(ys), k0 * ts / 3600.0))
     return out
-
-
-def _grid(n_rows: int) -> tuple[Any, Any]:
-    # An explicit Agg canvas: no pyplot state, no display needed (as fcc_env.plotting).
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
-    fig = Figure(figsize=(12, 2.3 * n_rows), dpi=90, layout="constrained")
-    FigureCanvasAgg(fig)
-    return fig, fig.subplots(n_rows, len(_FIGURE_CHANNELS), sharex=True, squeeze=False)
-
-
-def _finish(fig: Any, axes: Any, ylabel: str, xlabel: str) -> bytes:
-    """Units on every axis; the PNG bytes."""
-    for ax, c in zip(axes.ravel(), _FIGURE_CHANNELS * axes.shape[0], strict=True):
-        ax.set_ylabel(ylabel.format(c=c, unit=_UNITS[c]), fontsize=8)
-        ax.ticklabel_format(axis="y", useOffset=False)  # absolute values on the axis
-        ax.tick_params(labelsize=7)
-    for ax in axes[-1]:
-        ax.set_xlabel(xlabel, fontsize=8)
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png")
-    return buf.getvalue()
-
-
-def responses_figure(responses: list[Response]) -> bytes:
-    """PNG: one row per response, columns T_rx, T_rg1, u_F, R_ar (set points dashed)."""
-    fig, axes = _grid(len(responses))
-    for row, r in zip(axes, responses, strict=True):
-        for ax, c in zip(row, _FIGURE_CHANNELS, strict=True):
-            ax.plot(r.time_h, r.y[:, CLOSED_LOOP_CHANNELS.index(c)], lw=1.0)
-            sp = f"{c}_sp"
-            if sp in SETPOINT_NAMES:
-                ax.plot(r.time_h, r.y[:, CLOSED_LOOP_CHANNELS.index(sp)], "k--", lw=0.8)
-            ax.axvline(r.step_at_h, color="tab:red", ls=":", lw=0.8)
-        row[0].set_title(r.title, fontsize=9, loc="left")
-    return _finish(fig, axes, "{c} [{unit}]", "time [h]")
-
-
-def closed_minus_open_figure(runs: list[FaultDeltas]) -> bytes:
-    """PNG: per fault a row of Δ (faulty − healthy) on T_rx, T_rg1, u_F, R_ar, closed and open
-    loop overlaid (episode means), ±3σ dotted; hours after onset."""
-    by = {(r.fault, r.loop): r for r in runs}
-    faults = list(dict.fromkeys(r.fault for r in runs))
-    fig, axes = _grid(len(faults))
-    for row, f in zip(axes, faults, strict=True):
-        for ax, c in zip(row, _FIGURE_CHANNELS, strict=True):
-            for loop, color in (("open", "tab:gray"), ("closed", "tab:blue")):
-                r = by[(f, loop)]
-                t_h = (np.arange(r.deltas[c].shape[1]) - r.onset) * r.sample_time_s / 3600.0
-                ax.plot(t_h, r.mean(c), color=color, lw=1.0, label=f"{loop} loop")
-            thr = visibility_threshold(c)
-            ax.axhline(thr, color="k", ls=":", lw=0.6, label="±3σ")
-            ax.axhline(-thr, color="k", ls=":", lw=0.6)
-            ax.set_xlim(-0.5, None)  # half an hour before onset: the differences are 0 there
-        row[0].set_title(f"{f}: faulty − healthy", fontsize=9, loc="left")
-    axes[0, 0].legend(fontsize=7)
-    return _finish(fig, axes, "Δ{c} [{unit}]", "time after onset [h]")
 
 
 def count_terminations(
@@ -479,10 +403,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--seeds", type=int, nargs="+", default=[5000, 5001, 5002, 5003])
     ap.add_argument("--response-samples", type=int, default=1500, help="response length (1500)")
     args = ap.parse_args(argv)
-    config = ReportConfig(
-        horizon=args.horizon, onset=args.onset, seeds=tuple(args.seeds),
-        response_samples=args.response_samples,
-    )  # fmt: skip
+    try:
+        config = ReportConfig(
+            horizon=args.horizon, onset=args.onset, seeds=tuple(args.seeds),
+            response_samples=args.response_samples,
+        )  # fmt: skip
+    except ValueError as e:
+        ap.error(str(e))
     if args.terminations < 0:
         ap.error(f"--terminations={args.terminations}: must be >= 0 (0 skips the count)")
     report = build_report(config, args.terminations)

@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from fcc_common.validation import Constraint, Integer, Real, check_params, invalid
+from fcc_common.validation import Constraint, Integer, Real, check_params, from_fields, invalid
 from fcc_env.params import NOMINAL_INPUTS
 
 #: Allowed values of the :class:`Excitation` fields.
@@ -51,13 +51,7 @@ class Excitation:
         if isinstance(value, Excitation):
             return value
         if isinstance(value, Mapping):
-            allowed = set(cls.__dataclass_fields__)
-            unknown = sorted(set(value) - allowed)
-            if unknown:
-                raise ValueError(
-                    f"Unknown excitation option(s) {unknown}. Allowed: {sorted(allowed)}"
-                )
-            return cls(**value)
+            return from_fields(cls, value, "excitation")
         raise invalid(
             "excitation", value, "True, False, None, an Excitation or a mapping of its fields"
         )

@@ -50,7 +50,7 @@ import numba
 import numpy as np
 from scipy.signal import lfilter
 
-from fcc_common.validation import Integer, Real, check_params, invalid
+from fcc_common.validation import Integer, Real, check_params, from_fields, invalid
 from fcc_env.params import NOMINAL_INPUTS
 
 __all__ = [
@@ -65,8 +65,8 @@ __all__ = [
 
 #: The loops a layer may close: controlled measurement → manipulated input.
 LOOP_NAMES: tuple[str, ...] = ("T_rx", "T_rg1")
-#: Controlled measurement's index in the Table 1 observation, manipulated input's index.
-_LOOP_INDEX = {"T_rx": (3, 0), "T_rg1": (4, 1)}
+#: Loop j reads Table 1 channel 3 + j (T_rx, T_rg1) and sets input j (u_F, R_ar).
+_FIRST_CONTROLLED = 3
 #: The set-point channels, in observation order.
 SETPOINT_NAMES: tuple[str, ...] = ("T_rx_sp", "T_rg1_sp")
 #: Actuator limits on the applied u_F (kg/s) and R_ar (t/h): the open-loop env's limits.
@@ -182,20 +182,14 @@ class RegulatoryLayer:
         if isinstance(value, RegulatoryLayer):
             return value
         if isinstance(value, Mapping):
-            allowed = [f.name for f in dataclasses.fields(cls)]
-            unknown = sorted(set(value) - set(allowed))
-            if unknown:
-                raise ValueError(f"Unknown regulatory option(s) {unknown}. Allowed: {allowed}")
             fields = dict(value)
             if isinstance(fields.get("program"), Mapping):
-                names = [f.name for f in dataclasses.fields(SetpointProgram)]
-                bad = sorted(set(fields["program"]) - set(names))
-                if bad:
-                    raise ValueError(f"Unknown set-point program option(s) {bad}. Allowed: {names}")
-                fields["program"] = SetpointProgram(**fields["program"])
-            if "loops" in fields and isinstance(fields["loops"], list):
+                fields["program"] = from_fields(
+                    SetpointProgram, fields["program"], "set-point program"
+                )
+            if isinstance(fields.get("loops"), list):
                 fields["loops"] = tuple(fields["loops"])
-            return cls(**fields)
+            return from_fields(cls, fields, "regulatory")
         raise invalid(
             "regulatory", value, "True, False, None, a RegulatoryLayer or a mapping of its fields"
         )
@@ -226,12 +220,27 @@ def initial_controller_state(u0: np.ndarray) -> np.ndarray:
     return np.array([u0[0], 0.0, u0[1], 0.0])
 
 
+_SP_LOW = np.array([SETPOINT_RANGES[n].low for n in SETPOINT_NAMES])
+_SP_HIGH = np.array([SETPOINT_RANGES[n].high for n in SETPOINT_NAMES])
+
+
+@numba.njit(cache=True, nogil=True)
+def _clip_rows(sp: np.ndarray, low: np.ndarray, high: np.ndarray) -> bool:
+    clipped = False
+    for i in range(sp.shape[0]):
+        for j in range(sp.shape[1]):
+            v = min(max(sp[i, j], low[j]), high[j])
+            if v != sp[i, j]:
+                sp[i, j] = v
+                clipped = True
+    return clipped
+
+
 def check_setpoints(setpoints: np.ndarray) -> tuple[np.ndarray, bool]:
-    """Set points clipped to :data:`SETPOINT_RANGES`, and whether a clip was needed."""
-    lo = np.array([SETPOINT_RANGES[n].low for n in SETPOINT_NAMES])
-    hi = np.array([SETPOINT_RANGES[n].high for n in SETPOINT_NAMES])
-    clipped = np.minimum(np.maximum(setpoints, lo), hi)
-    return clipped, bool((clipped != setpoints).any())
+    """Set points (``(2,)`` or ``(n, 2)``) clipped to :data:`SETPOINT_RANGES`, and whether a
+    clip was needed: the one clipping rule of the env's steps and of batch programs."""
+    out = np.array(setpoints, dtype=np.float64)
+    return out, _clip_rows(out.reshape(-1, 2), _SP_LOW, _SP_HIGH)
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
@@ -258,7 +267,7 @@ def controller_update(
         g = j * _GAIN_SLOTS
         if gains[g] == 0.0:
             continue
-        y = float(obs[3 + j])  # T_rx (3) and T_rg1 (4): _LOOP_INDEX
+        y = float(obs[_FIRST_CONTROLLED + j])
         e = setpoint[j] - y
         kc = gains[g + 1]
         u = c[2 * j] + kc * (e - c[2 * j + 1]) + kc * gains[g + 2] * e

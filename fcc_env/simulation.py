@@ -343,6 +343,20 @@ def simulate_episodes(
     )
 
 
+def operating_program(
+    seed: int, n_samples: int, plant: PlantConfig | None = None
+) -> tuple[np.ndarray, np.ndarray | None]:
+    """The operating program of episode ``seed`` as the env and :func:`simulate_episodes` draw
+    it, without simulating: inputs ``(n_samples, 6)`` (in closed loop the valve and air
+    columns are the program's, which the controllers replace) and, in closed loop, the set
+    points ``(n_samples, 2)`` (else None). The program does not depend on the fault."""
+    config = plant or PlantConfig()
+    n_samples = check("n_samples", n_samples, N_SAMPLES_RANGE)
+    rng, _ = seeding.np_random(check("seed", seed, Integer(0)))
+    setup = setup_episode(rng, config, FaultSpec(), n_samples)
+    return setup.take_program(np.arange(n_samples))
+
+
 @dataclass(frozen=True)
 class InputSimulation:
     """Noise-free response to given inputs: arrays with a leading episode axis if one was given."""

@@ -40,7 +40,6 @@ from collections.abc import Sequence
 
 import fcc_env
 from diagnosers.registry import available, diagnoser_class
-from diagnosers.relations import required_channels
 from evaluation.leaderboard import paper
 from evaluation.leaderboard.arguments import (
     build_parser,
@@ -67,6 +66,7 @@ from evaluation.reports.outputs import write_outputs
 from evaluation.reports.tables import markdown_table, reference_row, sample_time, table_legend
 from evaluation.sweep.config import BASELINES
 from evaluation.sweep.dataset_loaders import load_external
+from evaluation.tracks.board import applicable
 from fcc_env.scenarios import FaultSpec
 
 __all__ = ["main", "resolve_options"]
@@ -92,9 +92,7 @@ def resolve_options(
         if args.external is not None:  # recorded data have no labelled training faults
             diags = tuple(d for d in diags if not diagnoser_class(d).isolates)
         else:  # FCC-v0's channels: a closed-loop detector (it reads u_F) has nothing to read
-            diags = tuple(
-                d for d in diags if required_channels(d) <= set(fcc_env.MEASUREMENT_NAMES)
-            )
+            diags = tuple(applicable(diags, fcc_env.MEASUREMENT_NAMES, "")[0])
     unknown = [d for d in diags if d not in avail]
     if unknown:
         parser.error(f"unknown diagnoser(s) {unknown}. Available: {avail}")

@@ -29,7 +29,7 @@ import shutil
 import sys
 import tempfile
 import time
-from collections.abc import Sequence
+from collections.abc import Collection, Sequence
 from pathlib import Path
 
 from diagnosers.registry import import_modules
@@ -46,22 +46,27 @@ from evaluation.tracks.track_data import TrackData
 from fcc_env.closed_loop import CLOSED_LOOP_CHANNELS
 from fcc_env.params import MEASUREMENT_NAMES
 
-__all__ = ["run_track"]
+__all__ = ["applicable", "run_track", "track_channels"]
 
 
-def applicable(names: Sequence[str], track: Track) -> tuple[list[str], list[str]]:
-    """(the diagnosers that can read ``track``'s channels, one-line reasons for the others)."""
-    channels = set(CLOSED_LOOP_CHANNELS if track.closed_loop else MEASUREMENT_NAMES)
+def applicable(
+    names: Sequence[str], channels: Collection[str], where: str
+) -> tuple[list[str], list[str]]:
+    """(the diagnosers of ``names`` that can read ``channels``, one-line reasons for the
+    others, saying they are skipped ``where``)."""
     keep, skipped = [], []
     for name in names:
-        missing = sorted(required_channels(name) - channels)
+        missing = sorted(required_channels(name) - set(channels))
         if missing:
-            skipped.append(
-                f"{name}: skipped on track {track.name} (no channel {', '.join(missing)})"
-            )
+            skipped.append(f"{name}: skipped {where} (no channel {', '.join(missing)})")
         else:
             keep.append(name)
     return keep, skipped
+
+
+def track_channels(track: Track) -> tuple[str, ...]:
+    """The channels a track's episodes have."""
+    return CLOSED_LOOP_CHANNELS if track.closed_loop else MEASUREMENT_NAMES
 
 
 def run_track(
@@ -87,7 +92,7 @@ def run_track(
     t0 = time.perf_counter()
     data = TrackData(track=track)
     import_modules(imports)
-    diagnosers, skipped = applicable(diagnosers, track)
+    diagnosers, skipped = applicable(diagnosers, track_channels(track), f"on track {track.name}")
     for line in skipped:
         print(line, file=sys.stderr)
     config = SweepConfig(diagnosers=default_specs(diagnosers), data=data, imports=tuple(imports))

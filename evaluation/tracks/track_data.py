@@ -20,8 +20,9 @@ from fcc_common.validation import invalid
 from fcc_env.closed_loop import CLOSED_LOOP_CHANNELS
 from fcc_env.params import INPUT_NAMES, MEASUREMENT_NAMES
 from fcc_env.plant import PlantConfig
+from fcc_env.regulatory import RegulatoryLayer
 from fcc_env.scenarios import FaultSpec
-from fcc_env.simulation import simulate_inputs
+from fcc_env.simulation import operating_program, simulate_inputs
 from fcc_env.uncertainty import PlantUncertainty
 
 #: the tracks' sample time [s] (the env's default)
@@ -186,19 +187,18 @@ class TrackData:
         which nobody measures, are the seed's program (the same in the healthy twin). Returns
         ``(T, 8)``, the Table 1 channels.
         """
-        twin = fcc_env.simulate_episodes(
-            [seed], self.track.n_samples, noise_scale=0.0, regulatory=True
-        )
+        plant = PlantConfig(regulatory=RegulatoryLayer())
         if record is None:
+            twin = fcc_env.simulate_episodes([seed], self.track.n_samples, plant=plant)
             record = twin.y_clean[0]
         record = np.asarray(record, dtype=np.float64)
-        T = record.shape[0]
         if record.ndim != 2 or record.shape[1] != len(CLOSED_LOOP_CHANNELS):
             raise ValueError(
                 f"record has shape {record.shape}; allowed: (T, {len(CLOSED_LOOP_CHANNELS)}) "
                 f"with the columns {', '.join(CLOSED_LOOP_CHANNELS)}"
             )
-        u = np.array(twin.inputs[0, :T], dtype=np.float64)
+        T = record.shape[0]
+        u, _ = operating_program(seed, T, plant)
         for name in ("u_F", "R_ar", "T_ar", "T_fp"):
             u[:, INPUT_NAMES.index(name)] = record[:, CLOSED_LOOP_CHANNELS.index(name)]
         x0 = PlantConfig().initial_state()

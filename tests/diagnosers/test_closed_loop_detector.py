@@ -8,7 +8,7 @@ import pytest
 import diagnosers
 from diagnosers.conformance import check_diagnoser
 from diagnosers.relations import CLOSED_LOOP_RELATIONS, required_channels
-from evaluation.tracks.board import applicable
+from evaluation.tracks.board import applicable, track_channels
 from evaluation.tracks.catalogue import TRACKS
 
 
@@ -20,9 +20,12 @@ def test_closed_preset_reads_the_manipulated_variables() -> None:
 
 
 def test_harness_skips_a_detector_without_its_channels() -> None:
-    keep, skipped = applicable(["limits", "lrgf-glr-closed"], TRACKS["paper"])
-    assert keep == ["limits"] and skipped and "u_F" in skipped[0]
-    keep, skipped = applicable(["limits", "lrgf-glr-closed", "lrgf-glr"], TRACKS["closed"])
+    names = ["limits", "lrgf-glr-closed"]
+    keep, skipped = applicable(names, track_channels(TRACKS["paper"]), "on track paper")
+    assert keep == ["limits"]
+    assert skipped == ["lrgf-glr-closed: skipped on track paper (no channel u_F)"]
+    names = ["limits", "lrgf-glr-closed", "lrgf-glr"]
+    keep, skipped = applicable(names, track_channels(TRACKS["closed"]), "on track closed")
     assert keep == ["limits", "lrgf-glr-closed", "lrgf-glr"] and not skipped
 
 

@@ -3,6 +3,8 @@ saturation without windup, set-point clipping, bad input and the linear stabilit
 
 from __future__ import annotations
 
+import re
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -16,10 +18,12 @@ from fcc_env.closed_loop_analysis import (
     closed_loop_steady_state,
     stability_cases,
 )
+from fcc_env.closed_loop_report import main as report_main
 from fcc_env.episode_setup import CHUNK_SAMPLES
 from fcc_env.params import MEASUREMENT_NAMES, NOMINAL_INPUTS
 from fcc_env.plant import PlantConfig
 from fcc_env.regulatory import SETPOINT_RANGES, RegulatoryLayer, SetpointProgram
+from fcc_env.simulation import operating_program
 from fcc_env.uncertainty import PlantUncertainty
 
 ZERO = np.zeros(2, dtype=np.float32)
@@ -235,6 +239,19 @@ def test_set_point_clipping_is_flagged():
             lambda: fcc_env.simulate_episodes([0], 10, regulatory=True, plant=PlantConfig()),
             r"\['regulatory'\] were both given",
         ),
+        (
+            lambda: fcc_env.simulate_episodes([0], 10, regulatory=[1, 2]),
+            r"regulatory=\[1, 2\] .*True, False, None, a RegulatoryLayer",
+        ),
+        (
+            lambda: RegulatoryLayer(program={"T_rx_sp_halfrange_C": 1.0}),
+            r"program=\{.*\} .*a SetpointProgram or None",
+        ),
+        (
+            lambda: gym.make("FCC-closedloop-v0", regulatory={"program": {"amplitude": 1}}),
+            r"Unknown set-point program option\(s\) \['amplitude'\]. Allowed: \['T_rx_sp",
+        ),
+        (lambda: operating_program(-1, 10), r"seed=-1 is outside the allowed range"),
     ],
     ids=[
         "negative-gain",
@@ -246,11 +263,45 @@ def test_set_point_clipping_is_flagged():
         "program-halfrange",
         "hold-order",
         "plant-and-keyword",
+        "not-a-layer-batch",
+        "program-not-a-program",
+        "unknown-program-option",
+        "negative-seed",
     ],
 )
 def test_bad_control_options_are_refused(make, match):
     with pytest.raises(ValueError, match=match):
         make()
+
+
+@pytest.mark.parametrize(
+    ("argv", "match"),
+    [
+        (["--horizon", "2"], r"horizon=2 is outside the allowed range: an integer in \[4, inf\)"),
+        (
+            ["--onset", "4000"],
+            r"onset=4000 is outside the allowed range: an integer in \[1, 3998\]",
+        ),
+        (["--seeds", "-3"], r"seeds=.*-3.* is outside the allowed range"),
+        (["--terminations", "-1"], r"--terminations=-1: must be >= 0"),
+    ],
+)
+def test_report_cli_refuses_bad_values_by_name(argv, match, tmp_path, capsys):
+    with pytest.raises(SystemExit) as exc:
+        report_main(["--out", str(tmp_path), *argv])
+    assert exc.value.code == 2
+    assert re.search(match, capsys.readouterr().err)
+
+
+def test_operating_program_is_the_simulated_program():
+    plant = PlantConfig(regulatory=RegulatoryLayer())
+    u, sp = operating_program(7, 700, plant)
+    b = fcc_env.simulate_episodes([7], 700, plant=plant)
+    np.testing.assert_array_equal(u[:, 2:], b.inputs[0, :, 2:])  # all but the valve and air
+    np.testing.assert_array_equal(sp, b.setpoints[0])
+    u_open, sp_open = operating_program(7, 700)
+    assert sp_open is None
+    np.testing.assert_array_equal(u_open, fcc_env.simulate_episodes([7], 700).inputs[0])
 
 
 def test_closed_loop_is_stable_at_nominal_and_the_largest_faults():

@@ -7,6 +7,7 @@ import csv
 import numpy as np
 import pytest
 
+from fcc_env.closed_loop import visibility_threshold
 from fcc_env.closed_loop_analysis import stability_cases
 from fcc_env.closed_loop_report import (
     SIGNATURE_CHANNELS,
@@ -18,7 +19,6 @@ from fcc_env.closed_loop_report import (
     signature_rows,
     signatures_table,
     trace_signature,
-    visibility_threshold,
 )
 
 # A tiny configuration: enough samples after onset for the fast parts of a signature to show.

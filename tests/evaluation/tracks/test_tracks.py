@@ -209,6 +209,11 @@ def make(**changes: object) -> Track:
             r"a distribution with support in \[1, 3800\]",
         ),
         (
+            {"closed_loop": True, "plant_variation": True},
+            r"plant_variation=True is outside the allowed range: False on a closed-loop track",
+        ),
+        ({"closed_loop": "yes"}, r"closed_loop='yes' is outside the allowed range"),
+        (
             {"ramp": Fixed(500)},
             r"ramp=Fixed\(value=500\) is outside the allowed range: None \(a ramp needs 'incipient'",
         ),
