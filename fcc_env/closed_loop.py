@@ -165,7 +165,8 @@ def simulate_closed_per_sample(
     RK4 of :func:`fcc_env.episode_setup.generic_sample` with ``d_state`` effects, as the env
     does), so batch = env bit for bit here too. ``U`` is written in place (applied inputs).
 
-    Returns (Y, OBS, X, AUX, SAT) with the shapes of :func:`fcc_env.simulate_episodes`' arrays.
+    Returns (Y, OBS, X, AUX, SAT) as :func:`fcc_env.simulate_episodes` returns them (Y and
+    OBS with the closed-loop channels).
     """
     B, T = U.shape[:2]
     Y = np.empty((B, T, N_MEASUREMENTS))
@@ -203,6 +204,9 @@ def simulate_closed_per_sample(
             OBS[:, k : k + 1],
         )  # fmt: skip
         for b in range(B):
-            SAT[b, k] = controller_update(C[b], SP[b, k], OBS[b, k], gains)
+            saturated = controller_update(C[b], SP[b, k], OBS[b, k], gains)
+            if k + 1 < T:  # the flag of the output in force over the next sample
+                SAT[b, k + 1] = saturated
         x = x_next
-    return Y, OBS, X, A, SAT
+    u_F = U[:, :, 0]
+    return assemble_observation(Y, u_F, SP), assemble_observation(OBS, u_F, SP), X, A, SAT

@@ -152,22 +152,24 @@ def simulate_kernel(
     noise_abs: np.ndarray,  # (N_MEASUREMENTS,) absolute noise std
     noise_rel: np.ndarray,  # (N_MEASUREMENTS,) noise std relative to the value
     noise_scale: float,
-    Y: np.ndarray,  # (B, T, N_MEASUREMENTS) out: noise-free measurements
-    OBS: np.ndarray,  # (B, T, N_MEASUREMENTS) float32 out: noisy measurements
+    Y: np.ndarray,  # (B, T, N_MEASUREMENTS [+ 3 closed loop]) out: noise-free observations
+    OBS: np.ndarray,  # (B, T, N_MEASUREMENTS [+ 3]) float32 out: noisy observations
     Xs: np.ndarray,  # (B, T, N_STATES) out: states
     AUX: np.ndarray,  # (B, T, N_AUX) out
     add_noise: bool,
     C: np.ndarray,  # (B, CONTROLLER_STATE_SIZE) controller states, updated in place
     SP: np.ndarray,  # (B, T, 2) set points (closed loop)
     gains: np.ndarray,  # controller gains (RegulatoryLayer.gains); empty = open loop
-    SAT: np.ndarray,  # (B, T) bool out: a loop clamped at sample k (closed loop)
+    SAT: np.ndarray,  # (B, T) bool out, zeros in: the output over sample k was clamped
 ) -> None:
     """Simulate B episodes of T samples; same arithmetic as :func:`step_kernel` per episode.
 
     With ``add_noise=False`` OBS is left untouched (the caller transforms Y first). In closed
     loop (``gains`` not empty, which needs ``add_noise``) the controllers' outputs replace
-    U[b, k, 0:2] (written back: U holds the applied inputs) and each sample's noisy observation
-    updates them for the next sample (:func:`fcc_env.regulatory.controller_update`).
+    U[b, k, 0:2] (written back: U holds the applied inputs), Y and OBS carry the valve command
+    and the set points after Table 1 (:data:`fcc_env.closed_loop.CLOSED_LOOP_CHANNELS`), and
+    each sample's noisy observation updates the controllers for the next sample
+    (:func:`fcc_env.regulatory.controller_update`).
     """
     B, T = U.shape[0], U.shape[1]
     closed = gains.shape[0] > 0
@@ -196,7 +198,16 @@ def simulate_kernel(
             for i in range(N_AUX):
                 AUX[b, k, i] = aux[i]
             if closed:
-                SAT[b, k] = controller_update(c, SP[b, k], OBS[b, k], gains)
+                # what the control system records, then the controllers' update: its clamp is
+                # the flag of the output in force over the next sample (the env's info)
+                Y[b, k, N_MEASUREMENTS] = u[0]
+                Y[b, k, N_MEASUREMENTS + 1] = SP[b, k, 0]
+                Y[b, k, N_MEASUREMENTS + 2] = SP[b, k, 1]
+                for i in range(N_MEASUREMENTS, N_MEASUREMENTS + 3):
+                    OBS[b, k, i] = np.float32(Y[b, k, i])
+                saturated = controller_update(c, SP[b, k], OBS[b, k], gains)
+                if k + 1 < T:
+                    SAT[b, k + 1] = saturated
             if k + 1 < T:
                 _rk4_inplace(x, u, p, h, substeps, work, True)
 

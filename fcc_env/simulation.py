@@ -15,7 +15,6 @@ from gymnasium.utils import seeding
 from fcc_common.validation import Integer, IntegerSequence, Real, check, invalid
 from fcc_env import effects as fx
 from fcc_env.closed_loop import (
-    assemble_observation,
     observation_channels,
     simulate_closed_per_sample,
 )
@@ -265,8 +264,9 @@ def simulate_episodes(
     else:  # each episode starts at its own plant's steady state
         x0 = np.stack([c.initial_state() for c in configs])
         p_base = np.stack([c.params.as_array() for c in configs])
-    Y = np.empty((B, T, N_MEASUREMENTS))
-    obs = np.empty((B, T, N_MEASUREMENTS), dtype=np.float32)
+    n_channels = len(observation_channels(config))
+    Y = np.empty((B, T, n_channels))
+    obs = np.empty((B, T, n_channels), dtype=np.float32)
     X = np.empty((B, T, N_STATES))
     A = np.empty((B, T, N_AUX))
     SAT = None
@@ -318,11 +318,6 @@ def simulate_episodes(
     reasons = tuple(
         TERMINATION_REASONS[codes[b, t]] if t >= 0 else None for b, t in enumerate(term_at)
     )
-    if SAT is not None:  # the update at sample k sets the output of sample k + 1
-        SAT = np.concatenate([np.zeros((B, 1), dtype=np.bool_), SAT[:, :-1]], axis=1)
-    if SP is not None:  # what a control system records: the valve command and set points
-        obs = assemble_observation(obs, U[:, :, 0], SP)
-        Y = assemble_observation(Y, U[:, :, 0], SP)
     return BatchResult(
         observations=obs,
         y_clean=Y,
