@@ -118,12 +118,13 @@ class FCCEnv(gym.Env):
     | fault_magnitude | paper's | relative change ≥ 0 (direction fixed by the fault) |
     | fault_profile | "abrupt" | or "incipient" |
     | ramp_samples | 500 | incipient ramp length (samples, ``DEFAULT_RAMP_SAMPLES``) |
-    | plant | None | a :class:`fcc_env.PlantConfig` instead of the five options below (not both) |
+    | plant | None | a :class:`fcc_env.PlantConfig` instead of the six options below (not both) |
     | valve_beta | 0.3 | slide-valve head share; 0 = flow mode, 0.15 = harder |
     | sample_time_s | 10.0 | sample period (s) |
     | rk4_substeps | 1 | RK4 steps per sample |
     | excitation | True | False = constant inputs; a dict overrides :class:`Excitation` |
     | noise_scale | 1.0 | multiplier on the noise stds; 0 = noise-free |
+    | regulatory | None | closed loop: True, a :class:`fcc_env.RegulatoryLayer` or a dict of its fields |
     | plant_effects | () | undeclared plant effects (:mod:`fcc_env.effects`): library ids such as |
     |  |  | ``"heat_loss:stage1"`` or objects with ``d_state``/``measure``; never shown in info |
     | horizon | 4000 | samples the scenario is laid out on: onsets must fall inside it and random |
