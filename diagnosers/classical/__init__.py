@@ -1,23 +1,30 @@
 """Classical detectors, the baselines of the leaderboard: fixed limits, PCA (T² + SPE) and an
 ARX output-error band.
 
-All three learn from healthy episodes only and decide with a confidence level ``1 - alpha``
+All learn from healthy episodes only and decide with a confidence level ``1 - alpha``
 (``alpha = 0.01`` as in the paper). They give the neural detectors a yardstick:
 
 * ``limits``   - :class:`LimitChecker`: per-channel ``mean ± t_α·std`` limits.
-* ``pca``      - :class:`PCADetector`: Hotelling T² and SPE (Q) on standardised measurements.
+* ``pca``      - :class:`PCADetector`: Hotelling T² and SPE (Q) on standardised measurements;
+  ``pca-empirical`` (:class:`PCAEmpirical`) sets both limits at the training data's percentile.
 * ``arx-band`` - :class:`ARXBand`: a linear ARX model of ``T_rx`` from ``T_rg2`` and ``T_fp``
   (the paper's relation (14)) run in simulation, with a band ``y_m ± t_α·σ``.
 """
 
 from diagnosers.classical.arx_band import ARXBand, fit_percent
 from diagnosers.classical.limit_checker import LimitChecker
-from diagnosers.classical.pca_monitor import PCADetector, hotelling_t2_limit, spe_limit
+from diagnosers.classical.pca_monitor import (
+    PCADetector,
+    PCAEmpirical,
+    hotelling_t2_limit,
+    spe_limit,
+)
 
 __all__ = [
     "ARXBand",
     "LimitChecker",
     "PCADetector",
+    "PCAEmpirical",
     "fit_percent",
     "hotelling_t2_limit",
     "spe_limit",

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
+from typing import Any, ClassVar
 
 import numpy as np
 from scipy import stats
@@ -17,10 +18,14 @@ from diagnosers.contract import require_varying
 from diagnosers.detection import Decision, Detection
 from diagnosers.diagnoser import Diagnoser
 from diagnosers.episode import Episode
+from diagnosers.presets import keyword_init, preset
 from diagnosers.registry import register
 from fcc_common.validation import Integer, Real, check_params, invalid
 
-__all__ = ["PCADetector", "hotelling_t2_limit", "spe_limit"]
+__all__ = ["LIMITS", "PCADetector", "PCAEmpirical", "hotelling_t2_limit", "spe_limit"]
+
+#: How :class:`PCADetector` sets its control limits.
+LIMITS: tuple[str, ...] = ("analytic", "empirical")
 
 
 def hotelling_t2_limit(n_components: int, n_samples: int, alpha: float) -> float:
@@ -63,11 +68,22 @@ class PCADetector(Diagnoser):
     """PCA monitoring with Hotelling's T² and the squared prediction error (SPE, Q).
 
     Measurements are standardised with the healthy mean and standard deviation (a channel that is
-    constant in training keeps scale 1, so any change of it shows up in SPE). The number of
+    constant in training keeps scale 1, so any change of it shows up in SPE; "constant" includes a
+    spread at the round-off level of its values, ``std <= 1e-9·|mean|``, as in recorded data whose
+    noise-free pressure channels differ only in their last bits). The number of
     principal components is ``n_components`` if given, else the smallest ``k`` whose cumulative
     explained variance reaches ``variance_explained``; it is capped at ``m - 1`` (``m`` monitored
     channels) so that a residual subspace, and hence SPE, exists. Alarm when T² > ``T2_lim`` or
     SPE > ``Q_lim``, both at level ``alpha``.
+
+    The limits are either the distributions' (``limits="analytic"``: Tracy–Young–Mason's F limit
+    of T² for a new observation, Jackson–Mudholkar's of SPE, which assume independent normal
+    samples) or the empirical ``1 - alpha`` quantiles of both statistics on the training samples
+    (``limits="empirical"``), the common practice of data-driven monitoring studies (e.g. the
+    source notebooks of the Santander et al. FCCU data set). Empirical limits hold the
+    training data's false-alarm rate whatever the distribution, but on autocorrelated data they
+    rest on fewer independent samples than there are rows. ``pca-empirical`` is ``pca`` with
+    ``limits="empirical"``.
 
     Args:
         alpha: significance level in (0, 1) for both limits; default 0.01. Smaller: higher
@@ -77,6 +93,7 @@ class PCADetector(Diagnoser):
         n_components: number of retained components (``1 <= k <= m - 1``), or None
             (default: chosen by ``variance_explained``).
         channels: monitored channel names (at least 2), or None (default) for all.
+        limits: ``"analytic"`` (default) or ``"empirical"``, see above.
 
     Decision arrays, names ``("T2", "SPE")`` (dimensionless, standardised units squared):
         signal = residual = ``[T², SPE]``, lower = ``[-inf, -inf]``, upper = ``[T2_lim, Q_lim]``.
@@ -87,18 +104,19 @@ class PCADetector(Diagnoser):
         covariance eigenvalues (descending); n_components_; n_samples_; t2_limit_; q_limit_.
     """
 
-    def __init__(
-        self,
-        *,
-        alpha: float = 0.01,
-        variance_explained: float = 0.95,
-        n_components: int | None = None,
-        channels: Sequence[str] | None = None,
-    ) -> None:
-        self.alpha = alpha
-        self.variance_explained = variance_explained
-        self.n_components = n_components
-        self.channels = channels
+    DEFAULTS: ClassVar[dict[str, Any]] = {
+        "alpha": 0.01,
+        "variance_explained": 0.95,
+        "n_components": None,
+        "channels": None,
+        "limits": "analytic",
+    }
+    __init__ = keyword_init(DEFAULTS)
+    alpha: float
+    variance_explained: float
+    n_components: int | None
+    channels: Sequence[str] | None
+    limits: str
 
     def _validate_params(self) -> None:
         check_params(
@@ -111,20 +129,23 @@ class PCADetector(Diagnoser):
             },
         )
         check_channel_names("channels", self.channels, allow_none=True)
+        if self.limits not in LIMITS:
+            raise invalid("limits", self.limits, f"one of {LIMITS}")
 
     def _fit(self, episodes: list[Episode]) -> None:
         idx = channel_indices(self.channels, self.channels_, "channels")
         m = idx.size
         if m < 2:
             raise ValueError(f"pca needs at least 2 monitored channels, got {m}")
-        x = stack_episodes(episodes)[:, idx]
+        stacked = stack_episodes(episodes)
+        x = stacked[:, idx]
         n = x.shape[0]
         if n <= m:
             raise ValueError(f"pca needs more training samples than channels ({m}), got {n}")
         require_varying(x, [self.channels_[i] for i in idx], "pca", every=False)
         mean = x.mean(axis=0)
         scale = x.std(axis=0, ddof=1)
-        scale = np.where(scale > 0.0, scale, 1.0)
+        scale = np.where(scale > 1e-9 * np.abs(mean), scale, 1.0)
         z = (x - mean) / scale
         # SVD of the data matrix is more accurate than eigh of the covariance.
         _, s, vt = np.linalg.svd(z, full_matrices=False)
@@ -152,12 +173,18 @@ class PCADetector(Diagnoser):
         self.eigenvalues_ = eig
         self.n_components_ = k
         self.n_samples_ = n
+        self.empirical_limits_ = np.quantile(
+            self.statistics(stacked), 1.0 - float(self.alpha), axis=0
+        )
         self._finish()
 
     def _finish(self) -> None:
         k = self.n_components_
-        self.t2_limit_ = hotelling_t2_limit(k, self.n_samples_, self.alpha)
-        self.q_limit_ = spe_limit(self.eigenvalues_[k:], self.alpha)
+        if self.limits == "empirical":
+            self.t2_limit_, self.q_limit_ = (float(v) for v in self.empirical_limits_)
+        else:
+            self.t2_limit_ = hotelling_t2_limit(k, self.n_samples_, self.alpha)
+            self.q_limit_ = spe_limit(self.eigenvalues_[k:], self.alpha)
         self.signal_names_ = ("T2", "SPE")
         self._lower = np.array([-np.inf, -np.inf])
         self._upper = np.array([self.t2_limit_, self.q_limit_])
@@ -170,7 +197,7 @@ class PCADetector(Diagnoser):
             "components": self.components_,
             "eigenvalues": self.eigenvalues_,
             "n_samples": np.array(self.n_samples_, dtype=np.int64),
-        }
+        } | ({} if self.empirical_limits_ is None else {"empirical_limits": self.empirical_limits_})
 
     def _set_state(self, state: dict[str, np.ndarray]) -> None:
         self.channel_idx_ = np.asarray(state["channel_idx"], dtype=np.int64)
@@ -180,6 +207,14 @@ class PCADetector(Diagnoser):
         self.eigenvalues_ = np.asarray(state["eigenvalues"], dtype=np.float64)
         self.n_components_ = int(self.components_.shape[1])
         self.n_samples_ = int(state["n_samples"])
+        # Models saved before the empirical limits existed have none; only that mode needs them.
+        saved = state.get("empirical_limits")
+        if saved is None and self.limits == "empirical":
+            raise ValueError(
+                "this saved pca model has no empirical limits (saved before limits='empirical' "
+                "existed); refit it"
+            )
+        self.empirical_limits_ = None if saved is None else np.asarray(saved, dtype=np.float64)
         self._finish()
 
     def statistics(self, y: np.ndarray) -> np.ndarray:
@@ -210,3 +245,16 @@ class PCADetector(Diagnoser):
             residual=st.copy(),
             signal_names=self.signal_names_,
         )
+
+
+PCAEmpirical = preset(
+    "pca-empirical",
+    PCADetector,
+    {"limits": "empirical"},
+    """``pca`` with empirical limits: the ``1 - alpha`` quantiles (99 %) of T² and SPE on the
+    training samples, the recipe of most data-driven monitoring studies and of the source
+    notebooks of the Santander et al. (2022) FCCU data set (standardised channels, components
+    to 95 % of the variance, alarm when either statistic is over its 99th percentile), so that
+    recipe is a row beside ``pca``'s distribution limits.""",
+    module=__name__,
+)

@@ -98,9 +98,18 @@ def resolve_options(
         parser.error(f"unknown diagnoser(s) {unknown}. Available: {avail}")
     if args.external is not None:
         try:
-            allowed = [tf.key for tf in load_external(args.external)[0].test_files]
+            data, ext_params = load_external(args.external)
         except ValueError as e:
             parser.error(f"--external {args.external}: {e}")
+        allowed = [tf.key for tf in data.test_files]
+        # a detector whose relations name channels the data lack is dropped before training
+        # (named by the user: refused), with the data set's own relations where it gives some
+        keep, skipped = applicable(diags, data.channels, f"on {args.external}", ext_params)
+        if skipped and args.diagnosers is not None:
+            parser.error("; ".join(skipped) + " (declare its relations in the manifest)")
+        for line in skipped:
+            print(line, file=sys.stderr)
+        diags = tuple(keep)
     else:
         allowed = list(fcc_env.SCENARIOS)
     scenarios = args.scenarios if args.scenarios is not None else tuple(allowed)

@@ -29,11 +29,12 @@ import shutil
 import sys
 import tempfile
 import time
-from collections.abc import Collection, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
-from diagnosers.registry import import_modules
-from diagnosers.relations import required_channels
+from diagnosers.registry import import_modules, make
+from diagnosers.relations import read_channels, required_channels
 from evaluation.reports.outputs import figure_cells, write_figures
 from evaluation.sweep.config import DiagnoserSpec, SweepConfig, default_specs
 from evaluation.sweep.runner import run_sweep
@@ -50,13 +51,19 @@ __all__ = ["applicable", "run_track", "track_channels"]
 
 
 def applicable(
-    names: Sequence[str], channels: Collection[str], where: str
+    names: Sequence[str],
+    channels: Collection[str],
+    where: str,
+    params: Mapping[str, Mapping[str, Any]] | None = None,
 ) -> tuple[list[str], list[str]]:
     """(the diagnosers of ``names`` that can read ``channels``, one-line reasons for the
-    others, saying they are skipped ``where``)."""
+    others, saying they are skipped ``where``). ``params``: hyperparameters per diagnoser
+    (e.g. a data set's relations) that replace its defaults before its channels are read."""
     keep, skipped = [], []
     for name in names:
-        missing = sorted(required_channels(name) - set(channels))
+        given = (params or {}).get(name)
+        need = required_channels(name) if not given else read_channels(make(name, **given))
+        missing = sorted(need - set(channels))
         if missing:
             skipped.append(f"{name}: skipped {where} (no channel {', '.join(missing)})")
         else:
