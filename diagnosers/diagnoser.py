@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import os
+import zipfile
 from abc import abstractmethod
 from pathlib import Path
 
@@ -20,11 +21,23 @@ import numpy as np
 from diagnosers.contract import DiagnoserContract
 from diagnosers.registry import make
 from fcc_common.io import atomic_open, atomic_write
+from fcc_common.safe_files import (
+    MAX_FILE_BYTES,
+    UnsafeFileError,
+    check_regular,
+    check_zip_members,
+    load_npz,
+    open_regular,
+    read_json,
+)
 
-__all__ = ["SAVE_FORMAT", "SAVE_FORMAT_VERSION", "Diagnoser"]
+__all__ = ["MAX_JSON_BYTES", "SAVE_FORMAT", "SAVE_FORMAT_VERSION", "Diagnoser"]
 
 SAVE_FORMAT = "fcc-diagnoser"
 SAVE_FORMAT_VERSION = 1
+#: Cap on a saved JSON file (``config.json``, ``models.json``): they hold settings, a few KiB.
+#: Array and weight files get :data:`fcc_common.safe_files.MAX_FILE_BYTES` (512 MiB).
+MAX_JSON_BYTES = 16 * 2**20
 
 
 class Diagnoser(DiagnoserContract):
@@ -69,10 +82,11 @@ class Diagnoser(DiagnoserContract):
         """Load a diagnoser written by :meth:`save`; never executes code from the files."""
         src = Path(path)
         cfg_path = src / "config.json"
-        if not cfg_path.is_file():
+        if not cfg_path.exists():
             raise ValueError(f"{src} is not a saved diagnoser: {cfg_path.name} is missing")
         try:
-            config = json.loads(cfg_path.read_text())
+            # bounded, regular files only: a FIFO or /dev/zero here must not hang the load
+            config = read_json(cfg_path, max_bytes=MAX_JSON_BYTES)
         except (json.JSONDecodeError, UnicodeDecodeError) as e:
             raise ValueError(f"{cfg_path} is not valid JSON: {e}") from e
         if not isinstance(config, dict) or config.get("format") != SAVE_FORMAT:
@@ -103,8 +117,9 @@ class Diagnoser(DiagnoserContract):
             raise ValueError(f"{cfg_path}: channels must be names (str), got {config['channels']}")
         try:
             obj = make(config["diagnoser"], **config["params"])
-            # a saved config is checked like constructor arguments: a hand-edited alpha=5 fails
-            obj._validate_params()
+            # a saved config is checked like constructor arguments before anything is built
+            # from it: a hand-edited alpha=5 or n_hidden=1e9 fails here, not in an allocation
+            obj.validate_params()
         except (ValueError, TypeError) as e:
             raise ValueError(f"{cfg_path}: {e}") from e
         saved_class = config.get("class")
@@ -118,15 +133,21 @@ class Diagnoser(DiagnoserContract):
             raise ValueError(
                 f"{src} holds a {config['diagnoser']!r} diagnoser, not a {cls.__name__}"
             )
+        # every file the hooks will read is checked first: _load_extra reads by name
+        _check_files(src)
         state_path = src / "state.npz"
         try:
-            with np.load(state_path, allow_pickle=False) as data:
-                state = {k: data[k] for k in data.files}
+            state = load_npz(state_path)
+        except UnsafeFileError as e:  # not regular, or over a cap: the message names both
+            raise UnsafeFileError(f"{e}; the saved diagnoser is corrupted: save it again") from e
         except Exception as e:  # BadZipFile, EOFError, zlib.error...: one clear message
             raise ValueError(
                 f"{state_path} is missing, truncated or not a numeric state file "
                 f"({type(e).__name__}); the saved diagnoser is corrupted: save it again"
             ) from e
+        for key, arr in state.items():
+            if arr.dtype.kind in "fc":
+                _require_finite(int(np.count_nonzero(~np.isfinite(arr))), arr.size, state_path, key)
         obj.channels_ = tuple(config["channels"])
         obj.sample_time_s_ = float(config["sample_time_s"])
         try:
@@ -172,3 +193,54 @@ class Diagnoser(DiagnoserContract):
 
     def _load_extra(self, directory: Path) -> None:
         """Read what :meth:`_save_extra` wrote; torch files with ``weights_only=True``."""
+
+
+# ---- checks of the files of a saved directory ------------------------------------------------
+def _require_finite(n_bad: int, size: int, path: Path, key: str) -> None:
+    """A NaN or inf in learned state makes a detector that never alarms: refuse it by name."""
+    if n_bad:
+        raise ValueError(
+            f"{path}: array {key!r} holds {n_bad} non-finite value(s) (NaN or inf) of {size}; "
+            "learned state must be finite: the file is corrupted or edited, save the diagnoser "
+            "again"
+        )
+
+
+def _check_files(directory: Path) -> None:
+    """Check every file in ``directory`` before any hook reads it.
+
+    :meth:`Diagnoser._load_extra` hooks read their files by name (``models.json``, and
+    ``weights.pt`` through ``torch.load``), so the one place that sees them all is here: each
+    must be a regular file under its cap; a zip (``.npz``, ``.pt``) must not inflate past
+    :data:`~fcc_common.safe_files.MAX_INFLATED_BYTES`; torch weights must be finite.
+    Subdirectories are saved diagnosers of their own, checked when they are loaded.
+    """
+    for entry in sorted(directory.iterdir()):
+        if entry.is_dir():
+            continue
+        suffix = entry.suffix
+        try:
+            check_regular(entry, max_bytes=MAX_JSON_BYTES if suffix == ".json" else MAX_FILE_BYTES)
+        except FileNotFoundError:
+            continue  # a dangling symlink: the hook that needs the file reports it missing
+        if suffix == ".pt":
+            _check_weights(entry)
+
+
+def _check_weights(path: Path) -> None:
+    import torch  # only diagnosers with torch modules write .pt files
+
+    with open_regular(path) as fh:
+        if zipfile.is_zipfile(fh):  # torch's format since 1.6; older files are not zips
+            check_zip_members(fh, name=path)
+        fh.seek(0)
+        try:
+            tensors = torch.load(fh, weights_only=True, map_location="cpu")
+        except Exception:  # torch raises many types on a bad file
+            return  # not a weights file: the hook that reads it refuses it by name
+    if not isinstance(tensors, dict):
+        return
+    for key, value in tensors.items():
+        if isinstance(value, torch.Tensor) and (value.is_floating_point() or value.is_complex()):
+            n_bad = int((~torch.isfinite(value)).sum())
+            _require_finite(n_bad, value.numel(), path, str(key))

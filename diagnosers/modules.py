@@ -20,6 +20,13 @@ import torch
 from diagnosers.lrgf_net import LRGF
 from diagnosers.mem_net import NNARXErrorModel
 from fcc_common.io import atomic_open, atomic_write
+from fcc_common.safe_files import UnsafeFileError, check_zip_members, open_regular, read_json
+
+#: The config entries that size a module's tensors.
+_SIZES = ("n_inputs", "n_hidden", "order", "n_outputs", "n_linear", "input_delays", "output_delays")
+
+#: Largest ``models.json`` read (a bank's configs are a few kB).
+MAX_CONFIG_BYTES = 16 * 2**20
 
 __all__ = ["build_module", "export_module", "load_bank", "paper_lrgf", "paper_mem", "save_bank"]
 
@@ -79,6 +86,18 @@ def build_module(config: dict[str, Any], state: dict[str, torch.Tensor]) -> LRGF
     kind = config.get("kind")
     if kind not in _KINDS:
         raise ValueError(f"unknown module kind {kind!r}. Available: {sorted(_KINDS)}")
+    # Sizes in a config (n_hidden, order...) decide what the constructor allocates, and every
+    # unit of size owns at least one weight: a size above the number of saved weights (which the
+    # file's size cap bounds) is an edited file, refused before it can allocate gigabytes.
+    n_saved = sum(int(v.numel()) for v in state.values())
+    for key in _SIZES:
+        size = config.get(key)
+        sizes = size if isinstance(size, list) else [size]
+        if any(isinstance(v, int) and not isinstance(v, bool) and v > n_saved for v in sizes):
+            raise ValueError(
+                f"the {kind} module's config gives {key}={size!r}, more than the {n_saved} saved "
+                "weights can hold; the model file was edited or is not from this library"
+            )
     module = _KINDS[kind].from_config(copy.deepcopy(config))
     module.load_state_dict(state)
     return module
@@ -111,12 +130,19 @@ def load_bank(directory: Path) -> list[dict[str, Module]]:
     naming the file when either is missing, corrupted or not written by :func:`save_bank`.
     """
     try:
-        configs = json.loads((directory / "models.json").read_text())
+        configs = read_json(directory / "models.json", max_bytes=MAX_CONFIG_BYTES)
+    except UnsafeFileError:
+        raise
     except (OSError, json.JSONDecodeError, UnicodeDecodeError) as e:
         raise ValueError(f"{directory / 'models.json'} is missing or not valid JSON: {e}") from e
     weights = directory / "weights.pt"
     try:
-        tensors = torch.load(weights, weights_only=True)
+        with open_regular(weights) as fh:  # a FIFO or device never reaches torch
+            check_zip_members(fh, name=weights)
+            fh.seek(0)
+            tensors = torch.load(fh, weights_only=True)
+    except UnsafeFileError:
+        raise
     except Exception as e:
         # torch's text for a refused pickle suggests weights_only=False, i.e. executing the
         # file: never relay that advice about a file that may have been tampered with.

@@ -10,6 +10,10 @@ The modules, by job:
   effects and per-episode plant draws;
 - :mod:`~fcc_env.episode_setup`: one episode's set-up, shared by :mod:`~fcc_env.env` (``FCC-v0``) and
   :mod:`~fcc_env.simulation` (:func:`simulate_episodes`);
+- :mod:`~fcc_env.regulatory`, :mod:`~fcc_env.closed_loop`: the regulatory layer and what a
+  closed-loop plant shows (``FCC-closedloop-v0``);
+- :mod:`~fcc_env.plotting`, :mod:`~fcc_env.render`: figures and the env's ``rgb_array`` frame;
+  :mod:`~fcc_env.dataset_schema`: units and roles in a dataset's Parquet schema;
 - :mod:`~fcc_env.generate`, :mod:`~fcc_env.demo`, :mod:`~fcc_env.simulator_speed`: the commands.
 
 A :class:`FaultSpec` and a :class:`PlantConfig` are validated once, when built, and travel whole
@@ -25,7 +29,7 @@ Importing the package registers ``FCC-v0``:
 (8,)
 """
 
-from gymnasium.envs.registration import register, registry
+from gymnasium.envs.registration import WrapperSpec, register, registry
 
 from fcc_env.excitation import Excitation
 from fcc_env.integrator import integrate_step
@@ -58,14 +62,24 @@ MAX_EPISODE_STEPS = DEFAULT_N_SAMPLES - 1
 #: The closed-loop plant: the regulatory layer of :class:`RegulatoryLayer` running.
 CLOSED_LOOP_ENV_ID = "FCC-closedloop-v0"
 
+# gym.make's max_episode_steps lives in a TimeLimit the env never sees: this wrapper, outside
+# it, warns when the limit ends an episode before its fault onset (fcc_env.env.OnsetHorizonCheck)
+_ONSET_CHECK = WrapperSpec("OnsetHorizonCheck", "fcc_env.env:OnsetHorizonCheck", {})
+
 if ENV_ID not in registry:
-    register(id=ENV_ID, entry_point="fcc_env.env:FCCEnv", max_episode_steps=MAX_EPISODE_STEPS)
+    register(
+        id=ENV_ID,
+        entry_point="fcc_env.env:FCCEnv",
+        max_episode_steps=MAX_EPISODE_STEPS,
+        additional_wrappers=(_ONSET_CHECK,),
+    )
 if CLOSED_LOOP_ENV_ID not in registry:
     register(
         id=CLOSED_LOOP_ENV_ID,
         entry_point="fcc_env.env:FCCEnv",
         max_episode_steps=MAX_EPISODE_STEPS,
         kwargs={"regulatory": True},
+        additional_wrappers=(_ONSET_CHECK,),
     )
 
 __version__ = "0.1.0"

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import warnings
+from collections import deque
 from collections.abc import Mapping
 from typing import Any
 
@@ -17,6 +19,7 @@ from fcc_env.params import NOMINAL_INPUTS
 from fcc_env.physics import AUX_NAMES
 from fcc_env.plant import AFTERBURN_WARNING_C, PlantConfig, plant_from_request, termination_reason
 from fcc_env.regulatory import SETPOINT_RANGES, RegulatoryLayer
+from fcc_env.render import WINDOW_SAMPLES, TrendRenderer
 from fcc_env.scenarios import (
     DEFAULT_N_SAMPLES,
     ENV_FAULT_KEYWORDS,
@@ -215,7 +218,8 @@ class FCCEnv(gym.Env):
         self.action_space = spaces.Box(-1.0, 1.0, shape=(2,), dtype=np.float32)
         self._p_base = self.config.params.as_array()
         self._x0 = self.config.initial_state()
-        self._history: list[np.ndarray] = []
+        self._history: deque[np.ndarray] = deque(maxlen=WINDOW_SAMPLES)
+        self._renderer = TrendRenderer()
 
     # ---- Gymnasium API -------------------------------------------------------------------------
     def reset(
@@ -265,7 +269,7 @@ class FCCEnv(gym.Env):
         self._u = self._inputs(0)
         self._y_clean = self._measure(0)
         self._obs = self._make_obs(0)
-        self._history = [self._obs]
+        self._history = deque([self._obs], maxlen=WINDOW_SAMPLES)
         return self._obs, self._get_info()
 
     def step(self, action: Any) -> tuple[np.ndarray, float, bool, bool, dict[str, Any]]:
@@ -299,12 +303,14 @@ class FCCEnv(gym.Env):
             self._obs = np.clip(self._obs, OBS_LOW, OBS_HIGH)
         self._terminated_reason = reason
         self._history.append(self._obs)
-        if len(self._history) > 2000:
-            del self._history[:1000]
         return self._obs, 0.0, reason is not None, False, self._get_info()
 
     def render(self) -> np.ndarray | None:
         return _trend_frame(self) if self.render_mode == "rgb_array" else None
+
+    def close(self) -> None:
+        self._renderer.close()  # frees the render figure; a later render() builds a new one
+        super().close()
 
     # ---- helpers -------------------------------------------------------------------------------
     def _inputs(self, k: int) -> np.ndarray:
@@ -350,17 +356,50 @@ class FCCEnv(gym.Env):
 
 
 def _trend_frame(env: FCCEnv) -> np.ndarray:
-    """The ``rgb_array`` frame: the Table 1 trends of the last 500 samples."""
-    from fcc_env.plotting import trend_image  # matplotlib only when rendering
-
+    """The ``rgb_array`` frame: the Table 1 trends of the last 500 samples (H, W, 3) uint8."""
+    if not hasattr(env, "_x"):
+        raise gym.error.ResetNeeded("call reset() before render()")
     nominal = env.fault.scenario is Scenario.NOMINAL
-    return trend_image(
-        np.array(env._history[-500:])[:, :8],
+    return env._renderer.frame(
+        np.array(env._history)[:, :8],
         env._k,
         env.config.sample_time_s,
         scenario=env.fault.scenario.value,
         fault_onset=None if nominal else env.fault.onset,
     )
+
+
+class OnsetHorizonCheck(gym.Wrapper, gym.utils.RecordConstructorArgs):
+    """Warns on ``reset`` when a ``TimeLimit`` below it ends the episode before the fault onset.
+
+    The env lays a scenario out on its own ``horizon`` (an onset outside it is an error), but a
+    ``max_episode_steps`` given to ``gym.make`` lives in a ``TimeLimit`` wrapper the env never
+    sees: ``gym.make("FCC-v0", scenario="f1", max_episode_steps=1000)`` would truncate every
+    episode at sample 1000, before the onset at 1900, and give fault-free "f1" episodes. This
+    wrapper, outside the ``TimeLimit``, reads its limit from the wrapped env's spec and raises a
+    ``UserWarning`` naming the onset and the limit.
+    """
+
+    def __init__(self, env: gym.Env) -> None:
+        gym.utils.RecordConstructorArgs.__init__(self)
+        gym.Wrapper.__init__(self, env)
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[Any, dict[str, Any]]:
+        obs, info = self.env.reset(seed=seed, options=options)
+        limit = None if self.env.spec is None else self.env.spec.max_episode_steps
+        onset = info.get("fault_time")
+        # after max_episode_steps steps the last observation is sample max_episode_steps
+        if limit is not None and onset is not None and onset > limit:
+            warnings.warn(
+                f"the episode ends at sample {limit} (max_episode_steps={limit}) before its "
+                f"{info['scenario']} fault onset at sample {onset}: it will show no fault. Pass "
+                f"max_episode_steps >= {onset}, or fault_time <= {limit}",
+                UserWarning,
+                stacklevel=2,
+            )
+        return obs, info
 
 
 def _registered_closed_loop(plant: Any, regulatory: Any) -> tuple[Any, Any]:
@@ -428,4 +467,11 @@ def actuator_inputs(program: np.ndarray, move: np.ndarray) -> tuple[np.ndarray, 
     return u, True
 
 
-__all__ = ["RESET_OPTION_NAMES", "FCCEnv", "actuator_inputs", "check_action", "episode_request"]
+__all__ = [
+    "RESET_OPTION_NAMES",
+    "FCCEnv",
+    "OnsetHorizonCheck",
+    "actuator_inputs",
+    "check_action",
+    "episode_request",
+]

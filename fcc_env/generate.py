@@ -5,9 +5,14 @@ JSON sidecar of the same stem. The table is CSV (``--out x.csv``) or Parquet (``
 needs the optional ``pyarrow``: ``pip install 'fcc-fault-diagnosis[parquet]'``). The sidecar's
 ``columns`` maps every column, in file order, to its ``unit``, ``description`` and ``role``; "none"
 is always JSON ``null`` (a nominal episode's fault onset and magnitude, an episode that was never
-terminated), never ``-1``. Column roles are also listed in ``roles``:
+terminated), never ``-1``. A Parquet table repeats each column's record in its schema's field
+metadata (``pyarrow.parquet.read_schema(path).field("T_rx").metadata[b"unit"]``,
+:func:`fcc_env.dataset_schema.field_metadata`). Column roles are also listed in ``roles``:
 
 * ``measured``: the Table 1 measurements as the sensors report them (noisy);
+* ``manipulated``, ``setpoint`` (closed loop only, ``--closed-loop``): what the control system
+  records, as ``FCC-closedloop-v0`` observes it: the valve command ``u_F`` (and the air ``R_ar``,
+  a measured column) and the set points ``T_rx_sp``, ``T_rg1_sp`` (noise-free);
 * ``commanded``: manipulated variables as commanded (``cmd_u_F`` valve, ``cmd_R_ar`` air);
 * ``truth``: what only a simulator knows (applied disturbances ``in_*``, noise-free
   measurements ``clean_*``, the fault label ``fault_active``, optionally the states ``x_*``).
@@ -35,8 +40,10 @@ from fcc_common.io import (
     require_pyarrow,
 )
 from fcc_common.validation import Real, check, invalid
-from fcc_env import MODEL_VERSION
+from fcc_env import CLOSED_LOOP_ENV_ID, ENV_ID, MODEL_VERSION
 from fcc_env import effects as fx
+from fcc_env.closed_loop import CLOSED_LOOP_ROLES, CLOSED_LOOP_UNITS
+from fcc_env.dataset_schema import parquet_table
 from fcc_env.params import (
     INPUT_NAMES,
     INPUT_UNITS,
@@ -105,6 +112,18 @@ def column_metadata(names: Sequence[str]) -> dict[str, dict[str, str]]:
         "cmd_u_F": ("kg/s", "commanded " + _INPUT_DESCRIPTIONS["u_F"], "commanded"),
         "cmd_R_ar": ("t/h", "commanded " + _INPUT_DESCRIPTIONS["R_ar"], "commanded"),
         "fault_active": ("-", "1 while the fault is applied, else 0", "truth"),
+        # closed loop (FCC-closedloop-v0): what the control system records besides Table 1
+        "u_F": (
+            CLOSED_LOOP_UNITS["u_F"],
+            "regenerated-catalyst slide valve command, as the T_rx controller sets it",
+            "manipulated",
+        ),
+        "T_rx_sp": (CLOSED_LOOP_UNITS["T_rx_sp"], "riser outlet temperature set point", "setpoint"),
+        "T_rg1_sp": (
+            CLOSED_LOOP_UNITS["T_rg1_sp"],
+            "stage-1 regenerator bed temperature set point",
+            "setpoint",
+        ),
     }
     out: dict[str, dict[str, str]] = {}
     for n in names:
@@ -170,7 +189,7 @@ def plant_json(plant: PlantConfig) -> dict[str, Any]:
     """The sidecar record of a plant (the env keyword names; ``params`` only if not declared)."""
     declared = FCCParams().replace(beta_sv=plant.valve_beta)
     ex = plant.excitation
-    return {
+    record = {
         "valve_beta": plant.valve_beta,
         "sample_time_s": plant.sample_time_s,
         "rk4_substeps": plant.rk4_substeps,
@@ -178,6 +197,9 @@ def plant_json(plant: PlantConfig) -> dict[str, Any]:
         "noise_scale": plant.noise_scale,
         "params": None if plant.params == declared else dataclasses.asdict(plant.params),
     }
+    if plant.regulatory is not None:  # only in closed loop: open-loop sidecars stay as they were
+        record["regulatory"] = dataclasses.asdict(plant.regulatory)
+    return record
 
 
 def write_dataset(
@@ -236,6 +258,9 @@ def write_dataset(
     }
     for i, name in enumerate(MEASUREMENT_NAMES):
         cols[name] = batch.observations[:, :, i].astype(np.float64).ravel()
+    closed = config.regulatory is not None
+    for name in batch.channels[len(MEASUREMENT_NAMES) :]:  # closed loop: valve, set points
+        cols[name] = batch.observations[:, :, batch.channels.index(name)].astype(np.float64).ravel()
     cols["cmd_u_F"] = batch.inputs[:, :, 0].ravel()
     cols["cmd_R_ar"] = batch.inputs[:, :, 1].ravel()
     for i, name in enumerate(INPUT_NAMES):
@@ -251,7 +276,7 @@ def write_dataset(
         "format": DATASET_FORMAT,
         "format_version": DATASET_FORMAT_VERSION,
         "model_version": MODEL_VERSION,
-        "env_id": "FCC-v0",
+        "env_id": CLOSED_LOOP_ENV_ID if closed else ENV_ID,
         "scenario": spec.scenario,
         "fault": spec.to_json(),
         "plant": plant_json(config),
@@ -274,6 +299,11 @@ def write_dataset(
         "roles": {
             "index": ["episode", "seed", "k", "time_s"],
             "measured": list(MEASUREMENT_NAMES),
+            **(
+                {r: list(CLOSED_LOOP_ROLES[r]) for r in ("manipulated", "setpoint")}
+                if closed
+                else {}
+            ),
             "commanded": ["cmd_u_F", "cmd_R_ar"],
             "truth": [n for n in names if n.startswith(("in_", "clean_", "x_"))] + ["fault_active"],
         },
@@ -282,9 +312,8 @@ def write_dataset(
     out.parent.mkdir(parents=True, exist_ok=True)
     # table first, sidecar last: a sidecar never describes a table that is not there
     if pq is not None:
-        import pyarrow as pa
-
-        table = pa.table({n: np.ascontiguousarray(cols[n]) for n in names})
+        # the schema repeats each column's unit, role and description for sidecar-blind readers
+        table = parquet_table(cols, meta["columns"])
         with atomic_open(out, "wb") as fh:
             pq.write_table(table, fh)
     else:
@@ -358,6 +387,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--no-excitation", action="store_true", help="hold inputs at nominal")
     parser.add_argument("--states", action="store_true", help="also write the 11 states")
     parser.add_argument(
+        "--closed-loop",
+        action="store_true",
+        help="the plant under its regulatory layer (FCC-closedloop-v0): adds the valve command "
+        "u_F and the set points T_rx_sp, T_rg1_sp",
+    )
+    parser.add_argument(
         "--memory-budget-gib",
         type=float,
         default=DEFAULT_MEMORY_BUDGET_BYTES / 2**30,
@@ -391,6 +426,7 @@ def main(argv: Sequence[str] | None = None) -> int:
             valve_beta=args.valve_beta,
             noise_scale=args.noise_scale,
             excitation=not args.no_excitation,
+            regulatory=True if args.closed_loop else None,
         )
         path = write_dataset(
             args.out,

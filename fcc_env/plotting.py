@@ -22,6 +22,25 @@ def _figure(width_in: float, height_in: float):
     return fig
 
 
+def trend_title(
+    k_now: int, sample_time_s: float, scenario: str | None, fault_onset: int | None
+) -> str:
+    """The title of the trend frame at sample ``k_now`` : the time and, for a scenario, whether and since when the fault is on."""
+    hours = sample_time_s / 3600.0
+    title = f"FCC-v0, sample {k_now}, t = {k_now * hours:.2f} h"
+    if scenario is None:
+        return title
+    if fault_onset is not None and k_now >= fault_onset:
+        what = (
+            f"scenario {scenario}, fault since sample {fault_onset} ({fault_onset * hours:.2f} h)"
+        )
+    elif fault_onset is None:
+        what = f"scenario {scenario}, no fault"
+    else:
+        what = f"scenario {scenario}, no fault yet"
+    return f"{title}\n{what}"
+
+
 def trend_figure(
     y: np.ndarray,
     k_now: int,
@@ -52,18 +71,7 @@ def trend_figure(
             ax.axvline(fault_onset * hours, **_ONSET_STYLE, label="fault onset")
     for ax in axes[-1]:
         ax.set_xlabel("time [h]", fontsize=7)
-    if scenario is None:
-        what = ""
-    elif onset_seen:
-        what = (
-            f"scenario {scenario}, fault since sample {fault_onset} ({fault_onset * hours:.2f} h)"
-        )
-    elif fault_onset is None:
-        what = f"scenario {scenario}, no fault"
-    else:
-        what = f"scenario {scenario}, no fault yet"
-    title = f"FCC-v0, sample {k_now}, t = {k_now * hours:.2f} h"
-    fig.suptitle(f"{title}\n{what}" if what else title, fontsize=9)
+    fig.suptitle(trend_title(k_now, sample_time_s, scenario, fault_onset), fontsize=9)
     if onset_seen:
         handles, labels = axes[0, 0].get_legend_handles_labels()
         if "fault onset" in labels:

@@ -16,6 +16,13 @@ Why it is built like this:
   training seeds or external files); every model and cell file holds the hash of its diagnoser
   specification *and* that data hash. Test seeds and scenarios are deliberately left out of the
   hashes, so a sweep extended with more seeds or another diagnoser reuses what is already there.
+* **Validate what is read.** A cell's scores must be in range (rates in [0, 1], times >= 0, counts
+  >= 0; ``null`` where the format says undefined) and its label, scenario and seed must match its
+  folder; a reused model's ``config.json`` must still describe the diagnoser its ``spec.json``
+  was trained for; every file is read bounded and only if it is a regular file.
+* **Confined.** Every path the store reads or writes lies below the store root after
+  :meth:`Path.resolve`; a symbolic link inside the store is refused by name, so a re-run never
+  writes outside ``--out``.
 * **Never overwrite silently.** A file that is not valid JSON, has another format tag, another
   version or another hash raises :class:`StoreError` naming the file and what to do; the store
   never replaces an existing cell file.
@@ -25,6 +32,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import math
 import os
 import re
 import shutil
@@ -37,7 +45,10 @@ from typing import Any
 
 import numpy as np
 
+from diagnosers.registry import make
 from fcc_common.io import TMP_SUFFIX, atomic_open, atomic_write_json, remove_stale_tmp
+from fcc_common.safe_files import UnsafeFileError, load_npz, read_json
+from fcc_common.validation import Constraint, Integer, Real, check
 
 __all__ = [
     "CELL_FORMAT",
@@ -60,6 +71,21 @@ MANIFEST = "sweep.json"
 #: sweep and removed when the store is opened; younger ones may belong to a sweep still running.
 STALE_TMP_AGE_S = 3600.0
 _NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._+-]*$")
+#: Cap on one JSON file of the store (manifest, cell, model spec): each holds a few KiB.
+MAX_JSON_BYTES = 64 * 2**20
+
+#: Allowed values of a cell record's fields (``evaluation.sweep.records.CellResult``): ``None``
+#: in a tuple allows ``null``, which is how the writer stores an undefined (``nan``) score.
+_RATE = (Real(0, 1), None)
+_TIME = (Real(0, math.inf), None)
+_COUNT = (Integer(0, math.inf),)
+_RECORD_CONSTRAINTS: dict[str, tuple[Constraint | None, ...]] = {
+    **dict.fromkeys(("r_fd", "r_td", "r_ti", "r_fi", "cdr"), _RATE),
+    **dict.fromkeys(("t_dt", "t_dt_s", "t_it", "detect_wall_s"), _TIME),
+    **dict.fromkeys(("n_samples", "n_samples_planned", "n_fault_samples", "n_alarms"), _COUNT),
+    **dict.fromkeys(("fault_onset", "terminated_at"), (Integer(0, math.inf), None)),
+    "sample_time_s": (Real(0, math.inf, closed="right"),),
+}
 
 
 class StoreError(RuntimeError):
@@ -99,14 +125,52 @@ def _atomic_write_json(path: Path, obj: Any) -> None:
 
 def _read_json(path: Path, what: str, remedy: str) -> dict[str, Any]:
     try:
-        obj = json.loads(path.read_text())
-    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        # strict JSON: the writer stores nan as null, so a NaN/Infinity token is an edit
+        obj = read_json(path, max_bytes=MAX_JSON_BYTES, allow_nan=False)
+    except UnsafeFileError as e:
+        raise StoreError(f"{e}: the {what} is not a file of this store; {remedy}") from e
+    except ValueError as e:  # JSONDecodeError, UnicodeDecodeError, NaN tokens
         raise StoreError(
             f"{path} is not valid JSON ({e}): the {what} is corrupted; {remedy}"
         ) from e
     if not isinstance(obj, dict):
         raise StoreError(f"{path} does not hold a JSON object: the {what} is corrupted; {remedy}")
     return obj
+
+
+def _check_record(
+    record: dict[str, Any], path: Path, label: str, scenario: str, seed: int, remedy: str
+) -> None:
+    """Refuse a cell record out of range or filed under another label, scenario or seed."""
+    for key, folder in (("diagnoser", label), ("scenario", scenario), ("seed", seed)):
+        if key in record and (record[key] != folder or isinstance(record[key], bool)):
+            raise StoreError(
+                f"{path}: {key}={record[key]!r} does not match its place in the store "
+                f"({key} {folder!r}); the file was moved or edited; {remedy}"
+            )
+    for key, constraints in _RECORD_CONSTRAINTS.items():
+        value = record.get(key)
+        # types are CellResult.from_json's to report; ranges are checked here, on every read
+        if isinstance(value, int | float) and not isinstance(value, bool):
+            try:
+                check(key, value, *constraints)
+            except ValueError as e:
+                raise StoreError(f"{path}: {e}; the file is corrupted or edited; {remedy}") from e
+
+
+def _resolved_params(name: Any, params: Any, where: Path, remedy: str) -> str:
+    """Hash of the hyperparameters a diagnoser ``name`` built from ``params`` resolves to."""
+    if not isinstance(name, str) or not isinstance(params, dict):
+        raise StoreError(
+            f"{where}: diagnoser name {name!r} / params {params!r} are missing or of the wrong "
+            f"type; {remedy}"
+        )
+    try:
+        diagnoser = make(name, **params)
+        diagnoser.validate_params()
+        return canonical_hash(diagnoser.result_params())
+    except (ValueError, TypeError) as e:
+        raise StoreError(f"{where}: {e}; {remedy}") from e
 
 
 def _check_tag(obj: dict[str, Any], path: Path, fmt: str, what: str, remedy: str) -> None:
@@ -196,7 +260,7 @@ class ResultStore:
     def cell_path(self, label: str, scenario: str, seed: int) -> Path:
         check_name("diagnoser label", label)
         check_name("scenario", scenario)
-        return self.root / "cells" / label / scenario / f"seed-{int(seed)}.json"
+        return self._confined(self.root / "cells" / label / scenario / f"seed-{int(seed)}.json")
 
     def read_cell(
         self, label: str, scenario: str, seed: int, cell_hash: str
@@ -226,6 +290,7 @@ class ResultStore:
         record = obj.get("record")
         if not isinstance(record, dict):
             raise StoreError(f"{path} has no 'record' object: the file is corrupted; {remedy}")
+        _check_record(record, path, label, scenario, int(seed), remedy)
         return record
 
     def write_cell(
@@ -258,7 +323,7 @@ class ResultStore:
     def detection_path(self, label: str, scenario: str, seed: int) -> Path:
         check_name("diagnoser label", label)
         check_name("scenario", scenario)
-        return self.root / "detections" / label / scenario / f"seed-{int(seed)}.npz"
+        return self._confined(self.root / "detections" / label / scenario / f"seed-{int(seed)}.npz")
 
     def read_detection(
         self, label: str, scenario: str, seed: int, cell_hash: str
@@ -269,8 +334,7 @@ class ResultStore:
         if not path.is_file():
             return None
         try:
-            with np.load(path, allow_pickle=False) as z:
-                arrays = {k: z[k] for k in z.files}
+            arrays = load_npz(path)
         except (OSError, ValueError, zipfile.BadZipFile) as e:
             raise StoreError(
                 f"{path} is not a readable detection file ({type(e).__name__}: {e}); delete it "
@@ -291,7 +355,7 @@ class ResultStore:
 
     # ---- models ------------------------------------------------------------------------------
     def model_dir(self, label: str) -> Path:
-        return self.root / "models" / check_name("diagnoser label", label)
+        return self._confined(self.root / "models" / check_name("diagnoser label", label))
 
     def has_model(self, label: str, model_hash: str) -> bool:
         """Whether a trained model for ``label`` is stored; raises if it is foreign/other."""
@@ -300,7 +364,7 @@ class ResultStore:
             return False
         spec = d / "spec.json"
         remedy = f"delete {d} to retrain this diagnoser"
-        if not spec.is_file():
+        if not spec.exists():  # a special file is not missing: _read_json refuses it by name
             raise StoreError(f"{d} exists but has no spec.json: it is incomplete; {remedy}")
         obj = _read_json(spec, "model spec", remedy)
         _check_tag(obj, spec, MODEL_SPEC_FORMAT, "trained-model spec", remedy)
@@ -310,7 +374,51 @@ class ResultStore:
                 f"{str(obj.get('hash'))[:12]}..., expected {model_hash[:12]}...); give the "
                 f"diagnoser another label, or {remedy}"
             )
+        self._check_model_config(d, obj.get("spec"), remedy)
         return True
+
+    def _check_model_config(self, d: Path, spec: Any, remedy: str) -> None:
+        """The saved ``config.json`` must resolve to the hyperparameters of the spec the hash
+        in ``spec.json`` was made from: an edited ``config.json`` keeps that hash.
+
+        Only for models of a sweep (a spec with ``name`` and ``params``); the comparison is of
+        :meth:`~diagnosers.contract.DiagnoserContract.result_params`, as the hash is.
+        """
+        if not (isinstance(spec, dict) and "name" in spec and "params" in spec):
+            return
+        cfg_path = d / "config.json"
+        if not cfg_path.exists():
+            raise StoreError(f"{d} has no config.json: the trained model is incomplete; {remedy}")
+        cfg = _read_json(cfg_path, "trained model's config", remedy)
+        if cfg.get("diagnoser") != spec["name"]:
+            raise StoreError(
+                f"{cfg_path}: diagnoser {cfg.get('diagnoser')!r} is not the {spec['name']!r} "
+                f"this model was trained as; the file was edited; {remedy}"
+            )
+        saved = _resolved_params(cfg["diagnoser"], cfg.get("params"), cfg_path, remedy)
+        if saved != _resolved_params(spec["name"], spec["params"], d / "spec.json", remedy):
+            raise StoreError(
+                f"{cfg_path}: the hyperparameters {cfg.get('params')!r} are not those this model "
+                f"was trained with ({spec['params']!r} in spec.json); the file was edited; "
+                f"{remedy}"
+            )
+
+    def _confined(self, path: Path) -> Path:
+        """``path`` (below :attr:`root`) if no component below the root is a symbolic link and
+        it resolves inside the root; raise :class:`StoreError` naming the link otherwise."""
+        cur = self.root
+        for part in path.relative_to(self.root).parts:
+            cur = cur / part
+            if cur.is_symlink():
+                raise StoreError(
+                    f"{cur} is a symbolic link inside the store {self.root} (to "
+                    f"{os.readlink(cur)!r}); the store reads and writes only below its root: "
+                    "replace the link with a real directory or file"
+                )
+        root = self.root.resolve()
+        if not path.resolve().is_relative_to(root):
+            raise StoreError(f"{path} resolves outside the store root {root}; refusing it")
+        return path
 
     def write_model(
         self, label: str, model_hash: str, files: Mapping[str, bytes], spec: Mapping[str, Any]

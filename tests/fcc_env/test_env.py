@@ -187,36 +187,6 @@ def test_render_rgb_array():
     assert img.std() > 0
 
 
-def test_render_frame_shows_scenario_time_and_onset(monkeypatch):
-    import fcc_env.plotting as plotting
-
-    titles = []
-
-    def spy(*args, **kwargs):
-        fig = plotting.trend_figure(*args, **kwargs)
-        titles.append(fig.get_suptitle())
-        fig.canvas.draw()
-        return np.asarray(fig.canvas.buffer_rgba())[..., :3].copy()
-
-    monkeypatch.setattr(plotting, "trend_image", spy)
-    frames = {}
-    for scenario in ("nominal", "f1"):
-        env = gym.make("FCC-v0", scenario=scenario, fault_time=10, render_mode="rgb_array")
-        env.reset(seed=0)
-        for k in range(20):
-            env.step(np.zeros(2))
-            if k in (5, 19):
-                frames[scenario, k] = env.render()
-    assert titles == [
-        "FCC-v0, sample 6, t = 0.02 h\nscenario nominal, no fault",
-        "FCC-v0, sample 20, t = 0.06 h\nscenario nominal, no fault",
-        "FCC-v0, sample 6, t = 0.02 h\nscenario f1, no fault yet",
-        "FCC-v0, sample 20, t = 0.06 h\nscenario f1, fault since sample 10 (0.03 h)",
-    ]
-    assert not np.array_equal(frames["nominal", 19], frames["f1", 19])
-    assert not np.array_equal(frames["f1", 5], frames["f1", 19])
-
-
 def test_vector_env():
     envs = gym.make_vec(
         "FCC-v0", num_envs=2, vectorization_mode="sync", scenario="f2", fault_time=1

@@ -194,3 +194,25 @@ def test_unknown_table_suffix_is_refused(tmp_path, capsys):
     with pytest.raises(SystemExit):
         main(["--out", str(tmp_path / "x.xlsx"), "--samples", "20"])
     assert "x.xlsx" in capsys.readouterr().err
+
+
+def test_closed_loop_dataset_records_the_valve_and_the_set_points(tmp_path, capsys):
+    """``--closed-loop``: the columns FCC-closedloop-v0 observes, with roles ``manipulated``
+    and ``setpoint``, the env id and the regulatory layer in the sidecar; open-loop sidecars
+    have no ``regulatory`` field."""
+    path = tmp_path / "cl.csv"
+    argv = ["--closed-loop", "--scenario", "f1", "--fault-time", "60", "--seeds", "2,4"]
+    assert main([*argv, "--samples", "150", "--out", str(path)]) == 0
+    meta, cols = read_dataset(path)
+    assert meta["env_id"] == fcc_env.CLOSED_LOOP_ENV_ID
+    assert meta["roles"]["manipulated"] == ["u_F", "R_ar"]
+    assert meta["roles"]["setpoint"] == ["T_rx_sp", "T_rg1_sp"]
+    assert meta["columns"]["u_F"]["role"] == "manipulated" and meta["columns"]["u_F"]["unit"]
+    assert meta["plant"]["regulatory"]["T_rx_gain"] == fcc_env.RegulatoryLayer().T_rx_gain
+    batch = fcc_env.simulate_episodes([2, 4], 150, scenario="f1", fault_time=60, regulatory=True)
+    for name in ("T_rx", "u_F", "T_rx_sp", "T_rg1_sp"):
+        got = cols[name].reshape(2, 150)
+        want = batch.observations[:, :, batch.channels.index(name)]
+        np.testing.assert_allclose(got, want, rtol=1e-9)
+    open_meta, _ = read_dataset(write_dataset(tmp_path / "open.csv", n_samples=20))
+    assert "regulatory" not in open_meta["plant"] and "manipulated" not in open_meta["roles"]

@@ -15,6 +15,7 @@ import math
 
 import numpy as np
 import pytest
+from synthetic import heldout_rmse
 
 import fcc_env
 from evaluation import discover as d
@@ -22,16 +23,6 @@ from fcc_env import effects as fx
 from fcc_env.generate import write_dataset
 
 N = 4000
-
-
-def heldout_rmse(data: d.MeasuredData, train_fraction: float = 0.6) -> dict[str, float]:
-    m = d.PhysicsModel()
-    n_train = round(train_fraction * data.n_samples)
-    m.prepare(data, n_train)
-    P = m.predict(data, [], np.zeros((1, 0)), data.n_samples)[0]
-    E = data.stack(m.output_channels) - P
-    rmse = np.sqrt(np.mean(E[:, n_train:] ** 2, axis=(0, 1)))
-    return dict(zip(m.output_channels, rmse, strict=True))
 
 
 # (effect text, truth parameter name, true value, relative tolerance, seed)
