@@ -15,6 +15,14 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from diagnosers.episode_checks import (
+    check_channels,
+    check_labels,
+    frame_values,
+    read_dataset_episodes,
+    real_values,
+)
+
 if TYPE_CHECKING:  # annotations only: building episodes needs no simulator import
     from fcc_env.simulation import BatchResult
 
@@ -37,6 +45,10 @@ class Episode:
             for an isolating diagnoser's faulty training records, the fault class.
         seed: seed the episode was simulated with, if any.
         y_clean: optional noise-free measurements (simulation only; for plots and diagnostics).
+
+    Construction refuses what would be read wrongly rather than convert it: no samples, repeated
+    channel names, boolean, time or complex values, text that is not a number, NaN or inf, an
+    onset or seed that is not an integer; the message names the channel, row and value.
     """
 
     y: np.ndarray
@@ -48,31 +60,23 @@ class Episode:
     y_clean: np.ndarray | None = field(default=None, repr=False)
 
     def __post_init__(self) -> None:
-        ch = self.channels
-        if (
-            not isinstance(ch, Sequence)
-            or isinstance(ch, str | bytes)
-            or not all(isinstance(c, str) for c in ch)
-        ):
-            raise ValueError(
-                f"Episode channels={ch!r} is outside the allowed range: a sequence of channel "
-                "names, e.g. ('T_rx', 'T_rg1'), not one string"
-            )
-        object.__setattr__(self, "channels", tuple(ch))
-        y = np.asarray(self.y, dtype=np.float64)
-        if y.ndim != 2 or y.shape[1] != len(self.channels):
-            raise ValueError(
-                f"Episode.y must have shape (n_samples, {len(self.channels)}) to match channels "
-                f"{self.channels}; got {y.shape}"
-            )
-        if not np.isfinite(y).all():
-            raise ValueError("Episode.y contains NaN or inf; clean or drop those samples first")
-        if not (np.isfinite(self.sample_time_s) and self.sample_time_s > 0):
-            raise ValueError(f"sample_time_s must be a positive number, got {self.sample_time_s!r}")
-        if self.fault_onset is not None and not 0 <= self.fault_onset < y.shape[0]:
-            raise ValueError(
-                f"fault_onset={self.fault_onset} outside the episode [0, {y.shape[0]})"
-            )
+        # every constructor of data ends here, so these checks are the one gate (issue 32)
+        channels = check_channels(self.channels)
+        object.__setattr__(self, "channels", channels)
+        y = real_values(self.y, channels)
+        check_labels(
+            y.shape[0],
+            sample_time_s=self.sample_time_s,
+            fault_onset=self.fault_onset,
+            seed=self.seed,
+            scenario=self.scenario,
+        )
+        if self.y_clean is not None:
+            clean = real_values(self.y_clean, channels, name="y_clean")
+            if clean.shape != y.shape:
+                raise ValueError(
+                    f"Episode y_clean has shape {clean.shape}; allowed: the shape of y, {y.shape}"
+                )
         object.__setattr__(self, "y", y)
 
     @property
@@ -141,57 +145,14 @@ class Episode:
         when all present, become ``y_clean``. Scenario, seed, fault onset and ``terminated_at``
         come from the sidecar's per-episode lists when it has them (each episode is cut at its
         ``terminated_at``, as in :meth:`from_batch`).
+
+        The file is checked as it is read (:func:`diagnosers.episode_checks.read_dataset_episodes`):
+        rows that disagree with the sidecar or with each other (a ``time_s`` step other than
+        ``sample_time_s``, missing or reversed rows, two seeds under one ``episode``), sidecar
+        entries of the wrong form and values that are not finite numbers raise ``ValueError``
+        naming the file, the column, the data row and what is allowed.
         """
-        from fcc_env.generate import read_dataset  # local: diagnosers works without the env
-
-        meta, cols = read_dataset(path)
-        roles = meta.get("roles") if isinstance(meta.get("roles"), dict) else {}
-        channels = tuple(roles.get("measured") or ())
-        missing = [c for c in channels if c not in cols]
-        if not channels or missing:
-            raise ValueError(
-                f"dataset {str(path)!r}: the sidecar's roles.measured must name columns of the "
-                f"CSV; got {list(channels)}, missing {missing}, columns {sorted(cols)}"
-            )
-        dt = meta.get("sample_time_s")
-        if dt is None:
-            raise ValueError(
-                f"dataset {str(path)!r}: the sidecar has no sample_time_s; add it (in seconds)"
-            )
-        key = next((k for k in ("episode", "seed") if k in cols), None)
-        n_rows = len(cols[channels[0]])
-        ids = np.asarray(cols[key]) if key is not None else np.zeros(n_rows)
-        # episodes in file order (np.unique would sort them)
-        order = list(dict.fromkeys(ids.tolist()))
-        clean = [f"clean_{c}" for c in channels]
-        has_clean = all(c in cols for c in clean)
-
-        def per_episode(field_name: str, i: int) -> Any:
-            values = meta.get(field_name)
-            return values[i] if isinstance(values, list) and i < len(values) else None
-
-        out = []
-        for i, ep_id in enumerate(order):
-            rows = np.flatnonzero(ids == ep_id)
-            term = per_episode("terminated_at", i)
-            n_used = len(rows) if term is None else min(int(term), len(rows))
-            rows = rows[:n_used]
-            onset = per_episode("fault_onsets", i)
-            seed = per_episode("seeds", i)
-            if seed is None and "seed" in cols:
-                seed = cols["seed"][rows[0]]
-            out.append(
-                cls(
-                    y=np.column_stack([cols[c][rows] for c in channels]),
-                    channels=channels,
-                    sample_time_s=float(dt),
-                    fault_onset=None if onset is None or onset >= n_used else int(onset),
-                    scenario=str(per_episode("scenarios", i) or meta.get("scenario", "unknown")),
-                    seed=None if seed is None else int(seed),
-                    y_clean=np.column_stack([cols[c][rows] for c in clean]) if has_clean else None,
-                )
-            )
-        return out
+        return [cls(**fields) for fields in read_dataset_episodes(path)]
 
     @classmethod
     def from_frame(
@@ -221,16 +182,7 @@ class Episode:
             ) from e
         if not isinstance(df, pd.DataFrame):
             raise TypeError(f"df must be a pandas DataFrame, got {type(df).__name__}")
-        names = tuple(str(c) for c in df.columns) if channels is None else tuple(channels)
-        missing = [c for c in names if c not in df.columns]
-        if missing:
-            raise ValueError(
-                f"channels {missing} are not columns of the frame. Columns: {list(df.columns)}"
-            )
-        try:
-            y = df.loc[:, list(names)].to_numpy(dtype=np.float64)
-        except (TypeError, ValueError) as e:
-            raise ValueError(f"channels {list(names)} must hold numbers: {e}") from e
+        names, y = frame_values(df, channels)
         return cls(
             y=y,
             channels=names,

@@ -165,7 +165,7 @@ def read_csv_columns(
     """The one CSV reader: ``(names, data)`` of the numeric ``columns`` of a CSV file.
 
     Args:
-        path: the file.
+        path: the file (UTF-8 text).
         columns: the columns wanted, by name, in this order (``None``: all of them).
         column_names: names of all columns of a headerless file, in order; ``None`` reads them
             from the first row.
@@ -175,19 +175,17 @@ def read_csv_columns(
         The names read and a float array ``(n_rows, n_columns)``.
 
     Raises:
-        ValueError: a missing or empty file, an unknown column (the message lists the available
-            ones) or a field that is not a number; each message names the file.
+        ValueError: a missing or empty file, bytes that are not UTF-8 (the message names the
+            line), an unknown column (the message lists the available ones), a wanted column
+            named twice, a short row or a field that is not a number (the message names the
+            column, the data row and the line); each message names the file.
     """
     p = Path(path)
     if not p.is_file():
         raise ValueError(f"{p} does not exist or is not a file")
     skip = 0
     if column_names is None:
-        with p.open(newline="") as fh:
-            header = next(csv.reader(fh, delimiter=delimiter), None)
-        if header is None:
-            raise ValueError(f"{p} is empty; expected a header row and data")
-        names = [h.strip() for h in header]
+        names = read_header(p, delimiter=delimiter)
         skip = 1
     else:
         names = [str(c) for c in column_names]
@@ -195,16 +193,85 @@ def read_csv_columns(
     missing = [c for c in wanted if c not in names]
     if missing:
         raise ValueError(f"{p}: unknown column(s) {missing}. Available: {names}")
+    _refuse_repeated(p, names, wanted)
+    usecols = [names.index(c) for c in wanted]
     try:
         data = np.loadtxt(
-            p, delimiter=delimiter, skiprows=skip, usecols=[names.index(c) for c in wanted], ndmin=2
+            p, delimiter=delimiter, skiprows=skip, usecols=usecols, ndmin=2, encoding="utf-8"
         )
+    except UnicodeDecodeError as e:
+        raise _not_utf8(p) from e
     except ValueError as e:
-        raise ValueError(
+        # loadtxt names neither the column nor the line; find the field again to say both
+        located = _bad_field(p, names, usecols, skip, delimiter)
+        raise located or ValueError(
             f"{p}: could not read numeric data ({e}); check the delimiter, the header and for "
             "text or empty fields"
         ) from e
     return names, data
+
+
+def _refuse_repeated(p: Path, names: Sequence[str], wanted: Sequence[str]) -> None:
+    """A wanted column named twice would be read from its first copy only: refuse it."""
+    twice = sorted({c for c in wanted if list(names).count(c) > 1})
+    if twice:
+        raise ValueError(
+            f"{p}: column name(s) {twice} appear more than once among the columns {list(names)}; "
+            "allowed: each name once (rename the copies)"
+        )
+
+
+def _not_utf8(p: Path) -> ValueError:
+    """The error for a file that is not UTF-8 text, naming the first bad line and byte."""
+    with p.open("rb") as fh:
+        for line, raw in enumerate(fh, 1):
+            try:
+                raw.decode("utf-8")
+            except UnicodeDecodeError as e:
+                return ValueError(
+                    f"{p}: line {line} is not UTF-8 text (byte {raw[e.start : e.start + 1]!r} at "
+                    f"byte {e.start + 1} of the line); allowed: UTF-8 (or ASCII) text, so save "
+                    "the file as UTF-8"
+                )
+    return ValueError(f"{p} is not UTF-8 text; allowed: UTF-8 (or ASCII) text")
+
+
+def _is_number(field: str) -> bool:
+    if "_" in field:  # float() takes '1_000'; loadtxt does not
+        return False
+    try:
+        float(field)
+    except ValueError:
+        return False
+    return True
+
+
+def _bad_field(
+    p: Path, names: Sequence[str], usecols: Sequence[int], skip: int, delimiter: str
+) -> ValueError | None:
+    """The first short row or non-numeric wanted field of a CSV, as an error naming the column,
+    the data row (counted from 0, as in the array read) and the line; ``None`` if none found."""
+    with p.open(newline="", encoding="utf-8") as fh:
+        reader = csv.reader(fh, delimiter=delimiter)
+        row = -1
+        for i, fields in enumerate(reader):
+            if i < skip or not fields:  # loadtxt skips blank lines too
+                continue
+            row += 1
+            where = f"data row {row} (line {reader.line_num})"
+            for j in usecols:
+                if j >= len(fields):
+                    return ValueError(
+                        f"{p}: {where} has {len(fields)} fields, but column {names[j]!r} is field "
+                        f"{j + 1}; allowed: {len(names)} fields per line, as many as the columns"
+                    )
+                if not _is_number(fields[j]):
+                    return ValueError(
+                        f"{p}: could not read numeric data: column {names[j]!r}, {where}: "
+                        f"{fields[j]!r} is not a number; allowed: a decimal number such as "
+                        "12.5, -3e2 or nan"
+                    )
+    return None
 
 
 #: File name endings read as Parquet.
@@ -237,13 +304,17 @@ def read_parquet_columns(
         raise ValueError(f"{p} does not exist or is not a file")
     pq = require_pyarrow(p)
     try:
-        names = list(pq.read_schema(p).names)
+        schema = pq.read_schema(p)
     except Exception as e:  # pyarrow raises its own error types for a damaged file
         raise ValueError(f"{p}: not a readable Parquet file ({e})") from e
+    names = list(schema.names)
     wanted = names if columns is None else [str(c) for c in columns]
     missing = [c for c in wanted if c not in names]
     if missing:
         raise ValueError(f"{p}: unknown column(s) {missing}. Available: {names}")
+    _refuse_repeated(p, names, wanted)
+    for c in wanted:
+        _refuse_non_numeric(p, c, schema.field(c).type)
     table = pq.read_table(p, columns=wanted)
     try:
         cols = [table.column(c).to_numpy(zero_copy_only=False).astype(np.float64) for c in wanted]
@@ -251,6 +322,25 @@ def read_parquet_columns(
         raise ValueError(f"{p}: could not read numeric data ({e})") from e
     data = np.column_stack(cols) if cols else np.empty((table.num_rows, 0))
     return names, data
+
+
+def _refuse_non_numeric(p: Path, column: str, arrow_type: Any) -> None:
+    """Booleans, times and text cast to floats without a word (True -> 1.0, a timestamp -> its
+    nanoseconds), so a column of them is refused, not converted."""
+    import pyarrow.types as pat
+
+    if pat.is_integer(arrow_type) or pat.is_floating(arrow_type) or pat.is_decimal(arrow_type):
+        return
+    if pat.is_boolean(arrow_type):
+        hint = "; store 0/1 integers if the flags are meant as numbers"
+    elif pat.is_temporal(arrow_type):
+        hint = "; store times as seconds (a number)"
+    else:
+        hint = ""
+    raise ValueError(
+        f"{p}: column {column!r} holds {arrow_type} values; allowed: integer or floating-point "
+        f"numbers{hint}"
+    )
 
 
 def read_header(path: str | os.PathLike, *, delimiter: str = ",") -> list[str]:
@@ -265,8 +355,11 @@ def read_header(path: str | os.PathLike, *, delimiter: str = ",") -> list[str]:
             raise
         except Exception as e:
             raise ValueError(f"{p}: not a readable Parquet file ({e})") from e
-    with p.open(newline="") as fh:
-        header = next(csv.reader(fh, delimiter=delimiter), None)
+    try:
+        with p.open(newline="", encoding="utf-8") as fh:
+            header = next(csv.reader(fh, delimiter=delimiter), None)
+    except UnicodeDecodeError as e:
+        raise _not_utf8(p) from e
     if header is None:
         raise ValueError(f"{p} is empty; expected a header row and data")
     return [h.strip() for h in header]

@@ -336,9 +336,14 @@ def read_sidecar(path: str | os.PathLike) -> dict[str, Any]:
     if not sidecar.is_file():
         raise ValueError(f"dataset {str(csv)!r} has no JSON sidecar {sidecar.name!r}")
     try:
-        meta = json.loads(sidecar.read_text())
+        meta = json.loads(sidecar.read_text(encoding="utf-8"))
     except json.JSONDecodeError as e:
         raise ValueError(f"sidecar {str(sidecar)!r} is not valid JSON: {e}") from e
+    except UnicodeDecodeError as e:
+        raise ValueError(
+            f"sidecar {str(sidecar)!r} is not UTF-8 text (byte {e.object[e.start : e.start + 1]!r}"
+            f" at byte {e.start + 1}); allowed: UTF-8 JSON, so save the file as UTF-8"
+        ) from e
     if not isinstance(meta, dict) or meta.get("format") != DATASET_FORMAT:
         got = meta.get("format") if isinstance(meta, dict) else meta
         raise ValueError(

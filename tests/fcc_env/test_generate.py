@@ -216,3 +216,20 @@ def test_closed_loop_dataset_records_the_valve_and_the_set_points(tmp_path, caps
         np.testing.assert_allclose(got, want, rtol=1e-9)
     open_meta, _ = read_dataset(write_dataset(tmp_path / "open.csv", n_samples=20))
     assert "regulatory" not in open_meta["plant"] and "manipulated" not in open_meta["roles"]
+
+
+def test_closed_loop_dataset_reads_back_as_the_env_observes(tmp_path):
+    """``Episode.from_dataset`` of a closed-loop file gives the 11 channels of
+    FCC-closedloop-v0 (Table 1, the valve command, the set points), as ``from_batch`` does."""
+    from diagnosers import Episode
+
+    path = write_dataset(
+        tmp_path / "cl.csv", seeds=[3], n_samples=80, scenario="f2", fault_time=40, regulatory=True
+    )
+    [ep] = Episode.from_dataset(path)
+    [want] = Episode.from_batch(
+        fcc_env.simulate_episodes([3], 80, scenario="f2", fault_time=40, regulatory=True)
+    )
+    assert ep.channels == want.channels == fcc_env.closed_loop.CLOSED_LOOP_CHANNELS
+    np.testing.assert_allclose(ep.y, want.y, rtol=1e-9)
+    assert ep.y_clean.shape == ep.y.shape and ep.fault_onset == 40
