@@ -7,10 +7,11 @@ True
 
 from diagnosers.conformance import ConformanceError, check_diagnoser
 from diagnosers.contract import NotFittedError
-from diagnosers.detection import UNKNOWN, Decision, Detection
+from diagnosers.detection import SCORE_THRESHOLD, UNKNOWN, Decision, Detection
 from diagnosers.diagnoser import Diagnoser
 from diagnosers.episode import Episode
 from diagnosers.registry import available, diagnoser_class, import_modules, make, register
+from diagnosers.search import grid_search  # scikit-learn is imported when it runs
 from fcc_env import __version__  # the project's one version
 
 # isort: split
@@ -24,6 +25,7 @@ from diagnosers import (
 )
 
 __all__ = [
+    "SCORE_THRESHOLD",
     "UNKNOWN",
     "ConformanceError",
     "Decision",
@@ -35,6 +37,7 @@ __all__ = [
     "available",
     "check_diagnoser",
     "diagnoser_class",
+    "grid_search",
     "import_modules",
     "make",
     "register",

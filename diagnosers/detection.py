@@ -2,22 +2,96 @@
 
 An isolating diagnoser also names the fault class it diagnoses: one of its trained classes,
 :data:`UNKNOWN`, or :data:`NO_DIAGNOSIS` while not alarmed.
+
+Both carry a normalised ``score`` (:func:`normalised_score`): the largest exceedance of any
+signal over its limits, scaled so that a limit sits at :data:`SCORE_THRESHOLD` (1). ``score >
+1`` marks the samples where some signal is outside ``[lower, upper]`` (the raw limit test);
+``alarm`` is the diagnoser's decision, which equals that test for every registered diagnoser at
+its defaults, and is a filtered subset of it where an alarm filter is set (``lrgf-glr``'s
+``on_delay`` > 1: an alarm only after that many exceedances in a row).
+
+>>> import numpy as np
+>>> det = Detection(
+...     alarm=np.array([False, True, False]),
+...     signal=np.array([[0.5, 1.0], [3.0, 2.0], [-1.0, 0.0]]),
+...     lower=np.array([[-1.0, -np.inf], [-1.0, -np.inf], [-1.0, -np.inf]]),
+...     upper=np.array([[1.0, 4.0], [1.0, 4.0], [1.0, 4.0]]),
+...     residual=np.zeros((3, 2)),
+...     signal_names=("two-sided", "upper limit"),
+... )
+>>> det.score.tolist()
+[0.5, 3.0, 1.0]
+>>> bool(np.array_equal(det.alarm, det.score > det.threshold))
+True
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
-__all__ = ["NO_DIAGNOSIS", "UNKNOWN", "Decision", "Detection"]
+__all__ = [
+    "NO_DIAGNOSIS",
+    "SCORE_THRESHOLD",
+    "UNKNOWN",
+    "Decision",
+    "Detection",
+    "exceedance",
+    "normalised_score",
+]
 
 #: The diagnosis of an isolating diagnoser that is alarmed but fits none of its fault classes.
 UNKNOWN = "unknown"
 #: The diagnosis while not alarmed (no diagnosis).
 NO_DIAGNOSIS = ""
+#: The normalised score of a signal on its limit: ``score > SCORE_THRESHOLD`` is "outside".
+SCORE_THRESHOLD = 1.0
+# the smallest float above the threshold: an exceedance that rounding brought down to 1
+_JUST_OVER = float(np.nextafter(SCORE_THRESHOLD, np.inf))
+
+
+def exceedance(signal: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
+    """Each signal's normalised exceedance of its limits (same shape, float64), 1 on a limit.
+
+    Per entry, with ``s`` the signal and ``l``/``u`` its limits:
+
+    * both finite (a band): ``|2(s − m)/(u − l)|``, ``m = (l + u)/2``: 0 at the band's centre,
+      1 on either edge (a band of zero width: 1 on it, ``inf`` off it);
+    * only ``u`` finite (an upper limit, e.g. T² ≤ h): ``s/u`` if ``u > 0``, ``2 − s/u`` if
+      ``u < 0`` (both ``1 + (s − u)/|u|``), ``1 + s`` if ``u = 0`` (signal units);
+    * only ``l`` finite (a lower limit): ``s/l`` if ``l < 0``, ``2 − s/l`` if ``l > 0``,
+      ``1 − s`` if ``l = 0``;
+    * neither (no limit, e.g. a detector's silent warm-up): 0.
+
+    A one-sided score is negative where the signal is on the far side of zero. The exact
+    limit test decides the side of 1 where rounding could blur it: an entry is above 1 if and
+    only if ``s < l or s > u``.
+    """
+    s, lo, hi = np.broadcast_arrays(
+        *(np.asarray(a, dtype=np.float64) for a in (signal, lower, upper))
+    )
+    has_lo, has_hi = np.isfinite(lo), np.isfinite(hi)
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        band = np.abs(2.0 * (s - (lo + hi) / 2.0) / (hi - lo))
+        above = np.where(hi > 0, s / hi, np.where(hi < 0, 2.0 - s / hi, 1.0 + s))
+        below = np.where(lo < 0, s / lo, np.where(lo > 0, 2.0 - s / lo, 1.0 - s))
+    ratio = np.select([has_lo & has_hi, has_hi, has_lo], [band, above, below], default=0.0)
+    outside = (s < lo) | (s > hi)
+    # fmin: a zero-width band's 0/0 on its edge is on the limit (1), not NaN
+    return np.where(outside, np.maximum(ratio, _JUST_OVER), np.fmin(ratio, SCORE_THRESHOLD))
+
+
+def normalised_score(signal: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> np.ndarray:
+    """The largest :func:`exceedance` over the signals (the last axis): ``(T, k) -> (T,)``,
+    ``(k,) -> ()``. Above :data:`SCORE_THRESHOLD` exactly where some signal is outside its
+    limits (``-inf`` with no signal at all)."""
+    e = exceedance(signal, lower, upper)
+    if e.shape[-1] == 0:
+        return np.full(e.shape[:-1], -np.inf)
+    return e.max(axis=-1)
 
 
 @dataclass(frozen=True)
@@ -42,6 +116,14 @@ class Decision:
     #: isolating diagnosers: a score per class of :attr:`Detection.class_names` (higher = fits
     #: better), ``None`` for a diagnoser that only detects
     class_scores: np.ndarray | None = None
+    #: the score on a limit (:data:`SCORE_THRESHOLD`)
+    threshold: ClassVar[float] = SCORE_THRESHOLD
+
+    @property
+    def score(self) -> float:
+        """The normalised score (:func:`normalised_score`): above :attr:`threshold` (1) exactly
+        when some signal is outside its limits."""
+        return float(normalised_score(self.signal, self.lower, self.upper))
 
 
 @dataclass(frozen=True)
@@ -51,6 +133,15 @@ class Detection:
     An isolating diagnoser also fills ``diagnosis`` (``(T,)`` str: a class of ``class_names``,
     :data:`UNKNOWN`, or ``""`` while not alarmed) and ``class_scores`` (``(T, C)``, one column
     per name of ``class_names``); a detector leaves them ``None`` and ``()``.
+
+    :attr:`score` ``(T,)`` is the normalised score (:func:`normalised_score`, computed from
+    ``signal``/``lower``/``upper``), and ``score > threshold`` (:data:`SCORE_THRESHOLD`, 1)
+    the raw limit test: some signal outside its limits. For every registered diagnoser at
+    its defaults ``alarm`` equals it sample for sample; an alarm filter makes ``alarm`` a
+    subset of it: ``lrgf-glr``'s ``on_delay`` (and its presets', and an isolator's around
+    such a detector) alarms only after ``on_delay`` raw exceedances in a row. An EWMA or
+    T² stage (``lrgf-mem``'s ``alarm_filter``) filters the *signal* instead, so its alarm is
+    the raw test of the filtered signal and equals ``score > 1``.
     """
 
     alarm: np.ndarray  # (T,) bool
@@ -62,6 +153,8 @@ class Detection:
     diagnosis: np.ndarray | None = None  # (T,) str, isolating diagnosers only
     class_scores: np.ndarray | None = None  # (T, C), isolating diagnosers only
     class_names: tuple[str, ...] = ()
+    #: the score on a limit (:data:`SCORE_THRESHOLD`): ``score > threshold`` is the raw test
+    threshold: ClassVar[float] = SCORE_THRESHOLD
 
     def __post_init__(self) -> None:
         n = len(self.alarm)
@@ -78,6 +171,12 @@ class Detection:
                     f"class_names {self.class_names}, got {cs.shape}"
                 )
             object.__setattr__(self, "class_scores", cs)
+
+    @property
+    def score(self) -> np.ndarray:
+        """The normalised score per sample ``(T,)`` (:func:`normalised_score`): above
+        :attr:`threshold` (1) exactly where some signal is outside its limits."""
+        return normalised_score(self.signal, self.lower, self.upper)
 
     @property
     def isolates(self) -> bool:

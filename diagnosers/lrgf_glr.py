@@ -126,8 +126,11 @@ class LRGFGLR(BankDetector):
 
     For the earliest detection on a plant like the training plants (it leads most tracks);
     ``lrgf-glr-adaptive`` is its preset for a plant that may differ from them. The bank's
-    hyperparameters are :class:`~diagnosers.bank_detector.BankDetector`'s (``n_hidden=None``,
-    ``progress=False`` here). The alarm stage
+    hyperparameters, ranges and units on :class:`~diagnosers.bank_detector.BankDetector`
+    (``n_hidden=None``, ``progress=False`` here), are ``relations``, ``order``, ``n_linear``,
+    ``steady_window``, ``mem_hidden``, ``mem_input_delays``, ``mem_output_delays``,
+    ``mem_output_activation``, ``mem_max_epochs``, ``mem_select``, ``method``, ``lr``,
+    ``max_epochs``, ``val_fraction``, ``band_alpha``, ``seed``, ``n_jobs``. The alarm stage
     (:class:`~diagnosers.directional_stage.DirectionalStage`, ``stage_``) owns
     ``false_alarm_target``; the optional parts are the fault directions
     (:class:`~diagnosers.fault_directions.FaultDirections`), the held baseline

@@ -106,6 +106,31 @@ class LRGFMEM(BankDetector):
             for T², the normal for one EWMA) scaled by the calibration's tail inflation at its
             0.99 quantile, because an empirical 0.998 quantile of a few autocorrelated
             episodes rests on one or two excursions.
+
+    Bank hyperparameters (each described in full on
+    :class:`~diagnosers.bank_detector.BankDetector`; defaults ``lrgf-mem``'s):
+
+    | hyperparameter | default | allowed values [unit] |
+    |---|---|---|
+    | ``relations`` | ``None``: three relations | ``[[output, [inputs...]], ...]`` in channel names |
+    | ``n_hidden`` | 5 | neurons per network in [1, 64], a list (one per relation), or ``None`` (by output) |
+    | ``order`` | 2 | IIR filter order of each neuron, [1, 8] |
+    | ``n_linear`` | 0 | linear (no tanh) neurons per network, [0, smallest network] |
+    | ``steady_window`` | 100 | silent start-up window, [1, 100000] samples |
+    | ``mem_hidden`` | 5 | hidden neurons of each NNARX error model, [1, 256] |
+    | ``mem_input_delays`` | 15 | error-model input delays, [1, 100] samples |
+    | ``mem_output_delays`` | 15 | error-model output delays, [1, 100] samples |
+    | ``mem_output_activation`` | ``"linear"`` | ``"linear"`` or ``"tanh"`` |
+    | ``mem_max_epochs`` | 200 | error-model training epochs, [1, 100000] |
+    | ``mem_select`` | ``"if_better"`` | ``"always"`` or ``"if_better"`` (keep where it lowers the error) |
+    | ``method`` | ``"adam"`` | the networks' optimiser, ``"adam"`` or ``"spsa"`` |
+    | ``lr`` | 0.03 | the networks' learning rate, (0, 1] |
+    | ``max_epochs`` | 3000 | the networks' training epochs, [1, 100000] |
+    | ``val_fraction`` | 0.25 | share of each training episode held out for early stopping, [0, 1) |
+    | ``band_alpha`` | 0.01 | two-sided level α of the band ``y_m + y_e ± t_α·v``, (0, 0.5) |
+    | ``seed`` | 0 | integer ≥ 0; relation ``j`` uses ``seed + 101 j`` |
+    | ``progress`` | ``None`` | tqdm bar: ``True``, ``False``, ``None`` (when interactive); execution only |
+    | ``n_jobs`` | ``None`` | training processes, an integer ≥ 1 or ``None`` (1); execution only |
     """
 
     DEFAULTS: ClassVar[dict[str, Any]] = {
