@@ -184,8 +184,12 @@ class TrackData:
         chose. ``record`` (``(T, 11)``) is the episode's noise-free observation (true
         inputs) or its observation (measured inputs: R_ar with 0.5 % noise, T_ar and T_fp
         with 0.3 °C; the valve command is exact in both). The feed rate and the coking factor,
-        which nobody measures, are the seed's program (the same in the healthy twin). Returns
-        ``(T, 8)``, the Table 1 channels.
+        which nobody measures, are the seed's program (the same in the healthy twin). So the
+        measured-input rows of a closed-loop track read one thing no detector may: the
+        program's feed-quality (coking-factor) drift. With the declared coking factor instead,
+        the perfect model's residual spread on T_rg1 is 1.29 °C against 0.36 °C
+        (``lab/closed_f3_limit.py``); a row at what the measured channels allow would estimate
+        the drift (an observer), which is not built. Returns ``(T, 8)``, the Table 1 channels.
         """
         plant = PlantConfig(regulatory=RegulatoryLayer())
         if record is None:
