@@ -31,6 +31,7 @@ Importing the package registers ``FCC-v0``:
 
 from gymnasium.envs.registration import WrapperSpec, register, registry
 
+from fcc_env.control_task import CONTROL_ENV_ID, EconomicReward
 from fcc_env.excitation import Excitation
 from fcc_env.integrator import integrate_step
 from fcc_env.params import (
@@ -82,12 +83,21 @@ if CLOSED_LOOP_ENV_ID not in registry:
         additional_wrappers=(_ONSET_CHECK,),
     )
 
+if CONTROL_ENV_ID not in registry:
+    register(
+        id=CONTROL_ENV_ID,
+        entry_point="fcc_env.control_task:FCCControlEnv",
+        max_episode_steps=MAX_EPISODE_STEPS,
+        additional_wrappers=(_ONSET_CHECK,),
+    )
+
 __version__ = "0.1.0"
 #: Bumped whenever the simulated numbers change (written into generated datasets).
 MODEL_VERSION = "fcc-model-2026.1"
 
 __all__ = [
     "CLOSED_LOOP_ENV_ID",
+    "CONTROL_ENV_ID",
     "DEFAULT_N_SAMPLES",
     "ENV_ID",
     "FAULTS",
@@ -100,6 +110,7 @@ __all__ = [
     "SCENARIOS",
     "STATE_NAMES",
     "BatchResult",
+    "EconomicReward",
     "Excitation",
     "FCCParams",
     "FaultProfile",

@@ -17,7 +17,13 @@ from fcc_env.closed_loop import ControlSystem
 from fcc_env.episode_setup import EpisodeStream, add_noise, setup_episode
 from fcc_env.params import NOMINAL_INPUTS
 from fcc_env.physics import AUX_NAMES
-from fcc_env.plant import AFTERBURN_WARNING_C, PlantConfig, plant_from_request, termination_reason
+from fcc_env.plant import (
+    AFTERBURN_WARNING_C,
+    PlantConfig,
+    afterburn_delta_C,
+    plant_from_request,
+    termination_reason,
+)
 from fcc_env.regulatory import SETPOINT_RANGES, RegulatoryLayer
 from fcc_env.render import WINDOW_SAMPLES, TrendRenderer
 from fcc_env.scenarios import (
@@ -342,7 +348,7 @@ class FCCEnv(gym.Env):
             "state": self._x.copy(),
             "inputs": self._u.copy(),
             "action_saturated": self._saturated,
-            "afterburn_warning": bool(self._x[9] - self._x[4] > AFTERBURN_WARNING_C),
+            "afterburn_warning": bool(afterburn_delta_C(self._x) > AFTERBURN_WARNING_C),
             "termination_reason": self._terminated_reason,
             **(self._control.info() if self.closed_loop else {}),
             **{name: float(v) for name, v in zip(AUX_NAMES, aux, strict=True)},

@@ -183,6 +183,14 @@ TERMINATION_REASONS: tuple[str | None, ...] = (
 
 
 @numba.njit(cache=True, nogil=True)
+def afterburn_delta_C(x: np.ndarray) -> float:
+    """The afterburn ΔT of state ``x``: stage-1 dilute phase minus stage-1 bed, T_d1 − T_rg1 [°C]
+    (spec §2.8: a warning above :data:`AFTERBURN_WARNING_C`, the end above
+    :data:`MAX_AFTERBURN_C`)."""
+    return x[9] - x[4]
+
+
+@numba.njit(cache=True, nogil=True)
 def envelope_code(x: np.ndarray) -> int:
     """The one envelope check (spec §2.8): index into :data:`TERMINATION_REASONS` of state ``x``.
 
@@ -195,7 +203,7 @@ def envelope_code(x: np.ndarray) -> int:
         return 2
     if x[4] < MIN_T_RG1_C:
         return 3
-    if x[9] - x[4] > MAX_AFTERBURN_C:
+    if afterburn_delta_C(x) > MAX_AFTERBURN_C:
         return 4
     return 0
 

@@ -1,0 +1,192 @@
+"""``FCC-control-v0``: the closed-loop plant as a control task with an economic reward.
+
+The agent is a supervisory layer: once per sample it moves the set points of the regulatory
+layer (the riser outlet temperature on the slide valve, the stage-1 bed temperature on the air;
+:class:`~fcc_env.regulatory.RegulatoryLayer`), exactly as on ``FCC-closedloop-v0`` (action ±1 =
+±15 °C on ``T_rx_sp``, ±20 °C on ``T_rg1_sp`` about the program's set points; a set point pushed
+out of its range is clipped and flagged in ``info["setpoint_clipped"]``). Every episode draws its
+fault (healthy, f1–f4; size and onset as ``scenario="random"`` draws them) unless the
+``scenario`` keyword fixes it. The observation is ``FCC-closedloop-v0``'s.
+
+The reward is the unit's economic margin over the sample, in US dollars, minus penalties for
+entering constraint regions and for a trip; every term is in ``info["reward_terms"]`` (same
+units, summing to the reward) so that a user can re-weight them. The terms, from model
+quantities (:data:`fcc_env.physics.AUX_NAMES` and the state):
+
+=============  ==========================================================================
+term           definition (per sample of ``dt`` seconds)
+=============  ==========================================================================
+conversion     ``+ F_feed·X·dt/1000 · conversion_usd_per_t``: feed converted to lighter
+               products (gasoline, LPG) is worth more than gas oil; the crack spread.
+coke           ``− coke_make·dt/1000 · coke_usd_per_t``: coke laid on the catalyst is feed
+               that leaves as flue gas, not product.
+air            ``− R_ar·dt/3600 · air_usd_per_t``: the combustion-air blower's power.
+afterburn      ``− max(0, T_d1 − T_rg1 − 40 °C)·dt/3600 · afterburn_usd_per_C_h``: above the
+               afterburn warning (spec §2.8) the dilute phase heats the cyclones; the episode
+               ends at 80 °C (a trip).
+regenerator    ``− [max(0, T_rg2 − regenerator_max_C) + max(0, regenerator_min_C − T_rg1)]
+               ·dt/3600 · regenerator_usd_per_C_h``: a stage-2 bed too hot ages the catalyst
+               and the internals; a stage-1 bed too cold burns incompletely (the envelope
+               ends the episode at 600 °C).
+well           ``− max(0, well_min_t − W_sp/1000)·dt/3600 · well_usd_per_t_h``: a catalyst
+               well near empty starves the slide valve (the envelope ends at 3 t).
+saturation     ``− dt/3600 · saturation_usd_per_h`` while a controller is at its actuator
+               limit: the loop has lost its authority.
+trip           ``− trip_usd`` once, on termination (any envelope exit): shutdown and restart.
+=============  ==========================================================================
+
+The prices are reconstructed orders of magnitude, not a refinery's: a crack spread of 60 USD/t,
+gas oil lost as coke at 400 USD/t, 2.4 USD per tonne of air (30 kWh/t at 0.08 USD/kWh), and
+penalties scaled to the margin (about 4,500 USD/h at the nominal point, 12.6 USD per 10-s
+sample): 10 °C of afterburn over its warning costs as much as the margin, a trip about two days
+of it. They are fields of :class:`EconomicReward` (pass ``economics=`` to ``gym.make``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from collections.abc import Mapping
+from dataclasses import dataclass
+from typing import Any, SupportsFloat
+
+import gymnasium as gym
+import numpy as np
+
+from fcc_common.validation import Real, check_params, from_fields
+from fcc_env.env import FCCEnv
+from fcc_env.plant import AFTERBURN_WARNING_C, afterburn_delta_C
+
+__all__ = ["CONTROL_ENV_ID", "REWARD_TERMS", "EconomicReward", "FCCControlEnv", "reward_terms"]
+
+#: The control task's registered id.
+CONTROL_ENV_ID = "FCC-control-v0"
+
+#: The reward's terms, in the order of :func:`reward_terms`.
+REWARD_TERMS: tuple[str, ...] = (
+    "conversion",
+    "coke",
+    "air",
+    "afterburn",
+    "regenerator",
+    "well",
+    "saturation",
+    "trip",
+)
+
+# state indices (spec §1): stage-1 bed, stage-2 bed, catalyst well
+_T_RG1, _T_RG2, _W_SP = 4, 7, 8
+# input indices (fcc_env.params.INPUT_NAMES): air, feed
+_R_AR, _F_FEED = 1, 4
+
+_PRICE = Real(0.0, 1e7, closed="both")
+_RANGES = {
+    "conversion_usd_per_t": _PRICE,
+    "coke_usd_per_t": _PRICE,
+    "air_usd_per_t": _PRICE,
+    "afterburn_usd_per_C_h": _PRICE,
+    "regenerator_usd_per_C_h": _PRICE,
+    "regenerator_max_C": Real(600.0, 900.0, unit="°C"),
+    "regenerator_min_C": Real(500.0, 700.0, unit="°C"),
+    "well_min_t": Real(0.0, 30.0, unit="t", why="the well holds 30 t at nominal"),
+    "well_usd_per_t_h": _PRICE,
+    "saturation_usd_per_h": _PRICE,
+    "trip_usd": _PRICE,
+}
+
+
+@dataclass(frozen=True)
+class EconomicReward:
+    """Prices and penalty weights of ``FCC-control-v0``'s reward (module doc: each term, its unit
+    and its reason). All are non-negative; set a weight to 0 to drop its term."""
+
+    conversion_usd_per_t: float = 60.0
+    coke_usd_per_t: float = 400.0
+    air_usd_per_t: float = 2.4
+    afterburn_usd_per_C_h: float = 450.0
+    regenerator_usd_per_C_h: float = 450.0
+    regenerator_max_C: float = 730.0
+    regenerator_min_C: float = 640.0
+    well_min_t: float = 7.5
+    well_usd_per_t_h: float = 1_000.0
+    saturation_usd_per_h: float = 2_000.0
+    trip_usd: float = 200_000.0
+
+    def __post_init__(self) -> None:
+        check_params(dataclasses.asdict(self), _RANGES)
+
+    @classmethod
+    def from_option(cls, value: EconomicReward | Mapping[str, Any] | None) -> EconomicReward:
+        """``None`` (the defaults), an instance, or a mapping of its fields."""
+        if value is None:
+            return cls()
+        if isinstance(value, cls):
+            return value
+        return from_fields(cls, value, "economics")
+
+
+def reward_terms(
+    info: Mapping[str, Any], terminated: bool, economics: EconomicReward, dt_s: float
+) -> dict[str, float]:
+    """The reward's terms (USD over one sample of ``dt_s`` seconds) from an env step's ``info``
+    (``X``, ``coke_make``, ``inputs``, ``state``, ``controller_saturated``): see the module doc.
+    Their sum is the reward."""
+    e = economics
+    x = np.asarray(info["state"], dtype=np.float64)
+    u = np.asarray(info["inputs"], dtype=np.float64)
+    hours = dt_s / 3600.0
+    too_hot = max(0.0, x[_T_RG2] - e.regenerator_max_C)
+    too_cold = max(0.0, e.regenerator_min_C - x[_T_RG1])
+    terms = {
+        "conversion": u[_F_FEED] * info["X"] * dt_s / 1000.0 * e.conversion_usd_per_t,
+        "coke": -info["coke_make"] * dt_s / 1000.0 * e.coke_usd_per_t,
+        "air": -u[_R_AR] * hours * e.air_usd_per_t,
+        "afterburn": -max(0.0, afterburn_delta_C(x) - AFTERBURN_WARNING_C)
+        * hours
+        * e.afterburn_usd_per_C_h,
+        "regenerator": -(too_hot + too_cold) * hours * e.regenerator_usd_per_C_h,
+        "well": -max(0.0, e.well_min_t - x[_W_SP] / 1000.0) * hours * e.well_usd_per_t_h,
+        "saturation": -hours * e.saturation_usd_per_h if info["controller_saturated"] else 0.0,
+        "trip": -e.trip_usd if terminated else 0.0,
+    }
+    return {name: float(v) for name, v in terms.items()}
+
+
+class FCCControlEnv(gym.Env):
+    """``FCC-closedloop-v0`` with the economic reward of :mod:`fcc_env.control_task`.
+
+    Keywords are ``FCC-closedloop-v0``'s (``scenario`` defaults to ``"random"``: healthy or a
+    fault per episode) plus ``economics`` (an :class:`EconomicReward` or a mapping of its
+    fields). ``info["reward_terms"]`` holds the terms of the step's reward. The plant is an
+    ``FCCEnv`` inside (``plant``); spaces, seeding and rendering are its own.
+    """
+
+    metadata = FCCEnv.metadata
+
+    def __init__(self, *, economics: Any = None, scenario: str = "random", **kwargs: Any) -> None:
+        self.economics = EconomicReward.from_option(economics)
+        self.plant = FCCEnv(scenario=scenario, regulatory=True, **kwargs)
+        self.observation_space = self.plant.observation_space
+        self.action_space = self.plant.action_space
+        self.render_mode = self.plant.render_mode
+        self._dt_s = float(self.plant.config.sample_time_s)
+
+    def reset(
+        self, *, seed: int | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[np.ndarray, dict[str, Any]]:
+        super().reset(seed=seed)
+        obs, info = self.plant.reset(seed=seed, options=options)
+        info["reward_terms"] = dict.fromkeys(REWARD_TERMS, 0.0)
+        return obs, info
+
+    def step(self, action: Any) -> tuple[np.ndarray, SupportsFloat, bool, bool, dict[str, Any]]:
+        obs, _, terminated, truncated, info = self.plant.step(action)
+        terms = reward_terms(info, terminated, self.economics, self._dt_s)
+        info["reward_terms"] = terms
+        return obs, math.fsum(terms.values()), terminated, truncated, info
+
+    def render(self) -> np.ndarray | None:
+        return self.plant.render()
+
+    def close(self) -> None:
+        self.plant.close()
