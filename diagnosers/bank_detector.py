@@ -319,7 +319,7 @@ class BankDetector(Diagnoser):
         lower, upper = band(centre, 0.0, self.v_, self.band_alpha)
         lower[: self.steady_window], upper[: self.steady_window] = -np.inf, np.inf  # warm-up
         alarm = np.any((y_out < lower) | (y_out > upper), axis=1)
-        names = tuple(f"{o} [°C]" for o, _ in self._relations())
+        names = tuple(o for o, _ in self._relations())  # units: the episode's, in figures
         return Detection(alarm, y_out, lower, upper, y_out - centre, names)
 
     # ---- persistence ---------------------------------------------------------------------------

@@ -22,6 +22,7 @@ from diagnosers.episode_checks import (
     read_dataset_episodes,
     real_values,
 )
+from diagnosers.episode_units import check_units
 
 if TYPE_CHECKING:  # annotations only: building episodes needs no simulator import
     from fcc_env.simulation import BatchResult
@@ -45,6 +46,9 @@ class Episode:
             for an isolating diagnoser's faulty training records, the fault class.
         seed: seed the episode was simulated with, if any.
         y_clean: optional noise-free measurements (simulation only; for plots and diagnostics).
+        units: the unit of each channel (``""`` where the data do not state it), or ``None``
+            when no units were recorded. Presentation only: figures and tables label values
+            with them; no diagnoser reads them.
 
     Construction refuses what would be read wrongly rather than convert it: no samples, repeated
     channel names, boolean, time or complex values, text that is not a number, NaN or inf, an
@@ -58,11 +62,13 @@ class Episode:
     scenario: str = "unknown"
     seed: int | None = None
     y_clean: np.ndarray | None = field(default=None, repr=False)
+    units: tuple[str, ...] | None = None
 
     def __post_init__(self) -> None:
         # every constructor of data ends here, so these checks are the one gate (issue 32)
         channels = check_channels(self.channels)
         object.__setattr__(self, "channels", channels)
+        object.__setattr__(self, "units", check_units(self.units, channels))
         y = real_values(self.y, channels)
         check_labels(
             y.shape[0],
@@ -82,6 +88,14 @@ class Episode:
     @property
     def n_samples(self) -> int:
         return int(self.y.shape[0])
+
+    @property
+    def channel_units(self) -> dict[str, str]:
+        """``{channel: unit}`` for every channel, ``""`` where the unit is unknown (empty when
+        no units were recorded)."""
+        if self.units is None:
+            return {}
+        return dict(zip(self.channels, self.units, strict=True))
 
     def channel(self, name: str) -> np.ndarray:
         """Column of ``y`` named ``name``, shape ``(n_samples,)``."""
@@ -109,7 +123,9 @@ class Episode:
         >>> ep.scenario, ep.seed, ep.fault_onset, det.detect(ep).alarm.shape
         ('f1', 0, 150, (300,))
         """
-        from fcc_env.params import MEASUREMENT_NAMES  # local: diagnosers works without the env
+        # local: diagnosers works without the env
+        from fcc_env.closed_loop import CHANNEL_UNITS
+        from fcc_env.params import MEASUREMENT_NAMES
 
         obs = np.asarray(batch.observations)
         if obs.ndim != 3:
@@ -117,6 +133,8 @@ class Episode:
                 f"batch.observations must have shape (n_episodes, n_samples, n_channels); "
                 f"got {obs.shape}"
             )
+        channels = tuple(getattr(batch, "channels", MEASUREMENT_NAMES))
+        units = tuple(CHANNEL_UNITS.get(c, "") for c in channels)
         out = []
         for b in range(obs.shape[0]):
             term = int(batch.terminated_at[b])
@@ -125,12 +143,13 @@ class Episode:
             out.append(
                 cls(
                     y=np.asarray(obs[b, :n_used], dtype=np.float64),
-                    channels=tuple(getattr(batch, "channels", MEASUREMENT_NAMES)),
+                    channels=channels,
                     sample_time_s=float(batch.sample_time_s),
                     fault_onset=None if onset is None or onset >= n_used else int(onset),
                     scenario=str(batch.scenarios[b]),
                     seed=int(batch.seeds[b]),
                     y_clean=np.asarray(batch.y_clean[b, :n_used], dtype=np.float64),
+                    units=units,
                 )
             )
         return out
@@ -144,7 +163,7 @@ class Episode:
         file order. Channels are the sidecar's ``measured`` columns; ``clean_<channel>`` columns,
         when all present, become ``y_clean``. Scenario, seed, fault onset and ``terminated_at``
         come from the sidecar's per-episode lists when it has them (each episode is cut at its
-        ``terminated_at``, as in :meth:`from_batch`).
+        ``terminated_at``, as in :meth:`from_batch`); units from its ``columns[name]["unit"]``.
 
         The file is checked as it is read (:func:`diagnosers.episode_checks.read_dataset_episodes`):
         rows that disagree with the sidecar or with each other (a ``time_s`` step other than

@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from diagnosers.episode_units import sidecar_units
 from fcc_common.io import read_columns, read_header
 from fcc_common.validation import Constraint, Integer, Real, check, invalid
 
@@ -295,6 +296,7 @@ def read_dataset_episodes(path: str | os.PathLike) -> list[dict[str, Any]]:
     y_clean = real_values(table[:, n_ch:], tuple(clean), name="y_clean", **at) if clean else None
     if y_clean is not None and recorded:  # the recorded command and set points carry no noise
         y_clean = np.hstack([y_clean, y[:, len(measured) :]])
+    units = sidecar_units(meta, channels, side)
     out = []
     for i, ((ep_id, lo, hi), seed) in enumerate(zip(blocks, seeds, strict=True)):
         n = hi - lo
@@ -326,6 +328,7 @@ def read_dataset_episodes(path: str | os.PathLike) -> list[dict[str, Any]]:
                 "scenario": scen or scenario or "unknown",
                 "seed": s_seed if s_seed is not None else seed,
                 "y_clean": None if y_clean is None else np.ascontiguousarray(y_clean[rows]),
+                "units": units,
             }
         )
     return out

@@ -4,16 +4,23 @@ figures. Presentation only: every figure and table here is read from a finished 
 not already score.
 
 Every file is written atomically (:mod:`fcc_common.io`): a killed run never leaves half a table.
+
+What the data say of themselves is taken from the data source when the files are written, not
+from the store: the units of the channels (figure axes) and which fault onsets are assumed
+rather than stated (:func:`marked_results`), so results stored before either existed are
+labelled as the data are described now.
 """
 
 from __future__ import annotations
 
 import csv
+import dataclasses
 import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from diagnosers.episode import Episode
 from evaluation.reports.plots import detection_figure, save_png
 from evaluation.reports.tables import (
     SUMMARY_COLUMNS,
@@ -24,12 +31,20 @@ from evaluation.reports.tables import (
     summary_rows,
 )
 from evaluation.sweep.config import SweepConfig, SweepResults
-from evaluation.sweep.records import CellResult, unpack_detection
+from evaluation.sweep.records import CellResult, mark_assumed_onsets, unpack_detection
 from evaluation.sweep.store import ResultStore
 from fcc_common.io import atomic_open, atomic_write, atomic_write_json
 from fcc_env import MODEL_VERSION, __version__
 
-__all__ = ["figure_cells", "package_version", "write_csv", "write_figures", "write_outputs"]
+__all__ = [
+    "assumed_onsets",
+    "figure_cells",
+    "marked_results",
+    "package_version",
+    "write_csv",
+    "write_figures",
+    "write_outputs",
+]
 
 
 def package_version() -> str:
@@ -37,9 +52,33 @@ def package_version() -> str:
     return f"{__version__} ({MODEL_VERSION})"
 
 
+def assumed_onsets(data: object) -> tuple[str, ...]:
+    """The scenarios of a data source whose fault onset is assumed, not stated by the data
+    (:attr:`ExternalData.assumed_onsets`); none for a source that does not say (simulated
+    data know their onsets)."""
+    return tuple(getattr(data, "assumed_onsets", ()))
+
+
+def marked_results(results: SweepResults) -> SweepResults:
+    """``results`` with each record's ``onset_assumed`` as its data source says now
+    (:func:`~evaluation.sweep.records.mark_assumed_onsets`), so tables and files mark them."""
+    records = mark_assumed_onsets(results.records, assumed_onsets(results.config.data))
+    return dataclasses.replace(results, records=tuple(records))
+
+
+def _with_source_units(episode: Episode, data: object) -> Episode:
+    """``episode`` with the data source's channel units when it was stored without them."""
+    units = getattr(data, "channel_units", None)
+    channels = getattr(data, "channels", None)
+    if episode.units is not None or units is None or tuple(channels or ()) != episode.channels:
+        return episode
+    return dataclasses.replace(episode, units=tuple(units))
+
+
 def write_outputs(results: SweepResults, out: Path, *, figures: bool = True) -> list[Path]:
     """Write the table, CSVs, raw results and figures of ``results`` into ``out``."""
     out.mkdir(parents=True, exist_ok=True)
+    results = marked_results(results)
     summaries = results.summary()
     reference = reference_row(results.config)
     md = header_text(results) + markdown_table(summaries, reference=reference)
@@ -110,6 +149,7 @@ def write_figures(results: SweepResults, directory: Path) -> list[Path]:
     """
     cfg = results.config
     store = ResultStore.open(results.store_dir, cfg.data.store_key())
+    assumed = assumed_onsets(cfg.data)
     paths = []
     for sc, seed in figure_cells(cfg):
         for spec in cfg.diagnosers:
@@ -117,9 +157,14 @@ def write_figures(results: SweepResults, directory: Path) -> list[Path]:
             if arrays is None:
                 continue
             episode, onset, detection, bands = unpack_detection(arrays)
+            episode = _with_source_units(episode, cfg.data)
             onset = onset if episode.fault_onset is not None else None
             fig = detection_figure(
-                episode, detection, title=f"{spec.key} on {sc}, seed {seed}", fault_onset=onset
+                episode,
+                detection,
+                title=f"{spec.key} on {sc}, seed {seed}",
+                fault_onset=onset,
+                onset_assumed=sc in assumed,
             )
             paths.append(save_png(fig, directory / sc / f"{spec.key}.png"))
             if bands is not None:
@@ -131,6 +176,7 @@ def write_figures(results: SweepResults, directory: Path) -> list[Path]:
                     title=f"{spec.key} on {sc}, seed {seed}: model bands",
                     fault_onset=onset,
                     decisions=detection,
+                    onset_assumed=sc in assumed,
                 )
                 paths.append(save_png(fig, directory / sc / f"{spec.key}-bands.png"))
     return paths

@@ -7,8 +7,9 @@ Pure presentation: functions take an :class:`~diagnosers.episode.Episode` and th
 
 Each figure has one panel per monitored signal (at most ``max_signals``; with more, those that
 leave their band most often are shown, since they explain the alarms, and the subtitle says so)
-with the measured signal or statistic and its unit, its lower/upper limit (a band for two-sided
-checks), the fault onset as a dashed vertical line and the detector's alarms shaded. A last strip
+with the measured signal or statistic and its unit (the episode's own, :attr:`Episode.units`),
+its lower/upper limit (a band for two-sided checks), the fault onset as a dashed vertical line
+("fault onset (assumed)" when the data do not state it) and the detector's alarms shaded. A last strip
 shows the detector's decision; when the panels show another view of the same models (a
 :meth:`~diagnosers.contract.DiagnoserContract.band_view`), the view's own exits are a second,
 named row of the strip, never mistaken for alarms. One legend for the whole figure sits below
@@ -31,7 +32,15 @@ from diagnosers.detection import Detection
 from diagnosers.episode import Episode
 from fcc_env.params import MEASUREMENTS
 
-__all__ = ["axis_label", "confusion_figure", "detection_figure", "save_png", "select_signals"]
+__all__ = [
+    "ASSUMED_ONSET_LABEL",
+    "ONSET_LABEL",
+    "axis_label",
+    "confusion_figure",
+    "detection_figure",
+    "save_png",
+    "select_signals",
+]
 
 _ONSET_STYLE = {"color": "tab:red", "linestyle": "--", "linewidth": 1.2}
 _ALARM_COLOR = "tab:orange"
@@ -39,6 +48,11 @@ _EXIT_COLOR = "tab:purple"
 #: Strip labels: the detector's decision and, for a band view, the view's own exits.
 ALARM_LABEL = "detector alarm"
 EXIT_LABEL = "band exit (an output outside its band; not an alarm)"
+#: The onset line's label, and its label for an onset the data do not state.
+ONSET_LABEL = "fault onset"
+ASSUMED_ONSET_LABEL = "fault onset (assumed)"
+#: How units written in ASCII by data sets (e.g. the Santander columns.csv) are shown.
+_UNIT_SYMBOLS = {"degF": "°F", "degC": "°C", "degR": "°R"}
 
 _UNITS = {m.name: m.unit for m in MEASUREMENTS}
 _HAS_UNIT = re.compile(r"\s\[[^\]]*\]$")  # "T_rx [°C]": a name that already carries its unit
@@ -48,16 +62,24 @@ _EWMA_OF = re.compile(r"^ewma\[(.+)\]$")
 def axis_label(name: str, units: Mapping[str, str] | None = None) -> str:
     """The y-axis label of signal ``name``, with its unit in brackets.
 
-    Measurements take their unit from ``units`` or, failing that, from the FCC-v0 table
-    (:data:`fcc_env.params.MEASUREMENTS`); test statistics (``T2``, ``SPE``, EWMA of normalised
-    residuals) are dimensionless, ``[-]``; a name that ends in ``" [unit]"`` is kept; an unknown
-    channel (external data without units) is marked ``[?]`` rather than given a guessed unit.
+    ``units`` maps channels to the units their data state (``""``: unknown), e.g. an episode's
+    :attr:`~diagnosers.episode.Episode.channel_units`. A channel in ``units`` takes that unit,
+    or no bracket at all when it is unknown, never a guessed one; this also replaces a unit a
+    diagnoser wrote into the name (``"Tr [°C]"`` of a band view on data in °F). Only when
+    ``units`` is ``None`` (nothing known, e.g. figure arrays stored before episodes carried
+    units) do FCC-v0 channel names take the units of :data:`fcc_env.params.MEASUREMENTS`, and
+    a name that ends in ``" [unit]"`` is kept. Test statistics (``T2``, ``SPE``, EWMA of
+    normalised residuals) are dimensionless, ``[-]``; any other name is shown as it is.
     """
-    if _HAS_UNIT.search(name):
+    carried = _HAS_UNIT.search(name)
+    base = name[: carried.start()] if carried else name
+    if units is not None and base in units:  # the data's own word on this channel
+        unit = _UNIT_SYMBOLS.get(units[base].strip(), units[base].strip())
+        return f"{base} [{unit}]" if unit else base
+    if carried:
         return name
-    unit = (units or {}).get(name, _UNITS.get(name))
-    if unit is not None:
-        return f"{name} [{unit}]"
+    if units is None and name in _UNITS:
+        return f"{name} [{_UNITS[name]}]"
     if name == "T2":
         return "T² [-]"
     if name == "SPE":
@@ -67,7 +89,27 @@ def axis_label(name: str, units: Mapping[str, str] | None = None) -> str:
     m = _EWMA_OF.match(name)
     if m:
         return f"EWMA of {m.group(1)} residual [-]"
-    return f"{name} [?]"
+    return name
+
+
+def _panel_units(
+    episode: Episode, det: Detection, j: int, units: Mapping[str, str] | None
+) -> Mapping[str, str] | None:
+    """The units that label panel ``j``: ``units`` (the caller's word) and, when the panel
+    draws a channel's own values, that channel's unit from the episode.
+
+    The episode's unit goes by the data, not by the name alone, so a statistic that shares a
+    channel's name (Hotelling's ``T2`` on data with a temperature ``T2``) is not given the
+    channel's unit. ``None`` when nothing is known (then :func:`axis_label` falls back).
+    """
+    own = episode.channel_units
+    if not own and not units:
+        return None
+    name = _HAS_UNIT.sub("", det.signal_names[j])
+    out = {}
+    if name in own and np.array_equal(det.signal[:, j], episode.channel(name), equal_nan=True):
+        out[name] = own[name]
+    return {**out, **(units or {})}
 
 
 def select_signals(det: Detection, max_signals: int) -> list[int]:
@@ -118,6 +160,7 @@ def detection_figure(
     fault_onset: int | None = None,
     decisions: Detection | None = None,
     units: Mapping[str, str] | None = None,
+    onset_assumed: bool = False,
 ) -> Figure:
     """Draw ``det`` over ``episode`` (see the module doc for the layout).
 
@@ -133,7 +176,10 @@ def detection_figure(
             ``alarm`` is shaded and is the strip's alarm row, while ``det.alarm`` (e.g. band
             exits) becomes a separate row named :data:`EXIT_LABEL`. ``None``: ``det`` is the
             detection.
-        units: units of channels not in the FCC-v0 table (e.g. external data), by name.
+        units: units by channel name, over the episode's own (:attr:`Episode.units`); e.g.
+            the data source's units for an episode stored without them.
+        onset_assumed: the onset is assumed, not stated by the data: its line is labelled
+            :data:`ASSUMED_ONSET_LABEL`.
     """
     if max_signals < 1:
         raise ValueError(f"max_signals={max_signals!r} must be >= 1")
@@ -144,6 +190,7 @@ def detection_figure(
     alarm = det.alarm if decisions is None else decisions.alarm
     onset = episode.fault_onset if fault_onset is None else fault_onset
     idx = select_signals(det, max_signals)
+    onset_label = ASSUMED_ONSET_LABEL if onset_assumed else ONSET_LABEL
     t = np.arange(n)
     fig = Figure(figsize=(9.0, 2.2 * len(idx) + 2.2), layout="constrained")
     FigureCanvasAgg(fig)
@@ -190,8 +237,8 @@ def detection_figure(
             linewidth=0,
         )
         if onset is not None:
-            ax.axvline(onset, **_ONSET_STYLE, label="fault onset")
-        ax.set_ylabel(axis_label(det.signal_names[j], units))
+            ax.axvline(onset, **_ONSET_STYLE, label=onset_label)
+        ax.set_ylabel(axis_label(det.signal_names[j], _panel_units(episode, det, j, units)))
     hours = 3600.0 / episode.sample_time_s
     top = axes[0].secondary_xaxis("top", functions=(lambda k: k / hours, lambda h: h * hours))
     top.set_xlabel("time [h]")

@@ -14,6 +14,7 @@ from evaluation.sweep.config import SweepConfig, SweepResults
 from evaluation.sweep.records import CellSummary
 
 __all__ = [
+    "ASSUMED_MARK",
     "PAPER_TABLE2",
     "SUMMARY_COLUMNS",
     "data_label",
@@ -37,6 +38,11 @@ PAPER_TABLE2: dict[str, Any] = {
         "f4": (0.5294, 55.0),
     },
 }
+
+
+#: Marks the columns of a fault whose onset is assumed, not stated by the data (no Markdown
+#: meaning, unlike ``*``).
+ASSUMED_MARK = "†"
 
 
 # ---- formatting -------------------------------------------------------------------------
@@ -73,16 +79,20 @@ def markdown_table(
     Columns: for every healthy scenario ``r_fd``; for every fault scenario ``r_td`` and ``t_dt``
     [samples]. Rows are sorted by mean ``r_td`` over faults minus mean ``r_fd`` over healthy
     scenarios (higher is better). ``reference`` (e.g. :data:`PAPER_TABLE2`) adds a last row.
+    A fault whose onset is assumed (:attr:`CellSummary.onset_assumed`) has its columns marked
+    :data:`ASSUMED_MARK` (``table_legend(onset_assumed=True)`` says what it means).
     """
     scenarios: list[tuple[str, bool]] = []
     by_diag: dict[str, dict[str, CellSummary]] = {}
+    assumed = {c.scenario for c in summaries if c.onset_assumed}
     for c in summaries:
         if (c.scenario, c.faulty) not in scenarios:
             scenarios.append((c.scenario, c.faulty))
         by_diag.setdefault(c.diagnoser, {})[c.scenario] = c
     header = ["diagnoser"]
     for sc, faulty in scenarios:
-        header += [f"{sc} r_td", f"{sc} t_dt"] if faulty else [f"r_fd ({sc})"]
+        name = sc + (ASSUMED_MARK if sc in assumed else "")
+        header += [f"{name} r_td", f"{name} t_dt"] if faulty else [f"r_fd ({sc})"]
     lines = ["| " + " | ".join(header) + " |", "|" + "|".join(["---"] * len(header)) + "|"]
     order = sorted(by_diag, key=lambda d: -_score(list(by_diag[d].values())))
     for diag in order:
@@ -123,6 +133,7 @@ SUMMARY_COLUMNS = (
     "misses",
     "n_detected",
     "n_terminated",
+    "onset_assumed",
 )
 
 
@@ -169,19 +180,28 @@ def t_dt_text(sample_time_s: float | None) -> str:
     )
 
 
-def table_legend(sample_time_s: float | None = None) -> str:
+#: What :data:`ASSUMED_MARK` means, worded once for every legend.
+ASSUMED_TEXT = (
+    f"{ASSUMED_MARK}: the fault onset is assumed, not stated by the data; r_td and t_dt count "
+    "from the assumed onset."
+)
+
+
+def table_legend(sample_time_s: float | None = None, *, onset_assumed: bool = False) -> str:
     """What the table's columns, units and signs mean (one paragraph, Markdown).
 
     Args:
         sample_time_s: the data's sample time, to say what a sample of ``t_dt`` is in seconds
             (``None``: not said).
+        onset_assumed: some fault's onset is assumed (its columns are marked
+            :data:`ASSUMED_MARK`): the legend says what the mark means.
     """
     return (
         f"Legend: {R_FD_TEXT}; {R_TD_TEXT}; {t_dt_text(sample_time_s)}, '(k/n missed)': k of "
         "n faulty episodes never alarmed after the onset. a ± b: mean ± standard deviation over "
         "the test seeds (the spread of single episodes, not an interval for the mean); no ±: "
         "one seed, or the paper's published values; –: no value (e.g. no seed detected the "
-        "fault)."
+        "fault)." + (f" {ASSUMED_TEXT}" if onset_assumed else "")
     )
 
 
@@ -193,8 +213,9 @@ def header_text(results: SweepResults) -> str:
     """What the table is about: data, seeds, the legend (metrics, units, ±), ranking."""
     description = results.config.data.describe()
     lines = [f"# Fault-detection leaderboard: {description.label}", "", *description.lines]
+    assumed = any(r.onset_assumed for r in results.records)
     lines += [
-        table_legend(sample_time(results)),
+        table_legend(sample_time(results), onset_assumed=assumed),
         "Rows are sorted by mean r_td over faults minus r_fd on healthy episodes.",
         "",
     ]

@@ -116,7 +116,9 @@ def load_santander(
       set). **Healthy test:** ``NOC_stableFeedFlow`` (scored for false alarms, ``r_fd``).
       **Fault tests:** the five fault files, named by their stem without ``_outputs``.
     * **Onset:** :data:`SANTANDER_ONSET` (sample 120) for every fault file; see its comment for
-      the evidence. Pass ``onset=`` to study another convention.
+      the evidence. Pass ``onset=`` to study another convention. The data do not state their
+      onsets, so the fault files are marked ``onset_assumed`` (tables and figures say so).
+    * **Units:** as ``columns.csv`` states them (temperatures in degF, flows in lb/s, ...).
     * **Channels:** all 46 variables of ``columns.csv`` except the time column. Inputs are the
       fresh feed flow and temperatures set outside the unit (``F3``, ``Tatm``, ``T1``) and every
       controller valve position (unit ``%``); all other variables are outputs (or only
@@ -142,7 +144,10 @@ def load_santander(
             raise ValueError(f"unknown output(s) {unknown}. Available: {list(all_outputs)}")
         all_outputs = tuple(outputs)
     tests = [ExternalFile(_SANTANDER_HEALTHY_TEST, None, "NOC_stableFeedFlow")]
-    tests += [ExternalFile(f, onset, f.removesuffix("_outputs.csv")) for f in _SANTANDER_FAULTS]
+    tests += [
+        ExternalFile(f, onset, f.removesuffix("_outputs.csv"), onset_assumed=True)
+        for f in _SANTANDER_FAULTS
+    ]
     return ExternalData(
         directory=str(d),
         inputs=inputs,
@@ -151,6 +156,7 @@ def load_santander(
         test_files=tuple(tests),
         column_names=names,
         sample_time_s=60.0,
+        units={sym: unit for sym, unit in cols if unit},
     )
 
 
@@ -165,6 +171,7 @@ _MANIFEST_KEYS = {
     "delimiter",
     "diagnoser_params",
     "episode_column",
+    "units",
 }
 
 
@@ -177,13 +184,16 @@ def load_manifest(directory: str | Path) -> tuple[ExternalData, dict[str, dict[s
     The manifest is JSON (never executed) with the fields of :class:`ExternalData`::
 
         {"inputs": ["T2", "Frgc"], "outputs": ["Tr"], "train_files": ["healthy.csv"],
-         "test_files": [{"path": "leak.csv", "onset": 120, "name": "leak"},
+         "test_files": [{"path": "leak.csv", "onset": 120, "name": "leak", "onset_assumed": true},
                         {"path": "normal.csv", "onset": null}],
          "sample_time_s": 60, "column_names": null, "delimiter": ",", "episode_column": "episode",
+         "units": {"Tr": "degF", "T2": "degF", "Frgc": "lb/s"},
          "diagnoser_params": {"arx-band": {"output": "Tr", "inputs": ["T2", "Frgc"]}}}
 
     ``diagnoser_params`` (optional) gives hyperparameters for diagnosers whose defaults name
-    FCC-v0 channels. Returns ``(data, diagnoser_params)``.
+    FCC-v0 channels. ``units`` (optional) labels figures and tables; a column without one is
+    labelled without a unit. ``onset_assumed`` (optional, default false) marks an onset the data
+    do not state. Returns ``(data, diagnoser_params)``.
     """
     path = Path(directory)
     if path.is_file():  # the manifest itself (any name); the data are beside it
@@ -206,12 +216,27 @@ def load_manifest(directory: str | Path) -> tuple[ExternalData, dict[str, dict[s
         raise ValueError(f"{path}: missing field(s) {missing}")
     try:
         tests = tuple(
-            ExternalFile(str(t["path"]), t.get("onset"), t.get("name")) for t in spec["test_files"]
+            ExternalFile(
+                str(t["path"]),
+                t.get("onset"),
+                t.get("name"),
+                onset_assumed=t.get("onset_assumed", False),
+            )
+            for t in spec["test_files"]
         )
-    except (TypeError, KeyError) as e:
+    except (TypeError, KeyError, AttributeError) as e:
         raise ValueError(
-            f"{path}: test_files must be a list of {{'path', 'onset', 'name'}} objects ({e})"
+            f"{path}: test_files must be a list of {{'path', 'onset', 'name', 'onset_assumed'}} "
+            f"objects ({e})"
         ) from e
+    units = spec.get("units")
+    if units is not None and not (
+        isinstance(units, dict) and all(isinstance(v, str) for v in units.values())
+    ):
+        raise ValueError(
+            f"{path}: units={units!r} is outside the allowed range: a JSON object of column "
+            'names to unit strings, e.g. {"Tr": "degF"}'
+        )
     for key in ("inputs", "outputs", "train_files", "column_names"):
         v = spec.get(key)
         if key == "column_names" and v is None:
@@ -237,6 +262,7 @@ def load_manifest(directory: str | Path) -> tuple[ExternalData, dict[str, dict[s
         sample_time_s=float(sample_time),
         delimiter=str(spec.get("delimiter", ",")),
         episode_column=_episode_column(path, spec),
+        units=units,
     )
     data.validate()
     params = spec.get("diagnoser_params") or {}

@@ -25,14 +25,15 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import math
-from collections.abc import Sequence
-from dataclasses import dataclass
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from diagnosers.episode import Episode
+from diagnosers.episode_units import units_for
 from evaluation.sweep.sources import DataDescription, LoadedEpisode
 from evaluation.sweep.store import check_name
 from fcc_common.io import read_csv_columns, read_header, read_parquet_columns
@@ -50,11 +51,15 @@ class ExternalFile:
         path: file name relative to the data directory (or absolute).
         onset: fault onset sample (0-based row index), ``None`` for a healthy record.
         name: scenario name in results (default: the file stem); letters, digits, ``._+-``.
+        onset_assumed: the onset is the user's assumption, not stated by the data (e.g. the
+            Santander data set's): tables and figures say so, since ``r_td`` and ``t_dt``
+            count from it.
     """
 
     path: str
     onset: int | None = None
     name: str | None = None
+    onset_assumed: bool = False
 
     @property
     def key(self) -> str:
@@ -130,12 +135,16 @@ class ExternalData:
         delimiter: CSV field separator.
         episode_column: the column that tells a file's stacked episodes apart (used when a file
             has it and it is not a channel); ``None``: every file is one record.
+        units: ``{column: unit}`` as the data state them (e.g. ``{"Tr": "degF"}``); a channel
+            without an entry has an unknown unit and is labelled without one. Presentation
+            only: the episodes carry them to figures and tables.
 
     Each test file is one cell per diagnoser, with scenario ``ExternalFile.key`` and seed 0; a
     test file with several episodes is one cell per episode, seed = the episode number. The
     store hash includes every field (``episode_column`` too, so stores written before files were
-    split are not resumed with split episodes) and the SHA-256 of every file, so changed data
-    are never mixed with stored results.
+    split are not resumed with split episodes) but the presentation-only ``units`` and
+    ``onset_assumed``, and the SHA-256 of every file, so changed data are never mixed with
+    stored results.
     """
 
     directory: str
@@ -147,10 +156,21 @@ class ExternalData:
     sample_time_s: float = 1.0
     delimiter: str = ","
     episode_column: str | None = "episode"
+    units: Mapping[str, str] | None = field(default=None, hash=False)  # a dict is unhashable
 
     @property
     def channels(self) -> tuple[str, ...]:
         return tuple(self.inputs) + tuple(self.outputs)
+
+    @property
+    def channel_units(self) -> tuple[str, ...] | None:
+        """The unit of each channel (``""`` where unknown); ``None`` when no unit is known."""
+        return units_for(self.channels, self.units, f"{self.directory}: units")
+
+    @property
+    def assumed_onsets(self) -> tuple[str, ...]:
+        """The scenarios (test file keys) whose fault onset is assumed, not stated by the data."""
+        return tuple(tf.key for tf in self.test_files if tf.onset_assumed and tf.onset is not None)
 
     def _path(self, name: str) -> Path:
         p = Path(name)
@@ -183,6 +203,11 @@ class ExternalData:
                 isinstance(tf.onset, bool) or not isinstance(tf.onset, int) or tf.onset < 0
             ):
                 raise ValueError(f"{tf.path}: onset={tf.onset!r} must be an integer >= 0 or None")
+            if not isinstance(tf.onset_assumed, bool) or (tf.onset_assumed and tf.onset is None):
+                raise ValueError(
+                    f"{tf.path}: onset_assumed={tf.onset_assumed!r} is outside the allowed range: "
+                    "true or false, and true only for a record with an onset"
+                )
         keys = [tf.key for tf in self.test_files]
         if len(set(keys)) != len(keys):
             raise ValueError(f"test file names {keys} repeat; give ExternalFile(name=...)")
@@ -207,9 +232,22 @@ class ExternalData:
             and self.sample_time_s > 0
         ):
             raise ValueError(f"sample_time_s={self.sample_time_s!r} must be a positive number")
+        if self.units is not None and not (
+            isinstance(self.units, Mapping)
+            and all(isinstance(k, str) and isinstance(v, str) for k, v in self.units.items())
+        ):
+            raise ValueError(
+                f"units={self.units!r} is outside the allowed range: a mapping of column names "
+                'to unit strings, e.g. {"Tr": "degF"}, or None'
+            )
 
     def store_key(self) -> dict[str, Any]:
         key = dataclasses.asdict(self)
+        # units and assumed onsets change no result: left out, stores written before they
+        # existed stay readable and a relabelled onset reuses its cells
+        del key["units"]
+        for tf in key["test_files"]:
+            del tf["onset_assumed"]
         key["directory"] = str(Path(self.directory).resolve())
         key["kind"] = "external"
         key["sha256"] = {
@@ -219,13 +257,18 @@ class ExternalData:
         return key
 
     def describe(self) -> DataDescription:
-        return DataDescription(
-            label=f"external:{Path(self.directory).name}",
-            lines=(
-                "External records: one test file per scenario (seed 0, or one seed per episode "
-                "of a multi-episode file); see results.json.",
-            ),
-        )
+        lines = [
+            "External records: one test file per scenario (seed 0, or one seed per episode "
+            "of a multi-episode file); see results.json."
+        ]
+        assumed = [tf for tf in self.test_files if tf.key in self.assumed_onsets]
+        if assumed:
+            at = ", ".join(f"{tf.key} (sample {tf.onset})" for tf in assumed)
+            lines.append(
+                f"Assumed fault onsets, not stated by the data: {at}; r_td and t_dt count from "
+                'them (marked † in the tables, "(assumed)" in the figures).'
+            )
+        return DataDescription(label=f"external:{Path(self.directory).name}", lines=tuple(lines))
 
     def _episode_key(self, path: Path) -> str | None:
         """The episode column of ``path`` if it has one (and it is not a channel)."""
@@ -273,6 +316,7 @@ class ExternalData:
                     fault_onset=onset,
                     scenario=name,
                     seed=e,
+                    units=self.channel_units,
                 )
             )
         return out

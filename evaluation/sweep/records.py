@@ -12,7 +12,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -26,7 +26,12 @@ from evaluation.metrics.isolation_metrics import UNKNOWN, isolation_scores
 from evaluation.sweep.sources import LoadedEpisode
 
 #: Python types a stored cell field may hold, by the annotation of :class:`CellResult`.
-_FIELD_KINDS: dict[str, type | tuple[type, ...]] = {"str": str, "int": int, "float": (int, float)}
+_FIELD_KINDS: dict[str, type | tuple[type, ...]] = {
+    "str": str,
+    "int": int,
+    "float": (int, float),
+    "bool": bool,
+}
 
 
 @dataclass(frozen=True)
@@ -60,6 +65,9 @@ class CellResult:
     r_ti: float = math.nan  # true isolation rate
     r_fi: float = math.nan  # false isolation rate
     cdr: float = math.nan  # correct diagnosis rate among the alarmed post-onset samples
+    # the fault onset is assumed, not stated by the data (r_td/t_dt count from an assumption);
+    # set from the data source when results are presented (:func:`mark_assumed_onsets`)
+    onset_assumed: bool = False
 
     @property
     def faulty(self) -> bool:
@@ -86,13 +94,30 @@ class CellResult:
             if f.type == "float" and v is None:
                 v = float("nan")
             kind = _FIELD_KINDS.get(f.type.replace(" | None", ""))
-            ok = kind is None or (isinstance(v, kind) and not isinstance(v, bool))
+            ok = kind is None or (isinstance(v, kind) and (kind is bool or not isinstance(v, bool)))
             if not ok and not (v is None and "None" in f.type):
                 raise ValueError(
                     f"cell record field {f.name}={v!r} has the wrong type (expected {f.type})"
                 )
             kwargs[f.name] = float(v) if f.type == "float" else v
         return cls(**kwargs)
+
+
+def mark_assumed_onsets(
+    records: Sequence[CellResult], assumed: Collection[str]
+) -> list[CellResult]:
+    """``records`` with ``onset_assumed`` set for the faulty cells of the ``assumed`` scenarios
+    (a data source's ``assumed_onsets``) and cleared elsewhere.
+
+    The flag describes the data, not a result: it is applied when results are presented, so
+    cells stored before it existed, or before a manifest marked its onsets, are labelled by
+    what the data source says now.
+    """
+    out = []
+    for r in records:
+        flag = r.faulty and r.scenario in assumed
+        out.append(r if r.onset_assumed == flag else dataclasses.replace(r, onset_assumed=flag))
+    return out
 
 
 def score_episode(
@@ -166,6 +191,7 @@ def pack_detection(
     out: dict[str, np.ndarray] = {
         "y": ep.y,
         "channels": np.array(ep.channels, dtype=str),
+        **({} if ep.units is None else {"units": np.array(ep.units, dtype=str)}),
         "sample_time_s": np.array(ep.sample_time_s),
         "scenario": np.array(ep.scenario),
         "seed": np.array(-1 if ep.seed is None else ep.seed),
@@ -190,6 +216,7 @@ def unpack_detection(
     onset = int(arrays["fault_onset"])
     planned = int(arrays["planned_onset"])
     seed = int(arrays["seed"])
+    units = arrays.get("units")  # absent in arrays stored before episodes carried units
     ep = Episode(
         y=arrays["y"],
         channels=tuple(str(c) for c in arrays["channels"]),
@@ -197,6 +224,7 @@ def unpack_detection(
         fault_onset=None if onset < 0 else onset,
         scenario=str(arrays["scenario"]),
         seed=None if seed < 0 else seed,
+        units=None if units is None else tuple(str(u) for u in units),
     )
     views: list[Detection | None] = []
     for view in _VIEWS:
@@ -240,6 +268,7 @@ class CellSummary:
     misses: int
     n_detected: int
     n_terminated: int
+    onset_assumed: bool = False  # the scenario's onset is assumed, not stated by the data
 
     def to_json(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
@@ -282,6 +311,7 @@ def summarize(records: Sequence[CellResult]) -> list[CellSummary]:
                 misses=sum(r.missed for r in rs),
                 n_detected=len(detected),
                 n_terminated=sum(r.terminated_at is not None for r in rs),
+                onset_assumed=any(r.onset_assumed for r in rs),
             )
         )
     return out

@@ -115,7 +115,7 @@ def test_axis_label_units() -> None:
     assert axis_label("T_rx [°C]") == "T_rx [°C]"  # already carries its unit
     assert axis_label("T2[ewma]") == "T² of EWMA residuals [-]"
     assert axis_label("ewma[T_rx]") == "EWMA of T_rx residual [-]"
-    assert axis_label("F3") == "F3 [?]"  # unknown: never a guessed unit
+    assert axis_label("F3") == "F3"  # unknown: no unit, never a guessed one
     assert axis_label("F3", {"F3": "kg/s"}) == "F3 [kg/s]"
 
 
