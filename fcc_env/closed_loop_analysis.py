@@ -15,13 +15,13 @@ Run ``python -m fcc_env.closed_loop_analysis`` for the table of the docs' closed
 
 from __future__ import annotations
 
-import argparse
 import itertools
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import root
 
+from fcc_common.invocation import command_parser
 from fcc_env.integrator import step_kernel
 from fcc_env.params import N_STATES, NOMINAL_INPUTS, FCCParams
 from fcc_env.physics import as_param_array, measure_core
@@ -193,9 +193,14 @@ def stability_table(cases: list[StabilityCase]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(
-        prog="python -m fcc_env.closed_loop_analysis",
-        description="Eigenvalues of the linearised closed loop (plant + regulatory layer).",
+    ap = command_parser(
+        "fcc_env.closed_loop_analysis",
+        "Eigenvalues of the linearised closed loop (plant + regulatory layer). Exits with 1 "
+        "when a case is unstable.",
+        (
+            ("", "the table of the docs: nominal, each fault, the 16 uncertain corners"),
+            ("--no-corners", "nominal and each fault only"),
+        ),
     )
     ap.add_argument("--no-corners", action="store_true", help="skip the 16 uncertain corners")
     args = ap.parse_args(argv)

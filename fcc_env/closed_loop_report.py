@@ -13,7 +13,6 @@ closed loop). Library functions compute and return; only :func:`main` prints.
 
 from __future__ import annotations
 
-import argparse
 import json
 import time
 from collections import Counter
@@ -24,6 +23,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from fcc_common.invocation import command_parser
 from fcc_common.io import atomic_write, atomic_write_json
 from fcc_common.validation import Integer, IntegerSequence, check_params, invalid
 from fcc_env import CLOSED_LOOP_ENV_ID
@@ -392,9 +392,20 @@ def write_report(out: Path, report: Report, config: ReportConfig) -> list[Path]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(
-        prog="python -m fcc_env.closed_loop_report",
-        description="Closed-loop evidence: stability, responses, fault signatures, terminations.",
+    ap = command_parser(
+        "fcc_env.closed_loop_report",
+        "Closed-loop evidence: stability, responses, fault signatures, terminations.",
+        (
+            ("--out results/closed_loop", "the stability table, responses and fault signatures"),
+            (
+                "--out results/closed_loop --terminations 20",
+                "also count terminations of 20 excited healthy episodes, open against closed loop",
+            ),
+            (
+                "--out results/short --horizon 2000 --seeds 5000 5001",
+                "shorter fault signatures on two seeds",
+            ),
+        ),
     )
     ap.add_argument("--out", type=Path, required=True, help="directory to write into")
     ap.add_argument("--terminations", type=int, default=0, help="healthy episodes to count (0)")

@@ -2,15 +2,22 @@
 
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
 import fcc_env
+from fcc_common.invocation import command_parser
 from fcc_env.plotting import plot_scenarios
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m fcc_env.demo", description=__doc__)
+    parser = command_parser(
+        "fcc_env.demo",
+        "Simulate the healthy plant and each fault on one seed and plot them.",
+        (
+            ("", "seed 0, into results/demo/scenarios.png"),
+            ("--seed 3 --out results/demo3", "another seed, into results/demo3/scenarios.png"),
+        ),
+    )
     parser.add_argument("--out", default="results/demo", help="output folder (results/demo)")
     parser.add_argument("--seed", type=int, default=0, help="episode seed (0)")
     args = parser.parse_args(argv)

@@ -22,7 +22,6 @@ Diagnosers and the modelling loop read ``measured`` and ``commanded`` only.
 
 from __future__ import annotations
 
-import argparse
 import dataclasses
 import json
 import os
@@ -32,6 +31,7 @@ from typing import Any
 
 import numpy as np
 
+from fcc_common.invocation import command_parser
 from fcc_common.io import (
     PARQUET_SUFFIXES,
     atomic_open,
@@ -362,9 +362,21 @@ def read_dataset(path: str | os.PathLike) -> tuple[dict[str, Any], dict[str, np.
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(
-        prog="python -m fcc_env.generate",
-        description="Simulate FCC-v0 episodes and write them as CSV or Parquet + JSON sidecar.",
+    parser = command_parser(
+        "fcc_env.generate",
+        "Simulate FCC-v0 episodes and write them as CSV or Parquet + JSON sidecar.",
+        (
+            ("--scenario f1 --seeds 0-9 --out data/f1.csv", "ten episodes of fault f1, as CSV"),
+            (
+                "--scenario f2 --seeds 0-4 --fault-profile incipient --ramp-samples 500 "
+                "--out data/f2.parquet",
+                "incipient f2 faults as Parquet (needs pyarrow)",
+            ),
+            (
+                "--closed-loop --seeds 0-3 --states --out data/closed.csv",
+                "healthy closed-loop episodes with the valve command, set points and states",
+            ),
+        ),
     )
     parser.add_argument(
         "--out",

@@ -9,13 +9,13 @@ assertions.
 
 from __future__ import annotations
 
-import argparse
 import time
 
 import gymnasium as gym
 import numpy as np
 
 import fcc_env
+from fcc_common.invocation import command_parser
 
 #: Closed-loop speed relative to open loop that issue 31 asks for (env and batch alike).
 CLOSED_LOOP_SPEED_GOAL = 0.8
@@ -62,7 +62,14 @@ def bench_batch(
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m fcc_env.simulator_speed", description=__doc__)
+    parser = command_parser(
+        "fcc_env.simulator_speed",
+        __doc__ or "",
+        (
+            ("", "the default benchmark: 1024 episodes in a batch, 20000 single-env steps"),
+            ("--episodes 64 --steps 2000", "a quick look"),
+        ),
+    )
     parser.add_argument("--episodes", type=int, default=1024, help="batch size (1024)")
     parser.add_argument("--steps", type=int, default=20_000, help="single-env steps (20000)")
     args = parser.parse_args(argv)

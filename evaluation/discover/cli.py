@@ -24,6 +24,7 @@ from evaluation.discover.loop import discover
 from evaluation.discover.physics_model import PHYSICS_INPUT_CHANNELS, PHYSICS_OUTPUT_CHANNELS
 from evaluation.discover.report import REPORT_FILE
 from evaluation.sweep.dataset_loaders import load_manifest
+from fcc_common.invocation import command_parser
 
 __all__ = ["main"]
 
@@ -42,10 +43,24 @@ def _source(args: argparse.Namespace) -> tuple[Any, Any]:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(
-        prog="python -m evaluation.discover",
-        description="Find the effect the declared FCC model lacks in measured data, add it, and "
+    parser = command_parser(
+        "evaluation.discover",
+        "Find the effect the declared FCC model lacks in measured data, add it, and "
         "report the held-out error before and after (DIR/report.json + plots).",
+        (
+            (
+                "--data data/f1.csv --out results/discover",
+                "a dataset written by fcc_env.generate (CSV or Parquet, with its .json sidecar)",
+            ),
+            (
+                "--external my_unit/ --out results/my_unit --max-effects 2",
+                "your own data: a directory with a dataset.json manifest; at most two effects",
+            ),
+            (
+                "--data data/f1.csv --out results/d --candidates heat_loss:stage1 --no-plots",
+                "test one candidate effect, without figures",
+            ),
+        ),
     )
     src = parser.add_mutually_exclusive_group(required=True)
     src.add_argument("--data", help="dataset .csv/.parquet with its .json sidecar (same stem)")

@@ -9,11 +9,11 @@ rounds (find + confirm nothing else), which is the typical case.
 
 from __future__ import annotations
 
-import argparse
 import time
 
 import fcc_env
 from evaluation import discover as d
+from fcc_common.invocation import command_parser
 
 EFFECT = "sensor_bias:T_fp,bias=3"
 
@@ -27,7 +27,14 @@ def run(n_samples: int, candidates: list[str] | None, seed: int = 0) -> tuple[fl
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m evaluation.discover.loop_speed")
+    ap = command_parser(
+        "evaluation.discover.loop_speed",
+        (__doc__ or "").split("\n\n")[0],
+        (
+            ("", "the full benchmark: one 4000-sample run, then the scaling curves"),
+            ("--quick", "fewer points on the scaling curves"),
+        ),
+    )
     ap.add_argument("--quick", action="store_true", help="fewer points")
     args = ap.parse_args(argv)
     run(500, ["sensor_bias:T_fp"])  # compile / warm caches

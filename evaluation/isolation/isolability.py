@@ -24,7 +24,6 @@ Run ``python -m evaluation.isolation.isolability --track paper`` for the tables.
 
 from __future__ import annotations
 
-import argparse
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -34,6 +33,7 @@ import numpy as np
 from evaluation.tracks.catalogue import TRACKS
 from evaluation.tracks.track import FAULT_NAMES
 from evaluation.tracks.track_data import TrackData
+from fcc_common.invocation import command_parser
 from fcc_common.validation import Integer, Real, check
 from fcc_env.params import MEASUREMENT_NAMES, MEASUREMENTS
 
@@ -245,7 +245,14 @@ def isolability_markdown(res: Isolability) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p = command_parser(
+        "evaluation.isolation.isolability",
+        (__doc__ or "").split("\n")[0],
+        (
+            ("--track paper", "the paper track's isolability tables on 10 validation seeds"),
+            ("--track all --seeds 4 --horizon 500", "every track, quicker"),
+        ),
+    )
     p.add_argument("--track", default="paper", help="comma-separated track names (or 'all')")
     p.add_argument("--seeds", type=int, default=10, help="validation seeds per fault")
     p.add_argument("--horizon", type=int, default=1000, help="samples after onset analysed")

@@ -19,7 +19,6 @@ Outputs: ``<out>/<track>-<seeds>.md|json`` and ``<out>/figures/<track>-<seeds>-<
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import time
@@ -42,6 +41,7 @@ from evaluation.metrics.isolation_metrics import UNKNOWN, confusion_matrix, isol
 from evaluation.reports.plots import confusion_figure
 from evaluation.tracks.catalogue import TRACKS
 from evaluation.tracks.track_data import TrackData
+from fcc_common.invocation import command_parser
 
 __all__ = ["ISOLATORS", "Isolator", "episode_rows", "main", "summarise"]
 
@@ -245,7 +245,21 @@ def run(
 
 
 def main(argv: Sequence[str] | None = None) -> None:
-    p = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    p = command_parser(
+        "evaluation.isolation.study",
+        (__doc__ or "").split("\n")[0],
+        (
+            ("--track paper --seeds validation", "tune: the isolators on validation seeds 5000+"),
+            (
+                "--track paper --seeds test --out results/isolation",
+                "the final score on the track's test seeds (run once, at the end)",
+            ),
+            (
+                "--track small --detector models/lrgf-mem-small --n-seeds 5",
+                "a saved lrgf-mem, trained on the track, and 5 faulty episodes per fault",
+            ),
+        ),
+    )
     p.add_argument("--track", default="paper", help="comma-separated track names")
     p.add_argument("--seeds", default="validation", choices=["validation", "test"])
     p.add_argument("--n-seeds", type=int, default=20, help="faulty episodes per fault")

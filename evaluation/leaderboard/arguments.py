@@ -1,9 +1,14 @@
 """The leaderboard's command line: its parser and the checks both modes share.
 
-``python -m evaluation.leaderboard`` runs the paper leaderboard (:mod:`evaluation.leaderboard.paper`)
-or, with ``--track``, the benchmark tracks (:mod:`evaluation.leaderboard.track_runs`); both parse
-with :func:`build_parser` and refuse a bad ``--out``, ``--backend`` or ``--import`` here, before
-any work.
+``python -m evaluation.leaderboard`` (or ``fcc-leaderboard``) runs the paper leaderboard
+(:mod:`evaluation.leaderboard.paper`) or, with ``--track``, the benchmark tracks
+(:mod:`evaluation.leaderboard.track_runs`); both parse with :func:`build_parser` and refuse a bad
+``--out``, ``--backend`` or ``--import`` here, before any work.
+
+This module imports nothing heavy (no torch, scipy, matplotlib, diagnoser registry), so that
+``--help`` and a refused argument answer at once: the defaults the help text quotes are mirrored
+below from the modules that own them (``tests/test_cli_polish.py`` pins each to its source), and
+the registry and the result store are imported when a check needs them.
 """
 
 from __future__ import annotations
@@ -13,26 +18,21 @@ import os
 import sys
 from collections.abc import Callable
 from pathlib import Path
-from typing import NoReturn
+from typing import Any, NoReturn
 
-from diagnosers.registry import import_modules
-from evaluation.leaderboard.paper import (
-    DEFAULT_OUT,
-    DEFAULT_SEEDS,
-    DEFAULT_TRAIN_EPISODES,
-    QUICK_SEEDS,
-    QUICK_TRAIN_EPISODES,
-    VALIDATION_FAULT_SCALE,
-    VALIDATION_OUT,
-    VALIDATION_SEED_BASE,
-    VALIDATION_SEEDS,
-)
-from evaluation.sweep.backends import BACKENDS
-from evaluation.sweep.config import BASELINES
-from evaluation.sweep.sources import TRAIN_SEED_BASE
-from evaluation.sweep.store import StoreError
+from fcc_common.invocation import command_parser
 
 __all__ = [
+    "DEFAULT_OUT",
+    "DEFAULT_SEEDS",
+    "DEFAULT_TRAIN_EPISODES",
+    "HELP_DEFAULTS",
+    "QUICK_SEEDS",
+    "QUICK_TRAIN_EPISODES",
+    "VALIDATION_FAULT_SCALE",
+    "VALIDATION_OUT",
+    "VALIDATION_SEEDS",
+    "VALIDATION_SEED_BASE",
     "build_parser",
     "check_backend",
     "check_out_dir",
@@ -67,18 +67,70 @@ def _int_at_least(low: int) -> Callable[[str], int]:
 _positive_int = _int_at_least(1)
 _non_negative_int = _int_at_least(0)
 
+#: The values the help text and ``--backend`` quote, by owning module; the owners import torch,
+#: scipy or matplotlib, which ``--help`` must not wait for (for a dict, its keys).
+#: The leaderboard's defaults (this module owns them; evaluation.leaderboard.paper imports them).
+QUICK_SEEDS = 3
+QUICK_TRAIN_EPISODES = 3
+DEFAULT_SEEDS = 10
+DEFAULT_TRAIN_EPISODES = 9  # lrgf-mem: 6 to train the models, 3 held out to calibrate
+DEFAULT_OUT = Path("results/leaderboard")
+#: --validation: seeds 5000.. (never the test seeds 0..), faults at 0.7x the paper's magnitudes.
+VALIDATION_SEED_BASE = 5000
+VALIDATION_SEEDS = 40
+VALIDATION_FAULT_SCALE = 0.7
+VALIDATION_OUT = Path("results/validation")
+
+#: Values the help text and ``--backend`` quote whose owners import torch, scipy or matplotlib,
+#: which ``--help`` must not wait for (a test checks each against its owner).
+HELP_DEFAULTS: dict[str, dict[str, Any]] = {
+    "evaluation.sweep.config": {"BASELINES": ("limits", "pca", "arx-band")},
+    "evaluation.sweep.sources": {"TRAIN_SEED_BASE": 1000},
+    "evaluation.sweep.backends": {"BACKENDS": ("local", "ray")},
+    "evaluation.tracks.catalogue": {
+        "TRACKS": (
+            "paper",
+            "small",
+            "incipient",
+            "noisy",
+            "uncertain",
+            "random",
+            "closed",
+            "closed-random",
+        )
+    },
+}
+_D = {name: value for owned in HELP_DEFAULTS.values() for name, value in owned.items()}
+BASELINES, BACKENDS, TRAIN_SEED_BASE = _D["BASELINES"], _D["BACKENDS"], _D["TRAIN_SEED_BASE"]
+
+_DESCRIPTION = (
+    "Train diagnosers on healthy FCC-v0 episodes (training seeds 1000.., never tested), "
+    "score them on every scenario over test seeds 0..N-1, and print a Markdown "
+    "leaderboard (r_fd on healthy episodes; r_td and t_dt per fault; mean ± std over "
+    "seeds; missed faults) followed by its legend. Writes leaderboard.md/.csv, raw per-seed "
+    "results and figures to --out. Re-running the same command resumes from the result store."
+    "\n\nProgress and timings go to stderr, so `> table.md` keeps the table and its legend."
+)
+_EXAMPLES = (
+    (
+        "--quick",
+        f"the baselines on {QUICK_SEEDS} test seeds per scenario, into {DEFAULT_OUT}",
+    ),
+    (
+        "--diagnosers pca,lrgf-mem --scenarios nominal,f1 --seeds 5 --out results/two",
+        "two diagnosers on the healthy plant and fault f1, 5 test seeds each",
+    ),
+    (
+        "--import examples.cusum_diagnoser --diagnosers cusum-example --quick --out results/cusum",
+        "a diagnoser of your own: examples/cusum_diagnoser.py registers it (run from the "
+        "repository root)",
+    ),
+    ("--track all --quick", "every benchmark track, on fewer episodes, into results/tracks"),
+)
+
 
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
-        prog="python -m evaluation.leaderboard",
-        description=(
-            "Train diagnosers on healthy FCC-v0 episodes (training seeds 1000.., never tested), "
-            "score them on every scenario over test seeds 0..N-1, and print a Markdown "
-            "leaderboard (r_fd on healthy episodes; r_td and t_dt per fault; mean ± std over "
-            "seeds; missed faults). Writes leaderboard.md/.csv, raw per-seed results and "
-            "figures to --out. Re-running the same command resumes from the result store."
-        ),
-    )
+    p = command_parser("evaluation.leaderboard", _DESCRIPTION, _EXAMPLES)
     p.add_argument(
         "--quick",
         action="store_true",
@@ -204,8 +256,7 @@ def build_parser() -> argparse.ArgumentParser:
         "--track",
         metavar="NAME[,NAME...]",
         help=(
-            "benchmark v2: run the named tracks (paper, small, incipient, noisy, uncertain, "
-            "random, or all) with the physical-limit and measured-input reference rows and 95%% "
+            f"benchmark v2: run the named tracks ({', '.join(_D['TRACKS'])}, or all) with the physical-limit and measured-input reference rows and 95%% "
             "bootstrap intervals; writes <out>/<track>/ and <out>/summary.md (default --out "
             "results/tracks). With --quick: the baselines on 6 healthy and 3 faulty episodes per "
             "fault"
@@ -255,6 +306,8 @@ def check_backend(backend: str) -> None:
 
 def exit_on_failure(parser: argparse.ArgumentParser, e: Exception) -> NoReturn:
     """Exit on a store or run failure; suggest re-running only where it can succeed."""
+    from evaluation.sweep.store import StoreError  # imported when a run has failed: see above
+
     if isinstance(e, StoreError):  # a re-run meets the same file: the message says what to do
         parser.exit(1, f"{parser.prog}: {e}\n")
     parser.exit(1, f"{parser.prog}: {e}\nFinished cells are stored; re-run to resume.\n")
@@ -274,6 +327,8 @@ def import_user_modules(args: argparse.Namespace, parser: argparse.ArgumentParse
     cwd = os.getcwd()
     if cwd not in sys.path and "" not in sys.path:
         sys.path.insert(0, cwd)
+    from diagnosers.registry import import_modules  # the registry imports torch: see above
+
     try:
         import_modules(modules)
     except ValueError as e:

@@ -4,9 +4,9 @@ Runs a sweep (:func:`evaluation.sweep.run_sweep`), then writes into ``--out``
 (default ``results/leaderboard``):
 
 * ``leaderboard.md`` - the Markdown table printed to stdout (its legend,
-  :func:`~evaluation.reports.tables.table_legend`, is
-  in the file's header and printed to stderr): one row per diagnoser plus the
-  paper's Table 2 as a reference row; columns ``r_fd`` on healthy episodes, then ``r_td`` and
+  :func:`~evaluation.reports.tables.table_legend`, is in the file's header and printed to
+  stdout after the table, a blank line between; progress and timings go to stderr): one row
+  per diagnoser plus the paper's Table 2 as a reference row; columns ``r_fd`` on healthy episodes, then ``r_td`` and
   ``t_dt`` for each fault, each mean ± standard deviation over test seeds, with the miss count.
 * ``leaderboard.csv`` - one row per diagnoser × scenario: ``diagnoser, scenario, n_seeds, r_fd,
   r_fd_std, r_td, r_td_std, t_dt, t_dt_std, t_dt_s, t_dt_s_std, misses, n_detected,
@@ -37,19 +37,10 @@ import argparse
 import sys
 import time
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
-import fcc_env
-from diagnosers.registry import available, diagnoser_class
-from evaluation.leaderboard import paper
 from evaluation.leaderboard.arguments import (
-    build_parser,
-    check_backend,
-    check_out_dir,
-    exit_on_failure,
-    import_user_modules,
-    user_imports,
-)
-from evaluation.leaderboard.paper import (
+    BASELINES,
     DEFAULT_OUT,
     DEFAULT_SEEDS,
     DEFAULT_TRAIN_EPISODES,
@@ -59,15 +50,16 @@ from evaluation.leaderboard.paper import (
     VALIDATION_OUT,
     VALIDATION_SEED_BASE,
     VALIDATION_SEEDS,
-    LeaderboardOptions,
+    build_parser,
+    check_backend,
+    check_out_dir,
+    exit_on_failure,
+    import_user_modules,
+    user_imports,
 )
-from evaluation.leaderboard.track_runs import main_tracks
-from evaluation.reports.outputs import write_outputs
-from evaluation.reports.tables import markdown_table, reference_row, sample_time, table_legend
-from evaluation.sweep.config import BASELINES
-from evaluation.sweep.dataset_loaders import load_external
-from evaluation.tracks.board import applicable
-from fcc_env.scenarios import FaultSpec
+
+if TYPE_CHECKING:
+    from evaluation.leaderboard.paper import LeaderboardOptions
 
 __all__ = ["main", "resolve_options"]
 
@@ -76,6 +68,14 @@ def resolve_options(
     args: argparse.Namespace, parser: argparse.ArgumentParser
 ) -> LeaderboardOptions:
     """Fill defaults (``--quick`` or full) and check names against the allowed sets."""
+    # imported here, after parsing, so that --help and argparse's refusals answer at once
+    import fcc_env
+    from diagnosers.registry import available, diagnoser_class
+    from evaluation.leaderboard.paper import LeaderboardOptions
+    from evaluation.sweep.dataset_loaders import load_external
+    from evaluation.tracks.board import applicable
+    from fcc_env.scenarios import FaultSpec
+
     if args.test_seed_start is not None:
         parser.error(
             f"--test-seed-start {args.test_seed_start} applies to --track; the paper "
@@ -170,7 +170,13 @@ def main(argv: Sequence[str] | None = None) -> int:
     args = parser.parse_args(argv)
     import_user_modules(args, parser)  # before any name is resolved
     if args.track is not None:
+        from evaluation.leaderboard.track_runs import main_tracks  # after parsing: see above
+
         return main_tracks(args, parser)
+    from evaluation.leaderboard import paper
+    from evaluation.reports.outputs import write_outputs
+    from evaluation.reports.tables import markdown_table, reference_row, sample_time, table_legend
+
     opts = resolve_options(args, parser)
     t0 = time.perf_counter()
     try:
@@ -181,9 +187,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         exit_on_failure(parser, e)
     written = write_outputs(results, opts.out, figures=opts.figures)
     reference = reference_row(results.config)
-    print(markdown_table(results.summary(), reference=reference), end="", flush=True)
-    # stdout stays the bare table (to pipe or paste); its legend follows on stderr
-    print(table_legend(sample_time(results)), file=sys.stderr)
+    # stdout is the table and its legend (`> table.md` keeps both); progress goes to stderr
+    print(markdown_table(results.summary(), reference=reference))
+    assumed = any(r.onset_assumed for r in results.records)  # as the file's header says it
+    print(table_legend(sample_time(results), onset_assumed=assumed), flush=True)
     print(
         f"{results.n_computed} cells computed, {results.n_reused} reused, "
         f"{results.n_trained} diagnosers trained in {time.perf_counter() - t0:.1f} s; "

@@ -22,32 +22,11 @@ from evaluation.sweep.store import canonical_hash
 from fcc_env.scenarios import FaultSpec
 
 __all__ = [
-    "DEFAULT_OUT",
-    "DEFAULT_SEEDS",
-    "DEFAULT_TRAIN_EPISODES",
-    "QUICK_SEEDS",
-    "QUICK_TRAIN_EPISODES",
-    "VALIDATION_FAULT_SCALE",
-    "VALIDATION_OUT",
-    "VALIDATION_SEEDS",
-    "VALIDATION_SEED_BASE",
     "LeaderboardOptions",
     "build_config",
     "run",
     "store_dir_for",
 ]
-
-QUICK_SEEDS = 3
-QUICK_TRAIN_EPISODES = 3
-DEFAULT_SEEDS = 10
-DEFAULT_TRAIN_EPISODES = 9  # lrgf-mem: 6 to train the models, 3 held out to calibrate
-DEFAULT_OUT = Path("results/leaderboard")
-#: The validation protocol on which ``lrgf-mem``'s hyperparameters were chosen: seeds the test
-#: sweep (0..N-1) and the training (1000..) never use, faults at 0.7x the paper's magnitudes.
-VALIDATION_SEED_BASE = 5000
-VALIDATION_SEEDS = 40
-VALIDATION_FAULT_SCALE = 0.7
-VALIDATION_OUT = Path("results/validation")
 
 
 # ---- options -----------------------------------------------------------------------------------

@@ -260,7 +260,7 @@ def load_manifest(directory: str | Path) -> tuple[ExternalData, dict[str, dict[s
         test_files=tests,
         column_names=tuple(spec["column_names"]) if spec.get("column_names") else None,
         sample_time_s=float(sample_time),
-        delimiter=str(spec.get("delimiter", ",")),
+        delimiter=spec.get("delimiter", ","),  # validate() refuses a non-string by value
         episode_column=_episode_column(path, spec),
         units=units,
     )

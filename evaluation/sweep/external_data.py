@@ -48,7 +48,8 @@ class ExternalFile:
     """One file of an external data set.
 
     Args:
-        path: file name relative to the data directory (or absolute).
+        path: file name relative to the data directory; it must stay inside the directory
+            after resolving ``..`` and symbolic links.
         onset: fault onset sample (0-based row index), ``None`` for a healthy record.
         name: scenario name in results (default: the file stem); letters, digits, ``._+-``.
         onset_assumed: the onset is the user's assumption, not stated by the data (e.g. the
@@ -173,8 +174,19 @@ class ExternalData:
         return tuple(tf.key for tf in self.test_files if tf.onset_assumed and tf.onset is not None)
 
     def _path(self, name: str) -> Path:
-        p = Path(name)
-        return p if p.is_absolute() else Path(self.directory) / p
+        """The data file ``name`` (relative to the directory), resolved through symbolic links.
+
+        Raises ValueError when it lies outside the data directory (an absolute path, ``..``,
+        or a link that leads out): a manifest never makes the harness read, train on or echo
+        a file elsewhere."""
+        root = Path(self.directory).resolve()
+        p = (root / name).resolve()
+        if not p.is_relative_to(root):
+            raise ValueError(
+                f"data file {name!r} is outside the allowed range: a file inside the data "
+                f"directory {str(root)!r} (it resolves to {str(p)!r}); copy it into the directory"
+            )
+        return p
 
     def validate(self) -> None:
         d = Path(self.directory)
@@ -211,6 +223,7 @@ class ExternalData:
         keys = [tf.key for tf in self.test_files]
         if len(set(keys)) != len(keys):
             raise ValueError(f"test file names {keys} repeat; give ExternalFile(name=...)")
+        # resolved paths: "../d/a.csv", "./a.csv" and a link to a.csv are all a.csv
         overlap = sorted(
             {str(self._path(f)) for f in self.train_files}
             & {str(self._path(tf.path)) for tf in self.test_files}
@@ -232,6 +245,11 @@ class ExternalData:
             and self.sample_time_s > 0
         ):
             raise ValueError(f"sample_time_s={self.sample_time_s!r} must be a positive number")
+        if not isinstance(self.delimiter, str) or len(self.delimiter) != 1:
+            raise ValueError(
+                f"delimiter={self.delimiter!r} is outside the allowed range: one character, "
+                'e.g. "," or ";"'
+            )
         if self.units is not None and not (
             isinstance(self.units, Mapping)
             and all(isinstance(k, str) and isinstance(v, str) for k, v in self.units.items())

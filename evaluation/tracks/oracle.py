@@ -17,7 +17,9 @@ The statistic (the same alarm stage as ``lrgf-mem``, :mod:`diagnosers.alarm`):
 
 Two more reference rows (:data:`DEFAULT_REFERENCES`, each an :class:`OracleConfig`, which says
 what each is for): the same observer driven by the *measured* inputs, and that perfect model
-evaluated by ``lrgf-glr``'s alarm stage.
+evaluated by ``lrgf-glr``'s alarm stage. None of these is a bound; the optimal-detector rows of
+:mod:`evaluation.tracks.optimal` (a CUSUM bank on the known fault trajectories and a GLR over
+the fault's size) close the list.
 
 >>> OracleConfig().channels
 ('T_rx', 'T_rg1', 'T_rg2', 'T_d1', 'T_dg')
@@ -41,6 +43,7 @@ from diagnosers.fault_directions import FaultDirections
 from diagnosers.registry import diagnoser_class
 from evaluation.sweep.records import CellResult, score_episode
 from evaluation.sweep.sources import LoadedEpisode
+from evaluation.tracks.optimal import CUSUM_LABEL, GLR_LABEL, FaultSignatures, KnownFaultBank
 from evaluation.tracks.track import Track
 from evaluation.tracks.track_data import TrackData
 from fcc_common.validation import Integer, Options, Real, check
@@ -54,6 +57,7 @@ __all__ = [
     "ORACLE_LABEL",
     "REFERENCE_LABELS",
     "STAGE_LABEL",
+    "TRUE_INPUT_STAGES",
     "OracleConfig",
     "OracleInputs",
     "OracleStage",
@@ -80,6 +84,13 @@ class OracleStage(StrEnum):
 
     T2 = "t2"
     DIRECTIONAL = "directional"
+    #: :mod:`evaluation.tracks.optimal`'s banks (true inputs only)
+    CUSUM = "cusum"
+    GLR = "glr"
+
+
+#: The stages that read the exact model with its true inputs only (the optimal-detector rows).
+TRUE_INPUT_STAGES: frozenset[OracleStage] = frozenset({OracleStage.CUSUM, OracleStage.GLR})
 
 
 #: The label of the perfect model on measured inputs with lrgf-glr's alarm stage.
@@ -96,6 +107,8 @@ REFERENCE_LABELS = {
     (OracleInputs.MEASURED, OracleStage.T2): MEASURED_INPUTS_LABEL,
     (OracleInputs.MEASURED, OracleStage.DIRECTIONAL): STAGE_LABEL,
     (OracleInputs.TRUE, OracleStage.DIRECTIONAL): "perfect model + lrgf-glr stage (true inputs)",
+    (OracleInputs.TRUE, OracleStage.CUSUM): CUSUM_LABEL,
+    (OracleInputs.TRUE, OracleStage.GLR): GLR_LABEL,
 }
 
 
@@ -122,22 +135,27 @@ class OracleConfig:
       what a detector of that family would reach with a perfect model, from what a detector
       can read: where it misses the physical-limit row's bounds, no model improvement can
       close the gap with that stage.
+    * ``OracleConfig(stage="cusum")`` and ``OracleConfig(stage="glr")``, the optimal-detector
+      rows (:mod:`evaluation.tracks.optimal`): true inputs only, calibrated like the physical
+      limit (validation seeds, target 0.002).
 
     Args:
         channels: the monitored temperatures; default ``("T_rx", "T_rg1", "T_rg2", "T_d1",
             "T_dg")``.
         ewma_lambda: the EWMA's weight λ, in (0, 1]; default 0.3 (``lrgf-mem``'s).
         target: the declared false-alarm target, in (0, 0.5); ``None`` (default): 0.002 for
-            the T² stage, :data:`DIRECTIONAL_TARGET` (0.005) for the directional one, chosen so
+            the T², CUSUM and GLR stages, :data:`DIRECTIONAL_TARGET` (0.005) for the
+            directional one, chosen so
             that it realises about what ``lrgf-glr`` realises on validation seeds
             (lab/detector-lab.md).
         inputs: what drives the reference (:class:`OracleInputs`): ``"true"`` (default) or
             ``"measured"``.
-        stage: the alarm stage (:class:`OracleStage`): ``"t2"`` (default) or
-            ``"directional"``.
+        stage: the alarm stage (:class:`OracleStage`): ``"t2"`` (default),
+            ``"directional"``, ``"cusum"`` or ``"glr"`` (the last two with ``inputs="true"``).
         n_calibration: healthy calibration episodes from the track's first validation seed,
             an integer ≥ 1 that stays clear of the test and training seeds; ``None`` (default):
-            the track's validation seeds for the T², :data:`DIRECTIONAL_CALIBRATION` (100)
+            the track's validation seeds for the T², CUSUM and GLR,
+            :data:`DIRECTIONAL_CALIBRATION` (100)
             for the directional stage, whose slow scale's limit rests on few effectively
             independent samples per episode.
     """
@@ -160,13 +178,18 @@ class OracleConfig:
             check("n_calibration", self.n_calibration, Integer(1))
         check("inputs", self.inputs, Options(OracleInputs))
         check("stage", self.stage, Options(OracleStage))
+        if self.stage in TRUE_INPUT_STAGES and self.inputs != OracleInputs.TRUE:
+            raise ValueError(
+                f"inputs={self.inputs!r} with stage={self.stage!r}; allowed: inputs='true' (the "
+                "optimal-detector rows read the exact model with its true inputs)"
+            )
 
     @property
     def false_alarm_target(self) -> float:
         """The declared target the stage is calibrated to."""
         if self.target is not None:
             return self.target
-        return 0.002 if self.stage == OracleStage.T2 else DIRECTIONAL_TARGET
+        return DIRECTIONAL_TARGET if self.stage == OracleStage.DIRECTIONAL else 0.002
 
     def calibration_seeds(self, track: Track) -> range:
         """The healthy episodes the stage is calibrated on (validation seeds of ``track``).
@@ -175,7 +198,7 @@ class OracleConfig:
             ValueError: when ``n_calibration`` reaches into the track's test or training seeds.
         """
         n = self.n_calibration
-        if n is None and self.stage == OracleStage.T2:
+        if n is None and self.stage != OracleStage.DIRECTIONAL:
             return track.validation_seeds
         n = DIRECTIONAL_CALIBRATION if n is None else n
         seeds = range(track.validation_seed_start, track.validation_seed_start + n)
@@ -199,6 +222,8 @@ DEFAULT_REFERENCES = (
     OracleConfig(),
     OracleConfig(inputs="measured"),
     OracleConfig(inputs="measured", stage="directional"),
+    OracleConfig(stage="cusum"),
+    OracleConfig(stage="glr"),
 )
 
 
@@ -249,6 +274,14 @@ class PhysicalLimit:
         :meth:`OracleConfig.calibration_seeds`, validation seeds of the track)."""
         seeds = list(self.config.calibration_seeds(self.data.track) if seeds is None else seeds)
         healthy = [self._sims.healthy(s) for s in seeds]
+        if self.config.stage in TRUE_INPUT_STAGES:
+            self.stage_: KnownFaultBank | _PerfectModelStage = KnownFaultBank(
+                self._sims.signatures,
+                self._reference,
+                statistic=self.config.stage,
+                false_alarm_target=self.config.false_alarm_target,
+            ).fit(healthy)
+            return self
         if self.config.stage == OracleStage.DIRECTIONAL:
             self.stage_ = _PerfectModelStage(
                 self._reference,
@@ -272,7 +305,7 @@ class PhysicalLimit:
 
     def detect(self, episode: Episode) -> Detection:
         assert episode.seed is not None, "the physical limit needs the episode's seed"
-        if self.config.stage == OracleStage.DIRECTIONAL:
+        if self.config.stage != OracleStage.T2:
             return self.stage_.detect(episode)
         r, z = self._statistic(episode)
         stat = np.asarray(self.t2_.score(z)).reshape(-1, 1)
@@ -372,6 +405,7 @@ class _Simulations:
         self.data = data
         self._healthy: dict[int, Episode] = {}
         self._references: dict[tuple[int, bytes | None], np.ndarray] = {}
+        self.signatures = FaultSignatures(data)
 
     def healthy(self, seed: int) -> Episode:
         if seed not in self._healthy:

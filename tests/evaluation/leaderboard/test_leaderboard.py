@@ -90,11 +90,19 @@ def test_paper_reference_values() -> None:
     }
 
 
+def _table_and_legend(out: str) -> tuple[str, str]:
+    """The leaderboard's stdout: the Markdown table, a blank line, its one-paragraph legend."""
+    table, legend = out.split("\n\n")
+    assert legend.startswith("Legend: ") and legend.endswith("\n") and "\n" not in legend[:-1]
+    return table + "\n", legend
+
+
 def test_cli_end_to_end_and_resume(tmp_path, capsys) -> None:
     out = tmp_path / "lb"
     assert main([*SMALL, "--out", str(out)]) == 0
     printed = capsys.readouterr()
-    table = printed.out.splitlines()
+    table_text, legend = _table_and_legend(printed.out)
+    table = table_text.splitlines()
     assert table[0] == "| diagnoser | r_fd (nominal) | f1 r_td | f1 t_dt |"
     assert {t.split(" | ")[0] for t in table[2:]} == {
         "| limits",
@@ -102,7 +110,9 @@ def test_cli_end_to_end_and_resume(tmp_path, capsys) -> None:
         "| paper Table 2 (LRGF+MEM)",
     }
     assert "8 cells computed, 0 reused" in printed.err
-    assert (out / "leaderboard.md").read_text().endswith(printed.out)
+    md = (out / "leaderboard.md").read_text()
+    assert md.endswith(table_text) and legend in md  # stdout is the file's table and legend
+    assert "Legend:" not in printed.err
 
     with (out / "leaderboard.csv").open() as fh:
         rows = list(csv.DictReader(fh))
@@ -256,7 +266,7 @@ def test_quick_under_two_minutes(tmp_path) -> None:
     wall = time.perf_counter() - t0
     assert proc.returncode == 0, proc.stderr
     assert wall < 120.0
-    lines = proc.stdout.splitlines()
+    lines = _table_and_legend(proc.stdout)[0].splitlines()
     assert len(lines) == 2 + 3 + 1  # header, rule, three baselines, the paper row
 
 
@@ -279,7 +289,7 @@ def test_cli_external_santander(tmp_path, capsys) -> None:
         str(tmp_path),
     ]
     assert main(args) == 0
-    lines = capsys.readouterr().out.splitlines()
+    lines = _table_and_legend(capsys.readouterr().out)[0].splitlines()
     assert lines[0] == (
         "| diagnoser | r_fd (NOC_stableFeedFlow) | deltaP_increase r_td | deltaP_increase t_dt |"
     )

@@ -15,6 +15,7 @@ from evaluation.sweep.sources import simulate_loaded
 from evaluation.tracks import TRACKS
 from evaluation.tracks.board import run_track
 from evaluation.tracks.board_tables import track_table, write_track
+from evaluation.tracks.optimal import CUSUM_LABEL, GLR_LABEL
 from evaluation.tracks.oracle import (
     DIRECTIONAL_CALIBRATION,
     DIRECTIONAL_TARGET,
@@ -89,8 +90,10 @@ def test_oracle_config_rejects_bad_values() -> None:
         OracleConfig(ewma_lambda=0)
     with pytest.raises(ValueError, match=r"target=0.7 is outside the allowed range"):
         OracleConfig(target=0.7)
-    with pytest.raises(ValueError, match=r"stage='cusum'.*one of \['t2', 'directional'\]"):
-        OracleConfig(stage="cusum")
+    with pytest.raises(
+        ValueError, match=r"stage='bogus'.*one of \['t2', 'directional', 'cusum', 'glr'\]"
+    ):
+        OracleConfig(stage="bogus")
     with pytest.raises(ValueError, match=r"n_calibration=0 is outside the allowed range"):
         OracleConfig(n_calibration=0)
 
@@ -212,7 +215,14 @@ def test_track_rows_ratio_and_ranks() -> None:
 def test_run_track_end_to_end(tmp_path) -> None:
     run = run_track(TINY, ["limits"], tmp_path / "paper", workers=0, progress=False)
     labels = [r.label for r in run.rows]
-    assert labels == ["limits", ORACLE_LABEL, MEASURED_INPUTS_LABEL, STAGE_LABEL]
+    assert labels == [
+        "limits",
+        ORACLE_LABEL,
+        MEASURED_INPUTS_LABEL,
+        STAGE_LABEL,
+        CUSUM_LABEL,
+        GLR_LABEL,
+    ]
     summary = {(s.diagnoser, s.scenario): s for s in summarize(run.records)}
     assert summary[(ORACLE_LABEL, "f1")].t_dt <= 2
     paths = write_track(run, tmp_path / "paper")

@@ -1,0 +1,120 @@
+"""The command lines as a new user meets them: named as invoked, with examples in every help
+page, the leaderboard's legend on stdout, and a ``--help`` that imports nothing heavy."""
+
+from __future__ import annotations
+
+import importlib
+import os
+import subprocess
+import sys
+import tomllib
+from collections.abc import Callable
+from pathlib import Path
+
+import pytest
+
+from evaluation.leaderboard import arguments
+
+ROOT = Path(__file__).resolve().parents[1]
+
+#: Every command line with an argparse parser, by the module ``python -m`` runs.
+COMMANDS = (
+    "evaluation.leaderboard",
+    "evaluation.discover",
+    "evaluation.discover.loop_speed",
+    "evaluation.isolation.study",
+    "evaluation.isolation.isolability",
+    "fcc_env.generate",
+    "fcc_env.demo",
+    "fcc_env.closed_loop_report",
+    "fcc_env.closed_loop_analysis",
+    "fcc_env.simulator_speed",
+)
+
+
+def _main(module: str) -> Callable[[list[str]], int | None]:
+    return importlib.import_module(module).main
+
+
+def _help(main: Callable[[list[str]], int | None], argv0: str, monkeypatch, capsys) -> str:
+    monkeypatch.setattr(sys, "argv", [argv0])
+    with pytest.raises(SystemExit) as e:
+        main(["--help"])
+    assert e.value.code == 0
+    return capsys.readouterr().out
+
+
+def _console_scripts() -> dict[str, str]:
+    with (ROOT / "pyproject.toml").open("rb") as fh:
+        return tomllib.load(fh)["project"]["scripts"]
+
+
+@pytest.mark.parametrize("script", sorted(_console_scripts()))
+def test_a_console_script_names_itself(script: str, monkeypatch, capsys) -> None:
+    module, func = _console_scripts()[script].split(":")
+    main = getattr(importlib.import_module(module), func)
+    out = _help(main, f"/usr/local/bin/{script}", monkeypatch, capsys)
+    assert out.startswith(f"usage: {script} ")
+    assert f"\n  {script} " in out  # the examples, as the user invoked the command
+
+
+@pytest.mark.parametrize("module", COMMANDS)
+def test_python_m_says_python_m_and_shows_examples(module: str, monkeypatch, capsys) -> None:
+    # ``python -m pkg`` sets argv[0] to pkg/__main__.py, ``python -m pkg.mod`` to pkg/mod.py
+    path = ROOT.joinpath(*module.split("."))
+    argv0 = str(path / "__main__.py") if path.is_dir() else str(path.with_suffix(".py"))
+    out = _help(_main(module), argv0, monkeypatch, capsys)
+    assert out.startswith(f"usage: python -m {module} ")
+    examples = out.split("\nexamples:\n", 1)[1]
+    assert examples.startswith(f"  python -m {module}"), examples
+    assert "__main__.py" not in out and ".py " not in out.splitlines()[0]
+
+
+def test_an_error_names_the_command_as_invoked(monkeypatch, capsys) -> None:
+    monkeypatch.setattr(sys, "argv", ["/usr/local/bin/fcc-leaderboard"])
+    with pytest.raises(SystemExit):
+        _main("evaluation.leaderboard")(["--seeds", "0"])
+    assert (
+        "fcc-leaderboard: error: argument --seeds: must be >= 1, got 0" in capsys.readouterr().err
+    )
+
+
+def test_the_help_defaults_are_their_owners(monkeypatch) -> None:
+    """The leaderboard's help quotes values owned by heavy modules: the mirrors stay equal."""
+    for module, values in arguments.HELP_DEFAULTS.items():
+        owner = importlib.import_module(module)
+        for name, value in values.items():
+            actual = getattr(owner, name)
+            actual = tuple(actual) if isinstance(actual, dict) else actual
+            assert actual == value, f"{module}.{name} is {actual!r}; the help says {value!r}"
+
+
+def test_the_legend_follows_the_table_on_stdout(tmp_path, capsys) -> None:
+    argv = ["--diagnosers", "limits", "--scenarios", "nominal,f1", "--seeds", "1"]
+    argv += ["--train-episodes", "1", "--n-samples", "400", "--fault-time", "200"]
+    argv += ["--workers", "0", "--no-figures", "--no-progress", "--out", str(tmp_path)]
+    assert _main("evaluation.leaderboard")(argv) == 0
+    printed = capsys.readouterr()
+    table, legend = printed.out.split("\n\n")
+    assert table.startswith("| diagnoser |") and legend.startswith("Legend: ")
+    assert "cells computed" in printed.err and "Legend" not in printed.err
+
+
+def test_leaderboard_help_imports_nothing_heavy() -> None:
+    code = (
+        "import runpy, sys\n"
+        "sys.argv = ['fcc-leaderboard', '--help']\n"
+        "try:\n"
+        "    runpy.run_module('evaluation.leaderboard', run_name='__main__', alter_sys=True)\n"
+        "except SystemExit as e:\n"
+        "    assert e.code == 0, e.code\n"
+        "heavy = ('torch', 'matplotlib', 'scipy', 'numba', 'diagnosers', 'gymnasium')\n"
+        "print(sorted(m for m in heavy if m in sys.modules), file=sys.stderr)\n"
+    )
+    env = {**os.environ, "PYTHONPATH": str(ROOT)}
+    proc = subprocess.run(
+        [sys.executable, "-c", code], cwd=ROOT, env=env, capture_output=True, text=True, timeout=60
+    )
+    assert proc.returncode == 0, proc.stderr
+    assert "examples:" in proc.stdout
+    assert proc.stderr.strip().splitlines()[-1] == "[]", proc.stderr
