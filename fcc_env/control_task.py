@@ -36,10 +36,13 @@ trip           ``− trip_usd`` once, on termination (any envelope exit): shutdo
 =============  ==========================================================================
 
 The prices are reconstructed orders of magnitude, not a refinery's: a crack spread of 60 USD/t,
-gas oil lost as coke at 400 USD/t, 2.4 USD per tonne of air (30 kWh/t at 0.08 USD/kWh), and
-penalties scaled to the margin (about 4,500 USD/h at the nominal point, 12.6 USD per 10-s
-sample): 10 °C of afterburn over its warning costs as much as the margin, a trip about two days
-of it. They are fields of :class:`EconomicReward` (pass ``economics=`` to ``gym.make``).
+coke at 300 USD/t (gas oil lost as product, less the heat its burning returns to the riser),
+2.4 USD per tonne of air (30 kWh/t at 0.08 USD/kWh), and penalties scaled to the margin (about
+5,800 USD/h at the nominal point, 16 USD per 10-s sample): 10 °C of afterburn over its warning
+costs about the margin, a trip about a day and a half of it. With these prices the best steady
+operation raises the riser outlet to the top of its set-point range (545 °C), as units that
+maximise conversion run against a limit (:mod:`evaluation.control.setpoints`). They are fields
+of :class:`EconomicReward` (pass ``economics=`` to ``gym.make``).
 """
 
 from __future__ import annotations
@@ -101,10 +104,10 @@ class EconomicReward:
     and its reason). All are non-negative; set a weight to 0 to drop its term."""
 
     conversion_usd_per_t: float = 60.0
-    coke_usd_per_t: float = 400.0
+    coke_usd_per_t: float = 300.0
     air_usd_per_t: float = 2.4
-    afterburn_usd_per_C_h: float = 450.0
-    regenerator_usd_per_C_h: float = 450.0
+    afterburn_usd_per_C_h: float = 600.0
+    regenerator_usd_per_C_h: float = 600.0
     regenerator_max_C: float = 730.0
     regenerator_min_C: float = 640.0
     well_min_t: float = 7.5

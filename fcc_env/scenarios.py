@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from fcc_common.validation import Integer, Options, Real, check, invalid
-from fcc_env.params import PARAM_INDEX
+from fcc_env.params import PARAM_INDEX, FCCParams
 
 
 class Scenario(StrEnum):
@@ -162,6 +162,14 @@ class EpisodeFault:
         if self.scenario is Scenario.NOMINAL:
             return 1.0
         return 1.0 + FAULTS[self.scenario].direction * self.magnitude
+
+    def faulty_params(self, params: FCCParams) -> FCCParams:
+        """``params`` with the fault at its full size (the plant long after the onset)."""
+        if self.scenario is Scenario.NOMINAL:
+            return params
+        m = self.final_multiplier
+        names = FAULTS[self.scenario].parameters
+        return params.replace(**{n: getattr(params, n) * m for n in names})
 
     @property
     def ramp(self) -> int:

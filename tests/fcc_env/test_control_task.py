@@ -43,7 +43,7 @@ def test_the_plant_is_the_closed_loop_env_and_the_reward_sums_its_terms():
         )
         terms = info["reward_terms"]
         assert terms["conversion"] + terms["coke"] + terms["air"] == pytest.approx(margin)
-    assert 5.0 < r < 30.0  # about 12.6 USD per 10-s sample at the nominal point
+    assert 5.0 < r < 30.0  # about 16 USD per 10-s sample at the nominal point
 
 
 @pytest.mark.parametrize("scenario", ["nominal", "f1", "f2", "f3", "f4"])

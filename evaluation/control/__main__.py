@@ -1,0 +1,3 @@
+from evaluation.control.study import main
+
+raise SystemExit(main())

@@ -1,0 +1,164 @@
+"""``python -m evaluation.control``: the control task's baselines on test seeds, with intervals.
+
+Each policy (:mod:`evaluation.control.policies`) runs ``FCC-control-v0`` on the same episodes:
+the healthy plant and each fault at the paper's size and onset, ``--seeds`` test seeds each
+(seeds 0.., the benchmark's test range; nothing here is tuned, the set points come from the
+steady-state search). Per policy: the mean return per episode (USD) with its 95 % bootstrap
+interval, trips per 100 episodes, the share of samples inside a constraint region (any penalty
+term but the trip below zero), and the loss against the oracle (its return minus the
+policy's, paired by episode, with its interval). Written to ``--out`` as ``control.csv`` and
+``control.json``; the table is printed.
+
+A diagnosis-driven supervisor (a detector's alarm and isolation switching to the per-fault set
+points) and a reinforcement-learning agent are not built yet.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import time
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+
+from evaluation.control.policies import Policy, ProgramPolicy, fixed_setpoints, oracle
+from evaluation.metrics.intervals import Interval, bootstrap_ci
+from fcc_common.io import atomic_write, atomic_write_json
+from fcc_env.control_task import CONTROL_ENV_ID, REWARD_TERMS
+from fcc_env.scenarios import SCENARIOS
+
+__all__ = ["EpisodeScore", "PolicySummary", "run_episode", "run_study", "summarise"]
+
+#: The penalty terms whose being below zero marks a sample inside a constraint region.
+_CONSTRAINTS = tuple(t for t in REWARD_TERMS if t not in ("conversion", "coke", "air", "trip"))
+
+
+@dataclass(frozen=True)
+class EpisodeScore:
+    """One episode of one policy."""
+
+    policy: str
+    scenario: str
+    seed: int
+    return_usd: float
+    tripped: bool
+    constraint_share: float
+    n_steps: int
+
+
+@dataclass(frozen=True)
+class PolicySummary:
+    """A policy over the study's episodes."""
+
+    policy: str
+    n_episodes: int
+    return_usd: Interval
+    trips_per_100: float
+    constraint_share: float
+    loss_vs_oracle_usd: Interval
+
+
+def run_episode(
+    policy: Policy, scenario: str, seed: int, n_steps: int, **env_kwargs: Any
+) -> EpisodeScore:
+    """``policy`` on one ``FCC-control-v0`` episode (``scenario`` at its paper size)."""
+    env = gym.make(CONTROL_ENV_ID, scenario=scenario, **env_kwargs)
+    obs, info = env.reset(seed=seed)
+    policy.reset(info)
+    total, inside, tripped, k = 0.0, 0, False, 0
+    for k in range(1, n_steps + 1):  # noqa: B007 (k is the episode's length after the loop)
+        obs, reward, terminated, truncated, info = env.step(policy.act(obs, info))
+        total += float(reward)
+        inside += any(info["reward_terms"][t] < 0.0 for t in _CONSTRAINTS)
+        if terminated or truncated:
+            tripped = bool(terminated)
+            break
+    env.close()
+    return EpisodeScore(policy.name, scenario, seed, total, tripped, inside / k, k)
+
+
+def summarise(scores: Sequence[EpisodeScore], reference: str) -> list[PolicySummary]:
+    """Per policy: the mean return, trips, constraint share and the paired loss against the
+    policy named ``reference`` (same scenario and seed)."""
+    ref = {(s.scenario, s.seed): s.return_usd for s in scores if s.policy == reference}
+    out = []
+    for name in dict.fromkeys(s.policy for s in scores):
+        mine = [s for s in scores if s.policy == name]
+        loss = [
+            ref[(s.scenario, s.seed)] - s.return_usd for s in mine if (s.scenario, s.seed) in ref
+        ]
+        out.append(
+            PolicySummary(
+                name,
+                len(mine),
+                bootstrap_ci([s.return_usd for s in mine]),
+                100.0 * sum(s.tripped for s in mine) / len(mine),
+                float(np.mean([s.constraint_share for s in mine])),
+                bootstrap_ci(loss) if loss else Interval(math.nan, math.nan, math.nan, 0),
+            )
+        )
+    return out
+
+
+def run_study(
+    policies: Sequence[Policy], seeds: Sequence[int], n_steps: int, scenarios: Sequence[str]
+) -> list[EpisodeScore]:
+    return [
+        run_episode(p, sc, seed, n_steps) for p in policies for sc in scenarios for seed in seeds
+    ]
+
+
+def _table(summaries: Sequence[PolicySummary]) -> str:
+    def ci(i: Interval) -> str:
+        return f"{i.estimate:,.0f} [{i.low:,.0f}, {i.high:,.0f}]"
+
+    lines = [
+        "| policy | return per episode [USD] | trips per 100 episodes | time in constraint "
+        "regions | loss against the oracle [USD] |",
+        "|---|---|---|---|---|",
+    ]
+    for s in summaries:
+        lines.append(
+            f"| {s.policy} | {ci(s.return_usd)} | {s.trips_per_100:.1f} | "
+            f"{100 * s.constraint_share:.2f} % | {ci(s.loss_vs_oracle_usd)} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="python -m evaluation.control", description=__doc__.splitlines()[0]
+    )
+    parser.add_argument("--seeds", type=int, default=20, help="test seeds per scenario (20)")
+    parser.add_argument("--steps", type=int, default=3999, help="steps per episode (3999)")
+    parser.add_argument("--out", type=Path, default=Path("results/control"))
+    args = parser.parse_args(argv)
+    if args.seeds < 1 or not 1 <= args.steps <= 3999:
+        parser.error(
+            f"--seeds {args.seeds} / --steps {args.steps}: allowed --seeds >= 1, --steps 1..3999"
+        )
+    t0 = time.perf_counter()
+    policies: list[Policy] = [ProgramPolicy(), fixed_setpoints(), oracle()]
+    scores = run_study(policies, range(args.seeds), args.steps, SCENARIOS)
+    summaries = summarise(scores, reference=policies[-1].name)
+    args.out.mkdir(parents=True, exist_ok=True)
+    rows = [asdict(s) for s in scores]
+    header = ",".join(rows[0])
+    body = "\n".join(",".join(str(v) for v in r.values()) for r in rows)
+    atomic_write(args.out / "control.csv", header + "\n" + body + "\n")
+    atomic_write_json(
+        args.out / "control.json",
+        {"summaries": [asdict(s) for s in summaries], "episodes": rows},
+    )
+    table = _table(summaries)
+    print(table, end="")
+    print(
+        f"\n{len(scores)} episodes ({args.seeds} test seeds x {len(SCENARIOS)} scenarios x "
+        f"{len(policies)} policies) in {time.perf_counter() - t0:.0f} s; wrote {args.out}",
+    )
+    return 0
