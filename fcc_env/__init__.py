@@ -63,32 +63,29 @@ MAX_EPISODE_STEPS = DEFAULT_N_SAMPLES - 1
 #: The closed-loop plant: the regulatory layer of :class:`RegulatoryLayer` running.
 CLOSED_LOOP_ENV_ID = "FCC-closedloop-v0"
 
-# gym.make's max_episode_steps lives in a TimeLimit the env never sees: this wrapper, outside
-# it, warns when the limit ends an episode before its fault onset (fcc_env.env.OnsetHorizonCheck)
-_ONSET_CHECK = WrapperSpec("OnsetHorizonCheck", "fcc_env.env:OnsetHorizonCheck", {})
-
-if ENV_ID not in registry:
-    register(
-        id=ENV_ID,
-        entry_point="fcc_env.env:FCCEnv",
-        max_episode_steps=MAX_EPISODE_STEPS,
-        additional_wrappers=(_ONSET_CHECK,),
-    )
-if CLOSED_LOOP_ENV_ID not in registry:
-    register(
-        id=CLOSED_LOOP_ENV_ID,
-        entry_point="fcc_env.env:FCCEnv",
-        max_episode_steps=MAX_EPISODE_STEPS,
-        kwargs={"regulatory": True},
-        additional_wrappers=(_ONSET_CHECK,),
-    )
+# The plant ids have a native vector env (gym.make_vec(..., vectorization_mode=
+# "vector_entry_point")), which Gymnasium refuses for a spec with additional wrappers: so the
+# check that gym.make's max_episode_steps does not end an episode before its fault onset
+# (fcc_env.env.OnsetHorizonCheck) is the vector env's own, and a wrapper a user adds for single
+# envs (use horizon= to shorten an episode: an onset outside it is refused).
+for _id, _kwargs in ((ENV_ID, {}), (CLOSED_LOOP_ENV_ID, {"regulatory": True})):
+    if _id not in registry:
+        register(
+            id=_id,
+            entry_point="fcc_env.env:FCCEnv",
+            vector_entry_point="fcc_env.vector_env:FCCVectorEnv",
+            max_episode_steps=MAX_EPISODE_STEPS,
+            kwargs=_kwargs,
+        )
 
 if CONTROL_ENV_ID not in registry:
     register(
         id=CONTROL_ENV_ID,
         entry_point="fcc_env.control_task:FCCControlEnv",
         max_episode_steps=MAX_EPISODE_STEPS,
-        additional_wrappers=(_ONSET_CHECK,),
+        additional_wrappers=(
+            WrapperSpec("OnsetHorizonCheck", "fcc_env.env:OnsetHorizonCheck", {}),
+        ),
     )
 
 __version__ = "0.1.0"

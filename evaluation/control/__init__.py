@@ -3,6 +3,6 @@
 ================  ================================================================================
 ``setpoints``     the best fixed set points of a plant, healthy or faulty (steady-state search)
 ``policies``      the baselines: the program, fixed set points, the oracle that knows the fault
-``study``         ``python -m evaluation.control``: the baselines on test seeds, with intervals
+``returns``       ``python -m evaluation.control``: the baselines on test seeds, with intervals
 ================  ================================================================================
 """

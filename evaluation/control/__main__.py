@@ -1,3 +1,3 @@
-from evaluation.control.study import main
+from evaluation.control.returns import main
 
 raise SystemExit(main())

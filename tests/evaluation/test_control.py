@@ -15,7 +15,7 @@ from evaluation.control.setpoints import (
     steady_operation,
     total_inventory_kg,
 )
-from evaluation.control.study import EpisodeScore, run_episode, summarise
+from evaluation.control.returns import EpisodeScore, run_episode, summarise
 from fcc_env.control_task import EconomicReward
 from fcc_env.params import NOMINAL_INPUTS, FCCParams
 from fcc_env.physics import rhs
