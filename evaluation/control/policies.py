@@ -12,6 +12,11 @@ recovers the program's as "shown − last move" and moves by the difference
   (:func:`evaluation.control.setpoints.best_setpoints`), held throughout.
 * :func:`oracle`: knows the episode's fault and its onset (``info`` at reset: what no agent may
   read) and moves, from the onset, to the best set points of the faulty plant.
+* :class:`DiagnosisSupervisor`: a fitted diagnoser reads the observation sample by sample
+  (``update``); from its first alarm the policy moves to the best set points of the fault the
+  diagnoser names (an isolator), or, from a detector that names none, to the set points best on
+  average over the faults (:func:`robust_setpoints`). What a diagnosis is worth is the gap
+  between it and the fixed set points, and what it lacks, the gap to the oracle.
 """
 
 from __future__ import annotations
@@ -28,7 +33,16 @@ from fcc_env.control_task import EconomicReward
 from fcc_env.env import SETPOINT_ACTION_SCALE
 from fcc_env.scenarios import EpisodeFault, FaultSpec, Scenario
 
-__all__ = ["Policy", "ProgramPolicy", "SetpointPolicy", "fixed_setpoints", "oracle"]
+__all__ = [
+    "DiagnosisSupervisor",
+    "Policy",
+    "ProgramPolicy",
+    "SetpointPolicy",
+    "fault_setpoints",
+    "fixed_setpoints",
+    "oracle",
+    "robust_setpoints",
+]
 
 _SP = [CLOSED_LOOP_CHANNELS.index(n) for n in ("T_rx_sp", "T_rg1_sp")]
 
@@ -102,3 +116,54 @@ def oracle(economics: EconomicReward | None = None) -> SetpointPolicy:
         return cache[key].setpoints
 
     return SetpointPolicy("oracle (knows the fault and its onset)", target)
+
+
+def fault_setpoints(economics: EconomicReward | None = None) -> dict[str, np.ndarray]:
+    """The best set points of the plant with each fault at the paper's size, by fault name."""
+    out = {}
+    for sc in Scenario:
+        if sc is not Scenario.NOMINAL:
+            fault = FaultSpec(scenario=sc.value).resolve(horizon=4000)
+            out[sc.value] = best_setpoints(fault, economics=economics).setpoints
+    return out
+
+
+def robust_setpoints(per_fault: Mapping[str, np.ndarray]) -> np.ndarray:
+    """The set points for "some fault, not known which": the mean of the faults' best ones."""
+    return np.mean(np.stack(list(per_fault.values())), axis=0)
+
+
+@dataclass
+class DiagnosisSupervisor:
+    """Fixed healthy set points until ``diagnoser`` alarms, then the diagnosed fault's.
+
+    ``diagnoser`` is fitted on closed-loop episodes with the observation's channels; it reads
+    each observation through ``update`` (streaming, as on a unit). Once alarmed the policy
+    stays switched (a supervisor that flip-flops on each alarm would move the set points with
+    the noise); a later diagnosis of another fault switches again.
+    """
+
+    name: str
+    diagnoser: Any
+    healthy: np.ndarray
+    per_fault: Mapping[str, np.ndarray]
+    _policy: SetpointPolicy = field(init=False, repr=False)
+    _target: np.ndarray = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        self._policy = SetpointPolicy(self.name, lambda k, info: self._target)
+
+    def reset(self, info: Mapping[str, Any]) -> None:
+        self.diagnoser.reset()
+        self._target = self.healthy
+        self._policy.reset(info)
+
+    def act(self, obs: np.ndarray, info: Mapping[str, Any]) -> np.ndarray:
+        decision = self.diagnoser.update(np.asarray(obs, dtype=np.float64))
+        if decision.alarm:
+            named = getattr(decision, "diagnosis", None)
+            if named in self.per_fault:
+                self._target = self.per_fault[named]
+            elif self._target is self.healthy:
+                self._target = robust_setpoints(self.per_fault)
+        return self._policy.act(obs, info)

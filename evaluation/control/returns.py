@@ -9,8 +9,11 @@ term but the trip below zero), and the loss against the oracle (its return minus
 policy's, paired by episode, with its interval). Written to ``--out`` as ``control.csv`` and
 ``control.json``; the table is printed.
 
-A diagnosis-driven supervisor (a detector's alarm and isolation switching to the per-fault set
-points) and a reinforcement-learning agent are not built yet.
+``--diagnosers`` (default ``pca``) adds a diagnosis-driven supervisor per registered diagnoser
+(:class:`~evaluation.control.policies.DiagnosisSupervisor`), trained on closed-loop episodes of
+the training seeds (1000..; healthy, and for an isolator each fault at the paper's size too):
+what its alarms and diagnoses are worth in money and trips. A reinforcement-learning agent is
+not built yet.
 """
 
 from __future__ import annotations
@@ -26,13 +29,30 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from evaluation.control.policies import Policy, ProgramPolicy, fixed_setpoints, oracle
+from evaluation.control.policies import (
+    DiagnosisSupervisor,
+    Policy,
+    ProgramPolicy,
+    fault_setpoints,
+    fixed_setpoints,
+    oracle,
+)
 from evaluation.metrics.intervals import Interval, bootstrap_ci
 from fcc_common.io import atomic_write, atomic_write_json
 from fcc_env.control_task import CONTROL_ENV_ID, REWARD_TERMS
 from fcc_env.scenarios import SCENARIOS
 
-__all__ = ["EpisodeScore", "PolicySummary", "run_episode", "run_study", "summarise"]
+__all__ = [
+    "EpisodeScore",
+    "PolicySummary",
+    "run_episode",
+    "run_study",
+    "summarise",
+    "supervisor",
+]
+
+#: Training episodes of a supervisor's diagnoser: seeds 1000.. (never a test seed).
+TRAIN_SEEDS = range(1000, 1009)
 
 #: The penalty terms whose being below zero marks a sample inside a constraint region.
 _CONSTRAINTS = tuple(t for t in REWARD_TERMS if t not in ("conversion", "coke", "air", "trip"))
@@ -113,6 +133,26 @@ def run_study(
     ]
 
 
+def supervisor(name: str, n_samples: int = 4000) -> DiagnosisSupervisor:
+    """A :class:`DiagnosisSupervisor` around registered diagnoser ``name``, trained on
+    closed-loop episodes of :data:`TRAIN_SEEDS`."""
+    import fcc_env
+    from diagnosers import Episode, diagnoser_class, make
+
+    healthy = fcc_env.simulate_episodes(list(TRAIN_SEEDS), n_samples, regulatory=True)
+    train = Episode.from_batch(healthy)
+    if diagnoser_class(name).isolates:
+        for fault in SCENARIOS[1:]:
+            batch = fcc_env.simulate_episodes(
+                list(TRAIN_SEEDS), n_samples, scenario=fault, regulatory=True
+            )
+            train += Episode.from_batch(batch)
+    best = fault_setpoints()
+    return DiagnosisSupervisor(
+        f"supervisor on {name}", make(name).fit(train), fixed_setpoints().target(0, {}), best
+    )
+
+
 def _table(summaries: Sequence[PolicySummary]) -> str:
     def ci(i: Interval) -> str:
         return f"{i.estimate:,.0f} [{i.low:,.0f}, {i.high:,.0f}]"
@@ -137,13 +177,26 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--seeds", type=int, default=20, help="test seeds per scenario (20)")
     parser.add_argument("--steps", type=int, default=3999, help="steps per episode (3999)")
     parser.add_argument("--out", type=Path, default=Path("results/control"))
+    parser.add_argument(
+        "--diagnosers",
+        default="pca",
+        help="comma-separated registered diagnosers, each driving a supervisor (pca); '' none",
+    )
     args = parser.parse_args(argv)
     if args.seeds < 1 or not 1 <= args.steps <= 3999:
         parser.error(
             f"--seeds {args.seeds} / --steps {args.steps}: allowed --seeds >= 1, --steps 1..3999"
         )
     t0 = time.perf_counter()
-    policies: list[Policy] = [ProgramPolicy(), fixed_setpoints(), oracle()]
+    from diagnosers import available
+
+    names = [n for n in args.diagnosers.split(",") if n]
+    unknown = [n for n in names if n not in available()]
+    if unknown:
+        parser.error(f"--diagnosers: unknown {unknown}; allowed: {available()}")
+    policies: list[Policy] = [ProgramPolicy(), fixed_setpoints()]
+    policies += [supervisor(n) for n in names]
+    policies.append(oracle())
     scores = run_study(policies, range(args.seeds), args.steps, SCENARIOS)
     summaries = summarise(scores, reference=policies[-1].name)
     args.out.mkdir(parents=True, exist_ok=True)

@@ -9,13 +9,13 @@ from scipy import optimize
 
 import fcc_env  # noqa: F401  (registers the ids)
 from evaluation.control.policies import ProgramPolicy, SetpointPolicy
+from evaluation.control.returns import EpisodeScore, run_episode, summarise
 from evaluation.control.setpoints import (
     best_setpoints,
     operating_point,
     steady_operation,
     total_inventory_kg,
 )
-from evaluation.control.returns import EpisodeScore, run_episode, summarise
 from fcc_env.control_task import EconomicReward
 from fcc_env.params import NOMINAL_INPUTS, FCCParams
 from fcc_env.physics import rhs
@@ -81,3 +81,38 @@ def test_the_study_scores_episodes_and_pairs_the_loss():
     a, ref = summarise(scores, reference="ref")
     assert a.loss_vs_oracle_usd.estimate == pytest.approx(10.0)
     assert ref.trips_per_100 == 20.0 and ref.loss_vs_oracle_usd.estimate == 0.0
+
+
+class _Stub:
+    """A diagnoser that alarms from sample ``at`` on, naming ``fault`` (or nothing)."""
+
+    def __init__(self, at: int, fault: str | None) -> None:
+        self.at, self.fault, self.k = at, fault, 0
+
+    def reset(self) -> None:
+        self.k = 0
+
+    def update(self, y):
+        from types import SimpleNamespace
+
+        self.k += 1
+        return SimpleNamespace(alarm=self.k > self.at, diagnosis=self.fault)
+
+
+@pytest.mark.parametrize(("fault", "want"), [("f2", "f2"), (None, "robust")])
+def test_a_supervisor_switches_on_the_first_alarm_to_the_diagnosed_faults_set_points(fault, want):
+    from evaluation.control.policies import DiagnosisSupervisor, robust_setpoints
+
+    healthy = np.array([535.0, 685.0])
+    per_fault = {"f1": np.array([540.0, 680.0]), "f2": np.array([530.0, 690.0])}
+    sup = DiagnosisSupervisor("s", _Stub(30, fault), healthy, per_fault)
+    env = gym.make("FCC-control-v0", scenario="nominal")
+    obs, info = env.reset(seed=1)
+    sup.reset(info)
+    shown = []
+    for _ in range(60):
+        obs, *_, info = env.step(sup.act(obs, info))
+        shown.append(info["setpoints"].copy())
+    target = per_fault["f2"] if want == "f2" else robust_setpoints(per_fault)
+    assert np.allclose(shown[20], healthy, atol=1e-4)
+    assert np.allclose(shown[45], target, atol=1e-4)
