@@ -49,18 +49,7 @@ LRGFMEMPaper = preset(
     (``band_definition="paper"``) and the paper's rule: alarm when the output leaves its band
     (``alarm_filter="none"``, α = ``band_alpha``). ``lrgf-mem`` with these defaults. The
     start-up convention (``steady_window=100``, a silent warm-up) is ``lrgf-mem``'s: the paper
-    does not say how its filters start.
-
-    Hyperparameters: ``lrgf-mem``'s (:class:`~diagnosers.lrgf_mem.LRGFMEM`, each documented
-    there with its range and unit), with the defaults above changed (``n_hidden=3``,
-    ``mem_output_activation="tanh"``, ``mem_select="always"``, ``lr=0.01``,
-    ``band_definition="paper"``, ``alarm_filter="none"``). The others keep ``lrgf-mem``'s
-    defaults: ``relations`` (``None``: the paper's one relation), ``order``, ``n_linear``,
-    ``steady_window``, ``mem_hidden``, ``mem_input_delays``, ``mem_output_delays``,
-    ``mem_max_epochs``, ``method``, ``max_epochs``, ``val_fraction``, ``band_alpha`` (α of the
-    band the rule alarms on), ``seed``, ``progress``, ``n_jobs``; ``ewma_lambda``,
-    ``false_alarm_target``, ``threshold_margin`` and ``limit_method`` set the EWMA stage's
-    limits, which the band rule does not use.""",
+    does not say how its filters start.""",
     module=__name__,
     # relations=None is the paper's one relation for this preset
     attributes={"DEFAULT_RELATIONS": PAPER_RELATIONS},
@@ -87,18 +76,6 @@ LRGFGLRAdaptive = preset(
     detection (the calibration records are corrected more than fresh episodes are): use
     ``lrgf-glr`` there. ``baseline_filters=None, false_alarm_target=0.03`` gives the
     running-mean variant. The settings were chosen on validation seeds (lab/detector-lab.md).
-
-    Hyperparameters: ``lrgf-glr``'s (:class:`~diagnosers.lrgf_glr.LRGFGLR`, each documented
-    there with its range and unit), with the defaults above changed (``baseline_lambda``,
-    ``baseline_hold``, ``baseline_filters``, ``baseline_ridge``, ``false_alarm_target=0.04``,
-    ``val_fraction=0``); ``statistic`` and ``calibration`` keep theirs, as do
-    ``relations``, ``n_hidden``, ``order``, ``n_linear``, ``steady_window``, ``mem_hidden``,
-    ``mem_input_delays``, ``mem_output_delays``, ``mem_output_activation``, ``mem_max_epochs``,
-    ``mem_select``, ``method``, ``lr``, ``max_epochs``, ``band_alpha``, ``ewma_lambda``,
-    ``slow_ewma_lambda``, ``slow_share``, ``omnibus_share``, ``glr_window``, ``cusum_drift``,
-    ``limit_method``, ``threshold_margin``, ``on_delay``, ``n_folds``, ``refit_epochs``,
-    ``fault_scenarios``, ``fault_seeds``, ``direction_window``, ``baseline_settle``,
-    ``novelty_gain``, ``seed``, ``progress``, ``n_jobs``.
     """,
     module=__name__,
 )
@@ -112,19 +89,7 @@ LRGFGLRClosed = preset(
     :data:`diagnosers.relations.CLOSED_LOOP_RELATIONS`: T_rx from the valve command, T_rg2 and
     T_fp; T_rg1 and T_rg2 with the air and the valve), and its fault directions are learned on
     faults simulated under control. Everything else is ``lrgf-glr``'s. It needs the channels
-    ``u_F`` and ``R_ar``: on open-loop data (no ``u_F``) the harness skips it.
-
-    Hyperparameters: ``lrgf-glr``'s (:class:`~diagnosers.lrgf_glr.LRGFGLR`, each documented
-    there with its range and unit, defaults unchanged; ``relations=None`` is the closed-loop
-    set above): ``false_alarm_target``, ``statistic``, ``calibration``, ``val_fraction``,
-    ``baseline_lambda``, ``baseline_hold``, ``baseline_filters``, ``baseline_ridge``,
-    ``relations``, ``n_hidden``, ``order``, ``n_linear``, ``steady_window``, ``mem_hidden``,
-    ``mem_input_delays``, ``mem_output_delays``, ``mem_output_activation``, ``mem_max_epochs``,
-    ``mem_select``, ``method``, ``lr``, ``max_epochs``, ``band_alpha``, ``ewma_lambda``,
-    ``slow_ewma_lambda``, ``slow_share``, ``omnibus_share``, ``glr_window``, ``cusum_drift``,
-    ``limit_method``, ``threshold_margin``, ``on_delay``, ``n_folds``, ``refit_epochs``,
-    ``fault_scenarios``, ``fault_seeds``, ``direction_window``, ``baseline_settle``,
-    ``novelty_gain``, ``seed``, ``progress``, ``n_jobs``.""",
+    ``u_F`` and ``R_ar``: on open-loop data (no ``u_F``) the harness skips it.""",
     module=__name__,
     attributes={"DEFAULT_RELATIONS": CLOSED_LOOP_RELATIONS},
 )

@@ -78,7 +78,8 @@ def preset(
         raise ValueError(f"preset {name!r}: {unknown} are not hyperparameters of {family}")
     merged = {**base_defaults, **defaults}
     qualname = "".join(
-        part.upper() if part in ("lrgf", "mem", "glr") else part.title() for part in name.split("-")
+        part.upper() if part in ("lrgf", "mem", "glr", "pca") else part.title()
+        for part in name.split("-")
     )
     cls = type(
         qualname,
@@ -86,10 +87,23 @@ def preset(
         {
             "DEFAULTS": merged,
             "__init__": keyword_init(merged),
-            "__doc__": doc,
+            "__doc__": _with_parameters(doc, name, family, defaults),
             "__module__": module,
             "__qualname__": qualname,
             **(attributes or {}),
         },
     )
     return register(name)(cls)  # type: ignore[return-value]
+
+
+def _with_parameters(doc: str, name: str, family: type, defaults: Mapping[str, Any]) -> str:
+    """``doc`` followed by the preset's hyperparameters, generated from the family's table so
+    that ``help()`` lists every one and no list is kept by hand."""
+    changed = ", ".join(f"``{k}={v!r}``" for k, v in defaults.items()) or "none"
+    kept = ", ".join(f"``{k}``" for k in family.DEFAULTS if k not in defaults)  # type: ignore[attr-defined]
+    text = inspect.cleandoc(doc)
+    return (
+        f"{text}\n\nHyperparameters: those of :class:`~{family.__module__}.{family.__qualname__}`"
+        f" (each documented there, with its range and unit). ``{name}`` changes {changed}; the "
+        f"others keep the family's defaults: {kept}."
+    )

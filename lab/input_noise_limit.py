@@ -7,7 +7,7 @@ simulation-residual detector reads). ``--channels`` restricts both observers to 
 temperatures (e.g. ``T_rg1``: a perfect model of the T_rg1 relation alone). ``--stages
 t2,directional`` adds the same two references evaluated by ``lrgf-glr``'s alarm stage
 (``OracleConfig(stage="directional")``, declared target ``--target``, default
-:data:`evaluation.tracks.oracle.DIRECTIONAL_TARGET`).
+:data:`evaluation.tracks.oracle.REFERENCE_TARGET`).
 
     python lab/input_noise_limit.py --track paper --n-healthy 30 --n-faulty 10
     python lab/input_noise_limit.py --track small --n-healthy 60 --stages directional

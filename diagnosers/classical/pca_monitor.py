@@ -255,11 +255,6 @@ PCAEmpirical = preset(
     training samples, the recipe of most data-driven monitoring studies and of the source
     notebooks of the Santander et al. (2022) FCCU data set (standardised channels, components
     to 95 % of the variance, alarm when either statistic is over its 99th percentile), so that
-    recipe is a row beside ``pca``'s distribution limits.
-
-    Hyperparameters: ``pca``'s (:class:`PCADetector`), defaults unchanged but ``limits``:
-    ``alpha`` (level of both limits, (0, 1), default 0.01), ``variance_explained`` ((0, 1],
-    default 0.95), ``n_components`` (``None`` or [1, m − 1]), ``channels`` (``None``: all),
-    ``limits`` (``"empirical"`` here).""",
+    recipe is a row beside ``pca``'s distribution limits.""",
     module=__name__,
 )

@@ -6,6 +6,8 @@ Times are sample indices (integers); to get seconds multiply by the episode's ``
 * :func:`r_fd` - false detection rate, eq. (12): share of ``[t_on, t_from)`` spent in alarm.
 * :func:`r_td` - true detection rate, eq. (13): share of ``[t_from, t_hor)`` spent in alarm.
 * :func:`t_dt` - detection time: samples from ``t_from`` to the first alarm at or after it.
+* :func:`censored_delay` - the detection time with a miss counted: ``min(t_dt, horizon)``, a
+  miss (``nan``) at ``horizon``, the samples scored from the onset on.
 
 The paper sums the durations ``t_fd^i`` of the false (true) detection periods; with sampled alarms
 that sum is the number of alarmed samples in the window, so the rates are window means.
@@ -22,7 +24,7 @@ import numbers
 
 import numpy as np
 
-__all__ = ["check_sample_index", "episode_scores", "r_fd", "r_td", "t_dt"]
+__all__ = ["censored_delay", "check_sample_index", "episode_scores", "r_fd", "r_td", "t_dt"]
 
 
 def _check_alarms(alarms: np.ndarray) -> np.ndarray:
@@ -141,3 +143,30 @@ def episode_scores(alarms: np.ndarray, fault_onset: int | None, t_on: int = 0) -
         "r_td": r_td(a, onset),
         "t_dt": t_dt(a, onset),
     }
+
+
+def censored_delay(t_dt: float, horizon: int) -> float:
+    """The detection time of one faulty episode with a miss counted: ``min(t_dt, horizon)``,
+    and ``horizon`` when the fault was missed (``t_dt`` is ``nan``).
+
+    A mean of ``t_dt`` over the detected seeds only rewards a detector that misses its slow
+    seeds; censoring at the end of the episode charges a miss the whole post-onset time it
+    stayed silent, a lower bound on its true delay (the alarm would come, if ever, later).
+
+    Args:
+        t_dt: samples from the onset to the first alarm at or after it, ``nan`` when missed.
+        horizon: the samples scored from the onset on (``T - onset``, cut where the plant
+            ended the episode), an integer ≥ 1.
+
+    >>> censored_delay(12.0, 300), censored_delay(float("nan"), 300)
+    (12.0, 300.0)
+    """
+    h = check_sample_index("horizon", horizon)
+    if h < 1:
+        raise ValueError(f"horizon={horizon!r}; allowed: an integer ≥ 1 (samples after the onset)")
+    t = float(t_dt)
+    if np.isnan(t):
+        return float(h)
+    if t < 0:
+        raise ValueError(f"t_dt={t_dt!r}; allowed: a delay ≥ 0 samples, or nan for a miss")
+    return min(t, float(h))

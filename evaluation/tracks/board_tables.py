@@ -1,5 +1,13 @@
 """A track's tables and files: the Markdown/CSV/JSON leaderboard of a track, its isolation
-table and confusion figures, and the summary over tracks with the goal table."""
+table and confusion figures, and the summary over tracks with the goal table.
+
+A track has two tables: the compact one (:func:`track_table`, printed, and first in
+``leaderboard.md``): r_fd with its interval, per fault r_td / t_dt / delay with misses counted
+(rank) and the ratio to the optimal CUSUM row; and the wide one (:func:`track_wide_table`, below
+it in ``leaderboard.md``, and every column in ``leaderboard.csv`` / ``.json``). Ranks range over
+the registered detectors whose r_fd meets the goal (:func:`evaluation.tracks.rows.rank_rows`);
+every other row is shown unranked, a row over the goal marked with :data:`OVER_GOAL`, and a
+line under each table says what each reference row is."""
 
 from __future__ import annotations
 
@@ -24,6 +32,7 @@ from evaluation.tracks.goal import (
     limit_goal,
     track_goals,
 )
+from evaluation.tracks.oracle import CUSUM_LABEL, ORACLE_LABEL, REFERENCE_NOTES
 from evaluation.tracks.rows import TrackRow, TrackRun, records_of
 from evaluation.tracks.track import Track
 from fcc_common.io import atomic_write, atomic_write_json
@@ -34,6 +43,7 @@ __all__ = [
     "summary_table",
     "track_legend",
     "track_table",
+    "track_wide_table",
     "write_summary",
     "write_track",
 ]
@@ -43,6 +53,47 @@ def _ci(iv: Interval, digits: int) -> str:
     if not math.isfinite(iv.estimate):
         return "–"
     return f"{iv.estimate:.{digits}f} [{iv.low:.{digits}f}, {iv.high:.{digits}f}]"
+
+
+#: the mark of a row whose r_fd's upper 95 % end exceeds the goal on the test episodes
+OVER_GOAL = "†"
+
+
+def _label(row: TrackRow) -> str:
+    return row.label + (f" {OVER_GOAL}" if not row.meets_r_fd_goal else "")
+
+
+def _marks_text() -> str:
+    return (
+        f"Ranks ((rank), '=' where intervals overlap) range over the registered detectors whose "
+        f"r_fd's upper 95 % end is at most {GOAL_R_FD:g}; reference rows and detectors over "
+        f"that goal show '–'. {OVER_GOAL}: r_fd's upper 95 % end above {GOAL_R_FD:g} on the test "
+        "episodes (a detector: unranked; a reference row: no detector is scored against it)."
+    )
+
+
+def _references_line(run: TrackRun) -> str:
+    """What each reference row of ``run`` is, and which rows the ratios are taken against."""
+    refs = [r for r in run.rows if r.reference]
+    if not refs:
+        return "No reference rows."
+    limit, optimal = run.limit_row, run.optimal_row
+    parts = [f"{r.label}: {REFERENCE_NOTES.get(r.label, 'a reference row')}" for r in refs]
+    return (
+        "Reference rows (read what no detector may; never ranked): "
+        + "; ".join(parts)
+        + f". t_dt/oracle is against `{limit.label if limit else 'none'}`, t_dt/optimal "
+        f"against `{optimal.label if optimal else 'none'}` (the first reference row from "
+        f"`{ORACLE_LABEL}`, resp. `{CUSUM_LABEL}`, on that meets the r_fd goal)."
+    )
+
+
+def _delay_text() -> str:
+    return (
+        "delay: mean over the seeds of min(t_dt, T − onset), a miss counted as T − onset (T: "
+        "the episode's end), so a miss costs its whole silent time, unlike t_dt's mean over the "
+        "detected seeds"
+    )
 
 
 def track_legend(sample_time_s: float | None = None) -> str:
@@ -56,8 +107,10 @@ def track_legend(sample_time_s: float | None = None) -> str:
         f"Legend: {R_FD_TEXT}; healthy eps. alarmed: the share of healthy episodes with any "
         "alarm [0-1]; worst r_fd (seed): the largest r_fd of one healthy episode and its seed; "
         f"{R_TD_TEXT}, (rank) on r_td with '=' where intervals overlap; "
-        f"{t_dt_text(sample_time_s)}; t_dt/oracle: (t_dt + 1) / (oracle t_dt + 1) [-] over the "
-        "seeds both detected, 1 = as fast as the physical limit; missed/ended: faulty episodes "
+        f"{t_dt_text(sample_time_s)}; {_delay_text()}; t_dt/oracle: (t_dt + 1) / (oracle t_dt + "
+        "1) [-] over the seeds both detected, 1 = as fast as the physical limit (where that row "
+        "misses the r_fd goal, the reference row named under the table); t_dt/optimal: the same "
+        "against the optimal CUSUM row; missed/ended: faulty episodes "
         "never alarmed after the onset / episodes the plant ended early, with the reasons "
         "(well_empty, afterburn, extinguished; scored on their samples before the end). "
         "a [lo, hi]: estimate and 95 % BCa bootstrap interval over the seeds; –: no value."
@@ -72,12 +125,18 @@ def _seed_line(track: Track) -> str:
     )
 
 
+def _point(iv: Interval, digits: int) -> str:
+    return f"{iv.estimate:.{digits}f}" if math.isfinite(iv.estimate) else "–"
+
+
 def track_table(run: TrackRun) -> str:
-    """Markdown table of a track (header sentences, legend, rows)."""
+    """The compact Markdown table of a track (printed): r_fd with its interval, per fault
+    r_td / t_dt / delay (rank) and t_dt/optimal; header sentences, legend, the reference line."""
     faults = run.track.faults
-    head = ["diagnoser", "r_fd [95 % CI]", "healthy eps. alarmed", "worst r_fd (seed)"]
+    head = ["diagnoser", "r_fd [95 % CI]"]
     for f in faults:
-        head += [f"{f} r_td (rank)", f"{f} t_dt", f"{f} t_dt/oracle", f"{f} missed/ended"]
+        head += [f"{f} r_td / t_dt / delay (rank)", f"{f} t_dt/optimal"]
+    dt = run.records[0].sample_time_s if run.records else None
     lines = [
         f"## Track `{run.track.name}`",
         "",
@@ -85,14 +144,46 @@ def track_table(run: TrackRun) -> str:
         "",
         _seed_line(run.track),
         "",
-        track_legend(run.records[0].sample_time_s if run.records else None),
+        f"Legend: {R_FD_TEXT}; {R_TD_TEXT}; {t_dt_text(dt)}; {_delay_text()}; t_dt/optimal: "
+        "(t_dt + 1) / (optimal t_dt + 1) [-] over the seeds both detected; a [lo, hi]: estimate "
+        f"and 95 % BCa bootstrap interval over the seeds; –: no value. {_marks_text()} "
+        "The wide table (intervals everywhere, misses, ended episodes) is in leaderboard.md/.csv.",
+        "",
+        "| " + " | ".join(head) + " |",
+        "|" + "---|" * len(head),
+    ]
+    for row in run.rows:
+        cells = [_label(row), _ci(row.r_fd, 4)]
+        for f in faults:
+            c = row.faults[f]
+            cells += [
+                f"{_point(c.r_td, 3)} / {_point(c.t_dt, 0)} / {_point(c.delay, 0)} ({c.rank})",
+                _point(c.ratio_optimal, 2),
+            ]
+        lines.append("| " + " | ".join(cells) + " |")
+    lines += ["", _references_line(run)]
+    return "\n".join(lines) + "\n"
+
+
+def track_wide_table(run: TrackRun) -> str:
+    """The wide Markdown table of a track (every column with its interval; legend, reference
+    line)."""
+    faults = run.track.faults
+    head = ["diagnoser", "r_fd [95 % CI]", "healthy eps. alarmed", "worst r_fd (seed)"]
+    for f in faults:
+        head += [f"{f} r_td (rank)", f"{f} t_dt", f"{f} delay", f"{f} t_dt/oracle"]
+        head += [f"{f} t_dt/optimal", f"{f} missed/ended"]
+    lines = [
+        f"### Track `{run.track.name}`, every column",
+        "",
+        track_legend(run.records[0].sample_time_s if run.records else None) + " " + _marks_text(),
         "",
         "| " + " | ".join(head) + " |",
         "|" + "---|" * len(head),
     ]
     for row in run.rows:
         cells = [
-            row.label,
+            _label(row),
             _ci(row.r_fd, 4),
             f"{row.alarmed_share:.2f}",
             f"{row.worst_r_fd:.4f} ({row.worst_seed})",
@@ -102,18 +193,26 @@ def track_table(run: TrackRun) -> str:
             cells += [
                 f"{_ci(c.r_td, 3)} ({c.rank})",
                 _ci(c.t_dt, 0),
+                _ci(c.delay, 0),
                 _ci(c.ratio, 2),
+                _ci(c.ratio_optimal, 2),
                 f"{c.misses}/{c.terminated}"
                 + "".join(f" {reason}×{n}" for reason, n in c.ended_reasons),
             ]
         lines.append("| " + " | ".join(cells) + " |")
+    lines += ["", _references_line(run)]
     return "\n".join(lines) + "\n"
 
 
-def _flat(row: TrackRow, track: str) -> dict[str, Any]:
+def _flat(row: TrackRow, track: str, run: TrackRun) -> dict[str, Any]:
+    limit, optimal = run.limit_row, run.optimal_row
     d: dict[str, Any] = {
         "track": track,
         "diagnoser": row.label,
+        "reference": row.reference,
+        "r_fd_meets_goal": row.meets_r_fd_goal,
+        "limit_reference": limit.label if limit else "",
+        "optimal_reference": optimal.label if optimal else "",
         "r_fd": row.r_fd.estimate,
         "r_fd_low": row.r_fd.low,
         "r_fd_high": row.r_fd.high,
@@ -122,7 +221,13 @@ def _flat(row: TrackRow, track: str) -> dict[str, Any]:
         "worst_seed": row.worst_seed,
     }
     for f, c in row.faults.items():
-        for name, iv in (("r_td", c.r_td), ("t_dt", c.t_dt), ("t_dt_over_oracle", c.ratio)):
+        for name, iv in (
+            ("r_td", c.r_td),
+            ("t_dt", c.t_dt),
+            ("t_dt_over_oracle", c.ratio),
+            ("delay_censored", c.delay),
+            ("t_dt_over_optimal", c.ratio_optimal),
+        ):
             d[f"{f}_{name}"], d[f"{f}_{name}_low"], d[f"{f}_{name}_high"] = (
                 iv.estimate,
                 iv.low,
@@ -217,11 +322,20 @@ def write_track(run: TrackRun, out: Path) -> list[Path]:
     """The track's table (Markdown, CSV, JSON) and its per-seed records."""
     name = run.track.name
     paths = [
-        atomic_write(out / "leaderboard.md", track_table(run) + isolation_table(run)),
-        write_csv(out / "leaderboard.csv", [_flat(r, name) for r in run.rows]),
+        atomic_write(
+            out / "leaderboard.md",
+            track_table(run) + "\n" + track_wide_table(run) + isolation_table(run),
+        ),
+        write_csv(out / "leaderboard.csv", [_flat(r, name, run) for r in run.rows]),
         atomic_write_json(
             out / "leaderboard.json",
-            {"track": run.track.to_json(), "rows": [r.to_json() for r in run.rows]},
+            {
+                "track": run.track.to_json(),
+                "r_fd_goal": GOAL_R_FD,
+                "limit_reference": run.limit_row.label if run.limit_row else None,
+                "optimal_reference": run.optimal_row.label if run.optimal_row else None,
+                "rows": [r.to_json() for r in run.rows],
+            },
             indent=1,
         ),
         write_csv(out / "results.csv", [r.to_json() for r in run.records]),
@@ -267,7 +381,8 @@ def summary_table(runs: Sequence[TrackRun]) -> tuple[str, list[dict[str, Any]]]:
         f"{GOAL_TIME_SLACK:g} samples with r_td at most {GOAL_R_TD_MARGIN:g} below it; "
         f"r_fd ≤ {GOAL_R_FD:g}: the upper end of its 95 % interval. Test seeds from "
         + ", ".join(str(s) for s in sorted({run.track.test_seed_start for run in runs}))
-        + ".",
+        + "."
+        + _stand_ins(runs),
         "",
         f"| track | diagnoser | r_fd [95 % CI] | r_fd ≤ {GOAL_R_FD:g} | mean r_td | "
         "mean t_dt/oracle | faults at the limit | track wall time |",
@@ -284,6 +399,21 @@ def summary_table(runs: Sequence[TrackRun]) -> tuple[str, list[dict[str, Any]]]:
             f"{r['mean_t_dt_over_oracle']:.2f} | {at} | {r['track_wall_s']:.0f} s |"
         )
     return "\n".join(lines) + "\n", rows
+
+
+def _stand_ins(runs: Sequence[TrackRun]) -> str:
+    """A sentence per track whose physical-limit row misses the r_fd goal: what stands in."""
+    out = ""
+    for run in runs:
+        if not any(r.label == ORACLE_LABEL for r in run.rows):
+            continue
+        limit = run.limit_row
+        if limit is None or limit.label != ORACLE_LABEL:
+            out += (
+                f" Track {run.track.name}: the physical limit's r_fd misses the goal, so the limit "
+                f"is {'none' if limit is None else f'`{limit.label}`'}."
+            )
+    return out
 
 
 def write_summary(runs: Sequence[TrackRun], out: Path) -> list[Path]:

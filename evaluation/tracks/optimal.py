@@ -41,7 +41,8 @@ of an unknown magnitude, which every real detector pays; a detector's gap to the
 what its model and its fault directions cost.
 
 Both limits are set on healthy episodes of the track's validation seeds, never test seeds, at
-the physical-limit row's target (0.002), as the empirical quantile of the bank's statistic.
+every reference row's target (:data:`evaluation.tracks.oracle.REFERENCE_TARGET`), as the empirical
+quantile of the bank's statistic.
 
 >>> round(float(log_likelihood_ratio(np.zeros((1, 1)), np.zeros((1, 1)),
 ...     np.ones((1, 1)), np.ones((1, 1)), np.ones((1, 1)))[0]), 3)

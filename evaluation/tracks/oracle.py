@@ -12,8 +12,14 @@ The statistic (the same alarm stage as ``lrgf-mem``, :mod:`diagnosers.alarm`):
    σ the channel's noise standard deviation times the track's noise scale;
 2. an EWMA of weight λ (default 0.3, ``lrgf-mem``'s) per channel;
 3. Hotelling's T² of the EWMA vector, its mean and covariance fitted on calibration episodes;
-4. an alarm when T² exceeds the ``chi2-tail`` limit at the false-alarm target (default 0.002),
-   calibrated on healthy episodes of the track's *validation* seeds, never the test seeds.
+4. an alarm when T² exceeds the ``chi2-tail`` limit at the false-alarm target
+   (:data:`REFERENCE_TARGET`, 0.002), calibrated on healthy episodes of the track's
+   *validation* seeds, never the test seeds.
+
+Every reference row is calibrated to that one target, so that the rows are compared at a
+matched false-alarm rate; whether a row *realises* it on the test episodes is checked where the
+table is built (:func:`evaluation.tracks.rows.meets_r_fd_goal`): a row whose r_fd's upper 95 %
+end exceeds :data:`GOAL_R_FD` is marked and no detector is scored against it.
 
 Two more reference rows (:data:`DEFAULT_REFERENCES`, each an :class:`OracleConfig`, which says
 what each is for): the same observer driven by the *measured* inputs, and that perfect model
@@ -52,10 +58,12 @@ from fcc_env.params import MEASUREMENT_NAMES, MEASUREMENTS
 __all__ = [
     "DEFAULT_REFERENCES",
     "DIRECTIONAL_CALIBRATION",
-    "DIRECTIONAL_TARGET",
+    "GOAL_R_FD",
     "MEASURED_INPUTS_LABEL",
     "ORACLE_LABEL",
     "REFERENCE_LABELS",
+    "REFERENCE_NOTES",
+    "REFERENCE_TARGET",
     "STAGE_LABEL",
     "TRUE_INPUT_STAGES",
     "OracleConfig",
@@ -95,8 +103,18 @@ TRUE_INPUT_STAGES: frozenset[OracleStage] = frozenset({OracleStage.CUSUM, Oracle
 
 #: The label of the perfect model on measured inputs with lrgf-glr's alarm stage.
 STAGE_LABEL = "perfect model + lrgf-glr stage (measured inputs)"
-#: The declared false-alarm target of the directional stage (its T² rows keep ``target``).
-DIRECTIONAL_TARGET = 0.005
+#: The track's false-alarm goal: the upper end of a row's 95 % r_fd interval over the test
+#: episodes may not exceed it (the goal of :mod:`evaluation.tracks.goal`, declared here because
+#: the reference rows' calibration target is chosen under it and the tables mark the rows that
+#: miss it).
+GOAL_R_FD = 0.01
+#: The one false-alarm target every reference row is calibrated to on the track's validation
+#: episodes (a share of healthy samples in alarm). It sits well under :data:`GOAL_R_FD` because
+#: a calibrated target is met on validation episodes only: on the test episodes the realised
+#: rate scatters above it (the directional stage, once at 0.005 to realise about what
+#: ``lrgf-glr`` realises, alarmed on 0.0090 [0.0062, 0.0142] of the paper track's healthy test
+#: samples, over the goal).
+REFERENCE_TARGET = 0.002
 #: Healthy calibration episodes of the directional stage (the T² rows: the track's validation
 #: seeds, 20 by default).
 DIRECTIONAL_CALIBRATION = 100
@@ -109,6 +127,18 @@ REFERENCE_LABELS = {
     (OracleInputs.TRUE, OracleStage.DIRECTIONAL): "perfect model + lrgf-glr stage (true inputs)",
     (OracleInputs.TRUE, OracleStage.CUSUM): CUSUM_LABEL,
     (OracleInputs.TRUE, OracleStage.GLR): GLR_LABEL,
+}
+
+#: what each reference row is, in one phrase (the line under every track table)
+REFERENCE_NOTES = {
+    ORACLE_LABEL: "EWMA + T² on the exact healthy model driven by the true inputs",
+    MEASURED_INPUTS_LABEL: "the same on the exact model driven by the measured inputs",
+    STAGE_LABEL: "lrgf-glr's directional alarm stage on the exact model, measured inputs",
+    REFERENCE_LABELS[OracleInputs.TRUE, OracleStage.DIRECTIONAL]: (
+        "lrgf-glr's directional alarm stage on the exact model, true inputs"
+    ),
+    CUSUM_LABEL: "a CUSUM bank on each fault's exact noise-free trajectory (a near bound)",
+    GLR_LABEL: "a window GLR on each fault's exact signature, its size unknown",
 }
 
 
@@ -137,17 +167,15 @@ class OracleConfig:
       close the gap with that stage.
     * ``OracleConfig(stage="cusum")`` and ``OracleConfig(stage="glr")``, the optimal-detector
       rows (:mod:`evaluation.tracks.optimal`): true inputs only, calibrated like the physical
-      limit (validation seeds, target 0.002).
+      limit (validation seeds, :data:`REFERENCE_TARGET`).
 
     Args:
         channels: the monitored temperatures; default ``("T_rx", "T_rg1", "T_rg2", "T_d1",
             "T_dg")``.
         ewma_lambda: the EWMA's weight λ, in (0, 1]; default 0.3 (``lrgf-mem``'s).
-        target: the declared false-alarm target, in (0, 0.5); ``None`` (default): 0.002 for
-            the T², CUSUM and GLR stages, :data:`DIRECTIONAL_TARGET` (0.005) for the
-            directional one, chosen so
-            that it realises about what ``lrgf-glr`` realises on validation seeds
-            (lab/detector-lab.md).
+        target: the declared false-alarm target, in (0, 0.5); ``None`` (default):
+            :data:`REFERENCE_TARGET` (0.002), the one target of every reference row, so that
+            the rows of a table are at a matched false-alarm rate.
         inputs: what drives the reference (:class:`OracleInputs`): ``"true"`` (default) or
             ``"measured"``.
         stage: the alarm stage (:class:`OracleStage`): ``"t2"`` (default),
@@ -162,7 +190,7 @@ class OracleConfig:
 
     channels: tuple[str, ...] = ("T_rx", "T_rg1", "T_rg2", "T_d1", "T_dg")
     ewma_lambda: float = 0.3
-    #: declared false-alarm target; ``None``: 0.002 for the T², DIRECTIONAL_TARGET otherwise
+    #: declared false-alarm target; ``None``: REFERENCE_TARGET
     target: float | None = None
     inputs: str = "true"
     stage: str = "t2"
@@ -187,9 +215,7 @@ class OracleConfig:
     @property
     def false_alarm_target(self) -> float:
         """The declared target the stage is calibrated to."""
-        if self.target is not None:
-            return self.target
-        return DIRECTIONAL_TARGET if self.stage == OracleStage.DIRECTIONAL else 0.002
+        return REFERENCE_TARGET if self.target is None else self.target
 
     def calibration_seeds(self, track: Track) -> range:
         """The healthy episodes the stage is calibrated on (validation seeds of ``track``).

@@ -92,7 +92,7 @@ def test_goal_per_track_takes_only_diagnosers_whose_r_fd_holds() -> None:
     assert small["faults_at_limit_any"] == {}
     text = goal_table(goals)
     assert "| paper | quiet, quieter | quiet | 2/3 f1 f3 | 3/3 f1 (quiet), f2 (quieter), " in text
-    assert "| small | none |  | 0/3 | 0/3 |" in text
+    assert "| small | none | none | 0/3 | 0/3 |" in text
     assert "Tracks where some diagnoser's r_fd holds: 1 of 2." in text
     assert "Faults at the limit: 2 of 6 with the best diagnoser per track, 3 of 6 with any." in text
     # the perfect-model row on the T² stage is not the one that says what is reachable
@@ -102,8 +102,8 @@ def test_goal_per_track_takes_only_diagnosers_whose_r_fd_holds() -> None:
 def test_goal_says_which_faults_a_perfect_model_on_the_measured_inputs_reaches() -> None:
     # the best diagnoser meets f2 as well, which the perfect model on measured inputs does not
     best = _row("best", 0.009, {"f1": (1.0, 0.0), "f2": (0.9, 12.0), "f3": (0.99, 15.0)})
-    # the stage row misses f2 (r_td 0.8 < 0.87) though its r_fd does not hold: still scored
-    stage = _row(STAGE_LABEL, 0.02, {"f1": (1.0, 1.0), "f2": (0.8, 9.0), "f3": (0.99, 19.0)})
+    # the stage row misses f2 (r_td 0.8 < 0.87); its r_fd holds, so it is scored
+    stage = _row(STAGE_LABEL, 0.009, {"f1": (1.0, 1.0), "f2": (0.8, 9.0), "f3": (0.99, 19.0)})
     other = _row("other", 0.009, {"f1": (1.0, 9.0), "f2": (0.9, 12.0), "f3": (0.5, 99.0)})
     goals = track_goals([_run("paper", best, stage), _run("small", other)])
     assert goals[0]["reachable"] == ["f1", "f3"] and goals[1]["reachable"] is None

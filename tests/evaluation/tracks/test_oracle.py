@@ -18,9 +18,9 @@ from evaluation.tracks.board_tables import track_table, write_track
 from evaluation.tracks.optimal import CUSUM_LABEL, GLR_LABEL
 from evaluation.tracks.oracle import (
     DIRECTIONAL_CALIBRATION,
-    DIRECTIONAL_TARGET,
     MEASURED_INPUTS_LABEL,
     ORACLE_LABEL,
+    REFERENCE_TARGET,
     STAGE_LABEL,
     OracleConfig,
     PhysicalLimit,
@@ -207,7 +207,9 @@ def test_track_rows_ratio_and_ranks() -> None:
     assert a.label == "a" and orc.label == ORACLE_LABEL
     assert a.faults["f1"].ratio.estimate == pytest.approx(limit_ratio(np.mean(range(9, 15)), 4.0))
     assert orc.faults["f1"].ratio.estimate == pytest.approx(1.0)
-    assert (orc.faults["f1"].rank, a.faults["f1"].rank) == ("1", "2")
+    # a reference row is never ranked: the one detector ranks first
+    assert (orc.faults["f1"].rank, a.faults["f1"].rank) == ("–", "1")
+    assert a.faults["f1"].delay.estimate == pytest.approx(np.mean(range(9, 15)))
     assert a.alarmed_share == pytest.approx(5 / 6)  # seed 0 has no alarm
     assert a.worst_seed == 5
 
@@ -228,7 +230,10 @@ def test_run_track_end_to_end(tmp_path) -> None:
     paths = write_track(run, tmp_path / "paper")
     assert {p.name for p in paths} >= {"leaderboard.md", "leaderboard.csv", "leaderboard.json"}
     text = track_table(run)
-    assert "oracle (physical limit)" in text and "t_dt/oracle" in text
+    assert "oracle (physical limit)" in text and "t_dt/optimal" in text
+    assert "Reference rows (read what no detector may; never ranked)" in text
+    wide = (tmp_path / "paper" / "leaderboard.md").read_text()
+    assert "t_dt/oracle" in wide and "f1 delay" in wide
     assert "Test seeds 0–1; trained on healthy episodes of seeds 1000–1001." in text
     assert list((tmp_path / "paper" / "figures").rglob("*.png"))
     # a second run resumes: nothing computed again
@@ -277,7 +282,7 @@ def test_directional_row_is_lrgf_glr_stage_on_a_perfect_model() -> None:
     scale is the noise std; f3 cools the regenerator beds; a noise-free faulty episode alarms
     only after its onset."""
     assert OracleConfig().false_alarm_target == 0.002
-    assert OracleConfig(stage="directional").false_alarm_target == DIRECTIONAL_TARGET
+    assert OracleConfig(stage="directional").false_alarm_target == REFERENCE_TARGET
     assert OracleConfig(stage="directional", target=0.01).false_alarm_target == 0.01
     cfg = OracleConfig(inputs="measured", stage="directional")
     assert cfg.label == STAGE_LABEL
@@ -287,7 +292,7 @@ def test_directional_row_is_lrgf_glr_stage_on_a_perfect_model() -> None:
     assert stage.v_residual_ == pytest.approx(orc.noise_std, rel=0.05)
     f3 = stage.directions_[list(stage.faults).index("f3")]
     assert f3[1] < -0.3 and f3[2] < -0.3  # T_rg1 and T_rg2 fall
-    assert stage.false_alarm_target == DIRECTIONAL_TARGET
+    assert stage.false_alarm_target == REFERENCE_TARGET
     ep = _noise_free_f2(data, 0)
     onset = ep.fault_onset
     assert onset is not None
