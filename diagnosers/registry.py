@@ -43,6 +43,11 @@ def register(name: str) -> Callable[[type[DiagnoserContract]], type[DiagnoserCon
     """Class decorator: make ``cls`` available as ``diagnosers.make(name)``."""
 
     def deco(cls: type[DiagnoserContract]) -> type[DiagnoserContract]:
+        if not (isinstance(cls, type) and issubclass(cls, DiagnoserContract)):
+            raise ValueError(
+                f"register({name!r}) was given {cls!r}, which is not a diagnoser; register a "
+                "subclass of diagnosers.Diagnoser (or of diagnosers.contract.DiagnoserContract)"
+            )
         if name in _REGISTRY and _REGISTRY[name] is not cls:
             # A module imported twice under two names (``python script.py`` runs it as
             # __main__) defines a second class of the same qualified name: say so.
@@ -74,23 +79,34 @@ def import_modules(modules: Iterable[str]) -> None:
     guard. Raises ``ValueError`` naming a module that cannot be imported, with the reason.
     """
     for mod in modules:
-        if not isinstance(mod, str) or not mod.strip():
-            raise ValueError(f"module={mod!r} is outside the allowed range: a dotted module name")
+        if not isinstance(mod, str) or not mod.strip() or mod.strip().startswith("."):
+            raise ValueError(
+                f"module={mod!r} is outside the allowed range: an absolute dotted module name "
+                "(not relative), e.g. examples.cusum_diagnoser"
+            )
         try:
             importlib.import_module(mod.strip())
-        except ImportError as e:
+        except Exception as e:  # the user's module may raise anything while it is imported
             raise ValueError(
-                f"cannot import module {mod!r} ({type(e).__name__}: {e}); give a dotted module "
-                "name importable from the current directory or the installed packages, "
-                "e.g. examples.cusum_diagnoser"
+                f"cannot import module {mod!r} ({type(e).__name__}: {_one_line(e)}); give a "
+                "dotted module name importable from the current directory or the installed "
+                "packages that defines (or registers) only diagnosers, e.g. "
+                "examples.cusum_diagnoser"
             ) from e
+
+
+def _one_line(e: BaseException) -> str:
+    if isinstance(e, SyntaxError):
+        return f"{e.msg} at {e.filename}, line {e.lineno}"
+    return " ".join(str(e).split())
 
 
 def load_entry_points(*, force: bool = False) -> None:
     """Load the diagnosers of :data:`ENTRY_POINT_GROUP` (once per process unless ``force``).
 
-    An entry point that fails to load is skipped with a ``RuntimeWarning`` naming it, so one
-    broken plug-in does not hide the others.
+    An entry point that fails to load, or whose name is already registered (a built-in
+    diagnoser's), is skipped with a ``RuntimeWarning`` naming both, so one broken plug-in does
+    not hide the others nor replace a built-in diagnoser.
     """
     global _ENTRY_POINTS_LOADED
     if _ENTRY_POINTS_LOADED and not force:
@@ -107,7 +123,24 @@ def load_entry_points(*, force: bool = False) -> None:
                 stacklevel=2,
             )
             continue
-        if isinstance(obj, type) and issubclass(obj, DiagnoserContract) and not obj.name:
+        # a class its module registered itself (its own ``name``, not one it inherits) is known
+        own = obj.__dict__.get("name", "") if isinstance(obj, type) else ""
+        if (
+            isinstance(obj, type)
+            and issubclass(obj, DiagnoserContract)
+            and not (own and _REGISTRY.get(own) is obj)
+        ):
+            if _REGISTRY.get(ep.name, obj) is not obj:
+                # a plug-in never replaces a diagnoser already known (a built-in one): a clash
+                # warns, and the plug-ins after it still load
+                warnings.warn(
+                    f"diagnoser entry point {ep.name!r} = {ep.value!r} ({obj}) has the name of "
+                    f"{_REGISTRY[ep.name]}, which is kept; the plug-in is skipped (rename its "
+                    "entry point)",
+                    RuntimeWarning,
+                    stacklevel=2,
+                )
+                continue
             register(ep.name)(obj)
         logger.debug("loaded diagnoser entry point %s = %s", ep.name, ep.value)
 

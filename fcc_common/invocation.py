@@ -8,13 +8,31 @@ argparse would print as the program's name although nobody can type it back; a c
 from __future__ import annotations
 
 import argparse
+import errno
 import os
 import shutil
 import sys
 import textwrap
-from collections.abc import Sequence
+import warnings
+from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import NoReturn
 
-__all__ = ["command_parser", "prog_name"]
+__all__ = [
+    "INPUT_ERRORS",
+    "check_out_path",
+    "command_parser",
+    "os_error_text",
+    "out_path",
+    "prog_name",
+    "refuse",
+    "run_command",
+]
+
+#: What a command refuses in one line with exit code 2, as argparse refuses a bad argument: a
+#: value out of range, a path that cannot be read or written, a module that cannot be imported.
+#: Any other exception is a bug of ours and keeps its traceback.
+INPUT_ERRORS: tuple[type[BaseException], ...] = (ValueError, OSError, ImportError, SyntaxError)
 
 
 def prog_name(module: str) -> str:
@@ -57,3 +75,86 @@ def command_parser(
         epilog="\n".join(lines),
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
+
+
+def os_error_text(e: OSError) -> str:
+    """One line for a failed read or write: the path, the reason, and what a path must be."""
+    where = " -> ".join(repr(str(f)) for f in (e.filename, e.filename2) if f is not None)
+    reason = e.strerror or type(e).__name__
+    if not where:
+        return f"{reason}: {e}"
+    return (
+        f"cannot use {where}: {reason}; give a path whose parent is a writable directory "
+        "(readable, for an input)"
+    )
+
+
+def refuse(parser: argparse.ArgumentParser, e: BaseException) -> NoReturn:
+    """Exit like argparse (code 2, usage line, one message line) for one of :data:`INPUT_ERRORS`."""
+    text = os_error_text(e) if isinstance(e, OSError) else str(e)
+    if isinstance(e, SyntaxError):
+        text = f"syntax error in {e.filename}, line {e.lineno}: {e.msg}"
+    parser.error(" ".join(text.split()) or type(e).__name__)
+
+
+def run_command(
+    parser: argparse.ArgumentParser,
+    body: Callable[[argparse.Namespace], int],
+    argv: Sequence[str] | None,
+) -> int:
+    """Parse ``argv`` and run ``body(args)``; any of :data:`INPUT_ERRORS` becomes one line.
+
+    The one place where every command turns a bad value or an unusable path, found however late,
+    into ``prog: error: ...`` and exit code 2 instead of a traceback.
+    """
+    args = parser.parse_args(argv)
+    shown = warnings.formatwarning
+    # a warning is one line too: the command's name and the message, not our source line
+    warnings.formatwarning = lambda message, *_a, **_k: f"{parser.prog}: warning: {message}\n"
+    try:
+        return body(args)
+    except INPUT_ERRORS as e:
+        refuse(parser, e)
+    finally:
+        warnings.formatwarning = shown
+
+
+def out_path(text: str) -> Path:
+    """An argparse ``type`` for an output path: refuses an empty one, which ``Path("")`` would
+    silently turn into the current directory."""
+    if not text.strip():
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is empty; give a directory path (use '.' for the current directory)"
+        )
+    return Path(text)
+
+
+def check_out_path(flag: str, out: str | os.PathLike) -> Path:
+    """Refuse an output path that is empty, is or lies under a regular file, or whose nearest
+    existing folder is not writable; before any work, so that a long run cannot fail at its end.
+
+    Returns the path. Raises ``ValueError`` naming ``flag``, the value and why.
+    """
+    text = os.fspath(out)
+    if not str(text).strip():
+        raise ValueError(
+            f"{flag} {text!r} is empty; give a directory or file path (use '.' for the current "
+            "directory)"
+        )
+    path = Path(text)
+    for p in (path, *path.parents):
+        if not p.exists():
+            continue
+        if p != path and not p.is_dir():
+            raise ValueError(
+                f"{flag} {str(path)!r} lies under {str(p)!r}, which is a regular file, not a "
+                "directory; choose another output path"
+            )
+        folder = p if p.is_dir() else p.parent
+        if not os.access(folder, os.W_OK | os.X_OK):
+            raise ValueError(
+                f"{flag} {str(path)!r}: {str(folder)!r} is not writable "
+                f"({os.strerror(errno.EACCES)}); choose a writable location"
+            )
+        break
+    return path

@@ -2,10 +2,11 @@
 
 from __future__ import annotations
 
+import argparse
 from pathlib import Path
 
 import fcc_env
-from fcc_common.invocation import command_parser
+from fcc_common.invocation import check_out_path, command_parser, run_command
 from fcc_env.plotting import plot_scenarios
 
 
@@ -20,7 +21,12 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--out", default="results/demo", help="output folder (results/demo)")
     parser.add_argument("--seed", type=int, default=0, help="episode seed (0)")
-    args = parser.parse_args(argv)
+    return run_command(parser, _demo, argv)
+
+
+def _demo(args: argparse.Namespace) -> int:
+    """The work of :func:`main`: its failures are refused by :func:`run_command`."""
+    check_out_path("--out", args.out)
     episodes, onsets = {}, {}
     for scenario in fcc_env.SCENARIOS:
         b = fcc_env.simulate_episodes([args.seed], scenario=scenario)

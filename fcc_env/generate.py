@@ -22,6 +22,7 @@ Diagnosers and the modelling loop read ``measured`` and ``commanded`` only.
 
 from __future__ import annotations
 
+import argparse
 import dataclasses
 import json
 import os
@@ -31,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from fcc_common.invocation import command_parser
+from fcc_common.invocation import check_out_path, command_parser, run_command
 from fcc_common.io import (
     PARQUET_SUFFIXES,
     atomic_open,
@@ -425,38 +426,40 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="undeclared plant effect (repeatable), e.g. heat_loss:stage1,extra_ua_kw_per_k=6; "
         "ids: python -c 'import fcc_env.effects as e; print(list(e.available()))'",
     )
-    args = parser.parse_args(argv)
-    try:
-        budget = check("--memory-budget-gib", args.memory_budget_gib, Real(0, closed="neither"))
-        budget *= 2**30
-        fault = fault_from_request(
-            None,
-            {
-                "scenario": args.scenario,
-                "fault_time": args.fault_time,
-                "fault_magnitude": args.fault_magnitude,
-                "fault_profile": args.fault_profile,
-                "ramp_samples": args.ramp_samples,
-            },
-        )
-        plant = PlantConfig.build(
-            valve_beta=args.valve_beta,
-            noise_scale=args.noise_scale,
-            excitation=not args.no_excitation,
-            regulatory=True if args.closed_loop else None,
-        )
-        path = write_dataset(
-            args.out,
-            fault=fault,
-            plant=plant,
-            seeds=parse_seeds(args.seeds, n_samples=args.samples, memory_budget_bytes=budget),
-            n_samples=args.samples,
-            memory_budget_bytes=budget,
-            include_states=args.states,
-            plant_effects=[fx.parse(t) for t in args.plant_effect],
-        )
-    except (ValueError, ImportError) as e:
-        parser.error(str(e))
+    return run_command(parser, _generate, argv)
+
+
+def _generate(args: argparse.Namespace) -> int:
+    """The work of :func:`main`: its failures are refused by :func:`run_command`."""
+    check_out_path("--out", args.out)
+    budget = check("--memory-budget-gib", args.memory_budget_gib, Real(0, closed="neither"))
+    budget *= 2**30
+    fault = fault_from_request(
+        None,
+        {
+            "scenario": args.scenario,
+            "fault_time": args.fault_time,
+            "fault_magnitude": args.fault_magnitude,
+            "fault_profile": args.fault_profile,
+            "ramp_samples": args.ramp_samples,
+        },
+    )
+    plant = PlantConfig.build(
+        valve_beta=args.valve_beta,
+        noise_scale=args.noise_scale,
+        excitation=not args.no_excitation,
+        regulatory=True if args.closed_loop else None,
+    )
+    path = write_dataset(
+        args.out,
+        fault=fault,
+        plant=plant,
+        seeds=parse_seeds(args.seeds, n_samples=args.samples, memory_budget_bytes=budget),
+        n_samples=args.samples,
+        memory_budget_bytes=budget,
+        include_states=args.states,
+        plant_effects=[fx.parse(t) for t in args.plant_effect],
+    )
     print(f"wrote {path} and {path.with_suffix('.json')}")
     return 0
 

@@ -29,6 +29,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
+from evaluation.control.figures import episode_figure
 from evaluation.control.policies import (
     DiagnosisSupervisor,
     Policy,
@@ -40,6 +41,7 @@ from evaluation.control.policies import (
 from evaluation.metrics.intervals import Interval, bootstrap_ci
 from fcc_common.io import atomic_write, atomic_write_json
 from fcc_env.control_task import CONTROL_ENV_ID, REWARD_TERMS
+from fcc_env.plant import PlantConfig
 from fcc_env.scenarios import SCENARIOS
 
 __all__ = [
@@ -84,17 +86,31 @@ class PolicySummary:
 
 
 def run_episode(
-    policy: Policy, scenario: str, seed: int, n_steps: int, **env_kwargs: Any
+    policy: Policy,
+    scenario: str,
+    seed: int,
+    n_steps: int,
+    *,
+    trace: dict[str, list[Any]] | None = None,
+    **env_kwargs: Any,
 ) -> EpisodeScore:
-    """``policy`` on one ``FCC-control-v0`` episode (``scenario`` at its paper size)."""
+    """``policy`` on one ``FCC-control-v0`` episode (``scenario`` at its paper size). ``trace``:
+    a dict that gets, per step, the reward, the set points, the state and the fault onset
+    (``"reward"``, ``"setpoints"``, ``"state"``; ``"onset"`` once) for a figure."""
     env = gym.make(CONTROL_ENV_ID, scenario=scenario, **env_kwargs)
     obs, info = env.reset(seed=seed)
     policy.reset(info)
+    if trace is not None:
+        trace["onset"] = [info.get("fault_time")]
     total, inside, tripped, k = 0.0, 0, False, 0
     for k in range(1, n_steps + 1):  # noqa: B007 (k is the episode's length after the loop)
         obs, reward, terminated, truncated, info = env.step(policy.act(obs, info))
         total += float(reward)
         inside += any(info["reward_terms"][t] < 0.0 for t in _CONSTRAINTS)
+        if trace is not None:
+            for key, value in (("reward", reward), ("setpoints", info["setpoints"])):
+                trace.setdefault(key, []).append(np.copy(value))
+            trace.setdefault("state", []).append(info["state"].copy())
         if terminated or truncated:
             tripped = bool(terminated)
             break
@@ -208,10 +224,25 @@ def main(argv: Sequence[str] | None = None) -> int:
         args.out / "control.json",
         {"summaries": [asdict(s) for s in summaries], "episodes": rows},
     )
+    figures = []
+    for scenario in SCENARIOS[1:]:  # one episode per fault, every policy: what each did
+        traces: dict[str, dict[str, list[Any]]] = {}
+        for p in policies:
+            traces[p.name] = {}
+            run_episode(p, scenario, 0, args.steps, trace=traces[p.name])
+        figures.append(
+            episode_figure(
+                traces,
+                PlantConfig().sample_time_s,  # the registered env's
+                args.out / f"episode_{scenario}.png",
+                title=f"FCC-control-v0, {scenario} at the paper's size and onset, test seed 0",
+            )
+        )
     table = _table(summaries)
     print(table, end="")
     print(
         f"\n{len(scores)} episodes ({args.seeds} test seeds x {len(SCENARIOS)} scenarios x "
-        f"{len(policies)} policies) in {time.perf_counter() - t0:.0f} s; wrote {args.out}",
+        f"{len(policies)} policies) in {time.perf_counter() - t0:.0f} s; wrote {args.out} "
+        f"(control.csv, control.json, {len(figures)} figures)",
     )
     return 0

@@ -24,7 +24,7 @@ from evaluation.discover.loop import discover
 from evaluation.discover.physics_model import PHYSICS_INPUT_CHANNELS, PHYSICS_OUTPUT_CHANNELS
 from evaluation.discover.report import REPORT_FILE
 from evaluation.sweep.dataset_loaders import load_manifest
-from fcc_common.invocation import command_parser
+from fcc_common.invocation import check_out_path, command_parser, run_command
 
 __all__ = ["main"]
 
@@ -72,24 +72,26 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--max-effects", type=int, default=3, help="0-10; 3")
     parser.add_argument("--alpha", type=float, default=0.01, help="family-wise level per round")
     parser.add_argument("--no-plots", action="store_true")
-    args = parser.parse_args(argv)
+    return run_command(parser, _discover, argv)
+
+
+def _discover(args: argparse.Namespace) -> int:
+    """The work of :func:`main`: its failures are refused by :func:`run_command`."""
+    check_out_path("--out", args.out)
     cands = None
     if args.candidates:
         cands = [c.strip() for c in args.candidates.split(",") if c.strip()]
-    try:
-        data, model = _source(args)
-        report = discover(
-            data,
-            model=model,
-            candidates=cands,
-            train_fraction=args.train_fraction,
-            max_effects=args.max_effects,
-            alpha=args.alpha,
-            out_dir=args.out,
-            plots=not args.no_plots,
-        )
-    except (ValueError, ImportError) as e:
-        parser.error(str(e))
+    data, model = _source(args)
+    report = discover(
+        data,
+        model=model,
+        candidates=cands,
+        train_fraction=args.train_fraction,
+        max_effects=args.max_effects,
+        alpha=args.alpha,
+        out_dir=args.out,
+        plots=not args.no_plots,
+    )
     for e in report.effects:
         print(f"effect {e.id}: {dict(e.params)} (95% CI {dict(e.ci95)})")
     if not report.effects:

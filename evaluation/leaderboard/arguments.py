@@ -20,9 +20,10 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any, NoReturn
 
-from fcc_common.invocation import command_parser
+from fcc_common.invocation import check_out_path, command_parser, out_path
 
 __all__ = [
+    "CELL_BYTES",
     "DEFAULT_OUT",
     "DEFAULT_SEEDS",
     "DEFAULT_TRAIN_EPISODES",
@@ -35,6 +36,7 @@ __all__ = [
     "VALIDATION_SEED_BASE",
     "build_parser",
     "check_backend",
+    "check_counts",
     "check_out_dir",
     "exit_on_failure",
     "import_user_modules",
@@ -191,7 +193,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--out",
-        type=Path,
+        type=out_path,
         default=None,
         metavar="DIR",
         help=f"output directory (default {DEFAULT_OUT}; --validation {VALIDATION_OUT})",
@@ -280,16 +282,76 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def check_out_dir(out: Path) -> None:
-    """Refuse an output directory that is, or lies under, an existing non-directory."""
-    for p in (out, *out.parents):
-        if p.exists():
-            if not p.is_dir():
-                where = "is" if p == out else f"lies under {str(p)!r}, which is"
-                raise ValueError(
-                    f"--out {str(out)!r} {where} a regular file, not a directory; "
-                    "choose another output directory"
-                )
-            return
+    """Refuse an output directory that is empty, is or lies under a regular file, or cannot be
+    written (:func:`fcc_common.invocation.check_out_path`)."""
+    check_out_path("--out", out)
+    if out.exists() and not out.is_dir():
+        raise ValueError(
+            f"--out {str(out)!r} is a regular file, not a directory; choose another output "
+            "directory"
+        )
+
+
+#: Bytes a test cell costs the driver while a sweep runs and reports (its record, its entries in
+#: the work lists, its rows of results.csv/.json); a generous estimate, to refuse absurd counts
+#: before any range of seeds is built, not to plan a run.
+CELL_BYTES = 8 * 2**10
+
+
+def check_counts(
+    *,
+    seeds: int | None,
+    seed_base: int,
+    train_episodes: int | None,
+    n_samples: int,
+    n_cells_per_seed: int,
+) -> None:
+    """Refuse counts that overlap another seed range or exceed the memory budget, before any
+    range or list of seeds is built (``None``: not given, a default that is known to fit).
+
+    Test seeds are ``seed_base..`` (0, or :data:`VALIDATION_SEED_BASE` with ``--validation``),
+    training seeds :data:`TRAIN_SEED_BASE`.. and validation seeds :data:`VALIDATION_SEED_BASE`..;
+    a training episode is held whole in a worker while it trains (budget:
+    :data:`fcc_env.simulation.DEFAULT_MEMORY_BUDGET_BYTES`).
+    """
+    from fcc_env.simulation import DEFAULT_MEMORY_BUDGET_BYTES, check_memory
+
+    ranges = (
+        f"test seeds 0..{TRAIN_SEED_BASE - 1}, training seeds {TRAIN_SEED_BASE}.."
+        f"{VALIDATION_SEED_BASE - 1}, validation seeds {VALIDATION_SEED_BASE}.."
+    )
+    if train_episodes is not None and TRAIN_SEED_BASE + train_episodes > VALIDATION_SEED_BASE:
+        raise ValueError(
+            f"--train-episodes {train_episodes} would use training seeds {TRAIN_SEED_BASE}.."
+            f"{TRAIN_SEED_BASE + train_episodes - 1}, into the validation seeds "
+            f"{VALIDATION_SEED_BASE}..; at most {VALIDATION_SEED_BASE - TRAIN_SEED_BASE} "
+            f"({ranges})"
+        )
+    if seeds is not None and seed_base < TRAIN_SEED_BASE < seed_base + seeds:
+        raise ValueError(
+            f"--seeds {seeds} would use test seeds {seed_base}..{seed_base + seeds - 1}, into the "
+            f"training seeds {TRAIN_SEED_BASE}..; at most {TRAIN_SEED_BASE - seed_base} ({ranges})"
+        )
+    if seeds is not None and seeds * n_cells_per_seed * CELL_BYTES > DEFAULT_MEMORY_BUDGET_BYTES:
+        most = DEFAULT_MEMORY_BUDGET_BYTES // (n_cells_per_seed * CELL_BYTES)
+        raise ValueError(
+            f"--seeds {seeds} makes {seeds * n_cells_per_seed} cells ({n_cells_per_seed} per "
+            f"seed), more than the memory budget of "
+            f"{DEFAULT_MEMORY_BUDGET_BYTES / 2**30:g} GiB holds at about {CELL_BYTES // 1024} "
+            f"KiB a cell: at most {most} seeds, or fewer diagnosers or scenarios per run"
+        )
+    # the arrays only: the process peaks higher (see check_memory's message)
+    held = (
+        (f"--train-episodes {train_episodes} x --n-samples {n_samples}", train_episodes),
+        (f"--n-samples {n_samples}", 1),
+    )
+    for what, n in held:
+        if n is None:
+            continue
+        try:
+            check_memory(n, n_samples)
+        except ValueError as e:
+            raise ValueError(f"{what} (held by each worker): {e}") from None
 
 
 def check_backend(backend: str) -> None:
@@ -304,13 +366,56 @@ def check_backend(backend: str) -> None:
             ) from None
 
 
-def exit_on_failure(parser: argparse.ArgumentParser, e: Exception) -> NoReturn:
-    """Exit on a store or run failure; suggest re-running only where it can succeed."""
+#: Exceptions (by class name, Ray's included without importing Ray) of a worker that died rather
+#: than of a task that raised: killed, out of memory, its node lost. Only these, and an
+#: interruption, are cured by re-running.
+_WORKER_DEATHS = frozenset(
+    {
+        "BrokenProcessPool",
+        "WorkerCrashedError",
+        "NodeDiedError",
+        "LocalRayletDiedError",
+        "OwnerDiedError",
+        "ObjectLostError",
+        "TaskCancelledError",
+    }
+)
+
+
+def _worker_died(e: BaseException | None) -> bool:
+    while e is not None:
+        if type(e).__name__ in _WORKER_DEATHS:
+            return True
+        e = e.__cause__
+    return False
+
+
+def exit_on_failure(parser: argparse.ArgumentParser, e: BaseException) -> NoReturn:
+    """Exit on an interruption, a store or a run failure; advise re-running only where it can
+    succeed: after an interruption or a worker that died, not after a deterministic failure."""
+    if isinstance(e, KeyboardInterrupt):
+        parser.exit(
+            130,
+            f"{parser.prog}: interrupted; finished cells are stored: re-run the same command "
+            "to resume\n",
+        )
+    if _worker_died(e):
+        parser.exit(
+            1,
+            f"{parser.prog}: {e}\nA worker process died (killed, or out of memory); finished "
+            "cells are stored: re-run the same command to resume (with fewer --workers if memory "
+            "ran out).\n",
+        )
+    # a store error names the file and what to do; a diagnoser that raised raises again
     from evaluation.sweep.store import StoreError  # imported when a run has failed: see above
 
-    if isinstance(e, StoreError):  # a re-run meets the same file: the message says what to do
-        parser.exit(1, f"{parser.prog}: {e}\n")
-    parser.exit(1, f"{parser.prog}: {e}\nFinished cells are stored; re-run to resume.\n")
+    advice = (
+        ""
+        if isinstance(e, StoreError)
+        else "Finished cells are stored, but re-running fails the same way until the cause "
+        "above is fixed (or the failing diagnoser is left out of --diagnosers).\n"
+    )
+    parser.exit(1, f"{parser.prog}: {e}\n{advice}")
 
 
 def user_imports(args: argparse.Namespace) -> tuple[str, ...]:

@@ -52,11 +52,13 @@ from evaluation.leaderboard.arguments import (
     VALIDATION_SEEDS,
     build_parser,
     check_backend,
+    check_counts,
     check_out_dir,
     exit_on_failure,
     import_user_modules,
     user_imports,
 )
+from fcc_common.invocation import run_command
 
 if TYPE_CHECKING:
     from evaluation.leaderboard.paper import LeaderboardOptions
@@ -137,6 +139,17 @@ def resolve_options(
     else:
         seeds = args.seeds or (QUICK_SEEDS if args.quick else DEFAULT_SEEDS)
     train = args.train_episodes or (QUICK_TRAIN_EPISODES if args.quick else DEFAULT_TRAIN_EPISODES)
+    if args.external is None:  # recorded data: the files set the counts
+        try:  # before any range of seeds is built
+            check_counts(
+                seeds=seeds,
+                seed_base=VALIDATION_SEED_BASE if args.validation else 0,
+                train_episodes=train,
+                n_samples=args.n_samples,
+                n_cells_per_seed=len(scenarios) * max(1, len(diags)),
+            )
+        except ValueError as e:
+            parser.error(str(e))
     try:
         fault = FaultSpec(
             onset=args.fault_time,
@@ -167,7 +180,12 @@ def resolve_options(
 
 def main(argv: Sequence[str] | None = None) -> int:
     parser = build_parser()
-    args = parser.parse_args(argv)
+    return run_command(parser, lambda args: _leaderboard(args, parser), argv)
+
+
+def _leaderboard(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
+    """The work of :func:`main`: a bad value or path found late is refused by
+    :func:`~fcc_common.invocation.run_command`, a failed run by :func:`exit_on_failure`."""
     import_user_modules(args, parser)  # before any name is resolved
     if args.track is not None:
         from evaluation.leaderboard.track_runs import main_tracks  # after parsing: see above
@@ -183,7 +201,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         results = paper.run(opts)
     except ValueError as e:  # bad configuration: say what and exit like argparse does
         parser.error(str(e))
-    except RuntimeError as e:  # a diagnoser failed to train or score: finished cells are kept
+    except (RuntimeError, KeyboardInterrupt) as e:  # finished cells are kept
         exit_on_failure(parser, e)
     written = write_outputs(results, opts.out, figures=opts.figures)
     reference = reference_row(results.config)

@@ -15,6 +15,7 @@ from typing import Any
 from diagnosers.registry import available
 from evaluation.leaderboard.arguments import (
     check_backend,
+    check_counts,
     check_out_dir,
     exit_on_failure,
     user_imports,
@@ -84,6 +85,16 @@ def main_tracks(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
         tracks = parse_tracks(args.track)
     except ValueError as e:
         parser.error(str(e))
+    try:  # before a track builds its ranges of seeds
+        check_counts(
+            seeds=None,
+            seed_base=0,
+            train_episodes=args.train_episodes,
+            n_samples=4000,
+            n_cells_per_seed=1,
+        )
+    except ValueError as e:
+        parser.error(str(e))
     tracks = track_options(args, parser, tracks)
     names = args.diagnosers or (BASELINES if args.quick else tuple(available()))
     out = args.out or Path("results/tracks")
@@ -109,7 +120,7 @@ def main_tracks(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
             )
         except ValueError as e:
             parser.error(str(e))
-        except RuntimeError as e:
+        except (RuntimeError, KeyboardInterrupt) as e:
             exit_on_failure(parser, e)
         write_track(run_, out / track.name)
         runs.append(run_)

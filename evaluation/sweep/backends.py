@@ -12,6 +12,8 @@ which alone writes the store, so remote Ray nodes need no shared file system.
 from __future__ import annotations
 
 import os
+import subprocess
+import sys
 from collections.abc import Callable, Iterator
 from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
 from pathlib import Path
@@ -73,6 +75,35 @@ def ray_runtime_env() -> dict[str, Any]:
     return {"env_vars": {"PYTHONPATH": path, "OMP_NUM_THREADS": "1"}}
 
 
+def start_watchdog() -> subprocess.Popen[bytes] | None:
+    """Start :mod:`evaluation.sweep.backends_watchdog` on this process (Linux only): it reaps the
+    local Ray processes if this driver is killed, which Ray does not do for its agents."""
+    if not os.path.isdir("/proc"):
+        return None
+    script = Path(__file__).with_name("backends_watchdog.py")
+    proc = subprocess.Popen(
+        [sys.executable, str(script), str(os.getpid())],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE,
+        start_new_session=True,  # a Ctrl-C of the driver's terminal leaves it to its job
+    )
+    assert proc.stdout is not None
+    proc.stdout.readline()  # it has noted the processes that are not Ray's
+    proc.stdout.close()
+    return proc
+
+
+def stop_watchdog(proc: subprocess.Popen[bytes]) -> None:
+    """A normal shutdown: the watchdog exits without touching a process."""
+    try:
+        assert proc.stdin is not None
+        proc.stdin.write(b"stop")
+        proc.stdin.close()
+    except OSError:
+        pass
+    proc.wait(timeout=10)
+
+
 class RayBackend:
     passes_paths = False
 
@@ -85,10 +116,12 @@ class RayBackend:
             ) from e
         self._ray = ray
         self._owned = False
+        self._watchdog: subprocess.Popen[bytes] | None = None
         if not ray.is_initialized():
             if address is not None:
                 ray.init(address=address)
             else:
+                self._watchdog = start_watchdog()  # before Ray's processes: it records them
                 ray.init(
                     num_cpus=n_workers,
                     include_dashboard=False,
@@ -116,6 +149,9 @@ class RayBackend:
     def close(self, cancel: bool) -> None:
         if self._owned:
             self._ray.shutdown()
+        if self._watchdog is not None:  # Ray cleaned up: tell the watchdog so, and let it go
+            stop_watchdog(self._watchdog)
+            self._watchdog = None
 
 
 class SerialBackend:

@@ -186,6 +186,17 @@ def _check_tag(obj: dict[str, Any], path: Path, fmt: str, what: str, remedy: str
         )
 
 
+def _same_result(a: Mapping[str, Any] | None, b: Mapping[str, Any]) -> bool:
+    """Two records of one cell agree but for their wall times (``*_wall_s``), which no two runs
+    share; compared as canonical JSON, where NaN equals NaN."""
+
+    def canon(r: Mapping[str, Any]) -> str:
+        kept = {k: v for k, v in r.items() if not str(k).endswith("wall_s")}
+        return json.dumps(kept, sort_keys=True, default=_json_default)
+
+    return a is not None and canon(a) == canon(b)
+
+
 class ResultStore:
     """A directory of finished cells and trained models of one sweep's data (see module doc).
 
@@ -296,12 +307,21 @@ class ResultStore:
     def write_cell(
         self, label: str, scenario: str, seed: int, cell_hash: str, record: Mapping[str, Any]
     ) -> Path:
-        """Write a finished cell atomically; refuses to replace an existing file."""
+        """Write a finished cell atomically; refuses to replace an existing file.
+
+        A file found in its place that holds the same record was written by another run of the
+        same sweep on this store (both computed the cell): it is kept, and this is no error.
+        """
         path = self.cell_path(label, scenario, seed)
         if path.exists():
+            found = self.read_cell(label, scenario, seed, cell_hash)  # raises if it is foreign
+            if _same_result(found, record):
+                return path
             raise StoreError(
-                f"{path} already exists; a store never overwrites a finished cell. Delete it "
-                "first if it must be recomputed"
+                f"{path} was written meanwhile by another run on this store (same settings, "
+                "another result: a diagnoser that is not deterministic?); a store never "
+                "overwrites a finished cell. Let one run at a time use this --out, or give "
+                "each run its own"
             )
         _atomic_write_json(
             path,
