@@ -34,6 +34,7 @@ from fcc_env.env import SETPOINT_ACTION_SCALE
 from fcc_env.scenarios import EpisodeFault, FaultSpec, Scenario
 
 __all__ = [
+    "ARM_AFTER",
     "DiagnosisSupervisor",
     "Policy",
     "ProgramPolicy",
@@ -118,6 +119,11 @@ def oracle(economics: EconomicReward | None = None) -> SetpointPolicy:
     return SetpointPolicy("oracle (knows the fault and its onset)", target)
 
 
+#: Samples after an episode's start before a supervisor acts on its diagnoser (50 min at 10 s):
+#: the move from the program's set points to the optimum has settled by then.
+ARM_AFTER = 300
+
+
 def fault_setpoints(economics: EconomicReward | None = None) -> dict[str, np.ndarray]:
     """The best set points of the plant with each fault at the paper's size, by fault name."""
     out = {}
@@ -140,14 +146,19 @@ class DiagnosisSupervisor:
     ``diagnoser`` is fitted on closed-loop episodes with the observation's channels; it reads
     each observation through ``update`` (streaming, as on a unit). Once alarmed the policy
     stays switched (a supervisor that flip-flops on each alarm would move the set points with
-    the noise); a later diagnosis of another fault switches again.
+    the noise); a later diagnosis of another fault switches again. The diagnoser is armed after
+    ``arm_after`` samples: the episode starts at the program's set points, and the move to the
+    healthy optimum is a start-up transient no detector is trained for (it is trained on the
+    settled operation, :func:`evaluation.control.returns.operated_episodes`).
     """
 
     name: str
     diagnoser: Any
     healthy: np.ndarray
     per_fault: Mapping[str, np.ndarray]
+    arm_after: int = ARM_AFTER
     _policy: SetpointPolicy = field(init=False, repr=False)
+    _k: int = field(init=False, repr=False, default=0)
     _target: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -156,11 +167,13 @@ class DiagnosisSupervisor:
     def reset(self, info: Mapping[str, Any]) -> None:
         self.diagnoser.reset()
         self._target = self.healthy
+        self._k = 0
         self._policy.reset(info)
 
     def act(self, obs: np.ndarray, info: Mapping[str, Any]) -> np.ndarray:
         decision = self.diagnoser.update(np.asarray(obs, dtype=np.float64))
-        if decision.alarm:
+        self._k += 1
+        if decision.alarm and self._k > self.arm_after:
             named = getattr(decision, "diagnosis", None)
             if named in self.per_fault:
                 self._target = self.per_fault[named]

@@ -105,7 +105,7 @@ def test_a_supervisor_switches_on_the_first_alarm_to_the_diagnosed_faults_set_po
 
     healthy = np.array([535.0, 685.0])
     per_fault = {"f1": np.array([540.0, 680.0]), "f2": np.array([530.0, 690.0])}
-    sup = DiagnosisSupervisor("s", _Stub(30, fault), healthy, per_fault)
+    sup = DiagnosisSupervisor("s", _Stub(30, fault), healthy, per_fault, arm_after=10)
     env = gym.make("FCC-control-v0", scenario="nominal")
     obs, info = env.reset(seed=1)
     sup.reset(info)
