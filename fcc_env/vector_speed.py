@@ -11,7 +11,6 @@ runs it several times faster.
 
 from __future__ import annotations
 
-import argparse
 import time
 from typing import Any
 
@@ -20,6 +19,7 @@ import numba
 import numpy as np
 
 import fcc_env
+from fcc_common.invocation import command_parser
 
 #: The issue's goals at 1024 envs: env-steps/s of the native env, and its speed-up over sync.
 NATIVE_GOAL = 500_000
@@ -52,7 +52,14 @@ def compare(env_id: str, n_envs: int, n_steps: int, sync_steps: int, **kwargs: A
 
 
 def main(argv: list[str] | None = None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = command_parser(
+        "fcc_env.vector_speed",
+        __doc__ or "",
+        (
+            ("", "1024 envs: the native vector env against SyncVectorEnv, both ids"),
+            ("--envs 256 --steps 500 --threads 1", "a quick look on one thread"),
+        ),
+    )
     ap.add_argument("--envs", type=int, default=1024, help="envs per vector env")
     ap.add_argument("--steps", type=int, default=1000, help="vector steps of the native env")
     ap.add_argument(

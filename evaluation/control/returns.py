@@ -42,6 +42,7 @@ from evaluation.control.policies import (
     oracle,
 )
 from evaluation.metrics.intervals import Interval, bootstrap_ci
+from fcc_common.invocation import check_out_path, command_parser, out_path, run_command
 from fcc_common.io import atomic_write, atomic_write_json
 from fcc_env.closed_loop import CLOSED_LOOP_CHANNELS
 from fcc_env.control_task import CONTROL_ENV_ID, REWARD_TERMS
@@ -224,29 +225,40 @@ def _table(summaries: Sequence[PolicySummary]) -> str:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(
-        prog="python -m evaluation.control", description=__doc__.splitlines()[0]
+    parser = command_parser(
+        "evaluation.control",
+        __doc__ or "",
+        (
+            ("--seeds 20", "the baselines and a pca-driven supervisor, 100 episodes each"),
+            ("--seeds 2 --diagnosers ''", "a quick look at the baselines alone"),
+            ("--diagnosers pca,lrgf-glr-closed", "what two detectors are worth as supervisors"),
+        ),
     )
     parser.add_argument("--seeds", type=int, default=20, help="test seeds per scenario (20)")
     parser.add_argument("--steps", type=int, default=3999, help="steps per episode (3999)")
-    parser.add_argument("--out", type=Path, default=Path("results/control"))
+    parser.add_argument("--out", type=out_path, default=Path("results/control"))
     parser.add_argument(
         "--diagnosers",
         default="pca",
         help="comma-separated registered diagnosers, each driving a supervisor (pca); '' none",
     )
-    args = parser.parse_args(argv)
-    if args.seeds < 1 or not 1 <= args.steps <= 3999:
-        parser.error(
-            f"--seeds {args.seeds} / --steps {args.steps}: allowed --seeds >= 1, --steps 1..3999"
-        )
-    t0 = time.perf_counter()
+    return run_command(parser, _study, argv)
+
+
+def _study(args: argparse.Namespace) -> int:
+    """The work of :func:`main`: its failures are refused by :func:`run_command`."""
     from diagnosers import available
 
+    if args.seeds < 1 or not 1 <= args.steps <= 3999:
+        raise ValueError(
+            f"--seeds {args.seeds} / --steps {args.steps}: allowed --seeds >= 1, --steps 1..3999"
+        )
+    check_out_path("--out", args.out)
     names = [n for n in args.diagnosers.split(",") if n]
     unknown = [n for n in names if n not in available()]
     if unknown:
-        parser.error(f"--diagnosers: unknown {unknown}; allowed: {available()}")
+        raise ValueError(f"--diagnosers: unknown {unknown}; allowed: {available()}")
+    t0 = time.perf_counter()
     policies: list[Policy] = [ProgramPolicy(), fixed_setpoints()]
     policies += [supervisor(n) for n in names]
     policies.append(oracle())
@@ -275,8 +287,7 @@ def main(argv: Sequence[str] | None = None) -> int:
                 title=f"FCC-control-v0, {scenario} at the paper's size and onset, test seed 0",
             )
         )
-    table = _table(summaries)
-    print(table, end="")
+    print(_table(summaries), end="")
     print(
         f"\n{len(scores)} episodes ({args.seeds} test seeds x {len(SCENARIOS)} scenarios x "
         f"{len(policies)} policies) in {time.perf_counter() - t0:.0f} s; wrote {args.out} "

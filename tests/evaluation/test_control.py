@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import re
+
 import gymnasium as gym
 import numpy as np
 import pytest
@@ -116,3 +118,20 @@ def test_a_supervisor_switches_on_the_first_alarm_to_the_diagnosed_faults_set_po
     target = per_fault["f2"] if want == "f2" else robust_setpoints(per_fault)
     assert np.allclose(shown[20], healthy, atol=1e-4)
     assert np.allclose(shown[45], target, atol=1e-4)
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--out", ""], "is empty"),
+        (["--seeds", "0"], "allowed --seeds >= 1"),
+        (["--diagnosers", "nope"], "unknown \\['nope'\\]"),
+    ],
+)
+def test_the_control_cli_refuses_bad_input_in_one_line(argv, message, capsys):
+    from evaluation.control.returns import main
+
+    with pytest.raises(SystemExit) as e:
+        main(argv)
+    assert e.value.code == 2
+    assert re.search(message, capsys.readouterr().err)
