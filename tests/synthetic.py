@@ -110,3 +110,32 @@ def heldout_rmse(data, train_fraction: float = 0.6) -> dict[str, float]:
     E = data.stack(m.output_channels) - P
     rmse = np.sqrt(np.mean(E[:, n_train:] ** 2, axis=(0, 1)))
     return dict(zip(m.output_channels, rmse, strict=True))
+
+
+def cell_record(
+    label: str, scenario: str, seed: int, *, r_td: float, t_dt: float, r_fd: float, n_alarms: int
+):
+    """A scored cell (:class:`evaluation.sweep.records.CellResult`) of a 400-sample episode
+    with its fault (if any) at sample 100, for table and ranking tests without simulation."""
+    from evaluation.sweep.records import CellResult
+
+    faulty = scenario != "nominal"
+    return CellResult(
+        diagnoser=label,
+        diagnoser_name=label,
+        scenario=scenario,
+        seed=seed,
+        fault_onset=100 if faulty else None,
+        n_samples=400,
+        n_samples_planned=400,
+        n_fault_samples=300 if faulty else 0,
+        terminated_at=None,
+        termination_reason=None,
+        r_fd=0.0 if faulty else r_fd,
+        r_td=r_td,
+        t_dt=t_dt,
+        t_dt_s=t_dt * 10,
+        n_alarms=n_alarms,
+        sample_time_s=10.0,
+        detect_wall_s=0.0,
+    )

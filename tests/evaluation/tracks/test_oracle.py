@@ -6,6 +6,7 @@ import math
 
 import numpy as np
 import pytest
+from synthetic import cell_record
 
 from diagnosers.alarm import EWMA
 from diagnosers.episode import Episode
@@ -173,25 +174,8 @@ def test_uncertain_track_shares_the_plant_and_hides_the_draw() -> None:
 
 
 def _rec(label: str, scenario: str, seed: int, r_td: float, t_dt: float) -> CellResult:
-    faulty = scenario != "nominal"
-    return CellResult(
-        diagnoser=label,
-        diagnoser_name=label,
-        scenario=scenario,
-        seed=seed,
-        fault_onset=100 if faulty else None,
-        n_samples=400,
-        n_samples_planned=400,
-        n_fault_samples=300 if faulty else 0,
-        terminated_at=None,
-        termination_reason=None,
-        r_fd=0.0 if faulty else 0.001 * seed,
-        r_td=r_td,
-        t_dt=t_dt,
-        t_dt_s=t_dt * 10,
-        n_alarms=seed,
-        sample_time_s=10.0,
-        detect_wall_s=0.0,
+    return cell_record(
+        label, scenario, seed, r_td=r_td, t_dt=t_dt, r_fd=0.001 * seed, n_alarms=seed
     )
 
 

@@ -8,6 +8,7 @@ import math
 
 import numpy as np
 import pytest
+from synthetic import cell_record
 
 from evaluation.metrics.detection_metrics import censored_delay
 from evaluation.metrics.intervals import UNRANKED, Interval
@@ -38,24 +39,14 @@ def _run(*rows: TrackRow, records: tuple[CellResult, ...] = ()) -> TrackRun:
 
 def _rec(label: str, scenario: str, seed: int, t_dt: float, *, r_fd: float = 0.001) -> CellResult:
     faulty = scenario != "nominal"
-    return CellResult(
-        diagnoser=label,
-        diagnoser_name=label,
-        scenario=scenario,
-        seed=seed,
-        fault_onset=100 if faulty else None,
-        n_samples=400,
-        n_samples_planned=400,
-        n_fault_samples=300 if faulty else 0,
-        terminated_at=None,
-        termination_reason=None,
-        r_fd=0.0 if faulty else r_fd,
+    return cell_record(
+        label,
+        scenario,
+        seed,
         r_td=math.nan if not faulty else (0.0 if math.isnan(t_dt) else 0.9),
         t_dt=math.nan if not faulty else t_dt,
-        t_dt_s=t_dt * 10,
+        r_fd=r_fd,
         n_alarms=1,
-        sample_time_s=10.0,
-        detect_wall_s=0.0,
     )
 
 
