@@ -26,6 +26,7 @@ import numpy as np
 import diagnosers
 import fcc_env
 from diagnosers import Episode
+from diagnosers.relations import required_channels
 
 N_SAMPLES = 2400
 ONSET = 1200
@@ -81,6 +82,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--diagnosers", help="comma-separated names (default: every registered one)")
     args = ap.parse_args(argv)
     names = args.diagnosers.split(",") if args.diagnosers else diagnosers.available()
+    # the episodes are FCC-v0's: a diagnoser reading the closed-loop channels (u_F) is left out
+    lacking = {n for n in names if not required_channels(n) <= set(fcc_env.MEASUREMENT_NAMES)}
+    if lacking:
+        print(f"left out (they read closed-loop channels): {sorted(lacking)}", file=sys.stderr)
+    names = [n for n in names if n not in lacking]
     fp = fingerprint(names)
     with open(args.out, "w") as f:
         json.dump(fp, f, indent=1, sort_keys=True)
