@@ -20,6 +20,7 @@ not built yet.
 from __future__ import annotations
 
 import argparse
+import json
 import math
 import time
 from collections.abc import Sequence
@@ -189,7 +190,9 @@ def operated_episodes(
     return out
 
 
-def supervisor(name: str, n_steps: int = 3999) -> DiagnosisSupervisor:
+def supervisor(
+    name: str, n_steps: int = 3999, params: dict[str, Any] | None = None
+) -> DiagnosisSupervisor:
     """A :class:`DiagnosisSupervisor` around registered diagnoser ``name``, trained on episodes
     of :data:`TRAIN_SEEDS` run at the supervisor's healthy set points (healthy ones, and for an
     isolator each fault at the paper's size too). Trained on the operating program instead, a
@@ -202,8 +205,12 @@ def supervisor(name: str, n_steps: int = 3999) -> DiagnosisSupervisor:
     if diagnoser_class(name).isolates:
         for fault in SCENARIOS[1:]:
             train += operated_episodes(fixed, fault, TRAIN_SEEDS, n_steps)
+    label = name + "".join(f" {k}={v}" for k, v in (params or {}).items())
     return DiagnosisSupervisor(
-        f"supervisor on {name}", make(name).fit(train), fixed.target(0, {}), fault_setpoints()
+        f"supervisor on {label}",
+        make(name, **(params or {})).fit(train),
+        fixed.target(0, {}),
+        fault_setpoints(),
     )
 
 
@@ -224,6 +231,13 @@ def _table(summaries: Sequence[PolicySummary]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _json(text: str) -> Any:
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError as e:
+        raise argparse.ArgumentTypeError(f"{text!r} is not JSON ({e})") from None
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     parser = command_parser(
         "evaluation.control",
@@ -232,6 +246,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             ("--seeds 20", "the baselines and a pca-driven supervisor, 100 episodes each"),
             ("--seeds 2 --diagnosers ''", "a quick look at the baselines alone"),
             ("--diagnosers pca,lrgf-glr-closed", "what two detectors are worth as supervisors"),
+            (
+                '--diagnosers lrgf-iso --diagnoser-params \'{"lrgf-iso": {"detector_name": '
+                '"lrgf-glr-closed"}}\'',
+                "an isolator on the closed-loop detector: it names the fault",
+            ),
         ),
     )
     parser.add_argument("--seeds", type=int, default=20, help="test seeds per scenario (20)")
@@ -241,6 +260,14 @@ def main(argv: Sequence[str] | None = None) -> int:
         "--diagnosers",
         default="pca",
         help="comma-separated registered diagnosers, each driving a supervisor (pca); '' none",
+    )
+    parser.add_argument(
+        "--diagnoser-params",
+        type=_json,
+        default={},
+        metavar="JSON",
+        help='hyperparameters per diagnoser, e.g. \'{"lrgf-iso": {"detector_name": '
+        "\"lrgf-glr-closed\"}}' (as a manifest's diagnoser_params)",
     )
     return run_command(parser, _study, argv)
 
@@ -260,7 +287,16 @@ def _study(args: argparse.Namespace) -> int:
         raise ValueError(f"--diagnosers: unknown {unknown}; allowed: {available()}")
     t0 = time.perf_counter()
     policies: list[Policy] = [ProgramPolicy(), fixed_setpoints()]
-    policies += [supervisor(n) for n in names]
+    params = args.diagnoser_params
+    if not isinstance(params, dict) or not all(isinstance(v, dict) for v in params.values()):
+        raise ValueError(
+            f"--diagnoser-params {params!r}: allowed: a JSON object mapping diagnoser names to "
+            "objects of hyperparameters"
+        )
+    stray = sorted(set(params) - set(names))
+    if stray:
+        raise ValueError(f"--diagnoser-params names {stray}, which --diagnosers does not")
+    policies += [supervisor(n, params=params.get(n)) for n in names]
     policies.append(oracle())
     scores = run_study(policies, range(args.seeds), args.steps, SCENARIOS)
     summaries = summarise(scores, reference=policies[-1].name)

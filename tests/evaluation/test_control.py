@@ -135,3 +135,19 @@ def test_the_control_cli_refuses_bad_input_in_one_line(argv, message, capsys):
         main(argv)
     assert e.value.code == 2
     assert re.search(message, capsys.readouterr().err)
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--diagnoser-params", "{bad"], "is not JSON"),
+        (["--diagnoser-params", '{"pca": 1}'], "objects of hyperparameters"),
+        (["--diagnoser-params", '{"lrgf-iso": {}}'], "which --diagnosers does not"),
+    ],
+)
+def test_diagnoser_params_are_checked_before_any_work(argv, message, capsys):
+    from evaluation.control.returns import main
+
+    with pytest.raises(SystemExit):
+        main(["--seeds", "1", *argv])
+    assert message in capsys.readouterr().err
