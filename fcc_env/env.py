@@ -8,6 +8,7 @@ from collections.abc import Mapping
 from typing import Any
 
 import gymnasium as gym
+import numba
 import numpy as np
 from gymnasium import spaces
 
@@ -458,25 +459,37 @@ def check_action(action: Any) -> np.ndarray:
     return a
 
 
+#: The actuator limits [[u_F low, R_ar low], [u_F high, R_ar high]] (kg/s, t/h).
+ACTUATOR_BOUNDS = np.array([U_F_LIMITS_REL, R_AR_LIMITS_REL]).T * NOMINAL_INPUTS[:2]
+
+
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def actuate(u: np.ndarray, move: np.ndarray, limits: np.ndarray) -> bool:
+    """Add the action's ``move`` (kg/s, t/h) to u_F and R_ar of ``u`` in place, held within
+    ``limits`` (:data:`ACTUATOR_BOUNDS`); True when a limit was hit. The env and the vector env
+    both step through it."""
+    u[0] += move[0]
+    u[1] += move[1]
+    if limits[0, 0] <= u[0] <= limits[1, 0] and limits[0, 1] <= u[1] <= limits[1, 1]:
+        return False
+    for i in range(2):
+        u[i] = min(max(u[i], limits[0, i]), limits[1, i])
+    return True
+
+
 def actuator_inputs(program: np.ndarray, move: np.ndarray) -> tuple[np.ndarray, bool]:
     """The inputs applied: the program plus the action's ``move`` (kg/s, t/h) on u_F and R_ar,
     held within the actuator limits; and whether a limit was hit."""
-    u = program.copy()
-    u[0] += move[0]
-    u[1] += move[1]
-    lo_f, hi_f = U_F_LIMITS_REL[0] * NOMINAL_INPUTS[0], U_F_LIMITS_REL[1] * NOMINAL_INPUTS[0]
-    lo_a, hi_a = R_AR_LIMITS_REL[0] * NOMINAL_INPUTS[1], R_AR_LIMITS_REL[1] * NOMINAL_INPUTS[1]
-    if lo_f <= u[0] <= hi_f and lo_a <= u[1] <= hi_a:
-        return u, False
-    u[0] = min(max(u[0], lo_f), hi_f)
-    u[1] = min(max(u[1], lo_a), hi_a)
-    return u, True
+    u = np.array(program, dtype=np.float64)
+    return u, actuate(u, np.asarray(move, dtype=np.float64), ACTUATOR_BOUNDS)
 
 
 __all__ = [
+    "ACTUATOR_BOUNDS",
     "RESET_OPTION_NAMES",
     "FCCEnv",
     "OnsetHorizonCheck",
+    "actuate",
     "actuator_inputs",
     "check_action",
     "episode_request",

@@ -167,6 +167,16 @@ class EpisodeSetup:
             sp, u[:, 5] = self.setpoints.take(k.shape[0])
         return self.schedule.inputs(k, u), sp
 
+    def draw_chunk(
+        self, ks: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray | None, np.ndarray, np.ndarray]:
+        """The episode's next samples ``ks``: program inputs, set points (closed loop, else
+        None), the noise's standard-normal draws ``(len(ks), 8)`` and the parameter multipliers,
+        drawn in this one order (the single env and the vector env give the same numbers)."""
+        u, sp = self.take_program(ks)
+        z = self.noise_rng.standard_normal((ks.shape[0], N_MEASUREMENTS))
+        return u, sp, z, self.schedule.multipliers(ks)
+
 
 def setup_episode(
     rng: np.random.Generator,
@@ -221,7 +231,6 @@ class EpisodeStream:
         self._p_base = p_base
         self._pidx = setup.schedule.pidx
         self._setup = setup
-        self._noise_rng = setup.noise_rng
         self._u_prog = np.empty((0, N_INPUTS))
         self._sp = np.empty((0, 2))
         self._z = np.empty((0, N_MEASUREMENTS))
@@ -230,14 +239,12 @@ class EpisodeStream:
     def _ensure(self, k: int) -> None:
         while self._u_prog.shape[0] <= k:
             ks = np.arange(self._u_prog.shape[0], self._u_prog.shape[0] + CHUNK_SAMPLES)
-            chunk, sp = self._setup.take_program(ks)
+            chunk, sp, z, pm = self._setup.draw_chunk(ks)
             self._u_prog = np.concatenate([self._u_prog, chunk])
             if sp is not None:
                 self._sp = np.concatenate([self._sp, sp])
-            self._z = np.concatenate(
-                [self._z, self._noise_rng.standard_normal((CHUNK_SAMPLES, N_MEASUREMENTS))]
-            )
-            self._pm = np.concatenate([self._pm, self.schedule.multipliers(ks)])
+            self._z = np.concatenate([self._z, z])
+            self._pm = np.concatenate([self._pm, pm])
 
     def program(self, k: int) -> np.ndarray:
         """The operating program's inputs at sample ``k`` (after input effects), shape (6,)."""

@@ -60,6 +60,7 @@ __all__ = [
     "SETPOINT_NAMES",
     "RegulatoryLayer",
     "SetpointProgram",
+    "clip_rows",
     "controller_update",
 ]
 
@@ -225,7 +226,9 @@ _SP_HIGH = np.array([SETPOINT_RANGES[n].high for n in SETPOINT_NAMES])
 
 
 @numba.njit(cache=True, nogil=True)
-def _clip_rows(sp: np.ndarray, low: np.ndarray, high: np.ndarray) -> bool:
+def clip_rows(sp: np.ndarray, low: np.ndarray, high: np.ndarray) -> bool:
+    """Each row of ``sp`` clipped in place to ``[low, high]`` per column; True if any was:
+    the one clipping rule of set points (the env, batch programs, the vector env)."""
     clipped = False
     for i in range(sp.shape[0]):
         for j in range(sp.shape[1]):
@@ -240,7 +243,7 @@ def check_setpoints(setpoints: np.ndarray) -> tuple[np.ndarray, bool]:
     """Set points (``(2,)`` or ``(n, 2)``) clipped to :data:`SETPOINT_RANGES`, and whether a
     clip was needed: the one clipping rule of the env's steps and of batch programs."""
     out = np.array(setpoints, dtype=np.float64)
-    return out, _clip_rows(out.reshape(-1, 2), _SP_LOW, _SP_HIGH)
+    return out, clip_rows(out.reshape(-1, 2), _SP_LOW, _SP_HIGH)
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")

@@ -33,10 +33,10 @@ from fcc_common.validation import Integer, check, invalid
 from fcc_env import effects as fx
 from fcc_env.env import (
     ACTION_SCALE,
-    R_AR_LIMITS_REL,
+    ACTUATOR_BOUNDS,
     SETPOINT_ACTION_SCALE,
-    U_F_LIMITS_REL,
     FCCEnv,
+    actuate,
     episode_request,
 )
 from fcc_env.episode_setup import CHUNK_SAMPLES, EpisodeSetup, setup_episode
@@ -55,6 +55,7 @@ from fcc_env.regulatory import (
     SETPOINT_NAMES,
     SETPOINT_RANGES,
     apply_controller_outputs,
+    clip_rows,
     controller_update,
     initial_controller_state,
 )
@@ -73,32 +74,15 @@ _NUMERICAL_FAILURE = 1
 # Per-env kernel modes.
 _SKIP, _STEP, _START = 0, 1, 2
 #: Actuator limits as [low, high] rows over (u_F, R_ar): the numbers of ``actuator_inputs``.
-_U_LIMITS = np.array([U_F_LIMITS_REL, R_AR_LIMITS_REL]).T * NOMINAL_INPUTS[:2]
 _SP_LIMITS = np.array([[SETPOINT_RANGES[n].low, SETPOINT_RANGES[n].high] for n in SETPOINT_NAMES]).T
-
-
-@numba.njit(cache=True, nogil=True, error_model="numpy")
-def _actuate(u: np.ndarray, move: np.ndarray, limits: np.ndarray) -> bool:
-    """``fcc_env.env.actuator_inputs`` in place on ``u`` (the env's formula, element for element)."""
-    u[0] += move[0]
-    u[1] += move[1]
-    if limits[0, 0] <= u[0] <= limits[1, 0] and limits[0, 1] <= u[1] <= limits[1, 1]:
-        return False
-    for i in range(2):
-        u[i] = min(max(u[i], limits[0, i]), limits[1, i])
-    return True
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
 def _setpoints(program: np.ndarray, move: np.ndarray, limits: np.ndarray, out: np.ndarray) -> bool:
     """``check_setpoints(program + move)`` into ``out``; True when a set point was clipped."""
-    clipped = False
     for j in range(2):
-        s = program[j] + move[j]
-        v = min(max(s, limits[0, j]), limits[1, j])
-        clipped = clipped or v != s
-        out[j] = v
-    return clipped
+        out[j] = program[j] + move[j]
+    return clip_rows(out.reshape(1, 2), limits[0], limits[1])
 
 
 class Episodes(NamedTuple):
@@ -154,7 +138,7 @@ def _observe(b: int, k: int, e: Episodes, s: Streams, pl: Plant) -> bool:
     if pl.gains.shape[0] > 0:
         apply_controller_outputs(u, e.c[b], pl.gains)
         _setpoints(s.setpoints[b, j], e.move[b], pl.sp_limits, e.shown[b])
-    elif _actuate(u, e.move[b], pl.u_limits):
+    elif actuate(u, e.move[b], pl.u_limits):
         e.saturated[b] = True
     e.u[b] = u
     # one RHS evaluation gives the info's aux and T_rx for the measurement (as simulate_kernel)
@@ -198,7 +182,7 @@ def _step_env(b: int, mode: int, a: np.ndarray, e: Episodes, s: Streams, pl: Pla
         u = e.u[b].copy()
     else:  # the new move applies from this sample on
         u = s.program[b, j].copy()
-        if _actuate(u, e.move[b], pl.u_limits):
+        if actuate(u, e.move[b], pl.u_limits):
             e.saturated[b] = True
     x = e.x[b].copy()
     step_kernel(x, u, pl.p_base, s.pidx[b], s.mult[b, j], pl.h, pl.substeps)
@@ -280,7 +264,7 @@ class FCCVectorEnv(VectorEnv):
         gains = cfg.regulatory.gains(cfg.sample_time_s) if self.closed_loop else np.empty(0)
         self._plant = Plant(
             cfg.params.as_array(), cfg.sample_time_s / cfg.rk4_substeps, cfg.rk4_substeps,
-            float(cfg.noise_scale), gains, _U_LIMITS, _SP_LIMITS,
+            float(cfg.noise_scale), gains, ACTUATOR_BOUNDS, _SP_LIMITS,
             self.single_observation_space.low, self.single_observation_space.high,
             SETPOINT_ACTION_SCALE if self.closed_loop else ACTION_SCALE,
         )  # fmt: skip
@@ -397,12 +381,10 @@ class FCCVectorEnv(VectorEnv):
         self._elapsed[b] = 0
 
     def _draw_chunk(self, b: int) -> None:
-        """The next chunk of env ``b``: program, noise, multipliers (``EpisodeStream``'s order)."""
+        """The next chunk of env ``b`` (:meth:`EpisodeSetup.draw_chunk`, as ``EpisodeStream``)."""
         setup = self._setups[b]
         ks = np.arange(self._drawn[b] * CHUNK_SAMPLES, (self._drawn[b] + 1) * CHUNK_SAMPLES)
-        u, sp = setup.take_program(ks)
-        z = setup.noise_rng.standard_normal((CHUNK_SAMPLES, N_MEASUREMENTS))
-        pm = setup.schedule.multipliers(ks)
+        u, sp, z, pm = setup.draw_chunk(ks)
         rows = slice(ks[0] % RING, ks[0] % RING + CHUNK_SAMPLES)
         s = self._s
         s.program[b, rows], s.z[b, rows] = u, z

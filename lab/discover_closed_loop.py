@@ -88,21 +88,11 @@ def layer(program: str) -> RegulatoryLayer | bool:
     )
 
 
-def floor_rmse(data: d.MeasuredData, train_fraction: float = 0.6) -> dict[str, float]:
-    m = d.PhysicsModel()
-    n_train = round(train_fraction * data.n_samples)
-    m.prepare(data, n_train)
-    pred = m.predict(data, [], np.zeros((1, 0)), data.n_samples)[0]
-    err = data.stack(m.output_channels) - pred
-    rmse = np.sqrt(np.mean(err[:, n_train:] ** 2, axis=(0, 1)))
-    return dict(zip(m.output_channels, rmse, strict=True))
-
-
 def run_case(text: str | None, pname: str | None, truth: float | None, seed: int, reg) -> str:
     effects = [] if text is None else [fx.parse(text) if isinstance(text, str) else text]
     t0 = time.perf_counter()
     data = d.from_batch(fcc_env.simulate_episodes([seed], N, plant_effects=effects, regulatory=reg))
-    floor = floor_rmse(d.from_batch(fcc_env.simulate_episodes([seed], N, regulatory=reg)))
+    floor = d.heldout_rmse(d.from_batch(fcc_env.simulate_episodes([seed], N, regulatory=reg)))
     rep = d.discover(data, max_effects=2, plots=False).to_json()
     named = rep["effects"][0]["id"] if rep["effects"] else "none"
     hidden = fx.parse(text).effect_id if isinstance(text, str) else None

@@ -98,20 +98,6 @@ def inject_step_fault(
     return dataclasses.replace(episode, y=y, fault_onset=onset, scenario=f"step_{channel}")
 
 
-def heldout_rmse(data, train_fraction: float = 0.6) -> dict[str, float]:
-    """Held-out RMSE per output channel of the modelling loop's declared model
-    (:class:`evaluation.discover.PhysicsModel`) on ``data``: the floor a found effect must reach."""
-    from evaluation import discover as d
-
-    m = d.PhysicsModel()
-    n_train = round(train_fraction * data.n_samples)
-    m.prepare(data, n_train)
-    P = m.predict(data, [], np.zeros((1, 0)), data.n_samples)[0]
-    E = data.stack(m.output_channels) - P
-    rmse = np.sqrt(np.mean(E[:, n_train:] ** 2, axis=(0, 1)))
-    return dict(zip(m.output_channels, rmse, strict=True))
-
-
 def cell_record(
     label: str, scenario: str, seed: int, *, r_td: float, t_dt: float, r_fd: float, n_alarms: int
 ):

@@ -49,7 +49,7 @@ from evaluation.discover.data import (
     load_measured,
 )
 from evaluation.discover.fitting import ar1_inflation, fit_effects
-from evaluation.discover.loop import TRAIN_FRACTION_RANGE, discover
+from evaluation.discover.loop import TRAIN_FRACTION_RANGE, discover, heldout_rmse
 from evaluation.discover.physics_model import (
     PHYSICS_INPUT_CHANNELS,
     PHYSICS_OUTPUT_CHANNELS,
@@ -98,6 +98,7 @@ __all__ = [
     "from_batch",
     "from_external",
     "heldout_comparison",
+    "heldout_rmse",
     "library_candidates",
     "load_measured",
     "main",

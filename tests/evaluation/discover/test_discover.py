@@ -15,7 +15,6 @@ import math
 
 import numpy as np
 import pytest
-from synthetic import heldout_rmse
 
 import fcc_env
 from evaluation import discover as d
@@ -48,7 +47,7 @@ SLOW_CASES = [
 def check_detection(text: str, pname: str, truth: float, rel_tol: float, seed: int) -> None:
     effect = fx.parse(text)
     data = d.from_batch(fcc_env.simulate_episodes([seed], N, plant_effects=[effect]))
-    floor = heldout_rmse(d.from_batch(fcc_env.simulate_episodes([seed], N)))
+    floor = d.heldout_rmse(d.from_batch(fcc_env.simulate_episodes([seed], N)))
     rep = d.discover(data, max_effects=2).to_json()
     assert rep["effects"], f"{text}: nothing found; rounds {rep['rounds'][0]['candidates'][:3]}"
     first = rep["effects"][0]

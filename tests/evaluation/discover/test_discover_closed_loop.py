@@ -7,7 +7,6 @@ from __future__ import annotations
 import dataclasses
 
 import pytest
-from synthetic import heldout_rmse
 
 import fcc_env
 from evaluation import discover as d
@@ -28,7 +27,7 @@ def _check(text: str, pname: str, truth: float, rel_tol: float, seed: int) -> No
     batch = fcc_env.simulate_episodes([seed], N, plant_effects=[effect], regulatory=DECLARED)
     assert "u_F" in batch.channels  # closed-loop data: the valve moved
     data = d.from_batch(batch)
-    floor = heldout_rmse(d.from_batch(fcc_env.simulate_episodes([seed], N, regulatory=DECLARED)))
+    floor = d.heldout_rmse(d.from_batch(fcc_env.simulate_episodes([seed], N, regulatory=DECLARED)))
     rep = d.discover(data, max_effects=2, plots=False).to_json()
     assert rep["effects"] and rep["effects"][0]["id"] == effect.effect_id
     assert rep["effects"][0]["params"][pname] == pytest.approx(truth, rel=rel_tol)
