@@ -69,6 +69,20 @@ def main(argv: list[str] | None = None) -> None:
         "--threads", type=int, default=None, help="numba threads of the native env (default: all)"
     )
     args = ap.parse_args(argv)
+    limits = {
+        "--envs": (args.envs, 1),
+        "--steps": (args.steps, 1),
+        "--sync-steps": (args.sync_steps, 1),
+    }
+    limits["--threads"] = (args.threads if args.threads is not None else 1, 1)
+    for flag, (value, low) in limits.items():
+        if value < low:
+            ap.error(f"{flag} {value} is outside the allowed range: an integer >= {low}")
+    if args.threads is not None and args.threads > numba.config.NUMBA_NUM_THREADS:
+        ap.error(
+            f"--threads {args.threads} is outside the allowed range: 1.."
+            f"{numba.config.NUMBA_NUM_THREADS} (numba's thread pool on this machine)"
+        )
     if args.threads is not None:
         numba.set_num_threads(args.threads)
     print(

@@ -341,6 +341,7 @@ def heldout_rmse(
     """The held-out RMSE per output channel of the declared ``model`` alone (default
     :class:`PhysicsModel`) on ``data``: on the same seed without an effect, the floor a found
     effect should bring the error down to (the report's ``rmse_before`` is this on its data)."""
+    train_fraction = check("train_fraction", train_fraction, TRAIN_FRACTION)
     m = PhysicsModel() if model is None else model
     n_train = round(train_fraction * data.n_samples)
     m.prepare(data, n_train)

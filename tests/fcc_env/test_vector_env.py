@@ -155,3 +155,20 @@ def test_bad_construction_names_the_value():
         FCCVectorEnv(2, render_mode="rgb_array")
     with pytest.raises(ValueError, match=r"plant_effects=.*vectorization_mode='sync'"):
         FCCVectorEnv(2, plant_effects=["sensor_bias:T_rx"]).reset(seed=0)
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["--envs", "0"], "--envs 0 is outside the allowed range: an integer >= 1"),
+        (["--steps", "-1"], "--steps -1 is outside the allowed range"),
+        (["--sync-steps", "0"], "--sync-steps 0 is outside the allowed range"),
+        (["--threads", "999"], "--threads 999 is outside the allowed range: 1.."),
+    ],
+)
+def test_vector_speed_refuses_bad_flags_by_value(argv, message, capsys):
+    from fcc_env.vector_speed import main
+
+    with pytest.raises(SystemExit) as e:
+        main(argv)
+    assert e.value.code == 2 and message in capsys.readouterr().err

@@ -398,3 +398,10 @@ def test_cli_reads_external_data_through_a_manifest(tmp_path, capsys):
     with pytest.raises(SystemExit):
         main(["--manifest", str(tmp_path / "nope.json"), *argv])
     assert "nope.json" in capsys.readouterr().err
+
+
+@pytest.mark.parametrize("fraction", [0.1, 0.95, float("nan")])
+def test_heldout_rmse_refuses_a_train_fraction_out_of_range(fraction):
+    data = d.from_batch(fcc_env.simulate_episodes([0], 200))
+    with pytest.raises(ValueError, match="train_fraction"):
+        d.heldout_rmse(data, train_fraction=fraction)
