@@ -36,6 +36,7 @@ from diagnosers.lrgf_net import LRGF
 from diagnosers.mem_net import NNARXErrorModel
 from diagnosers.modules import build_module, export_module
 from diagnosers.optimisers import FitResult, torch_threads
+from diagnosers.relation_cache import RelationCache, active_cache, job_key
 from diagnosers.training import fit_lrgf, fit_mem
 from fcc_common.workers import init_worker
 
@@ -94,6 +95,8 @@ class _RelationJob:
     seed: int
     #: the exported LRGF to start from (a warm start), or None for the seed's initialisation
     init: _Exported | None = None
+    #: a :class:`~diagnosers.relation_cache.RelationCache` directory to read and fill, or None
+    cache_dir: str | None = None
 
     @property
     def cost(self) -> int:
@@ -175,6 +178,15 @@ def _train_relation(job: _RelationJob) -> tuple[_Exported, _Exported, float, Fit
     return _export(net), _export(mem), float(ye_tr.std(ddof=1)), fit
 
 
+def _run_relation(job: _RelationJob) -> tuple[_Exported, _Exported, float, FitResult]:
+    """:func:`_train_relation`, through the relation cache when the job names one."""
+    if job.cache_dir is None:
+        return _train_relation(job)
+    key = job_key(job.settings, job.u, job.y, job.seed, job.init)
+    out = RelationCache(job.cache_dir).fetch_or_train(key, lambda: _train_relation(job))
+    return out  # type: ignore[return-value]
+
+
 def run_jobs(
     fn: Callable[[J], R], jobs: Sequence[J], n_jobs: int, cost: Callable[[J], float] | None = None
 ) -> list[R]:
@@ -224,7 +236,11 @@ def train_banks(
     ``init`` (one entry per set) warm-starts a set's LRGF networks from a trained bank of the
     same relations and sizes (``None`` entries start from the seed's initialisation); the error
     models always train from their own initialisation, on the warm-started networks' residuals.
+
+    Inside a :func:`diagnosers.relation_cache.shared_relations` block, a job trained before
+    (by any diagnoser, in any process sharing the directory) is read instead of trained again.
     """
+    cache = active_cache()
     per_relation = [settings] * len(in_idx) if isinstance(settings, BankSettings) else settings
     if len(per_relation) != len(in_idx):
         raise ValueError(f"{len(per_relation)} settings for {len(in_idx)} relations")
@@ -243,11 +259,12 @@ def train_banks(
             [y[:, [out_idx[j]]] for y in records],
             seed + 101 * j,
             None if start is None else _export(start.lrgf[j]),
+            None if cache is None else str(cache),
         )
         for records, start in zip(sets, inits, strict=True)
         for j in range(len(in_idx))
     ]
-    results = run_jobs(_train_relation, jobs, n_jobs, cost=lambda job: job.cost)
+    results = run_jobs(_run_relation, jobs, n_jobs, cost=lambda job: job.cost)
     k = len(in_idx)
     banks = []
     for b in range(len(sets)):

@@ -93,4 +93,5 @@ def run(opts: LeaderboardOptions) -> SweepResults:
         ray_address=opts.ray_address,
         progress=opts.progress,
         figure_cells=figure_cells(config) if opts.figures else (),
+        relation_cache=opts.out / "relations",
     )

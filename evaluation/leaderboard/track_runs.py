@@ -116,6 +116,7 @@ def main_tracks(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
                 progress=not args.no_progress,
                 figures=not args.no_figures,
                 model_cache=out / "models",
+                relation_cache=out / "relations",
                 imports=user_imports(args),
             )
         except ValueError as e:

@@ -60,6 +60,7 @@ def run_sweep(
     ray_address: str | None = None,
     progress: bool = True,
     figure_cells: Sequence[tuple[str, int]] = (),
+    relation_cache: str | os.PathLike | None = None,
 ) -> SweepResults:
     """Train and score every diagnoser of ``config``, resuming from ``store_dir``.
 
@@ -78,6 +79,11 @@ def run_sweep(
         figure_cells: ``(scenario, seed)`` test cells whose whole detection (and band view) is
             kept in the store (:meth:`ResultStore.read_detection`) for figures: it is computed
             in the scoring pass itself, never by a second simulation and detection.
+        relation_cache: a directory of trained relations that the trainings share
+            (:mod:`diagnosers.relation_cache`): a relation job that one LRGF diagnoser trains
+            is read by the others (``lrgf-mem``'s bank is the isolators' inner bank and partly
+            ``lrgf-glr``'s fold bank). ``None`` (default): each trains its own. It changes no
+            model: a cached relation has the bits of a fresh training.
 
     Returns:
         :class:`SweepResults` with every cell of the sweep.
@@ -142,7 +148,8 @@ def run_sweep(
         cores = (n_workers or cpu_count()) if backend == "local" and n_workers != 0 else 1
         cancel = True
         try:
-            _train_all(runner, store, config, to_train, mhash, progress, cores)
+            cache = None if relation_cache is None else str(relation_cache)
+            _train_all(runner, store, config, to_train, mhash, progress, cores, cache)
             _score_all(runner, store, config, missing, mhash, chash, n_missing, progress)
             cancel = False
         finally:
@@ -189,12 +196,15 @@ def _train_all(
     mhash: Mapping[str, str],
     progress: bool,
     cores: int = 1,
+    relation_cache: str | None = None,
 ) -> None:
     if not to_train:
         return
     jobs = training_jobs(to_train, cores) if cores > 1 else {}
     handles = {
-        runner.submit(train_task, s, config.data, config.imports, jobs.get(s.key)): s
+        runner.submit(
+            train_task, s, config.data, config.imports, jobs.get(s.key), relation_cache
+        ): s
         for s in to_train
     }
     with _progress_bar(len(to_train), "training", progress) as bar:

@@ -17,6 +17,7 @@ from typing import Any
 
 from diagnosers.diagnoser import Diagnoser
 from diagnosers.registry import diagnoser_class, import_modules
+from diagnosers.relation_cache import shared_relations
 from evaluation.sweep.config import DiagnoserSpec
 from evaluation.sweep.records import (
     detect_and_score,
@@ -85,11 +86,14 @@ def train_task(
     data: DataSource,
     imports: tuple[str, ...] = (),
     n_jobs: int | None = None,
+    relation_cache: str | None = None,
     _serial: bool = False,
 ) -> tuple[dict[str, bytes], dict[str, Any]]:
     """Fit one diagnoser on the healthy training episodes; return its saved files and facts.
 
     ``n_jobs``: set on the diagnoser (see :func:`training_jobs`) unless ``None``.
+    ``relation_cache``: a directory of trained relations shared with the other trainings
+    (:mod:`diagnosers.relation_cache`), or ``None``.
     """
     if not _serial:
         limit_threads()
@@ -109,7 +113,8 @@ def train_task(
     if n_jobs is not None:
         diag.set_params(n_jobs=n_jobs)
     try:
-        diag.fit(episodes)
+        with shared_relations(relation_cache):
+            diag.fit(episodes)
     except Exception as e:
         raise RuntimeError(f"training {spec.key}: {type(e).__name__}: {e}") from e
     wall = time.perf_counter() - t0

@@ -90,13 +90,16 @@ def run_track(
     figures: bool = True,
     model_cache: Path | None = None,
     imports: Sequence[str] = (),
+    relation_cache: Path | None = None,
 ) -> TrackRun:
     """Sweep ``diagnosers`` over ``track`` and add the physical-limit row (resumable).
 
     ``model_cache``: a directory of trained models shared by tracks; a track whose training
     episodes equal another's (:meth:`TrackData.training_key`: same seeds, noise and plant
     variation) reuses that track's models instead of training again. ``imports``: modules
-    that register diagnosers of your own (:attr:`SweepConfig.imports`).
+    that register diagnosers of your own (:attr:`SweepConfig.imports`). ``relation_cache``: a
+    directory of trained relations shared by the trainings of every track
+    (:mod:`diagnosers.relation_cache`).
     """
     t0 = time.perf_counter()
     data = TrackData(track=track)
@@ -120,6 +123,7 @@ def run_track(
         ray_address=ray_address,
         progress=progress,
         figure_cells=figure_cells(config) if figures else (),
+        relation_cache=relation_cache,
     )
     if model_cache is not None:
         _models_to_cache(config, store, model_cache)
