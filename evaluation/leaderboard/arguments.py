@@ -128,11 +128,24 @@ _EXAMPLES = (
         "repository root)",
     ),
     ("--track all --quick", "every benchmark track, on fewer episodes, into results/tracks"),
+    (
+        "--task control --seeds 2 --diagnosers ''",
+        "the control task's leaderboard (FCC-control-v0: returns in USD, trips, loss against "
+        "the oracle); its options are python -m evaluation.control's (--task control --help)",
+    ),
 )
 
 
 def build_parser() -> argparse.ArgumentParser:
     p = command_parser("evaluation.leaderboard", _DESCRIPTION, _EXAMPLES)
+    p.add_argument(
+        "--task",
+        choices=("detection", "control"),
+        default="detection",
+        help="detection (default): the diagnosers' leaderboard; control: the control task's "
+        "(what a supervisor, the oracle and the baselines earn on FCC-control-v0), with the "
+        "options of python -m evaluation.control",
+    )
     p.add_argument(
         "--quick",
         action="store_true",

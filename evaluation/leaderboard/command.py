@@ -179,8 +179,40 @@ def resolve_options(
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    words = list(sys.argv[1:] if argv is None else argv)
+    if _task(words) == "control":
+        # the control task's leaderboard has options of its own: its command parses them
+        from evaluation.control.returns import main as control_main
+
+        return control_main(_without_task(words))
     parser = build_parser()
-    return run_command(parser, lambda args: _leaderboard(args, parser), argv)
+    return run_command(parser, lambda args: _leaderboard(args, parser), words)
+
+
+def _task(words: Sequence[str]) -> str | None:
+    """The value of the first ``--task`` of ``words`` (``--task X`` or ``--task=X``), if any.
+    Only an exact ``control`` switches commands; anything else is the parser's to refuse."""
+    for i, word in enumerate(words):
+        if word == "--":
+            return None
+        if word.startswith("--task="):
+            return word.split("=", 1)[1]
+        if word == "--task" and i + 1 < len(words):
+            return words[i + 1]
+    return None
+
+
+def _without_task(words: Sequence[str]) -> list[str]:
+    out: list[str] = []
+    skip = False
+    for word in words:
+        if skip:
+            skip = False
+        elif word == "--task":
+            skip = True
+        elif not word.startswith("--task="):
+            out.append(word)
+    return out
 
 
 def _leaderboard(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
