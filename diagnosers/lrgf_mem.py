@@ -19,7 +19,7 @@ from diagnosers.alarm import (
     LimitMethod,
     two_sided_normal_quantile,
 )
-from diagnosers.band import BandScale
+from diagnosers.band import BandScale, band_scale
 from diagnosers.bank_detector import (
     BANK_CONSTRAINTS,
     BANK_DEFAULTS,
@@ -79,10 +79,12 @@ class LRGFMEM(BankDetector):
         band_definition: the band scale ``v``: ``"residual"`` (default), the RMS of
             ``y − y_m − y_e`` on the held-out healthy episodes (about zero, because the band
             is centred on ``y_m + y_e``), a band that covers 1 − α of healthy samples when the
-            remaining error is roughly normal; or ``"paper"``, the paper's literal text, the
-            standard deviation of ``y_e`` on the training data (how much the error model
-            moves, not how far the output strays, so its coverage is not 1 − α in general)
-            (:class:`diagnosers.band.BandScale`).
+            remaining error is roughly normal; ``"paper"``, the paper's literal text, the
+            standard deviation of ``y_e`` on the training part (how much the error model
+            moves, not how far the output strays, so its coverage is not 1 − α in general); or
+            ``"paper-record"``, the same over the whole healthy record given to ``fit``
+            (training and calibration parts, each episode from its first sample, start-up
+            included) (:class:`diagnosers.band.BandScale`).
         alarm_filter: the alarm logic (:class:`~diagnosers.ewma_stage.AlarmFilter`):
             ``"none"``, the paper's rule, an alarm when a measured output leaves its band
             (``signal`` the output, ``lower``/``upper`` the band); ``"ewma"``, an EWMA of each
@@ -190,6 +192,13 @@ class LRGFMEM(BankDetector):
             rem = [bank.remaining(y)[cal_from:] for y in cal]
         rem_all = np.concatenate(rem)
         self.v_residual_ = np.sqrt(np.mean(rem_all**2, axis=0))
+        if self.band_definition == BandScale.PAPER_RECORD:
+            # every error model's output, kept or not: the band is the paper's, whatever the
+            # held-out selection decided for the centre
+            self.v_record_ = band_scale(
+                np.concatenate([bank.parts(e.y)[1] for e in episodes]),
+                definition=BandScale.PAPER_RECORD,
+            )
         self.stage_ = self._new_stage().fit([r / self.v_residual_ for r in rem])
         self._finish()
 
@@ -204,9 +213,12 @@ class LRGFMEM(BankDetector):
 
     def _finish(self) -> None:
         """Derived state shared by ``_fit`` and ``_set_state``."""
-        self.v_ = (
-            self.bank_.v_paper if self.band_definition == BandScale.PAPER else self.v_residual_
-        )
+        if self.band_definition == BandScale.PAPER:
+            self.v_ = self.bank_.v_paper
+        elif self.band_definition == BandScale.PAPER_RECORD:
+            self.v_ = self.v_record_
+        else:
+            self.v_ = self.v_residual_
         self.v_ = np.maximum(self.v_, 1e-9)
         half_band = two_sided_normal_quantile(self.band_alpha) * np.asarray(self.v_, np.float64)
         self.stage_.set_band(half_band)  # as band()
@@ -249,12 +261,21 @@ class LRGFMEM(BankDetector):
 
     # ---- persistence ---------------------------------------------------------------------------
     def _get_state(self) -> dict[str, np.ndarray]:
-        return {**self.bank_.get_state(), **self.stage_.get_state(), "v_residual": self.v_residual_}
+        state = {
+            **self.bank_.get_state(),
+            **self.stage_.get_state(),
+            "v_residual": self.v_residual_,
+        }
+        if self.band_definition == BandScale.PAPER_RECORD:
+            state["v_record"] = self.v_record_  # only this band has it: other states unchanged
+        return state
 
     def _set_state(self, state: dict[str, np.ndarray]) -> None:
         self._set_bank_state(state)
         try:
             self.v_residual_ = state["v_residual"]
+            if self.band_definition == BandScale.PAPER_RECORD:
+                self.v_record_ = state["v_record"]
         except KeyError as e:
             raise ValueError(f"saved state lacks array {e.args[0]!r}") from None
         self.stage_ = self._new_stage()

@@ -36,7 +36,7 @@ def test_paper_configuration():
     assert (p["n_hidden"], p["order"]) == (3, 2)
     assert (p["mem_hidden"], p["mem_input_delays"], p["mem_output_delays"]) == (5, 15, 15)
     assert p["mem_output_activation"] == "tanh" and p["band_alpha"] == 0.01
-    assert p["band_definition"] == "paper" and p["alarm_filter"] == "none"
+    assert p["band_definition"] == "paper-record" and p["alarm_filter"] == "none"
     assert t_alpha(0.01) == pytest.approx(2.5758, abs=1e-4)
 
 
@@ -210,7 +210,7 @@ def test_per_relation_network_sizes_reach_the_networks_and_survive_save_load(tmp
         ({"n_hidden": [5, 0, 5]}, r"n_hidden=\[5, 0, 5\] is outside the allowed range"),
         (
             {"band_definition": "wide"},
-            r"band_definition='wide' is outside the allowed range: one of \['paper', 'residual'\]",
+            r"band_definition='wide' is outside the allowed range: one of \['paper', 'paper-record', 'residual'\]",
         ),
         (
             {"alarm_filter": "cusum"},
