@@ -23,7 +23,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any, NamedTuple, Protocol
 
 import numpy as np
 
@@ -39,6 +39,7 @@ __all__ = [
     "Policy",
     "ProgramPolicy",
     "SetpointPolicy",
+    "SupervisorEvent",
     "fault_setpoints",
     "fixed_setpoints",
     "oracle",
@@ -139,6 +140,15 @@ def robust_setpoints(per_fault: Mapping[str, np.ndarray]) -> np.ndarray:
     return np.mean(np.stack(list(per_fault.values())), axis=0)
 
 
+class SupervisorEvent(NamedTuple):
+    """A change of what a :class:`DiagnosisSupervisor` reads or does, at sample ``k``."""
+
+    k: int
+    alarm: bool
+    diagnosis: str | None
+    target: str  # "healthy", "robust" or the fault whose set points it moved to
+
+
 @dataclass
 class DiagnosisSupervisor:
     """Fixed healthy set points until ``diagnoser`` alarms, then the diagnosed fault's.
@@ -149,7 +159,8 @@ class DiagnosisSupervisor:
     the noise); a later diagnosis of another fault switches again. The diagnoser is armed after
     ``arm_after`` samples: the episode starts at the program's set points, and the move to the
     healthy optimum is a start-up transient no detector is trained for (it is trained on the
-    settled operation, :func:`evaluation.control.returns.operated_episodes`).
+    settled operation, :func:`evaluation.control.returns.operated_episodes`). ``history``
+    holds the episode's :class:`SupervisorEvent` s: each change of alarm, diagnosis or target.
     """
 
     name: str
@@ -157,26 +168,33 @@ class DiagnosisSupervisor:
     healthy: np.ndarray
     per_fault: Mapping[str, np.ndarray]
     arm_after: int = ARM_AFTER
+    history: list[SupervisorEvent] = field(init=False, default_factory=list)
     _policy: SetpointPolicy = field(init=False, repr=False)
     _k: int = field(init=False, repr=False, default=0)
     _target: np.ndarray = field(init=False, repr=False)
+    _target_name: str = field(init=False, repr=False, default="healthy")
 
     def __post_init__(self) -> None:
         self._policy = SetpointPolicy(self.name, lambda k, info: self._target)
 
     def reset(self, info: Mapping[str, Any]) -> None:
         self.diagnoser.reset()
-        self._target = self.healthy
+        self._target, self._target_name = self.healthy, "healthy"
         self._k = 0
+        self.history = []
         self._policy.reset(info)
 
     def act(self, obs: np.ndarray, info: Mapping[str, Any]) -> np.ndarray:
         decision = self.diagnoser.update(np.asarray(obs, dtype=np.float64))
         self._k += 1
+        named = getattr(decision, "diagnosis", None)
         if decision.alarm and self._k > self.arm_after:
-            named = getattr(decision, "diagnosis", None)
             if named in self.per_fault:
-                self._target = self.per_fault[named]
-            elif self._target is self.healthy:
+                self._target, self._target_name = self.per_fault[named], named
+            elif self._target_name == "healthy":
                 self._target = robust_setpoints(self.per_fault)
+                self._target_name = "robust"
+        event = SupervisorEvent(self._k, bool(decision.alarm), named, self._target_name)
+        if not self.history or self.history[-1][1:] != event[1:]:
+            self.history.append(event)
         return self._policy.act(obs, info)
