@@ -29,7 +29,7 @@ Importing the package registers ``FCC-v0``:
 (8,)
 """
 
-from gymnasium.envs.registration import WrapperSpec, register, registry
+from gymnasium.envs.registration import register, registry
 
 from fcc_env.control_task import CONTROL_ENV_ID, EconomicReward
 from fcc_env.excitation import Excitation
@@ -78,14 +78,14 @@ for _id, _kwargs in ((ENV_ID, {}), (CLOSED_LOOP_ENV_ID, {"regulatory": True})):
             kwargs=_kwargs,
         )
 
+# The control task has a native vector env too, so, as for the plant ids, no additional wrapper:
+# its vector env warns of a limit before the onset by itself (FCCVectorEnv's check).
 if CONTROL_ENV_ID not in registry:
     register(
         id=CONTROL_ENV_ID,
         entry_point="fcc_env.control_task:FCCControlEnv",
+        vector_entry_point="fcc_env.control_vector:FCCControlVectorEnv",
         max_episode_steps=MAX_EPISODE_STEPS,
-        additional_wrappers=(
-            WrapperSpec("OnsetHorizonCheck", "fcc_env.env:OnsetHorizonCheck", {}),
-        ),
     )
 
 __version__ = "0.1.0"

@@ -60,7 +60,15 @@ from fcc_common.validation import Real, check_params, from_fields
 from fcc_env.env import FCCEnv
 from fcc_env.plant import AFTERBURN_WARNING_C, afterburn_delta_C
 
-__all__ = ["CONTROL_ENV_ID", "REWARD_TERMS", "EconomicReward", "FCCControlEnv", "reward_terms"]
+__all__ = [
+    "CONTROL_ENV_ID",
+    "REWARD_TERMS",
+    "EconomicReward",
+    "FCCControlEnv",
+    "reward_term_arrays",
+    "reward_terms",
+    "total_reward",
+]
 
 #: The control task's registered id.
 CONTROL_ENV_ID = "FCC-control-v0"
@@ -128,31 +136,59 @@ class EconomicReward:
         return from_fields(cls, value, "economics")
 
 
-def reward_terms(
-    info: Mapping[str, Any], terminated: bool, economics: EconomicReward, dt_s: float
-) -> dict[str, float]:
-    """The reward's terms (USD over one sample of ``dt_s`` seconds) from an env step's ``info``
-    (``X``, ``coke_make``, ``inputs``, ``state``, ``controller_saturated``): see the module doc.
-    Their sum is the reward."""
+def _excess(v: np.ndarray) -> np.ndarray:
+    """``max(0, v)`` elementwise with Python's ``max(0.0, v)`` semantics (0 unless ``v > 0``)."""
+    return np.where(v > 0.0, v, 0.0)
+
+
+def reward_term_arrays(
+    info: Mapping[str, Any], terminated: Any, economics: EconomicReward, dt_s: float
+) -> dict[str, np.ndarray]:
+    """The reward's terms (USD over one sample of ``dt_s`` seconds), the one definition (module
+    doc) for one env or many: ``info`` holds ``X``, ``coke_make``, ``controller_saturated``
+    (scalars, or shape ``(n,)`` over ``n`` envs), ``state`` (``(11,)`` or ``(n, 11)``) and
+    ``inputs`` (``(6,)`` or ``(n, 6)``); ``terminated`` a bool or ``(n,)``. Each term has the
+    envs' shape (``()`` for one env). Their sum is the reward (:func:`total_reward`)."""
     e = economics
-    x = np.asarray(info["state"], dtype=np.float64)
-    u = np.asarray(info["inputs"], dtype=np.float64)
+    # transposed, row i is variable i of every env (of the one env for a 1-D state)
+    x = np.asarray(info["state"], dtype=np.float64).T
+    u = np.asarray(info["inputs"], dtype=np.float64).T
     hours = dt_s / 3600.0
-    too_hot = max(0.0, x[_T_RG2] - e.regenerator_max_C)
-    too_cold = max(0.0, e.regenerator_min_C - x[_T_RG1])
+    too_hot = _excess(x[_T_RG2] - e.regenerator_max_C)
+    too_cold = _excess(e.regenerator_min_C - x[_T_RG1])
     terms = {
-        "conversion": u[_F_FEED] * info["X"] * dt_s / 1000.0 * e.conversion_usd_per_t,
-        "coke": -info["coke_make"] * dt_s / 1000.0 * e.coke_usd_per_t,
+        "conversion": u[_F_FEED] * np.asarray(info["X"], dtype=np.float64) * dt_s / 1000.0
+        * e.conversion_usd_per_t,
+        "coke": -np.asarray(info["coke_make"], dtype=np.float64) * dt_s / 1000.0
+        * e.coke_usd_per_t,
         "air": -u[_R_AR] * hours * e.air_usd_per_t,
-        "afterburn": -max(0.0, afterburn_delta_C(x) - AFTERBURN_WARNING_C)
+        "afterburn": -_excess(afterburn_delta_C(x) - AFTERBURN_WARNING_C)
         * hours
         * e.afterburn_usd_per_C_h,
         "regenerator": -(too_hot + too_cold) * hours * e.regenerator_usd_per_C_h,
-        "well": -max(0.0, e.well_min_t - x[_W_SP] / 1000.0) * hours * e.well_usd_per_t_h,
-        "saturation": -hours * e.saturation_usd_per_h if info["controller_saturated"] else 0.0,
-        "trip": -e.trip_usd if terminated else 0.0,
-    }
-    return {name: float(v) for name, v in terms.items()}
+        "well": -_excess(e.well_min_t - x[_W_SP] / 1000.0) * hours * e.well_usd_per_t_h,
+        "saturation": np.where(info["controller_saturated"], -hours * e.saturation_usd_per_h, 0.0),
+        "trip": np.where(terminated, -e.trip_usd, 0.0),
+    }  # fmt: skip
+    shape = np.broadcast_shapes(*(np.shape(v) for v in terms.values()))
+    return {name: np.broadcast_to(v, shape).astype(np.float64) for name, v in terms.items()}
+
+
+def reward_terms(
+    info: Mapping[str, Any], terminated: bool, economics: EconomicReward, dt_s: float
+) -> dict[str, float]:
+    """:func:`reward_term_arrays` of one env step's ``info``, as floats."""
+    return {k: float(v) for k, v in reward_term_arrays(info, terminated, economics, dt_s).items()}
+
+
+def total_reward(terms: Mapping[str, Any]) -> np.ndarray:
+    """The reward: the exactly rounded sum (``math.fsum``) of the terms, per env (shape of a
+    term: ``()`` for one env, ``(n,)`` for ``n``); exact, so that no order of the terms or
+    vectorisation changes a bit of it."""
+    values = np.broadcast_arrays(*(np.asarray(v, dtype=np.float64) for v in terms.values()))
+    rows = np.stack(values, axis=-1)
+    sums = [math.fsum(r) for r in rows.reshape(-1, rows.shape[-1]).tolist()]
+    return np.array(sums, dtype=np.float64).reshape(rows.shape[:-1])
 
 
 class FCCControlEnv(gym.Env):
@@ -186,7 +222,7 @@ class FCCControlEnv(gym.Env):
         obs, _, terminated, truncated, info = self.plant.step(action)
         terms = reward_terms(info, terminated, self.economics, self._dt_s)
         info["reward_terms"] = terms
-        return obs, math.fsum(terms.values()), terminated, truncated, info
+        return obs, float(total_reward(terms)), terminated, truncated, info
 
     def render(self) -> np.ndarray | None:
         return self.plant.render()

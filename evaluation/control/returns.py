@@ -13,8 +13,8 @@ policy's, paired by episode, with its interval). Written to ``--out`` as ``contr
 (:class:`~evaluation.control.policies.DiagnosisSupervisor`), trained on episodes of the training
 seeds (1000..) run at its healthy set points (healthy, and for an isolator each fault at the
 paper's size too):
-what its alarms and diagnoses are worth in money and trips. A reinforcement-learning agent is
-not built yet.
+what its alarms and diagnoses are worth in money and trips. A reinforcement-learning agent joins
+the table through ``python -m evaluation.control.rl evaluate`` (:mod:`evaluation.control.rl`).
 """
 
 from __future__ import annotations
@@ -238,7 +238,8 @@ def _json(text: str) -> Any:
         raise argparse.ArgumentTypeError(f"{text!r} is not JSON ({e})") from None
 
 
-def main(argv: Sequence[str] | None = None) -> int:
+def main(argv: Sequence[str] | None = None, extra_policies: Sequence[Policy] = ()) -> int:
+    """The command; ``extra_policies`` run beside the baselines (before the oracle)."""
     parser = command_parser(
         "evaluation.control",
         __doc__ or "",
@@ -269,10 +270,10 @@ def main(argv: Sequence[str] | None = None) -> int:
         help='hyperparameters per diagnoser, e.g. \'{"lrgf-iso": {"detector_name": '
         "\"lrgf-glr-closed\"}}' (as a manifest's diagnoser_params)",
     )
-    return run_command(parser, _study, argv)
+    return run_command(parser, lambda args: _study(args, extra_policies), argv)
 
 
-def _study(args: argparse.Namespace) -> int:
+def _study(args: argparse.Namespace, extra_policies: Sequence[Policy] = ()) -> int:
     """The work of :func:`main`: its failures are refused by :func:`run_command`."""
     from diagnosers import available
 
@@ -297,6 +298,7 @@ def _study(args: argparse.Namespace) -> int:
     if stray:
         raise ValueError(f"--diagnoser-params names {stray}, which --diagnosers does not")
     policies += [supervisor(n, params=params.get(n)) for n in names]
+    policies += list(extra_policies)
     policies.append(oracle())
     scores = run_study(policies, range(args.seeds), args.steps, SCENARIOS)
     summaries = summarise(scores, reference=policies[-1].name)
