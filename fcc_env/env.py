@@ -343,7 +343,8 @@ class FCCEnv(gym.Env):
             "time_s": self._k * self.config.sample_time_s,
             "scenario": self.fault.scenario.value,
             "fault_active": self.fault.active(self._k),
-            "fault_time": self.fault.onset if self.fault.scenario is not Scenario.NOMINAL else None,
+            # absent in a healthy episode: vector envs then mask it (a None breaks SyncVectorEnv)
+            **({} if self.fault.scenario is Scenario.NOMINAL else {"fault_time": self.fault.onset}),
             "fault_magnitude": self.fault.magnitude,
             "y_clean": self._clean_observation(),
             "state": self._x.copy(),

@@ -430,17 +430,12 @@ class FCCVectorEnv(VectorEnv):
     def _infos(self, mask: np.ndarray | None) -> dict[str, Any]:
         """``FCCEnv``'s info keys batched as ``SyncVectorEnv._add_info`` batches them."""
         e, onset = self._e, self._onset
-        fault_time: np.ndarray = onset.copy()
-        # None for nominal episodes makes an object array, as in sync (which types a key by
-        # the first env that reports it)
-        if not self._faulty[mask if mask is not None else slice(None)].all():
-            fault_time = np.where(self._faulty, onset, None).astype(object)
         values: dict[str, np.ndarray] = {
             "t": e.k.copy(),
             "time_s": e.k * self.config.sample_time_s,
             "scenario": self._scenario.copy(),
             "fault_active": self._faulty & (onset >= 0) & (onset <= e.k),
-            "fault_time": fault_time,
+            "fault_time": np.where(self._faulty, onset, 0),
             "fault_magnitude": self._magnitude.copy(),
             "y_clean": e.y_clean.copy(),
             "state": e.x.copy(),
@@ -458,8 +453,13 @@ class FCCVectorEnv(VectorEnv):
         infos: dict[str, Any] = {}
         full = mask is None or bool(mask.all())
         for key, value in values.items():
-            if not full:  # envs left alone have no info: zeros or None, as sync leaves them
-                value[~mask] = None if value.dtype == object else 0
+            reported = np.ones(self.num_envs, np.bool_) if full else mask.copy()
+            if key == "fault_time":  # a healthy episode's info has none (FCCEnv._get_info)
+                reported &= self._faulty
+                if not reported.any():
+                    continue
+            # envs without the key or left alone: zeros or None, as sync leaves them
+            value[~reported] = None if value.dtype == object else 0
             infos[key] = value
-            infos[f"_{key}"] = np.ones(self.num_envs, np.bool_) if full else mask.copy()
+            infos[f"_{key}"] = reported
         return infos

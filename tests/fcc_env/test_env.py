@@ -82,8 +82,13 @@ def test_random_scenario_draws_differ_by_seed_and_are_reproducible():
     for seed in range(30):
         _, info = env.reset(seed=seed)
         _, info2 = env.reset(seed=seed)
-        assert (info["scenario"], info["fault_time"]) == (info2["scenario"], info2["fault_time"])
-        draws.add((info["scenario"], info["fault_time"], round(info["fault_magnitude"], 6)))
+        assert (info["scenario"], info.get("fault_time")) == (
+            info2["scenario"],
+            info2.get("fault_time"),
+        )
+        # a healthy episode's info has no onset; a faulty one's has it
+        assert ("fault_time" in info) == (info["scenario"] != "nominal")
+        draws.add((info["scenario"], info.get("fault_time"), round(info["fault_magnitude"], 6)))
     assert len({d[0] for d in draws}) == 5  # all five scenarios drawn
     onsets = [d[1] for d in draws if d[1] is not None]
     assert min(onsets) >= 1000 and max(onsets) < 3000  # middle half of the 4000 horizon

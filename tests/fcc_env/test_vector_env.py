@@ -76,13 +76,24 @@ def test_terminations_and_parameter_effects_match_sync(env_id):
 
 def test_random_scenarios_incipient_faults_and_chunk_boundaries_match_sync():
     # 600 steps cross the first 512-sample chunk; random faults give differing multipliers.
-    # Seed 0 gives env 0 a nominal episode: SyncVectorEnv types info["fault_time"] by env 0's
-    # value and fails on a later None when env 0 has a fault (an int array).
+    # Seed 0 gives env 0 a nominal episode, whose info has no fault_time (masked in both)
     seen = run_both(
         fcc_env.ENV_ID, 600, 0, scenario="random", fault_time=40, fault_profile="incipient",
         ramp_samples=30, noise_scale=2.0, rk4_substeps=2,
     )  # fmt: skip
     assert seen["truncated"] == 0
+
+
+@pytest.mark.parametrize("seed", [0, 16])
+def test_sync_takes_random_episodes_whichever_env_is_healthy(seed):
+    # seed 16 gives env 0 a fault and env 3 a healthy episode: a None fault_time there
+    # used to break SyncVectorEnv, which types a key by the first env that reports it
+    native, sync = make_pair(fcc_env.ENV_ID, scenario="random")
+    out_n, out_s = native.reset(seed=seed), sync.reset(seed=seed)
+    assert_same("reset", out_n, out_s)
+    scenarios = out_s[1]["scenario"]
+    assert "nominal" in scenarios.tolist() and set(scenarios) != {"nominal"}
+    assert out_s[1]["_fault_time"].tolist() == [sc != "nominal" for sc in scenarios]
 
 
 def test_reset_options_and_reset_mask_match_sync():
