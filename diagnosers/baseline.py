@@ -35,6 +35,8 @@ from typing import Any
 import numpy as np
 from scipy.signal import lfilter
 
+from diagnosers.baseline_kernels import adapt_step, filter_step, signals_step
+
 __all__ = ["HeldBaseline", "RegressionBaseline"]
 
 
@@ -80,7 +82,6 @@ class RegressionBaseline:
         self.n_relations = len(self.n_signals)
         self.width = max(self.n_signals)
         self.gains = 1.0 / taus  # per filter, a = 1/τ
-        self._gains_kw = self.gains[None, :, None]
         self.n_features = 1 + len(taus) * self.width
         self.forgetting = 1.0 - forgetting_lambda
         self.ridge = ridge
@@ -115,11 +116,14 @@ class RegressionBaseline:
 
     def features(self, x: np.ndarray) -> np.ndarray:
         """Regressors ``(k, p)`` of one sample's padded signals ``x`` ``(k, width)``."""
-        if not self._started:
-            self._state[...] = x[:, None, :]
-            self._started = True
-        else:
-            self._state += self._gains_kw * (x[:, None, :] - self._state)
+        x = np.asarray(x, dtype=np.float64)
+        if x.shape != (self.n_relations, self.width):  # the kernel does not check its indices
+            raise ValueError(
+                f"x has shape {x.shape}; allowed: ({self.n_relations}, {self.width}) (relations, "
+                "padded signals)"
+            )
+        filter_step(x, self.gains, self._state, self._started)
+        self._started = True
         return self._phi_now.copy()
 
     def features_batch(self, x: np.ndarray) -> np.ndarray:
@@ -139,12 +143,16 @@ class RegressionBaseline:
 
     def adapt(self, phi: np.ndarray, e: np.ndarray) -> None:
         """Take in one sample: regressors ``phi`` ``(k, p)``, errors ``e`` ``(k,)``."""
-        f = self.forgetting
-        self._info *= f
-        self._info += phi[:, :, None] * phi[:, None, :] + self._prior
-        self._moment *= f
-        self._moment += phi * e[:, None]
-        self.theta_ = np.linalg.solve(self._info, self._moment[:, :, None])[:, :, 0]
+        phi = np.ascontiguousarray(phi, dtype=np.float64)
+        e = np.ascontiguousarray(e, dtype=np.float64)
+        k, p = self.n_relations, self.n_features
+        if phi.shape != (k, p) or e.shape != (k,):  # the kernel does not check its indices
+            raise ValueError(
+                f"phi has shape {phi.shape} and e {e.shape}; allowed: ({k}, {p}) and ({k},)"
+            )
+        theta = np.empty_like(self.theta_)  # a fresh array: callers may hold the last one
+        adapt_step(self._info, self._moment, theta, phi, e, self.forgetting, self._prior)
+        self.theta_ = theta
 
 
 class HeldBaseline:
@@ -254,7 +262,19 @@ class HeldBaseline:
         """Regressors ``(k, p)`` of one sample (advances the filters), None without them."""
         if self._reg is None:
             return None
-        return self._reg.features(self._signals(y, y_m))
+        assert self._layout is not None
+        gather, mean, scale = self._layout
+        y = np.asarray(y, dtype=np.float64)
+        y_m = np.asarray(y_m, dtype=np.float64)
+        k = len(self._out_idx)
+        if y.ndim != 1 or len(y) < self._n_channels or y_m.shape != (k,):
+            raise ValueError(
+                f"y has shape {y.shape} and y_m {y_m.shape}; allowed: (c,) with c >= "
+                f"{self._n_channels} and ({k},)"
+            )
+        x = np.empty(gather.shape)
+        signals_step(y[: self._n_channels], y_m, gather, mean, scale, x)
+        return self._reg.features(x)
 
     def value(self, phi: np.ndarray | None) -> np.ndarray:
         """The baseline ``(k,)`` to subtract from this sample's normalised error."""

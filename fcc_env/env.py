@@ -254,9 +254,9 @@ class FCCEnv(gym.Env):
         Returns:
             ``(observation, info)``: the eight Table 1 measurements of sample 0 (float32, with
             noise, order ``fcc_env.MEASUREMENT_NAMES``) and the info dict of :meth:`step`
-            (``t``, ``time_s``, ``scenario``, ``fault_active``, ``fault_time``,
-            ``fault_magnitude``, ``y_clean``, ``state``, ``inputs``, ``action_saturated``,
-            ``afterburn_warning``, ``termination_reason`` and the auxiliary variables).
+            (``t``, ``time_s``, ``scenario``, ``fault_active``, ``fault_time`` (not in a healthy
+            episode: vector envs mask it), ``fault_magnitude``, ``y_clean``, ``state``, ``inputs``,
+            ``action_saturated``, ``afterburn_warning``, ``termination_reason``, auxiliaries).
         """
         seed = check("seed", seed, Integer(0), None)
         spec, effects = episode_request(options, self.fault_spec, self._plant_effects)
@@ -343,7 +343,6 @@ class FCCEnv(gym.Env):
             "time_s": self._k * self.config.sample_time_s,
             "scenario": self.fault.scenario.value,
             "fault_active": self.fault.active(self._k),
-            # absent in a healthy episode: vector envs then mask it (a None breaks SyncVectorEnv)
             **({} if self.fault.scenario is Scenario.NOMINAL else {"fault_time": self.fault.onset}),
             "fault_magnitude": self.fault.magnitude,
             "y_clean": self._clean_observation(),

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from diagnosers.baseline import RegressionBaseline
+from diagnosers.baseline_kernels import adapt_step, filter_step, signals_step, solver
 
 
 def _oracle_theta(phi: np.ndarray, e: np.ndarray, f: float, ridge: float) -> np.ndarray:
@@ -72,3 +73,66 @@ def test_bad_arguments_are_refused_by_value(kwargs: dict, match: str) -> None:
     args = {"time_constants": (1.0,), "forgetting_lambda": 0.0, "ridge": 1.0, **kwargs}
     with pytest.raises(ValueError, match=match):
         RegressionBaseline([2], **args)
+
+
+def test_compiled_steps_give_the_numpy_expressions_bits() -> None:
+    # the streaming path's kernels against the NumPy code they replaced, bit for bit
+    rng = np.random.default_rng(5)
+    k, p, f = 3, 13, 1.0 - 1e-4
+    prior = (1.0 - f) * 3.0 * np.eye(p)
+    info = np.broadcast_to(3.0 * np.eye(p), (k, p, p)).copy()
+    moment, theta = np.zeros((k, p)), np.zeros((k, p))
+    ref_info, ref_moment = info.copy(), moment.copy()
+    for _ in range(300):
+        phi, e = rng.normal(size=(k, p)), rng.normal(size=k)
+        adapt_step(info, moment, theta, phi, e, f, prior)
+        ref_info *= f
+        ref_info += phi[:, :, None] * phi[:, None, :] + prior
+        ref_moment *= f
+        ref_moment += phi * e[:, None]
+        ref_theta = np.linalg.solve(ref_info, ref_moment[:, :, None])[:, :, 0]
+        np.testing.assert_array_equal(info, ref_info)
+        np.testing.assert_array_equal(moment, ref_moment)
+        np.testing.assert_array_equal(theta, ref_theta)
+
+    gains = 1.0 / np.array([1.0, 10.0, 50.0])
+    state, ref = np.zeros((k, 3, 4)), np.zeros((k, 3, 4))
+    for t in range(50):
+        x = rng.normal(size=(k, 4))
+        filter_step(x, gains, state, t > 0)
+        if t == 0:
+            ref[...] = x[:, None, :]
+        else:
+            ref += gains[None, :, None] * (x[:, None, :] - ref)
+        np.testing.assert_array_equal(state, ref)
+
+    y, y_m = rng.normal(size=8), rng.normal(size=k)
+    gather = np.array([[0, 3, 8, 11], [5, 9, 11, 11], [2, 7, 10, 11]])  # 8..10: y_m, 11: zero
+    mean, scale = rng.normal(size=(k, 4)), rng.uniform(0.5, 2.0, size=(k, 4))
+    out = np.empty((k, 4))
+    signals_step(y, y_m, gather, mean, scale, out)
+    ext = np.concatenate([y, y_m, [0.0]])
+    np.testing.assert_array_equal(out, (ext[gather] - mean) / scale)
+
+
+def test_the_solver_is_numpys_lapack_where_numpy_has_one() -> None:
+    # None would only cost speed (adapt_step then solves with NumPy), never change a result
+    adapt = solver()
+    if adapt is None:
+        pytest.skip("NumPy's dgesv is not reachable here: adapt_step solves with NumPy")
+    rng = np.random.default_rng(6)
+    a = rng.normal(size=(2, 5, 9))
+    info = a @ a.transpose(0, 2, 1) + np.eye(5)
+    moment, theta = rng.normal(size=(2, 5)), np.empty((2, 5))
+    phi, e = np.zeros((2, 5)), np.zeros(2)  # with f = 1 and P = 0 the update leaves R, b alone
+    adapt(info, moment, theta, phi, e, 1.0, np.zeros((5, 5)))
+    np.testing.assert_array_equal(theta, np.linalg.solve(info, moment[:, :, None])[:, :, 0])
+
+
+def test_a_sample_of_the_wrong_shape_is_refused_before_the_kernels() -> None:
+    # the compiled steps do not check their indices: the shapes are checked before them
+    rb = RegressionBaseline([3, 2], (1.0, 5.0), forgetting_lambda=0.0, ridge=1.0)
+    with pytest.raises(ValueError, match=r"x has shape \(2, 2\); allowed: \(2, 3\)"):
+        rb.features(np.zeros((2, 2)))
+    with pytest.raises(ValueError, match=r"phi has shape \(2, 6\) and e \(2,\); allowed: \(2, 7\)"):
+        rb.adapt(np.zeros((2, 6)), np.zeros(2))
