@@ -405,3 +405,22 @@ def test_training_jobs_share_the_cores_among_the_banks():
     assert training_jobs([glr, mem], 5) == {"lrgf-glr": 2, "lrgf-mem": 2}
     # a value the user chose is left alone
     assert training_jobs([DiagnoserSpec("lrgf-glr", {"n_jobs": 1}), mem], 4) == {"lrgf-mem": 4}
+
+
+def test_trainings_of_a_sweep_share_their_relations(tmp_path) -> None:
+    from diagnosers.lrgf_mem import LRGFMEM
+
+    fast = LRGFMEM.fast_params()
+    specs = (
+        DiagnoserSpec("lrgf-mem", fast),
+        # another band on the same relations: the same relation jobs, trained once
+        DiagnoserSpec("lrgf-mem", {**fast, "band_alpha": 0.05}, label="lrgf-mem-wide"),
+    )
+    config = SweepConfig(diagnosers=specs, data=DATA)
+    cache = tmp_path / "relations"
+    res = run_sweep(config, tmp_path / "s", n_workers=0, progress=False, relation_cache=cache)
+    assert res.n_trained == 2
+    n_relations = len(LRGFMEM(**fast).fit(DATA.train_episodes()).lrgf_)
+    assert len(list(cache.rglob("*.npz"))) == n_relations
+    alone = run_sweep(config, tmp_path / "t", n_workers=0, progress=False)
+    assert _same(_scores(res), _scores(alone))  # the cache changes no result
