@@ -118,11 +118,13 @@ def test_a_supervisor_switches_on_the_first_alarm_to_the_diagnosed_faults_set_po
     target = per_fault["f2"] if want == "f2" else robust_setpoints(per_fault)
     assert np.allclose(shown[20], healthy, atol=1e-4)
     assert np.allclose(shown[45], target, atol=1e-4)
-    # the history: healthy and quiet from the start, then the alarm and the switch at 31
-    assert [tuple(e) for e in sup.history] == [
-        (1, False, fault, "healthy"),
-        (31, True, fault, want),
-    ]
+    # the history: healthy and quiet from the start; the diagnoser reads from sample 11 on,
+    # from a fresh reset (its 30 quiet updates end at sample 40), then the alarm and the switch
+    want_history = [(1, False, None, "healthy"), (41, True, fault, want)]
+    if fault is not None:
+        want_history.insert(1, (11, False, fault, "healthy"))
+    assert [tuple(e) for e in sup.history] == want_history
+    assert sup.diagnoser.k == 60 - 10  # it never read the start-up transient
 
 
 @pytest.mark.parametrize(
