@@ -32,6 +32,7 @@ import gymnasium as gym
 import numpy as np
 
 from diagnosers.episode import Episode
+from diagnosers.relation_cache import shared_relations
 from evaluation.control.figures import episode_figure
 from evaluation.control.policies import (
     ARM_AFTER,
@@ -297,7 +298,10 @@ def _study(args: argparse.Namespace, extra_policies: Sequence[Policy] = ()) -> i
     stray = sorted(set(params) - set(names))
     if stray:
         raise ValueError(f"--diagnoser-params names {stray}, which --diagnosers does not")
-    policies += [supervisor(n, params=params.get(n)) for n in names]
+    # supervisors on the same relations (lrgf-iso around lrgf-glr-closed and lrgf-glr-closed)
+    # train them once
+    with shared_relations(args.out / "relations"):
+        policies += [supervisor(n, params=params.get(n)) for n in names]
     policies += list(extra_policies)
     policies.append(oracle())
     scores = run_study(policies, range(args.seeds), args.steps, SCENARIOS)

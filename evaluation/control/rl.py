@@ -430,6 +430,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     e.add_argument("--seeds", type=int, default=20)
     e.add_argument("--steps", type=int, default=3999)
     e.add_argument("--diagnosers", default="", help="supervisors too (as evaluation.control)")
+    e.add_argument(
+        "--diagnoser-params", default="{}", metavar="JSON", help="as evaluation.control's"
+    )
     e.add_argument("--out", type=out_path, default=Path("results/control_rl"))
     return run_command(parser, _run, argv)
 
@@ -438,7 +441,8 @@ def _run(args: argparse.Namespace) -> int:
     if args.command == "evaluate":
         policy = load_policy(args.policy)
         study = ["--seeds", str(args.seeds), "--steps", str(args.steps), "--out", str(args.out)]
-        return returns.main([*study, "--diagnosers", args.diagnosers], extra_policies=[policy])
+        study += ["--diagnosers", args.diagnosers, "--diagnoser-params", args.diagnoser_params]
+        return returns.main(study, extra_policies=[policy])
     try:
         hidden = tuple(int(h) for h in args.hidden.split(","))
     except ValueError:
