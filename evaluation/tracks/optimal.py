@@ -190,7 +190,11 @@ class FaultSignatures:
             idx = [ep.channels.index(c) for c in MEASUREMENT_NAMES]
             clean = np.asarray(ep.y_clean, dtype=np.float64)
             h = twin if twin is not None else self.data.reference(seed, clean)
-            delta = clean[:, idx] - h[: clean.shape[0]]
+            # the signature ends with the shorter run: a healthy twin can trip where the faulty
+            # plant does not (incipient seed 59 at sample 1389), and past its end no healthy
+            # alternative exists to tell apart (KnownFaultBank.scores reads zeros there)
+            n = min(clean.shape[0], h.shape[0])
+            delta = clean[:n, idx] - h[:n]
             delta[: ep.fault_onset] = 0.0  # the twin equals the episode up to the onset
             out.append(delta)
         self._cache[seed] = out

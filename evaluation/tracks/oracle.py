@@ -71,6 +71,7 @@ __all__ = [
     "OracleStage",
     "PhysicalLimit",
     "oracle_records",
+    "reference_over",
     "reference_records",
 ]
 
@@ -286,8 +287,10 @@ class PhysicalLimit:
         if self.data.track.closed_loop:
             # closed loop: the record of the episode's own manipulated variables drives the
             # healthy model (TrackData.reference): noise-free (true) or observed (measured)
-            return self._sims.reference(episode.seed, episode.y if measured else episode.y_clean)
-        return self._sims.reference(episode.seed, episode.y if measured else None)
+            ref = self._sims.reference(episode.seed, episode.y if measured else episode.y_clean)
+        else:
+            ref = self._sims.reference(episode.seed, episode.y if measured else None)
+        return reference_over(ref, episode.y)
 
     def _statistic(self, episode: Episode) -> tuple[np.ndarray, np.ndarray]:
         y = episode.y
@@ -344,6 +347,19 @@ class PhysicalLimit:
             residual=np.linalg.norm(r, axis=1, keepdims=True),
             signal_names=("T2[oracle]" if self.name == ORACLE_LABEL else "T2[measured inputs]",),
         )
+
+
+def reference_over(ref: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """A reference ``(T', c)`` over an episode's ``T`` samples ``y`` ``(T, ≥ c)``: cut to ``T``,
+    or, where the reference ended first (its plant tripped, the episode's did not), continued
+    with the episode's own measurements, a zero residual: past its end the reference says
+    nothing, so no row draws evidence from there."""
+    T = y.shape[0]
+    if ref.shape[0] >= T:
+        return ref[:T]
+    out = np.array(y[:, : ref.shape[1]], dtype=np.float64)
+    out[: ref.shape[0]] = ref
+    return out
 
 
 class _PerfectModelStage:

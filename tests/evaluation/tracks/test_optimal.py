@@ -157,3 +157,30 @@ def test_no_detector_beats_the_cusum_row_on_the_small_track() -> None:
         assert mean(label, "nominal", "r_fd") < 0.006, label  # 3 × the 0.002 target
     for fault in track.faults:
         assert mean(CUSUM_LABEL, fault, "t_dt") <= mean(ORACLE_LABEL, fault, "t_dt"), fault
+
+
+def test_a_healthy_twin_that_trips_first_ends_the_signature() -> None:
+    # incipient seed 59: the healthy plant trips at sample 1389, the faulty plants run on
+    from evaluation.tracks.catalogue import TRACKS
+    from evaluation.tracks.optimal import FaultSignatures
+    from evaluation.tracks.track_data import TrackData
+
+    data = TrackData(track=TRACKS["incipient"])
+    twin = data.reference(59)
+    assert twin.shape[0] < 4000
+    for delta in FaultSignatures(data).of(59):
+        assert delta.shape[0] <= twin.shape[0]
+        assert np.all(np.isfinite(delta))
+
+
+def test_a_reference_is_cut_or_continued_with_the_episodes_own_measurements() -> None:
+    from evaluation.tracks.oracle import reference_over
+
+    y = np.arange(30.0).reshape(10, 3)
+    long = np.full((12, 2), -1.0)
+    np.testing.assert_array_equal(reference_over(long, y), long[:10])
+    short = np.full((4, 2), -1.0)
+    out = reference_over(short, y)
+    assert out.shape == (10, 2)
+    np.testing.assert_array_equal(out[:4], short)
+    np.testing.assert_array_equal(out[4:], y[4:, :2])  # a zero residual past its end
