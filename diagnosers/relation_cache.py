@@ -152,7 +152,9 @@ class RelationCache:
                 try:
                     return _read(target)
                 except Exception as e:  # an entry is a convenience: retrain, never trust it
-                    logger.warning("relation cache %s is unreadable (%s); training again", target, e)
+                    logger.warning(
+                        "relation cache %s is unreadable (%s); training again", target, e
+                    )
             result = train()
             _write(target, result)
             return result

@@ -17,9 +17,7 @@ from diagnosers.relation_cache import RelationCache, job_key, shared_relations
 
 
 def _weights(d) -> list[dict[str, np.ndarray]]:
-    return [
-        {k: v.numpy() for k, v in export_module(m)[1].items()} for m in [*d.lrgf_, *d.mem_]
-    ]
+    return [{k: v.numpy() for k, v in export_module(m)[1].items()} for m in [*d.lrgf_, *d.mem_]]
 
 
 def _same(a, b) -> None:
