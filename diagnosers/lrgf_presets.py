@@ -60,9 +60,9 @@ LRGFMEMPaper = preset(
     (``steady_window=100``, a silent warm-up) is ``lrgf-mem``'s: the paper does not say how its
     filters start.
 
-    It does not reach the paper's operating point (r_fd 0.0881): the error model of this
-    replica moves far less than the output strays from ``y_m + y_e``, so the literal band is
-    narrow and about 0.59 of healthy samples fall outside it (validation seeds 5000-5019).""",
+    It does not reach the paper's operating point: the error model of this replica moves far
+    less than the output strays from ``y_m + y_e``, so the literal band is narrow and much of a
+    healthy episode falls outside it (every reading measured: lab/results-history.md).""",
     module=__name__,
     # relations=None is the paper's one relation for this preset
     attributes={"DEFAULT_RELATIONS": PAPER_RELATIONS},

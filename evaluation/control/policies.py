@@ -162,9 +162,8 @@ class DiagnosisSupervisor:
     for (it is trained on the settled operation from that sample on,
     :func:`evaluation.control.returns.operated_episodes`), so it reads the episode from where
     its training records start, warm-up included. Fed the transient, a detector's statistics
-    carry it past the arming and it alarms at once (measured: ``lrgf-iso`` around
-    ``lrgf-glr-closed`` named f3 within 20 samples of the arming on every validation episode,
-    ``lab/control_isolator_trace.py``). ``history`` holds the episode's
+    carry it past the arming and it alarms at once, naming a fault it never saw. ``history``
+    holds the episode's
     :class:`SupervisorEvent` s: each change of alarm, diagnosis or target, from the start.
     """
 

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import time
 import zipfile
 
 import numpy as np
@@ -39,16 +38,13 @@ def test_a_cached_fit_has_the_bits_of_a_fresh_one(train, tmp_path) -> None:
     with shared_relations(tmp_path):
         first = diagnosers.make("lrgf-mem", **params).fit(train)
         entries = _entries(tmp_path)
-        t0 = time.perf_counter()
         second = diagnosers.make("lrgf-mem", **params).fit(train)
-        hit_s = time.perf_counter() - t0
     assert len(entries) == len(fresh.lrgf_)  # one entry per relation job
     assert _entries(tmp_path) == entries  # the second fit trained nothing
     _same(fresh, first)
     _same(fresh, second)
     ep = inject_step_fault(make_episode(900, seed=9), onset=500, magnitude=3.0)
     assert np.array_equal(fresh.detect(ep).alarm, second.detect(ep).alarm)
-    assert hit_s < 5.0
 
 
 def test_the_isolators_inner_bank_is_read_from_lrgf_mems(tmp_path) -> None:
