@@ -1,5 +1,25 @@
 """Pluggable fault-diagnosis agents that watch FCC episodes.
 
+The rooms (the contract, the registry and the presets at the top; the parts below):
+
+=====================  ===========================================================================
+``contract``           :class:`~diagnosers.contract.DiagnoserContract`: ``fit`` / ``reset`` /
+                       ``update`` / ``detect``, parameters, validation
+``diagnoser``          :class:`Diagnoser`: the contract plus saving and loading without pickles
+``detection``          :class:`Decision` (one sample) and :class:`Detection` (an episode)
+``registry``           :func:`make`, :func:`available`, :func:`register`, ``--import`` modules
+``presets``            hyperparameters declared once; registered variants that differ in defaults
+``conformance``        :func:`check_diagnoser`: the contract as a public test suite
+``search``             :func:`grid_search` of hyperparameters on validation episodes
+``episode/``           :class:`Episode`, the input, with its checks and units
+``classical/``         the baselines: ``limits``, ``pca``, ``arx-band``
+``networks/``          the LRGF network, the NNARX model-error model and their training
+``bank/``              a bank of relations: their models, parallel training and cache
+``stages/``            alarm stages: filters, statistics, limits, the paper's band
+``lrgf/``              the LRGF detectors (``lrgf-mem``, ``lrgf-glr`` and their presets)
+``isolation/``         the isolators ``lrgf-iso`` and ``lrgf-lda``
+=====================  ===========================================================================
+
 >>> import diagnosers
 >>> "limits" in diagnosers.available()
 True
@@ -18,10 +38,8 @@ from fcc_env import __version__  # the project's one version
 # Importing the model modules registers their diagnosers (after the registry exists).
 from diagnosers import (
     classical,  # noqa: F401  (registers limits, pca, arx-band)
-    isolators,  # noqa: F401  (registers lrgf-iso, lrgf-lda)
-    lrgf_glr,  # noqa: F401  (registers lrgf-glr)
-    lrgf_mem,  # noqa: F401  (registers lrgf-mem)
-    lrgf_presets,  # noqa: F401  (registers lrgf-mem-paper, lrgf-glr-adaptive)
+    isolation,  # noqa: F401  (registers lrgf-iso, lrgf-lda)
+    lrgf,  # noqa: F401  (registers lrgf-mem, lrgf-glr and their presets)
 )
 
 __all__ = [

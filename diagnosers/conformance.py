@@ -23,12 +23,12 @@ from typing import Any
 
 import numpy as np
 
+from diagnosers.bank.relations import read_channels
 from diagnosers.contract import NotFittedError
 from diagnosers.detection import UNKNOWN, Detection
 from diagnosers.diagnoser import Diagnoser
-from diagnosers.episode import Episode
+from diagnosers.episode.record import Episode
 from diagnosers.registry import diagnoser_class
-from diagnosers.relations import read_channels
 
 __all__ = ["CHECKS", "ConformanceError", "check_diagnoser", "default_episodes"]
 

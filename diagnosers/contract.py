@@ -23,7 +23,7 @@ from typing import Any, ClassVar, Self
 import numpy as np
 
 from diagnosers.detection import NO_DIAGNOSIS, UNKNOWN, Decision, Detection
-from diagnosers.episode import Episode
+from diagnosers.episode.record import Episode
 
 __all__ = ["DiagnoserContract", "NotFittedError", "check_labelled", "require_varying"]
 

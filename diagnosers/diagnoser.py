@@ -122,7 +122,7 @@ class Diagnoser(DiagnoserContract):
             obj.validate_params()
         except (ValueError, TypeError) as e:
             raise ValueError(f"{cfg_path}: {e}") from e
-        saved_class = config.get("class")
+        saved_class = _moved_class(config.get("class"))
         actual_class = f"{type(obj).__module__}.{type(obj).__qualname__}"
         if saved_class is not None and saved_class != actual_class:
             raise ValueError(
@@ -196,6 +196,26 @@ class Diagnoser(DiagnoserContract):
 
 
 # ---- checks of the files of a saved directory ------------------------------------------------
+#: modules that moved into sub-packages (0.x, issue 41): a model saved before the move names
+#: its class by the old path, which is the same class
+_MOVED_MODULES = {
+    "diagnosers.lrgf_mem": "diagnosers.lrgf.lrgf_mem",
+    "diagnosers.lrgf_glr": "diagnosers.lrgf.lrgf_glr",
+    "diagnosers.lrgf_presets": "diagnosers.lrgf.lrgf_presets",
+    "diagnosers.bank_detector": "diagnosers.lrgf.bank_detector",
+    "diagnosers.isolation": "diagnosers.isolation.isolating_detector",
+    "diagnosers.isolators": "diagnosers.isolation.isolators",
+}
+
+
+def _moved_class(saved: object) -> object:
+    """A saved class path read through :data:`_MOVED_MODULES` (anything else unchanged)."""
+    if not isinstance(saved, str) or "." not in saved:
+        return saved
+    module, _, name = saved.rpartition(".")
+    return f"{_MOVED_MODULES.get(module, module)}.{name}"
+
+
 def _require_finite(n_bad: int, size: int, path: Path, key: str) -> None:
     """A NaN or inf in learned state makes a detector that never alarms: refuse it by name."""
     if n_bad:

@@ -23,7 +23,7 @@ from typing import Any
 import numpy as np
 
 from diagnosers.contract import DiagnoserContract
-from diagnosers.episode import Episode
+from diagnosers.episode.record import Episode
 
 __all__ = ["DetectionScorer", "Scorer", "SearchResult", "grid_search"]
 

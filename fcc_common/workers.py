@@ -1,7 +1,7 @@
 """Worker-process set-up shared by every process pool of the project.
 
 Two pools use it: the sweep's local backend (:mod:`evaluation.backends`) and the parallel training
-of a diagnoser's models (:mod:`diagnosers.parallel`). Both start workers with the ``spawn`` method
+of a diagnoser's models (:mod:`diagnosers.bank.parallel`). Both start workers with the ``spawn`` method
 (numba and torch thread pools do not survive ``fork`` reliably) and call :func:`init_worker` in
 each: one compute thread per worker, since the parallelism comes from the processes, and a
 watchdog that ends the worker when the process that started it dies.

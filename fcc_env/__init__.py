@@ -14,7 +14,7 @@ The modules, by job:
   closed-loop plant shows (``FCC-closedloop-v0``);
 - :mod:`~fcc_env.plotting`, :mod:`~fcc_env.render`: figures and the env's ``rgb_array`` frame;
   :mod:`~fcc_env.dataset_schema`: units and roles in a dataset's Parquet schema;
-- :mod:`~fcc_env.generate`, :mod:`~fcc_env.demo`, :mod:`~fcc_env.simulator_speed`: the commands.
+- :mod:`~fcc_env.generate`, :mod:`~fcc_env.demo`, :mod:`~bench.simulator_speed`: the commands.
 
 A :class:`FaultSpec` and a :class:`PlantConfig` are validated once, when built, and travel whole
 from ``gym.make`` or :func:`simulate_episodes` to the physics; the env's keywords

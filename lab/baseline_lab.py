@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 import diagnosers
-from diagnosers.lrgf_glr import LRGFGLR
+from diagnosers.lrgf.lrgf_glr import LRGFGLR
 from evaluation.metrics import episode_scores
 from evaluation.tracks import TRACKS
 from evaluation.tracks.oracle import PhysicalLimit

@@ -47,7 +47,7 @@ from pathlib import Path
 import numpy as np
 
 from diagnosers import Diagnoser, make
-from diagnosers.relations import CLOSED_LOOP_RELATIONS, parse_relations
+from diagnosers.bank.relations import CLOSED_LOOP_RELATIONS, parse_relations
 from evaluation.tracks.catalogue import TRACKS
 from evaluation.tracks.track_data import TrackData
 from fcc_env.closed_loop import CLOSED_LOOP_CHANNELS

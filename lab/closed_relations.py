@@ -5,7 +5,7 @@
         --out results/closed-relations
 
 Registers ``lrgf-glr-closed-dilute``: the closed-loop bank plus the dilute-phase relations
-(:data:`diagnosers.relations.DILUTE_RELATIONS`), because under control f3 and f4 keep their
+(:data:`diagnosers.bank.relations.DILUTE_RELATIONS`), because under control f3 and f4 keep their
 steady signature in T_d1 and T_dg while the held temperatures lose it (docs: Closed loop,
 the masking table). Test seeds from 6000: validation seeds, never the test range.
 
@@ -21,9 +21,9 @@ relations do not help, so the registered bank stays ``CLOSED_LOOP_RELATIONS``.
 
 from __future__ import annotations
 
-from diagnosers.lrgf_glr import LRGFGLR
+from diagnosers.bank.relations import CLOSED_LOOP_RELATIONS, DILUTE_RELATIONS
+from diagnosers.lrgf.lrgf_glr import LRGFGLR
 from diagnosers.presets import preset
-from diagnosers.relations import CLOSED_LOOP_RELATIONS, DILUTE_RELATIONS
 
 LRGFGLRClosedDilute = preset(
     "lrgf-glr-closed-dilute",

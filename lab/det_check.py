@@ -10,8 +10,8 @@ import numpy as np
 sys.path.insert(0, ".")
 import diagnosers
 from diagnosers import Episode
-from diagnosers.lrgf_glr import LRGFGLR
-from diagnosers.parallel import TrainedBank
+from diagnosers.bank.parallel import TrainedBank
+from diagnosers.lrgf.lrgf_glr import LRGFGLR
 from evaluation.metrics import episode_scores
 from evaluation.metrics.intervals import bootstrap_ci
 from evaluation.tracks.track_data import TrackData
@@ -22,7 +22,7 @@ banks = iter(["0", "1", "2", "all"])
 
 def injected(self, sets):
     out = []
-    for _ in sets:  # the folds' banks, then the bank on all: one call (diagnosers.parallel)
+    for _ in sets:  # the folds' banks, then the bank on all: one call (diagnosers.bank.parallel)
         nets, mems = load_models(next(banks))
         fit = type("F", (), {"best_val_loss": 0.0})()
         out.append(TrainedBank(nets, mems, [0.0] * len(nets), [fit] * len(nets)))

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 sys.path.insert(0, ".")
-from diagnosers.alarm import (
+from diagnosers.stages.alarm import (
     CUSUM,
     EWMA,
     DirectionalGLR,

@@ -16,7 +16,7 @@ import numpy as np
 import torch
 
 import diagnosers
-from diagnosers.modules import build_module, export_module
+from diagnosers.networks.modules import build_module, export_module
 from evaluation.tracks import TRACKS
 from evaluation.tracks.track_data import TrackData
 

@@ -26,7 +26,7 @@ import numpy as np
 import diagnosers
 import fcc_env
 from diagnosers import Episode
-from diagnosers.relations import required_channels
+from diagnosers.bank.relations import required_channels
 
 N_SAMPLES = 2400
 ONSET = 1200

@@ -11,8 +11,8 @@ import time
 
 import numpy as np
 
-from diagnosers.lrgf_net import LRGF
-from diagnosers.training import fit_lrgf
+from diagnosers.networks.lrgf_net import LRGF
+from diagnosers.networks.training import fit_lrgf
 from evaluation.tracks import TRACKS
 from evaluation.tracks.track_data import TrackData
 from fcc_env.params import MEASUREMENT_NAMES

@@ -6,7 +6,7 @@ training episode unless ``--val-fraction``) on the paper track's healthy trainin
 or with ``torch.optim.LBFGS`` (``lbfgs:N``, about N loss evaluations: strong-Wolfe line search,
 20 inner steps and a history of 50 per outer step). It prints the wall time and the held-out
 error against the noise-free output on ten healthy validation episodes (seeds 5000-5009, the
-measured inputs). The L-BFGS loop replaces :func:`diagnosers.training.fit_lrgf`'s Adam loop for
+measured inputs). The L-BFGS loop replaces :func:`diagnosers.networks.training.fit_lrgf`'s Adam loop for
 the run only (same data, scaling, loss and early stopping); the library is not changed.
 
     python lab/optimizer_lab.py --output T_rg1 --variants adam:3000,lbfgs:600,lbfgs:1500
@@ -36,10 +36,10 @@ import numpy as np
 import torch
 from baseline_lab import at_least
 
-from diagnosers import training
-from diagnosers.lrgf_net import LRGF
-from diagnosers.optimisers import EarlyStopping, FitResult
-from diagnosers.training import fit_lrgf
+from diagnosers.networks import training
+from diagnosers.networks.lrgf_net import LRGF
+from diagnosers.networks.optimisers import EarlyStopping, FitResult
+from diagnosers.networks.training import fit_lrgf
 from evaluation.tracks import TRACKS
 from evaluation.tracks.track_data import TrackData
 from fcc_env.params import MEASUREMENT_NAMES

@@ -5,7 +5,7 @@ For the healthy validation episodes of a track (seeds 5000+) and a lab bank of
 (measured output minus the bank's centre) in °C RMS from sample ``--from`` on, after removing
 per episode: nothing; its mean; a static linear function of the relation's inputs and network
 output; a centred moving average of 200 samples; and, causally, an online regression
-(:class:`diagnosers.baseline.RegressionBaseline`, no forgetting, ridge ``--ridge``) on
+(:class:`diagnosers.stages.baseline.RegressionBaseline`, no forgetting, ridge ``--ridge``) on
 first-order lags (``--lags``, samples) of the relation's standardised inputs and network
 output, started at sample 300 and scored from ``--from``. Validation seeds only.
 
@@ -21,7 +21,7 @@ import numpy as np
 from baseline_lab import at_least, episodes, load
 from scipy.ndimage import uniform_filter1d
 
-from diagnosers.baseline import RegressionBaseline
+from diagnosers.stages.baseline import RegressionBaseline
 
 START = 300  # the warm-up and the start of the online fit
 

@@ -18,7 +18,7 @@ if str(TESTS) not in sys.path:
 
 from synthetic import make_episode  # noqa: E402  (after the path is set)
 
-from diagnosers.episode import Episode  # noqa: E402
+from diagnosers.episode.record import Episode  # noqa: E402
 
 
 @pytest.fixture(scope="module")

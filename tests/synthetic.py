@@ -16,7 +16,7 @@ import dataclasses
 
 import numpy as np
 
-from diagnosers.episode import Episode
+from diagnosers.episode.record import Episode
 
 CHANNELS: tuple[str, ...] = ("R_ar", "T_ar", "T_fp", "T_rx", "T_rg1", "T_rg2", "T_d1", "T_dg")
 SAMPLE_TIME_S = 10.0

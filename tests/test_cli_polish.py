@@ -21,14 +21,14 @@ ROOT = Path(__file__).resolve().parents[1]
 COMMANDS = (
     "evaluation.leaderboard",
     "evaluation.discover",
-    "evaluation.discover.loop_speed",
+    "bench.loop_speed",
     "evaluation.isolation.study",
     "evaluation.isolation.isolability",
     "fcc_env.generate",
     "fcc_env.demo",
     "fcc_env.closed_loop_report",
     "fcc_env.closed_loop_analysis",
-    "fcc_env.simulator_speed",
+    "bench.simulator_speed",
 )
 
 

@@ -10,13 +10,13 @@ from collections.abc import Sequence
 import numpy as np
 from scipy import signal as sps
 
-from diagnosers.band import band
 from diagnosers.classical.channel_selection import ALPHA, channel_indices, check_channel_names
 from diagnosers.contract import require_varying
 from diagnosers.detection import Decision, Detection
 from diagnosers.diagnoser import Diagnoser
-from diagnosers.episode import Episode
+from diagnosers.episode.record import Episode
 from diagnosers.registry import register
+from diagnosers.stages.band import band
 from fcc_common.validation import Integer, check_params, invalid
 
 __all__ = ["ARXBand", "fit_percent"]
@@ -169,7 +169,7 @@ class ARXBand(Diagnoser):
 
     def _finish(self) -> None:
         self.signal_names_ = (self.channels_[int(self.output_idx_[0])],)
-        # the band half-width t_α·σ, from the one formula of diagnosers.band.band
+        # the band half-width t_α·σ, from the one formula of diagnosers.stages.band.band
         _, upper = band(0.0, 0.0, self.sigma_, self.alpha)
         self.half_width_ = float(upper)
 

@@ -6,7 +6,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from diagnosers.episode import Episode
+from diagnosers.episode.record import Episode
 from fcc_common.validation import Real, invalid
 
 __all__ = ["ALPHA", "channel_indices", "check_channel_names", "stack_episodes"]

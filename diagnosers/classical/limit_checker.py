@@ -6,7 +6,6 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from diagnosers.band import band
 from diagnosers.classical.channel_selection import (
     ALPHA,
     channel_indices,
@@ -16,8 +15,9 @@ from diagnosers.classical.channel_selection import (
 from diagnosers.contract import require_varying
 from diagnosers.detection import Decision, Detection
 from diagnosers.diagnoser import Diagnoser
-from diagnosers.episode import Episode
+from diagnosers.episode.record import Episode
 from diagnosers.registry import register
+from diagnosers.stages.band import band
 from fcc_common.validation import check
 
 __all__ = ["LimitChecker"]

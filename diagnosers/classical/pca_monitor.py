@@ -17,7 +17,7 @@ from diagnosers.classical.channel_selection import (
 from diagnosers.contract import require_varying
 from diagnosers.detection import Decision, Detection
 from diagnosers.diagnoser import Diagnoser
-from diagnosers.episode import Episode
+from diagnosers.episode.record import Episode
 from diagnosers.presets import keyword_init, preset
 from diagnosers.registry import register
 from fcc_common.validation import Integer, Real, check_params, invalid

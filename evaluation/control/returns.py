@@ -31,8 +31,8 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from diagnosers.episode import Episode
-from diagnosers.relation_cache import shared_relations
+from diagnosers.bank.relation_cache import shared_relations
+from diagnosers.episode.record import Episode
 from evaluation.control.figures import episode_figure
 from evaluation.control.policies import (
     ARM_AFTER,

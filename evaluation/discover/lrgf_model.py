@@ -1,7 +1,7 @@
 """The modelling loop on the LRGF nominal model: which measured input does the network miss?
 
 :class:`LRGFModel` is a :class:`evaluation.discover.ModelAdapter`. ``prepare`` trains one LRGF
-network (simulation error, :func:`diagnosers.training.fit_lrgf`) per output channel on the
+network (simulation error, :func:`diagnosers.networks.training.fit_lrgf`) per output channel on the
 training part of the record, from its declared inputs. Candidates are
 :class:`evaluation.discover.MissingInput`: another measured channel, delayed by ``d`` samples,
 missing from an output's model. A candidate enters as an additive path on the network's output,
@@ -27,8 +27,8 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from diagnosers.lrgf_net import LRGF
-from diagnosers.training import fit_lrgf
+from diagnosers.networks.lrgf_net import LRGF
+from diagnosers.networks.training import fit_lrgf
 from evaluation.discover.arx import MissingInput, MissingInputAdapter
 from evaluation.discover.base import Candidate, FitResult
 from evaluation.discover.data import MeasuredData

@@ -32,8 +32,8 @@ import torch
 import diagnosers
 from diagnosers.detection import Detection
 from diagnosers.diagnoser import Diagnoser
-from diagnosers.episode import Episode
-from diagnosers.lrgf_mem import LRGFMEM
+from diagnosers.episode.record import Episode
+from diagnosers.lrgf.lrgf_mem import LRGFMEM
 from evaluation.isolation.unknown_faults import unknown_fault_episodes
 from evaluation.metrics.detection_metrics import r_td, t_dt
 from evaluation.metrics.intervals import bootstrap_ci

@@ -28,7 +28,7 @@ import numpy as np
 
 import fcc_env
 import fcc_env.effects as fx
-from diagnosers.episode import Episode
+from diagnosers.episode.record import Episode
 from evaluation.sweep.sources import LoadedEpisode
 from evaluation.tracks.track_data import TrackData
 from fcc_common.validation import Integer, Real, check

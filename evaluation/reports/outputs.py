@@ -20,7 +20,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-from diagnosers.episode import Episode
+from diagnosers.episode.record import Episode
 from evaluation.reports.plots import detection_figure, save_png
 from evaluation.reports.tables import (
     SUMMARY_COLUMNS,

@@ -1,6 +1,6 @@
 """Figures in the style of the paper's Fig. 3 / Fig. 4: a monitored signal with its band or limit.
 
-Pure presentation: functions take an :class:`~diagnosers.episode.Episode` and the
+Pure presentation: functions take an :class:`~diagnosers.episode.record.Episode` and the
 :class:`~diagnosers.detection.Detection` a diagnoser produced on it and return a
 :class:`matplotlib.figure.Figure` drawn on an Agg canvas. No pyplot (no global figure state, no
 ``show``), so it is safe in workers and tests; :func:`save_png` writes the file.
@@ -29,7 +29,7 @@ from matplotlib.figure import Figure
 from matplotlib.patches import Patch
 
 from diagnosers.detection import Detection
-from diagnosers.episode import Episode
+from diagnosers.episode.record import Episode
 from fcc_env.params import MEASUREMENTS
 
 __all__ = [
@@ -63,7 +63,7 @@ def axis_label(name: str, units: Mapping[str, str] | None = None) -> str:
     """The y-axis label of signal ``name``, with its unit in brackets.
 
     ``units`` maps channels to the units their data state (``""``: unknown), e.g. an episode's
-    :attr:`~diagnosers.episode.Episode.channel_units`. A channel in ``units`` takes that unit,
+    :attr:`~diagnosers.episode.record.Episode.channel_units`. A channel in ``units`` takes that unit,
     or no bracket at all when it is unknown, never a guessed one; this also replaces a unit a
     diagnoser wrote into the name (``"Tr [°C]"`` of a band view on data in °F). Only when
     ``units`` is ``None`` (nothing known, e.g. figure arrays stored before episodes carried

@@ -13,7 +13,7 @@ The rooms:
                        :func:`summarize`
 ``store``              the resumable result store on disk (:class:`ResultStore`)
 ``backends``           where tasks run: local processes, Ray, or this process
-``speed``              ``python -m evaluation.sweep.speed``: wall time of the sweep
+``speed``              ``python -m bench.sweep_speed``: wall time of the sweep
 =====================  ===========================================================================
 
 The names below are the sweep's public API; import them from here.

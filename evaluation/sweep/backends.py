@@ -19,7 +19,7 @@ from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wai
 from pathlib import Path
 from typing import Any, Protocol
 
-# the worker set-up is shared with diagnosers.parallel (fcc_common.workers)
+# the worker set-up is shared with diagnosers.bank.parallel (fcc_common.workers)
 from fcc_common.workers import cpu_count, init_worker
 
 #: Execution backends accepted by :func:`evaluation.sweep.run_sweep`.

@@ -32,8 +32,8 @@ from typing import Any
 
 import numpy as np
 
-from diagnosers.episode import Episode
-from diagnosers.episode_units import units_for
+from diagnosers.episode.record import Episode
+from diagnosers.episode.units import units_for
 from evaluation.sweep.sources import DataDescription, LoadedEpisode
 from evaluation.sweep.store import check_name
 from fcc_common.io import read_csv_columns, read_header, read_parquet_columns

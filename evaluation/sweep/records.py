@@ -20,7 +20,7 @@ import numpy as np
 
 from diagnosers.detection import Detection
 from diagnosers.diagnoser import Diagnoser
-from diagnosers.episode import Episode
+from diagnosers.episode.record import Episode
 from evaluation.metrics.detection_metrics import episode_scores
 from evaluation.metrics.isolation_metrics import UNKNOWN, isolation_scores
 from evaluation.sweep.sources import LoadedEpisode

@@ -80,7 +80,7 @@ def run_sweep(
             kept in the store (:meth:`ResultStore.read_detection`) for figures: it is computed
             in the scoring pass itself, never by a second simulation and detection.
         relation_cache: a directory of trained relations that the trainings share
-            (:mod:`diagnosers.relation_cache`): a relation job that one LRGF diagnoser trains
+            (:mod:`diagnosers.bank.relation_cache`): a relation job that one LRGF diagnoser trains
             is read by the others (``lrgf-mem``'s bank is the isolators' inner bank and partly
             ``lrgf-glr``'s fold bank). ``None`` (default): each trains its own. It changes no
             model: a cached relation has the bits of a fresh training.

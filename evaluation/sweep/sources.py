@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from typing import Any, Protocol, runtime_checkable
 
 import fcc_env
-from diagnosers.episode import Episode
+from diagnosers.episode.record import Episode
 from fcc_common.validation import Boolean, IntegerSequence, OptionSequence, check
 from fcc_env.plant import NOISE_SCALE_RANGE, SAMPLE_TIME_RANGE
 from fcc_env.scenarios import (

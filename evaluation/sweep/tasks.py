@@ -15,9 +15,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from diagnosers.bank.relation_cache import shared_relations
 from diagnosers.diagnoser import Diagnoser
 from diagnosers.registry import diagnoser_class, import_modules
-from diagnosers.relation_cache import shared_relations
 from evaluation.sweep.config import DiagnoserSpec
 from evaluation.sweep.records import (
     detect_and_score,
@@ -93,7 +93,7 @@ def train_task(
 
     ``n_jobs``: set on the diagnoser (see :func:`training_jobs`) unless ``None``.
     ``relation_cache``: a directory of trained relations shared with the other trainings
-    (:mod:`diagnosers.relation_cache`), or ``None``.
+    (:mod:`diagnosers.bank.relation_cache`), or ``None``.
     """
     if not _serial:
         limit_threads()

@@ -35,8 +35,8 @@ from collections.abc import Collection, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+from diagnosers.bank.relations import read_channels, required_channels
 from diagnosers.registry import import_modules, make
-from diagnosers.relations import read_channels, required_channels
 from evaluation.reports.outputs import figure_cells, write_figures
 from evaluation.sweep.config import DiagnoserSpec, SweepConfig, default_specs
 from evaluation.sweep.runner import run_sweep
@@ -99,7 +99,7 @@ def run_track(
     variation) reuses that track's models instead of training again. ``imports``: modules
     that register diagnosers of your own (:attr:`SweepConfig.imports`). ``relation_cache``: a
     directory of trained relations shared by the trainings of every track
-    (:mod:`diagnosers.relation_cache`).
+    (:mod:`diagnosers.bank.relation_cache`).
     """
     t0 = time.perf_counter()
     data = TrackData(track=track)

@@ -58,9 +58,9 @@ from enum import StrEnum
 import numba
 import numpy as np
 
-from diagnosers.alarm import CUSUM, LimitMethod, calibrate_limit
 from diagnosers.detection import Detection
-from diagnosers.episode import Episode
+from diagnosers.episode.record import Episode
+from diagnosers.stages.alarm import CUSUM, LimitMethod, calibrate_limit
 from evaluation.tracks.track_data import TrackData
 from fcc_common.validation import Integer, Options, Real, check
 from fcc_env.params import MEASUREMENT_NAMES
@@ -122,7 +122,7 @@ def log_likelihood_ratio(
 
 def cusum(llr: np.ndarray) -> np.ndarray:
     """Page's CUSUM ``S_t = max(0, S_{t−1} + LLR_t)``, ``S_{−1} = 0``, per column
-    (:class:`diagnosers.alarm.CUSUM` without drift). Shape: ``(T, k) -> (T, k)``."""
+    (:class:`diagnosers.stages.alarm.CUSUM` without drift). Shape: ``(T, k) -> (T, k)``."""
     return CUSUM(0.0).filter(np.asarray(llr, dtype=np.float64))
 
 

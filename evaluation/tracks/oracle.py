@@ -6,7 +6,7 @@ measurement noise until the fault acts, and its detection time is the earliest a
 a perfect model could reach at the same false-alarm rate. Every diagnoser's ``t_dt`` is reported
 against it as ``(t_dt + 1) / (oracle t_dt + 1)`` (:func:`evaluation.metrics.intervals.limit_ratio`).
 
-The statistic (the same alarm stage as ``lrgf-mem``, :mod:`diagnosers.alarm`):
+The statistic (the same alarm stage as ``lrgf-mem``, :mod:`diagnosers.stages.alarm`):
 
 1. residual r_k = (y_k − y_ref,k) / σ on the five temperatures T_rx, T_rg1, T_rg2, T_d1, T_dg,
    σ the channel's noise standard deviation times the track's noise scale;
@@ -41,12 +41,12 @@ from typing import Any
 
 import numpy as np
 
-from diagnosers.alarm import EWMA, HotellingT2, LimitMethod, calibrate_limit
 from diagnosers.detection import Detection
-from diagnosers.directional_stage import DirectionalStage
-from diagnosers.episode import Episode
-from diagnosers.fault_directions import FaultDirections
+from diagnosers.episode.record import Episode
+from diagnosers.lrgf.fault_directions import FaultDirections
 from diagnosers.registry import diagnoser_class
+from diagnosers.stages.alarm import EWMA, HotellingT2, LimitMethod, calibrate_limit
+from diagnosers.stages.directional_stage import DirectionalStage
 from evaluation.sweep.records import CellResult, score_episode
 from evaluation.sweep.sources import LoadedEpisode
 from evaluation.tracks.optimal import CUSUM_LABEL, GLR_LABEL, FaultSignatures, KnownFaultBank
@@ -159,8 +159,8 @@ class OracleConfig:
       not a bound).
     * ``OracleConfig(inputs="measured", stage="directional")``, ``perfect model + lrgf-glr
       stage (measured inputs)``: the same perfect model evaluated by ``lrgf-glr``'s own parts
-      (:class:`diagnosers.directional_stage.DirectionalStage` and
-      :class:`diagnosers.fault_directions.FaultDirections` on the reference's residual): fault
+      (:class:`diagnosers.stages.directional_stage.DirectionalStage` and
+      :class:`diagnosers.lrgf.fault_directions.FaultDirections` on the reference's residual): fault
       directions from the noise-free signatures of the training faults (seeds 1000-1002, as
       the detector's), a fast and a slow EWMA scale projected on them, an omnibus T². It is
       what a detector of that family would reach with a perfect model, from what a detector
@@ -367,8 +367,8 @@ class _PerfectModelStage:
 
     Everything after the residual (scale, fault directions, EWMA scales, projections, omnibus
     T², limits, alarm logic) is the detector's own parts,
-    :class:`~diagnosers.fault_directions.FaultDirections` and
-    :class:`~diagnosers.directional_stage.DirectionalStage` with ``lrgf-glr``'s defaults, so the
+    :class:`~diagnosers.lrgf.fault_directions.FaultDirections` and
+    :class:`~diagnosers.stages.directional_stage.DirectionalStage` with ``lrgf-glr``'s defaults, so the
     row measures that stage on a perfect model. ``reference_of(episode)`` gives the reference
     of an episode; ``monitored`` the channels. Batch only (``detect``). Not a diagnoser: it reads
     what no diagnoser may.

@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 import fcc_env
-from diagnosers.episode import Episode
+from diagnosers.episode.record import Episode
 from evaluation.sweep.sources import DataDescription, LoadedEpisode, simulate_loaded
 from evaluation.tracks.track import Track
 from fcc_common.validation import invalid

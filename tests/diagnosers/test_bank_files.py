@@ -1,4 +1,4 @@
-"""The bank's file format (``diagnosers.modules.save_bank`` / ``load_bank``) and the CSV writer
+"""The bank's file format (``diagnosers.networks.modules.save_bank`` / ``load_bank``) and the CSV writer
 every results table goes through (``evaluation.reports.outputs.write_csv``)."""
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import torch
 
 import diagnosers
 import fcc_env
-from diagnosers.modules import load_bank, paper_lrgf, paper_mem, save_bank
+from diagnosers.networks.modules import load_bank, paper_lrgf, paper_mem, save_bank
 from evaluation.reports.outputs import write_csv
 
 

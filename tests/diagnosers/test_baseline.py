@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from diagnosers.baseline import RegressionBaseline
-from diagnosers.baseline_kernels import adapt_step, filter_step, signals_step, solver
+from diagnosers.stages.baseline import RegressionBaseline
+from diagnosers.stages.baseline_kernels import adapt_step, filter_step, signals_step, solver
 
 
 def _oracle_theta(phi: np.ndarray, e: np.ndarray, f: float, ridge: float) -> np.ndarray:

@@ -8,8 +8,8 @@ from scipy import stats
 from synthetic import CHANNELS, inject_step_fault, make_episode
 
 from diagnosers import Episode, make
-from diagnosers.alarm import two_sided_normal_quantile
 from diagnosers.classical import ARXBand, fit_percent, hotelling_t2_limit, spe_limit
+from diagnosers.stages.alarm import two_sided_normal_quantile
 from evaluation.metrics import episode_scores
 
 ALPHA = 0.01

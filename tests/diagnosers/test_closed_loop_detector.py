@@ -6,8 +6,8 @@ from __future__ import annotations
 import pytest
 
 import diagnosers
+from diagnosers.bank.relations import CLOSED_LOOP_RELATIONS, required_channels
 from diagnosers.conformance import check_diagnoser
-from diagnosers.relations import CLOSED_LOOP_RELATIONS, required_channels
 from evaluation.tracks.board import applicable, track_channels
 from evaluation.tracks.catalogue import TRACKS
 

@@ -21,7 +21,7 @@ from synthetic import inject_step_fault, make_episode
 import diagnosers
 import fcc_env
 from diagnosers import Diagnoser, Episode, NotFittedError, make
-from diagnosers.relations import required_channels
+from diagnosers.bank.relations import required_channels
 
 #: every registered diagnoser that reads FCC-v0's channels (closed-loop ones: see
 #: tests/diagnosers/test_closed_loop_detector.py)

@@ -5,9 +5,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from diagnosers.alarm import EWMA, LimitMethod, calibrate_limit
-from diagnosers.baseline import HeldBaseline
-from diagnosers.directional_stage import DirectionalStage
+from diagnosers.stages.alarm import EWMA, LimitMethod, calibrate_limit
+from diagnosers.stages.baseline import HeldBaseline
+from diagnosers.stages.directional_stage import DirectionalStage
 
 DIRECTIONS = np.array([[1.0, 0.0, 0.0], [0.0, -0.6, 0.8]])
 

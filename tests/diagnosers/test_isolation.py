@@ -10,8 +10,8 @@ from synthetic import inject_step_fault, make_episode
 
 import diagnosers
 from diagnosers import Diagnoser, Episode, make
-from diagnosers.isolation import AGE_EDGES
-from diagnosers.isolators import LRGFISO, LRGFLDA, spherical_kmeans
+from diagnosers.isolation.isolating_detector import AGE_EDGES
+from diagnosers.isolation.isolators import LRGFISO, LRGFLDA, spherical_kmeans
 from evaluation.metrics.isolation_metrics import cdr, episode_label
 
 CLASSES = ("step_T_rg1", "step_T_rg2", "step_T_rx")

@@ -9,9 +9,9 @@ from scipy import signal, stats
 from synthetic import inject_step_fault, make_episode
 
 import diagnosers
-from diagnosers.alarm import CUSUM, DirectionalGLR, DirectionalProjection, normal_tail_limit
-from diagnosers.lrgf_glr import LRGFGLR
-from diagnosers.relation_bank import RelationBank
+from diagnosers.bank.relation_bank import RelationBank
+from diagnosers.lrgf.lrgf_glr import LRGFGLR
+from diagnosers.stages.alarm import CUSUM, DirectionalGLR, DirectionalProjection, normal_tail_limit
 
 
 def _cusum_oracle(x: np.ndarray, drift: float) -> np.ndarray:

@@ -7,9 +7,9 @@ import pytest
 from synthetic import make_episode
 
 import diagnosers
-from diagnosers.baseline import HeldBaseline
-from diagnosers.lrgf_glr import LRGFGLR
-from diagnosers.lrgf_presets import LRGFGLRAdaptive
+from diagnosers.lrgf.lrgf_glr import LRGFGLR
+from diagnosers.lrgf.lrgf_presets import LRGFGLRAdaptive
+from diagnosers.stages.baseline import HeldBaseline
 
 FAST = {**LRGFGLR.fast_params(), "fault_scenarios": ["f3"], "baseline_settle": 50}
 

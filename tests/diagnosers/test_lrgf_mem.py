@@ -8,9 +8,9 @@ import pytest
 import diagnosers
 import fcc_env
 from diagnosers import Episode
-from diagnosers.alarm import two_sided_normal_quantile as t_alpha
-from diagnosers.bank_detector import holdout_split
-from diagnosers.ewma_stage import EWMAStage
+from diagnosers.lrgf.bank_detector import holdout_split
+from diagnosers.stages.alarm import two_sided_normal_quantile as t_alpha
+from diagnosers.stages.ewma_stage import EWMAStage
 
 FAST = {"max_epochs": 300, "mem_max_epochs": 20}
 
@@ -118,7 +118,7 @@ def test_warm_up_is_silent_and_too_short_data_is_refused():
 def test_alarm_limits_follow_their_definition():
     from scipy.stats import chi2, norm
 
-    from diagnosers.alarm import TAIL_FIT_QUANTILE
+    from diagnosers.stages.alarm import TAIL_FIT_QUANTILE
 
     d = EWMAStage(
         alarm_filter="ewma-t2",
@@ -157,8 +157,8 @@ def test_learning_rate_reaches_the_trainer():
 def test_val_fraction_reaches_each_network(val_fraction):
     """The bank's network equals one trained by ``fit_lrgf`` directly with that hold-out share
     (same seed, one thread); 0 and 0.25 train different networks."""
-    from diagnosers.lrgf_net import LRGF
-    from diagnosers.training import fit_lrgf
+    from diagnosers.networks.lrgf_net import LRGF
+    from diagnosers.networks.training import fit_lrgf
 
     eps = _episodes([1000, 1001], n=400)
     kw = {"max_epochs": 20, "mem_max_epochs": 2, "mem_input_delays": 2, "mem_output_delays": 2}

@@ -1,4 +1,4 @@
-"""Tests of the LRGF network (diagnosers.lrgf_net) and its trainer (diagnosers.training.fit_lrgf)."""
+"""Tests of the LRGF network (diagnosers.networks.lrgf_net) and its trainer (diagnosers.networks.training.fit_lrgf)."""
 
 from __future__ import annotations
 
@@ -9,13 +9,17 @@ import torch
 from scipy import signal as sps
 from torch.func import functional_call
 
-from diagnosers.iir import denominator_from_reflection, iir_filter, reflection_from_denominator
-from diagnosers.lrgf_fused import lrgf_free_run
-from diagnosers.lrgf_net import LRGF, lrgf_activation
-from diagnosers.lrgf_stepper import LRGFStepper
-from diagnosers.modules import build_module, export_module
-from diagnosers.optimisers import SPSAOptions
-from diagnosers.training import fit_lrgf
+from diagnosers.networks.iir import (
+    denominator_from_reflection,
+    iir_filter,
+    reflection_from_denominator,
+)
+from diagnosers.networks.lrgf_fused import lrgf_free_run
+from diagnosers.networks.lrgf_net import LRGF, lrgf_activation
+from diagnosers.networks.lrgf_stepper import LRGFStepper
+from diagnosers.networks.modules import build_module, export_module
+from diagnosers.networks.optimisers import SPSAOptions
+from diagnosers.networks.training import fit_lrgf
 
 
 def _steps(rng: np.random.Generator, t_len: int, n: int, hold: int = 50) -> np.ndarray:
@@ -370,7 +374,7 @@ def test_persistence_round_trip(tmp_path, dtype: torch.dtype) -> None:
         build_module({"kind": "gru"}, loaded)
 
 
-# ---- fused free run (diagnosers.lrgf_fused) against the torch-autograd reference ---------------
+# ---- fused free run (diagnosers.networks.lrgf_fused) against the torch-autograd reference ---------------
 @pytest.mark.parametrize(
     ("initial_state", "steady_window", "t_len"),
     [("zero", 1, 300), ("steady", 1, 300), ("steady", 50, 300), ("steady", 300, 300),

@@ -1,4 +1,4 @@
-"""Tests of the NNARX model error model and the bands (diagnosers.mem_net, mem_stepper, band; diagnosers.training.fit_mem)."""
+"""Tests of the NNARX model error model and the bands (diagnosers.networks.mem_net, mem_stepper, band; diagnosers.networks.training.fit_mem)."""
 
 from __future__ import annotations
 
@@ -10,12 +10,12 @@ import pytest
 import torch
 from scipy import signal as sps
 
-from diagnosers.alarm import two_sided_normal_quantile
-from diagnosers.band import band, band_scale
-from diagnosers.mem_net import NNARXErrorModel
-from diagnosers.mem_stepper import MEMBankStepper, MEMStepper
-from diagnosers.modules import build_module, export_module, paper_mem
-from diagnosers.training import fit_mem
+from diagnosers.networks.mem_net import NNARXErrorModel
+from diagnosers.networks.mem_stepper import MEMBankStepper, MEMStepper
+from diagnosers.networks.modules import build_module, export_module, paper_mem
+from diagnosers.networks.training import fit_mem
+from diagnosers.stages.alarm import two_sided_normal_quantile
+from diagnosers.stages.band import band, band_scale
 
 
 def _steps(rng: np.random.Generator, t_len: int, n: int, hold: int = 40) -> np.ndarray:

@@ -1,4 +1,4 @@
-"""The operating-point novelty of ``lrgf-glr`` (diagnosers.novelty): the range, the distance,
+"""The operating-point novelty of ``lrgf-glr`` (diagnosers.lrgf.novelty): the range, the distance,
 which relations measure it, and that the detector divides by exactly ``1 + gain · d``."""
 
 from __future__ import annotations
@@ -9,9 +9,14 @@ import numpy as np
 import pytest
 from synthetic import make_episode
 
-from diagnosers.lrgf_glr import LRGFGLR
-from diagnosers.novelty import NoveltyScale, PredictionRange, exogenous_relations, novelty_scale
-from diagnosers.relations import BANK_RELATIONS, DILUTE_RELATIONS
+from diagnosers.bank.relations import BANK_RELATIONS, DILUTE_RELATIONS
+from diagnosers.lrgf.lrgf_glr import LRGFGLR
+from diagnosers.lrgf.novelty import (
+    NoveltyScale,
+    PredictionRange,
+    exogenous_relations,
+    novelty_scale,
+)
 
 
 def test_exogenous_relations_are_those_no_fault_moves() -> None:

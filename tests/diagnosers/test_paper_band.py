@@ -9,9 +9,9 @@ import pytest
 import diagnosers
 import fcc_env
 from diagnosers import Episode
-from diagnosers.alarm import two_sided_normal_quantile as t_alpha
-from diagnosers.band import BandScale, band_scale
-from diagnosers.lrgf_presets import PRESETS, LRGFMEMPaper
+from diagnosers.lrgf.lrgf_presets import PRESETS, LRGFMEMPaper
+from diagnosers.stages.alarm import two_sided_normal_quantile as t_alpha
+from diagnosers.stages.band import BandScale, band_scale
 
 # a small model: the oracle checks arithmetic, not the quality of the fit
 SMALL = {"max_epochs": 30, "mem_max_epochs": 5, "steady_window": 20}

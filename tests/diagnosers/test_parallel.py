@@ -1,4 +1,4 @@
-"""Parallel training of the LRGF + MEM banks (``n_jobs``, :mod:`diagnosers.parallel`)."""
+"""Parallel training of the LRGF + MEM banks (``n_jobs``, :mod:`diagnosers.bank.parallel`)."""
 
 from __future__ import annotations
 
@@ -9,9 +9,9 @@ import pytest
 from synthetic import inject_step_fault, make_episode
 
 import diagnosers
-from diagnosers.lrgf_glr import LRGFGLR
-from diagnosers.modules import export_module
-from diagnosers.parallel import BankSettings, run_jobs, train_banks
+from diagnosers.bank.parallel import BankSettings, run_jobs, train_banks
+from diagnosers.lrgf.lrgf_glr import LRGFGLR
+from diagnosers.networks.modules import export_module
 
 LRGF_NAMES = ("lrgf-mem-paper", "lrgf-mem", "lrgf-glr")
 

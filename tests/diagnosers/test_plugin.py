@@ -20,7 +20,7 @@ import diagnosers
 import evaluation
 import fcc_env
 from diagnosers import Episode, NotFittedError, registry
-from diagnosers.optimisers import auto_progress
+from diagnosers.networks.optimisers import auto_progress
 from fcc_env.generate import write_dataset
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -8,10 +8,10 @@ from typing import ClassVar
 import pytest
 
 import diagnosers
-from diagnosers.bank_detector import BankDetector
-from diagnosers.lrgf_glr import LRGFGLR
-from diagnosers.lrgf_mem import LRGFMEM
-from diagnosers.lrgf_presets import PRESETS
+from diagnosers.lrgf.bank_detector import BankDetector
+from diagnosers.lrgf.lrgf_glr import LRGFGLR
+from diagnosers.lrgf.lrgf_mem import LRGFMEM
+from diagnosers.lrgf.lrgf_presets import PRESETS
 from diagnosers.presets import keyword_init, preset
 
 FAMILIES = {"lrgf-mem-paper": LRGFMEM, "lrgf-glr-adaptive": LRGFGLR, "lrgf-glr-closed": LRGFGLR}

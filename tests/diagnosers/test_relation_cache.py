@@ -1,4 +1,4 @@
-"""The relation cache (:mod:`diagnosers.relation_cache`): shared training, the same bits."""
+"""The relation cache (:mod:`diagnosers.bank.relation_cache`): shared training, the same bits."""
 
 from __future__ import annotations
 
@@ -8,11 +8,11 @@ import numpy as np
 from synthetic import inject_step_fault, make_episode
 
 import diagnosers
-from diagnosers.lrgf_glr import LRGFGLR
-from diagnosers.lrgf_mem import LRGFMEM
-from diagnosers.modules import export_module
-from diagnosers.parallel import BankSettings, train_banks
-from diagnosers.relation_cache import RelationCache, job_key, shared_relations
+from diagnosers.bank.parallel import BankSettings, train_banks
+from diagnosers.bank.relation_cache import RelationCache, job_key, shared_relations
+from diagnosers.lrgf.lrgf_glr import LRGFGLR
+from diagnosers.lrgf.lrgf_mem import LRGFMEM
+from diagnosers.networks.modules import export_module
 
 
 def _weights(d) -> list[dict[str, np.ndarray]]:

@@ -16,9 +16,9 @@ from sklearn.base import clone
 
 import diagnosers
 from diagnosers import Decision, Detection, Diagnoser, Episode, NotFittedError
+from diagnosers.bank.relations import read_channels
 from diagnosers.conformance import default_episodes
 from diagnosers.detection import SCORE_THRESHOLD, exceedance, normalised_score
-from diagnosers.relations import read_channels
 from diagnosers.search import DetectionScorer, grid_search
 
 ROOT = Path(__file__).resolve().parents[2]

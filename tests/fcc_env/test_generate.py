@@ -154,7 +154,7 @@ def test_generated_files_get_normal_permissions(tmp_path):
 def test_parquet_dataset_equals_the_csv_one(tmp_path, capsys):
     import os
 
-    from diagnosers.episode import Episode
+    from diagnosers.episode.record import Episode
     from evaluation.discover import load_measured
 
     kw = dict(scenario="f1", seeds=[2, 4], n_samples=60, fault_time=30)

@@ -178,7 +178,7 @@ def test_bad_construction_names_the_value():
     ],
 )
 def test_vector_speed_refuses_bad_flags_by_value(argv, message, capsys):
-    from fcc_env.vector_speed import main
+    from bench.vector_speed import main
 
     with pytest.raises(SystemExit) as e:
         main(argv)

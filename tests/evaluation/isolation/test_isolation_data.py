@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from diagnosers import Diagnoser
-from diagnosers.isolators import LRGFISO
+from diagnosers.isolation.isolators import LRGFISO
 from evaluation.tracks import TRACKS
 from evaluation.tracks.track_data import TrackData
 from fcc_env.params import FCCParams

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from diagnosers.detection import Detection
-from diagnosers.episode import Episode
+from diagnosers.episode.record import Episode
 from evaluation.reports.plots import (
     ALARM_LABEL,
     EXIT_LABEL,

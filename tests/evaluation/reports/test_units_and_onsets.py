@@ -13,7 +13,7 @@ import pytest
 import diagnosers
 import fcc_env
 from diagnosers.detection import Detection
-from diagnosers.episode import Episode
+from diagnosers.episode.record import Episode
 from evaluation.reports.outputs import figure_cells, write_outputs
 from evaluation.reports.plots import ASSUMED_ONSET_LABEL, ONSET_LABEL, axis_label, detection_figure
 from evaluation.reports.tables import ASSUMED_MARK, ASSUMED_TEXT, table_legend
@@ -107,7 +107,7 @@ def test_external_figures_are_labelled_in_the_data_units(degf_dir) -> None:
     det = _limits_detection(data.train_episodes(), test, ["T2", "Tr", "flag"])
     labels = _ylabels(detection_figure(test, det, max_signals=3))
     assert labels == ["T2 [°F]", "Tr [°F]", "flag"]
-    # a band view names its outputs "[°C]" (diagnosers.bank_detector): the data's unit wins
+    # a band view names its outputs "[°C]" (diagnosers.lrgf.bank_detector): the data's unit wins
     y = test.channel("Tr")[:, None]
     bands = Detection(np.zeros(test.n_samples, bool), y, y - 1, y + 1, 0 * y, ("Tr [°C]",))
     assert _ylabels(detection_figure(test, bands, decisions=det)) == ["Tr [°F]"]

@@ -408,7 +408,7 @@ def test_training_jobs_share_the_cores_among_the_banks():
 
 
 def test_trainings_of_a_sweep_share_their_relations(tmp_path) -> None:
-    from diagnosers.lrgf_mem import LRGFMEM
+    from diagnosers.lrgf.lrgf_mem import LRGFMEM
 
     fast = LRGFMEM.fast_params()
     specs = (

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from scipy import stats
 
-from diagnosers.episode import Episode
+from diagnosers.episode.record import Episode
 from evaluation.sweep.sources import LoadedEpisode, simulate_loaded
 from evaluation.tracks import TRACKS
 from evaluation.tracks.optimal import (

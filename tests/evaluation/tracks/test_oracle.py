@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from synthetic import cell_record
 
-from diagnosers.alarm import EWMA
-from diagnosers.episode import Episode
+from diagnosers.episode.record import Episode
+from diagnosers.stages.alarm import EWMA
 from evaluation.metrics.intervals import limit_ratio
 from evaluation.sweep.records import CellResult, summarize
 from evaluation.sweep.sources import simulate_loaded

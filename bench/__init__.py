@@ -1,0 +1,11 @@
+"""Speed benchmarks, outside the library packages: each prints speed and quality figures.
+
+=====================  ===========================================================================
+``simulator_speed``    ``python -m bench.simulator_speed``: the FCC simulator
+``vector_speed``       ``python -m bench.vector_speed``: the native vector env against sync
+``detector_speed``     ``python -m bench.detector_speed``: the neural detector's training,
+                       held-out fit and streaming throughput
+``sweep_speed``        ``python -m bench.sweep_speed``: wall time of the sweep harness
+``loop_speed``         ``python -m bench.loop_speed``: wall time of the modelling loop
+=====================  ===========================================================================
+"""

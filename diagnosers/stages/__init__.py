@@ -1,0 +1,14 @@
+"""Alarm stages: from a detector's normalised remaining errors to alarms.
+
+The rooms:
+
+=====================  ===========================================================================
+``alarm``              the parts: residual filters (EWMA), statistics (Hotelling T², CUSUM,
+                       directional GLR, projections) and limit calibration
+``ewma_stage``         ``lrgf-mem``'s stage: the paper's band rule or EWMA persistence
+``directional_stage``  ``lrgf-glr``'s stage: T² and tests along fault directions
+``band``               the paper's uncertainty band ``y_m + y_e ± t_α v`` and its scale
+``baseline``           the held baseline a stage may remove first (running mean or regression)
+``baseline_kernels``   the regression baseline's compiled per-sample steps
+=====================  ===========================================================================
+"""
