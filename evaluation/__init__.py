@@ -8,6 +8,7 @@
 ``reports``       tables, figures and the files a run writes
 ``leaderboard``   ``python -m evaluation.leaderboard``: the command line
 ``discover``      ``python -m evaluation.discover``: close the modelling loop on measured data
+``control``       ``python -m evaluation.control``: the control task's study (what a policy earns)
 ================  ================================================================================
 
 Kept free of heavy imports so that ``import evaluation.metrics`` stays cheap: ``__version__``

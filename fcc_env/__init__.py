@@ -11,10 +11,16 @@ The modules, by job:
 - :mod:`~fcc_env.episode_setup`: one episode's set-up, shared by :mod:`~fcc_env.env` (``FCC-v0``) and
   :mod:`~fcc_env.simulation` (:func:`simulate_episodes`);
 - :mod:`~fcc_env.regulatory`, :mod:`~fcc_env.closed_loop`: the regulatory layer and what a
-  closed-loop plant shows (``FCC-closedloop-v0``);
+  closed-loop plant shows (``FCC-closedloop-v0``); :mod:`~fcc_env.closed_loop_analysis`: the
+  linearised closed loop's eigenvalues; :mod:`~fcc_env.closed_loop_report` and
+  :mod:`~fcc_env.closed_loop_figures`: the closed-loop report (responses, masking, terminations);
+- :mod:`~fcc_env.control_task`: ``FCC-control-v0``, the closed loop with an economic reward;
+- :mod:`~fcc_env.vector_env`, :mod:`~fcc_env.control_vector`: native vector envs (N episodes in
+  one compiled loop) of ``FCC-v0``/``FCC-closedloop-v0`` and of ``FCC-control-v0``;
 - :mod:`~fcc_env.plotting`, :mod:`~fcc_env.render`: figures and the env's ``rgb_array`` frame;
   :mod:`~fcc_env.dataset_schema`: units and roles in a dataset's Parquet schema;
-- :mod:`~fcc_env.generate`, :mod:`~fcc_env.demo`, :mod:`~bench.simulator_speed`: the commands.
+- :mod:`~fcc_env.generate`, :mod:`~fcc_env.demo`: the commands (the simulator's speed:
+  ``python -m bench.simulator_speed``).
 
 A :class:`FaultSpec` and a :class:`PlantConfig` are validated once, when built, and travel whole
 from ``gym.make`` or :func:`simulate_episodes` to the physics; the env's keywords

@@ -9,6 +9,15 @@ All learn from healthy episodes only and decide with a confidence level ``1 - al
   ``pca-empirical`` (:class:`PCAEmpirical`) sets both limits at the training data's percentile.
 * ``arx-band`` - :class:`ARXBand`: a linear ARX model of ``T_rx`` from ``T_rg2`` and ``T_fp``
   (the paper's relation (14)) run in simulation, with a band ``y_m ± t_α·σ``.
+
+The rooms:
+
+=====================  ===========================================================================
+``limit_checker``      ``limits``: per-channel limits
+``pca_monitor``        ``pca`` and ``pca-empirical``: T² and SPE on standardised measurements
+``arx_band``           ``arx-band``: the ARX output-error band
+``channel_selection``  what they share: the channels they watch and their significance level
+=====================  ===========================================================================
 """
 
 from diagnosers.classical.arx_band import ARXBand, fit_percent

@@ -20,8 +20,7 @@ The package, one room per concern:
 ``loop``                  :func:`discover`
 ``report``                :class:`DiscoveryReport`, residual tests and plots of the report
 ``residual_tests``        whiteness, bias, drift and correlation tests of a residual
-``cli``                   ``python -m evaluation.discover``
-``loop_speed``            ``python -m bench.loop_speed``: wall time of the loop
+``cli``                   ``python -m evaluation.discover`` (its wall time: ``python -m bench.loop_speed``)
 ========================  =========================================================================
 
 Limitations (stated, not hidden): a first-order *sensor lag on a model input channel* (T_ar,

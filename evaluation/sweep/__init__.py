@@ -3,17 +3,20 @@
 The rooms:
 
 =====================  ===========================================================================
-``runner``             the sweep itself: :class:`SweepConfig`, :class:`DiagnoserSpec`,
-                       :func:`run_sweep`, :class:`SweepResults`
-``training``           training every diagnoser once per sweep and reloading its saved model
+``config``             what a sweep is: :class:`SweepConfig`, :class:`DiagnoserSpec`,
+                       :class:`SweepResults`
+``runner``             the sweep itself: :func:`run_sweep`, training every diagnoser once and
+                       scoring every cell
+``tasks``              the tasks a worker runs: train one diagnoser, score one episode
 ``sources``            where episodes come from: :class:`SimulatedData`, the :class:`DataSource`
                        protocol, :class:`LoadedEpisode`
 ``external_data``      recorded CSV/Parquet datasets as a data source (:class:`ExternalData`)
+``dataset_loaders``    how a data directory (a ``dataset.json`` manifest) becomes one
 ``records``            what a cell records: :class:`CellResult`, :func:`score_episode`,
                        :func:`summarize`
 ``store``              the resumable result store on disk (:class:`ResultStore`)
 ``backends``           where tasks run: local processes, Ray, or this process
-``speed``              ``python -m bench.sweep_speed``: wall time of the sweep
+``backends_watchdog``  reaps the local Ray cluster of a driver that was killed
 =====================  ===========================================================================
 
 The names below are the sweep's public API; import them from here.

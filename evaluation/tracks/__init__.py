@@ -6,6 +6,8 @@
 ``catalogue``      the published tracks (:data:`TRACKS`), :func:`parse_tracks`
 ``track_data``     :class:`TrackData`: a track's episodes as a sweep's data source
 ``oracle``         the reference rows: physical-limit observers that read the noise-free plant
+``optimal``        the optimal-detector rows: a CUSUM and a GLR on each fault's exact signature
+``rows``           the rows of a track table: per diagnoser, intervals over the seeds (pure)
 ``goal``           the goal table: how far each detector is from its reference row
 ``board``          running a track (:func:`run_track`) into a :class:`TrackRun`
 ``board_tables``   a track's Markdown/CSV tables, isolation table, confusion figures, summary
