@@ -52,7 +52,7 @@ WARM_UP = 100
 def _episodes(seeds: list[int], n: int = 4000) -> list[Episode]:
     b = fcc_env.simulate_episodes(seeds, n)
     return [
-        Episode(b.observations[i].astype(float), fcc_env.MEASUREMENT_NAMES, 10.0)
+        Episode(b.observations[i].astype(float), fcc_env.MEASUREMENT_NAMES, b.sample_time_s)
         for i in range(len(seeds))
     ]
 

@@ -25,7 +25,7 @@ from fcc_common.invocation import command_parser
 from fcc_env.integrator import step_kernel
 from fcc_env.params import N_STATES, NOMINAL_INPUTS, FCCParams
 from fcc_env.physics import as_param_array, measure_core
-from fcc_env.plant import PlantConfig
+from fcc_env.plant import DEFAULT_SAMPLE_TIME_S, PlantConfig
 from fcc_env.regulatory import (
     CONTROLLER_STATE_SIZE,
     RegulatoryLayer,
@@ -147,7 +147,7 @@ def _case(name: str, params: FCCParams, layer: RegulatoryLayer, ts: float) -> St
 
 
 def stability_cases(
-    layer: RegulatoryLayer | None = None, ts: float = 10.0, corners: bool = True
+    layer: RegulatoryLayer | None = None, ts: float = DEFAULT_SAMPLE_TIME_S, corners: bool = True
 ) -> list[StabilityCase]:
     """Nominal, each fault at its largest allowed size, and (``corners``) the 16 corners of the
     ``uncertain`` track's parameter draw (every group at ± its default half-range)."""

@@ -32,7 +32,7 @@ def _demo(args: argparse.Namespace) -> int:
         b = fcc_env.simulate_episodes([args.seed], scenario=scenario)
         episodes[scenario] = b.observations[0]
         onsets[scenario] = b.fault_onsets[0]
-    path = plot_scenarios(episodes, onsets, 10.0, Path(args.out) / "scenarios.png")
+    path = plot_scenarios(episodes, onsets, b.sample_time_s, Path(args.out) / "scenarios.png")
     print(f"wrote {path}")
     return 0
 

@@ -44,6 +44,8 @@ NOISE_SCALE_RANGE = Real(0.0, 100.0, why="a multiplier on the spec's noise stds;
 
 #: The slide-valve head share of the declared plant (``valve_beta``'s default).
 DEFAULT_VALVE_BETA: float = FCCParams().beta_sv
+#: The paper's sample period [s]: :class:`PlantConfig`'s default, the one place it is written.
+DEFAULT_SAMPLE_TIME_S: float = 10.0
 
 
 @dataclass(frozen=True)
@@ -64,7 +66,7 @@ class PlantConfig:
     """
 
     params: FCCParams = field(default_factory=FCCParams)
-    sample_time_s: float = 10.0
+    sample_time_s: float = DEFAULT_SAMPLE_TIME_S
     rk4_substeps: int = 1
     excitation: Excitation | None = field(default_factory=Excitation)
     noise_scale: float = 1.0

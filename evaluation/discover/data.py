@@ -20,6 +20,7 @@ import numpy as np
 from fcc_common.io import read_columns, read_header
 from fcc_common.validation import Real, check
 from fcc_env.generate import DATASET_FORMAT, DATASET_SUFFIXES, read_sidecar
+from fcc_env.plant import DEFAULT_SAMPLE_TIME_S
 
 __all__ = [
     "DATASET_FORMAT",
@@ -84,7 +85,9 @@ class MeasuredData:
 
 
 def from_arrays(
-    channels: Mapping[str, Any], sample_time_s: float = 10.0, source: str = "<arrays>"
+    channels: Mapping[str, Any],
+    sample_time_s: float = DEFAULT_SAMPLE_TIME_S,
+    source: str = "<arrays>",
 ) -> MeasuredData:
     """Measured data from arrays (T,) or (n_episodes, T) per channel name."""
     out = {}

@@ -22,6 +22,7 @@ from evaluation.discover.data import TABLE1, MeasuredData
 from fcc_env import effects as fx
 from fcc_env.params import NOMINAL_INPUTS, FCCParams
 from fcc_env.physics import steady_state
+from fcc_env.plant import DEFAULT_SAMPLE_TIME_S
 from fcc_env.simulation import simulate_inputs
 
 __all__ = [
@@ -287,4 +288,4 @@ class PhysicsModel:
             Y[..., j] = first_order_lag(Y[..., j], values["tau_s"], self._dt)
         return Y
 
-    _dt: float = 10.0
+    _dt: float = DEFAULT_SAMPLE_TIME_S

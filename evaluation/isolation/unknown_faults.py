@@ -32,6 +32,7 @@ from diagnosers.episode.record import Episode
 from evaluation.sweep.sources import LoadedEpisode
 from evaluation.tracks.track_data import TrackData
 from fcc_common.validation import Integer, Real, check
+from fcc_env.plant import DEFAULT_SAMPLE_TIME_S
 from fcc_env.uncertainty import PlantUncertainty
 
 __all__ = ["UNKNOWN_FAULTS", "UNKNOWN_ONSET", "GatedEffect", "unknown_fault_episodes"]
@@ -58,7 +59,7 @@ class GatedEffect:
 
     effect: fx.LibraryEffect
     onset: int
-    sample_time_s: float = 10.0
+    sample_time_s: float = DEFAULT_SAMPLE_TIME_S
 
     def __post_init__(self) -> None:
         self.onset = check("onset", self.onset, Integer(0))
