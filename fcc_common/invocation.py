@@ -14,7 +14,7 @@ import shutil
 import sys
 import textwrap
 import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import NoReturn
 
@@ -22,11 +22,14 @@ __all__ = [
     "INPUT_ERRORS",
     "check_out_path",
     "command_parser",
+    "csv_list",
+    "import_from_cwd",
     "os_error_text",
     "out_path",
     "prog_name",
     "refuse",
     "run_command",
+    "user_modules",
 ]
 
 #: What a command refuses in one line with exit code 2, as argparse refuses a bad argument: a
@@ -158,3 +161,29 @@ def check_out_path(flag: str, out: str | os.PathLike) -> Path:
             )
         break
     return path
+
+
+def csv_list(text: str) -> tuple[str, ...]:
+    """An argparse ``type``: a non-empty comma-separated list of names, stripped."""
+    items = tuple(t.strip() for t in text.split(",") if t.strip())
+    if not items:
+        raise argparse.ArgumentTypeError(f"expected a comma-separated list, got {text!r}")
+    return items
+
+
+def import_from_cwd(modules: Sequence[str], importer: Callable[[Iterable[str]], None]) -> None:
+    """``importer(modules)`` (e.g. :func:`diagnosers.registry.import_modules`) finding modules as
+    ``python -m`` would: the current directory first (a console script does not put it on
+    ``sys.path``; local workers inherit the path)."""
+    if not modules:
+        return
+    cwd = os.getcwd()
+    if cwd not in sys.path and "" not in sys.path:
+        sys.path.insert(0, cwd)
+    importer(modules)
+
+
+def user_modules(groups: Iterable[Iterable[str]]) -> tuple[str, ...]:
+    """The modules of a repeatable ``--import`` option (a list of :func:`csv_list` values),
+    flattened, in order, without repeats."""
+    return tuple(dict.fromkeys(m for group in groups for m in group))

@@ -35,6 +35,11 @@ saturation     ``− dt/3600 · saturation_usd_per_h`` while a controller is at 
 trip           ``− trip_usd`` once, on termination (any envelope exit): shutdown and restart.
 =============  ==========================================================================
 
+The terms' names, their order, their kinds (:class:`TermKind`: the margin's three, the
+constraint regions' four, the trip) and the allowed ranges of their prices are one table,
+:data:`REWARD_TABLE`; :data:`REWARD_TERMS` and :data:`CONSTRAINT_TERMS` (what the control study
+counts as time in a constraint region) are read from it.
+
 The prices are reconstructed orders of magnitude, not a refinery's: a crack spread of 60 USD/t,
 coke at 300 USD/t (gas oil lost as product, less the heat its burning returns to the riser),
 2.4 USD per tonne of air (30 kWh/t at 0.08 USD/kWh), and penalties scaled to the margin (about
@@ -49,8 +54,9 @@ from __future__ import annotations
 
 import dataclasses
 import math
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
+from enum import StrEnum
 from typing import Any, SupportsFloat
 
 import gymnasium as gym
@@ -61,29 +67,45 @@ from fcc_env.env import FCCEnv
 from fcc_env.plant import AFTERBURN_WARNING_C, afterburn_delta_C
 
 __all__ = [
+    "CONSTRAINT_TERMS",
     "CONTROL_ENV_ID",
+    "REWARD_TABLE",
     "REWARD_TERMS",
     "EconomicReward",
     "FCCControlEnv",
+    "RewardTerm",
+    "TermKind",
+    "field_ranges",
     "reward_term_arrays",
     "reward_terms",
+    "term_names",
     "total_reward",
 ]
 
 #: The control task's registered id.
 CONTROL_ENV_ID = "FCC-control-v0"
 
-#: The reward's terms, in the order of :func:`reward_terms`.
-REWARD_TERMS: tuple[str, ...] = (
-    "conversion",
-    "coke",
-    "air",
-    "afterburn",
-    "regenerator",
-    "well",
-    "saturation",
-    "trip",
-)
+
+class TermKind(StrEnum):
+    """What a reward term stands for (module doc: the reward is the margin minus penalties)."""
+
+    #: the unit's economic margin: revenue (conversion) and operating costs (coke, air)
+    MARGIN = "margin"
+    #: a penalty while the plant is inside a constraint region (below zero there, 0 outside)
+    CONSTRAINT = "constraint"
+    #: the penalty of a termination, once
+    TRIP = "trip"
+
+
+@dataclass(frozen=True)
+class RewardTerm:
+    """One term of the reward (USD over a sample): its name, its kind, and the fields of
+    :class:`EconomicReward` that price or bound it, each with its allowed range."""
+
+    name: str
+    kind: TermKind
+    fields: tuple[tuple[str, Real], ...]
+
 
 # state indices (spec §1): stage-1 bed, stage-2 bed, catalyst well
 _T_RG1, _T_RG2, _W_SP = 4, 7, 8
@@ -91,19 +113,55 @@ _T_RG1, _T_RG2, _W_SP = 4, 7, 8
 _R_AR, _F_FEED = 1, 4
 
 _PRICE = Real(0.0, 1e7, closed="both")
-_RANGES = {
-    "conversion_usd_per_t": _PRICE,
-    "coke_usd_per_t": _PRICE,
-    "air_usd_per_t": _PRICE,
-    "afterburn_usd_per_C_h": _PRICE,
-    "regenerator_usd_per_C_h": _PRICE,
-    "regenerator_max_C": Real(600.0, 900.0, unit="°C"),
-    "regenerator_min_C": Real(500.0, 700.0, unit="°C"),
-    "well_min_t": Real(0.0, 30.0, unit="t", why="the well holds 30 t at nominal"),
-    "well_usd_per_t_h": _PRICE,
-    "saturation_usd_per_h": _PRICE,
-    "trip_usd": _PRICE,
-}
+
+#: The reward's terms, the one list (module doc: each term's definition): names, order, kinds
+#: and the ranges of their prices are read from here.
+REWARD_TABLE: tuple[RewardTerm, ...] = (
+    RewardTerm("conversion", TermKind.MARGIN, (("conversion_usd_per_t", _PRICE),)),
+    RewardTerm("coke", TermKind.MARGIN, (("coke_usd_per_t", _PRICE),)),
+    RewardTerm("air", TermKind.MARGIN, (("air_usd_per_t", _PRICE),)),
+    RewardTerm("afterburn", TermKind.CONSTRAINT, (("afterburn_usd_per_C_h", _PRICE),)),
+    RewardTerm(
+        "regenerator",
+        TermKind.CONSTRAINT,
+        (
+            ("regenerator_usd_per_C_h", _PRICE),
+            ("regenerator_max_C", Real(600.0, 900.0, unit="°C")),
+            ("regenerator_min_C", Real(500.0, 700.0, unit="°C")),
+        ),
+    ),
+    RewardTerm(
+        "well",
+        TermKind.CONSTRAINT,
+        (
+            ("well_min_t", Real(0.0, 30.0, unit="t", why="the well holds 30 t at nominal")),
+            ("well_usd_per_t_h", _PRICE),
+        ),
+    ),
+    RewardTerm("saturation", TermKind.CONSTRAINT, (("saturation_usd_per_h", _PRICE),)),
+    RewardTerm("trip", TermKind.TRIP, (("trip_usd", _PRICE),)),
+)
+
+
+def term_names(table: Sequence[RewardTerm], kind: TermKind | None = None) -> tuple[str, ...]:
+    """The names of ``table``'s terms (of ``kind`` only, if given), in the table's order.
+
+    >>> term_names(REWARD_TABLE, TermKind.CONSTRAINT)
+    ('afterburn', 'regenerator', 'well', 'saturation')
+    """
+    return tuple(t.name for t in table if kind is None or t.kind is kind)
+
+
+def field_ranges(table: Sequence[RewardTerm]) -> dict[str, Real]:
+    """The allowed range of each :class:`EconomicReward` field ``table`` names, in its order."""
+    return {name: allowed for t in table for name, allowed in t.fields}
+
+
+#: The reward's terms, in the order of :func:`reward_terms`.
+REWARD_TERMS: tuple[str, ...] = term_names(REWARD_TABLE)
+#: The terms whose being below zero marks a sample inside a constraint region.
+CONSTRAINT_TERMS: tuple[str, ...] = term_names(REWARD_TABLE, TermKind.CONSTRAINT)
+_RANGES = field_ranges(REWARD_TABLE)
 
 
 @dataclass(frozen=True)

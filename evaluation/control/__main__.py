@@ -1,3 +1,6 @@
-from evaluation.control.returns import main
+"""``python -m evaluation.control``: see :mod:`evaluation.control.returns_command`."""
 
-raise SystemExit(main())
+from evaluation.control.returns_command import main
+
+if __name__ == "__main__":
+    raise SystemExit(main())

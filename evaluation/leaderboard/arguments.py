@@ -14,13 +14,18 @@ the registry and the result store are imported when a check needs them.
 from __future__ import annotations
 
 import argparse
-import os
-import sys
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any, NoReturn
 
-from fcc_common.invocation import check_out_path, command_parser, out_path
+from fcc_common.invocation import (
+    check_out_path,
+    command_parser,
+    csv_list,
+    import_from_cwd,
+    out_path,
+    user_modules,
+)
 
 __all__ = [
     "CELL_BYTES",
@@ -42,13 +47,6 @@ __all__ = [
     "import_user_modules",
     "user_imports",
 ]
-
-
-def _csv_list(text: str) -> tuple[str, ...]:
-    items = tuple(t.strip() for t in text.split(",") if t.strip())
-    if not items:
-        raise argparse.ArgumentTypeError(f"expected a comma-separated list, got {text!r}")
-    return items
 
 
 def _int_at_least(low: int) -> Callable[[str], int]:
@@ -163,7 +161,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--import",
         dest="imports",
-        type=_csv_list,
+        type=csv_list,
         action="append",
         default=[],
         metavar="MODULE[,MODULE]",
@@ -173,7 +171,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--diagnosers",
-        type=_csv_list,
+        type=csv_list,
         default=None,
         metavar="A,B",
         help="comma-separated registry names (default: every registered diagnoser; "
@@ -181,7 +179,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--scenarios",
-        type=_csv_list,
+        type=csv_list,
         default=None,
         metavar="S,...",
         help="comma-separated scenarios, from nominal,f1,f2,f3,f4 (default: all); with "
@@ -433,7 +431,7 @@ def exit_on_failure(parser: argparse.ArgumentParser, e: BaseException) -> NoRetu
 
 def user_imports(args: argparse.Namespace) -> tuple[str, ...]:
     """The ``--import`` modules, flattened, in order, without repeats."""
-    return tuple(dict.fromkeys(m for group in args.imports for m in group))
+    return user_modules(args.imports)
 
 
 def import_user_modules(args: argparse.Namespace, parser: argparse.ArgumentParser) -> None:
@@ -442,12 +440,9 @@ def import_user_modules(args: argparse.Namespace, parser: argparse.ArgumentParse
     modules = user_imports(args)
     if not modules:
         return
-    cwd = os.getcwd()
-    if cwd not in sys.path and "" not in sys.path:
-        sys.path.insert(0, cwd)
     from diagnosers.registry import import_modules  # the registry imports torch: see above
 
     try:
-        import_modules(modules)
+        import_from_cwd(modules, import_modules)
     except ValueError as e:
         parser.error(f"--import: {e}")

@@ -26,6 +26,10 @@ Diagnosers of your own: ``--import MODULE[,MODULE]`` imports modules that regist
 (:attr:`evaluation.sweep.SweepConfig.imports`); installed packages can use the
 ``fcc_fault_diagnosis.diagnosers`` entry-point group instead (:mod:`diagnosers.registry`).
 
+``--task control`` is the control task's leaderboard, ``python -m evaluation.control``
+(:mod:`evaluation.control.returns_command`): ``--task`` is read first by a parser of its own
+(``parse_known_args``), and the other words go to the command the task names.
+
 Table formatting (:mod:`evaluation.reports.tables`) is separate from computation
 (:func:`evaluation.leaderboard.paper.run`), from writing the files (:mod:`evaluation.reports.outputs`)
 and from the command line (:func:`main`), the only place that prints.
@@ -180,44 +184,37 @@ def resolve_options(
 
 def main(argv: Sequence[str] | None = None) -> int:
     words = list(sys.argv[1:] if argv is None else argv)
-    if _task(words) == "control":
+    task, rest = _split_task(words)
+    if task == "control":
         # the control task's leaderboard has options of its own: its command parses them
-        from evaluation.control.returns import main as control_main
+        from evaluation.control.returns_command import main as control_main
 
-        return control_main(_without_task(words))
+        return control_main(rest)
     parser = build_parser()
     return run_command(parser, lambda args: _leaderboard(args, parser), words)
 
 
-def _task(words: Sequence[str]) -> str | None:
-    """The value of the first ``--task`` of ``words`` (``--task X`` or ``--task=X``), if any.
-    Only an exact ``control`` switches commands; anything else is the parser's to refuse."""
-    for i, word in enumerate(words):
-        if word == "--":
-            return None
-        if word.startswith("--task="):
-            return word.split("=", 1)[1]
-        if word == "--task" and i + 1 < len(words):
-            return words[i + 1]
-    return None
+def _split_task(words: Sequence[str]) -> tuple[str | None, list[str]]:
+    """``--task`` (``--task X`` or ``--task=X``, spelled out) and the other words, by argparse.
 
-
-def _without_task(words: Sequence[str]) -> list[str]:
-    out: list[str] = []
-    skip = False
-    for word in words:
-        if skip:
-            skip = False
-        elif word == "--task":
-            skip = True
-        elif not word.startswith("--task="):
-            out.append(word)
-    return out
+    The task picks the command that parses the rest, so it is read first, alone
+    (``parse_known_args``); anything this cannot read (no value) is left to the leaderboard's
+    parser to refuse, which also refuses a task that is not one of its choices.
+    """
+    first = argparse.ArgumentParser(add_help=False, allow_abbrev=False, exit_on_error=False)
+    first.add_argument("--task")
+    try:
+        known, rest = first.parse_known_args(words)
+    except argparse.ArgumentError:
+        return None, list(words)
+    return known.task, rest
 
 
 def _leaderboard(args: argparse.Namespace, parser: argparse.ArgumentParser) -> int:
     """The work of :func:`main`: a bad value or path found late is refused by
     :func:`~fcc_common.invocation.run_command`, a failed run by :func:`exit_on_failure`."""
+    if args.task == "control":  # an abbreviation of --task, which main does not read
+        parser.error("--task control: spell --task out (an abbreviation is not read)")
     import_user_modules(args, parser)  # before any name is resolved
     if args.track is not None:
         from evaluation.leaderboard.track_runs import main_tracks  # after parsing: see above

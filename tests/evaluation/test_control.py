@@ -136,7 +136,7 @@ def test_a_supervisor_switches_on_the_first_alarm_to_the_diagnosed_faults_set_po
     ],
 )
 def test_the_control_cli_refuses_bad_input_in_one_line(argv, message, capsys):
-    from evaluation.control.returns import main
+    from evaluation.control.returns_command import main
 
     with pytest.raises(SystemExit) as e:
         main(argv)
@@ -153,8 +153,15 @@ def test_the_control_cli_refuses_bad_input_in_one_line(argv, message, capsys):
     ],
 )
 def test_diagnoser_params_are_checked_before_any_work(argv, message, capsys):
-    from evaluation.control.returns import main
+    from evaluation.control.returns_command import main
 
     with pytest.raises(SystemExit):
         main(["--seeds", "1", *argv])
     assert message in capsys.readouterr().err
+
+
+def test_the_study_counts_the_reward_tables_constraint_terms():
+    from evaluation.control import returns
+    from fcc_env.control_task import REWARD_TABLE, TermKind, term_names
+
+    assert returns.CONSTRAINT_TERMS == term_names(REWARD_TABLE, TermKind.CONSTRAINT)

@@ -119,3 +119,33 @@ def test_faults_are_drawn_per_episode_healthy_included():
     env = gym.make("FCC-control-v0")
     seen = {env.reset(seed=s)[1]["scenario"] for s in range(30)}
     assert seen == {"nominal", "f1", "f2", "f3", "f4"}
+
+
+def test_the_term_lists_and_price_ranges_are_read_from_the_one_table():
+    import dataclasses
+
+    from fcc_common.validation import Real
+    from fcc_env.control_task import (
+        CONSTRAINT_TERMS,
+        REWARD_TABLE,
+        RewardTerm,
+        TermKind,
+        field_ranges,
+        term_names,
+    )
+
+    assert term_names(REWARD_TABLE) == REWARD_TERMS
+    assert CONSTRAINT_TERMS == ("afterburn", "regenerator", "well", "saturation")
+    # every field of EconomicReward has its range in the table, in the same order, and no other
+    assert list(field_ranges(REWARD_TABLE)) == [f.name for f in dataclasses.fields(EconomicReward)]
+    # a new term joins the lists of its kind by its row alone: no other list to edit
+    price = Real(0.0, 1e7)
+    grown = (
+        *REWARD_TABLE,
+        RewardTerm("steam", TermKind.MARGIN, (("steam_usd_per_t", price),)),
+        RewardTerm("flare", TermKind.CONSTRAINT, (("flare_usd_per_h", price),)),
+    )
+    assert term_names(grown) == (*REWARD_TERMS, "steam", "flare")
+    assert term_names(grown, TermKind.CONSTRAINT) == (*CONSTRAINT_TERMS, "flare")
+    assert term_names(grown, TermKind.MARGIN)[-1] == "steam"
+    assert list(field_ranges(grown))[-2:] == ["steam_usd_per_t", "flare_usd_per_h"]

@@ -35,3 +35,16 @@ def test_task_detection_is_the_default_leaderboard(capsys) -> None:
         main(["--task", "detection", "--help"])
     assert exit_.value.code == 0
     assert "--track" in capsys.readouterr().out
+
+
+def test_task_is_read_wherever_it_stands_and_only_spelled_out(capsys) -> None:
+    # --task read first by its own parser: the words around it go to the control command
+    with pytest.raises(SystemExit) as exit_:
+        main(["--seeds", "0", "--task=control", "--diagnosers", ""])
+    assert exit_.value.code == 2
+    assert "evaluation.control: error: --seeds 0" in capsys.readouterr().err
+    # an abbreviation would otherwise run the detection leaderboard under the control task's name
+    with pytest.raises(SystemExit) as exit_:
+        main(["--tas", "control", "--quick"])
+    assert exit_.value.code == 2
+    assert "spell --task out" in capsys.readouterr().err
