@@ -51,12 +51,19 @@ def bench_batch(
     regulatory: bool = False,
 ) -> float:
     """Samples/s of :func:`fcc_env.simulate_episodes` (scenario f2), best of ``repeats``."""
-    fcc_env.simulate_episodes([0, 1], 50, regulatory=regulatory)  # warm-up
+    fcc_env.simulate_episodes(
+        [0, 1], 50, plant=fcc_env.PlantConfig.build(regulatory=regulatory)
+    )  # warm-up
     best = np.inf
     for r in range(repeats):
         seeds = list(range(r * n_episodes, (r + 1) * n_episodes))
         t0 = time.perf_counter()
-        fcc_env.simulate_episodes(seeds, n_samples, scenario="f2", regulatory=regulatory)
+        fcc_env.simulate_episodes(
+            seeds,
+            n_samples,
+            fault=fcc_env.FaultSpec(scenario="f2"),
+            plant=fcc_env.PlantConfig.build(regulatory=regulatory),
+        )
         best = min(best, time.perf_counter() - t0)
     return n_episodes * n_samples / best
 

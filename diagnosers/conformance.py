@@ -68,15 +68,17 @@ def default_episodes(
 
     reg = True if closed_loop else None
 
-    def sim(seeds: list[int], n: int, **fault: Any) -> list[Episode]:
-        return Episode.from_batch(fcc_env.simulate_episodes(seeds, n, regulatory=reg, **fault))
+    plant = fcc_env.PlantConfig.build(regulatory=reg)
+
+    def sim(seeds: list[int], n: int, fault: Any = None) -> list[Episode]:
+        return Episode.from_batch(fcc_env.simulate_episodes(seeds, n, fault=fault, plant=plant))
 
     train = sim([1000, 1001], n_train)
-    [test] = sim([3], n_test, scenario="f1", fault_time=2 * n_test // 3)
+    [test] = sim([3], n_test, fcc_env.FaultSpec(scenario="f1", onset=2 * n_test // 3))
     faulty = [
         ep
         for scenario in ("f1", "f2")
-        for ep in sim([11, 12], n_test, scenario=scenario, fault_time=n_test // 2)
+        for ep in sim([11, 12], n_test, fcc_env.FaultSpec(scenario=scenario, onset=n_test // 2))
     ]
     return train, test, faulty
 

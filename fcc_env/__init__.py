@@ -9,7 +9,8 @@ The modules, by job:
   the noise and the envelope; :mod:`~fcc_env.effects`, :mod:`~fcc_env.uncertainty`: undeclared
   effects and per-episode plant draws;
 - :mod:`~fcc_env.episode_setup`: one episode's set-up, shared by :mod:`~fcc_env.env` (``FCC-v0``) and
-  :mod:`~fcc_env.simulation` (:func:`simulate_episodes`);
+  :mod:`~fcc_env.simulation` (:func:`simulate_episodes`, which takes the fault and the plant whole;
+  :mod:`~fcc_env.env_keywords`: the env's keywords as those objects, :func:`env_request`);
 - :mod:`~fcc_env.regulatory`, :mod:`~fcc_env.closed_loop`: the regulatory layer and what a
   closed-loop plant shows (``FCC-closedloop-v0``); :mod:`~fcc_env.closed_loop_analysis`: the
   linearised closed loop's eigenvalues; :mod:`~fcc_env.closed_loop_report` and
@@ -38,6 +39,7 @@ Importing the package registers ``FCC-v0``:
 from gymnasium.envs.registration import register, registry
 
 from fcc_env.control_task import CONTROL_ENV_ID, EconomicReward
+from fcc_env.env_keywords import env_request
 from fcc_env.excitation import Excitation
 from fcc_env.integrator import integrate_step
 from fcc_env.params import (
@@ -123,6 +125,7 @@ __all__ = [
     "RegulatoryLayer",
     "Scenario",
     "SetpointProgram",
+    "env_request",
     "integrate_step",
     "measure",
     "rhs",

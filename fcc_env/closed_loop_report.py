@@ -138,10 +138,15 @@ def fault_deltas(fault: str, loop: str, config: ReportConfig) -> FaultDeltas:
     if loop not in LOOPS:
         raise invalid("loop", loop, f"one of {list(LOOPS)}")
     regulatory = True if loop == "closed" else None
-    healthy = simulate_episodes(list(config.seeds), config.horizon, regulatory=regulatory)
+    healthy = simulate_episodes(
+        list(config.seeds), config.horizon, plant=PlantConfig.build(regulatory=regulatory)
+    )
     fault_spec = FaultSpec(scenario=fault, onset=config.onset)
     faulty = simulate_episodes(
-        list(config.seeds), config.horizon, fault=fault_spec, regulatory=regulatory
+        list(config.seeds),
+        config.horizon,
+        plant=PlantConfig.build(regulatory=regulatory),
+        fault=fault_spec,
     )
     ok = (healthy.terminated_at < 0) & (faulty.terminated_at < 0)
     if not ok.any():
@@ -319,7 +324,11 @@ def count_terminations(
         reasons: Counter[str] = Counter()
         for start in range(first_seed, first_seed + n, chunk):
             seeds = list(range(start, min(start + chunk, first_seed + n)))
-            b = simulate_episodes(seeds, horizon, regulatory=True if loop == "closed" else None)
+            b = simulate_episodes(
+                seeds,
+                horizon,
+                plant=PlantConfig.build(regulatory=True if loop == "closed" else None),
+            )
             reasons.update(r for r in b.termination_reasons if r is not None)
         counts[loop] = {"terminations": sum(reasons.values()), "reasons": dict(reasons)}
     return {

@@ -29,7 +29,7 @@ def _demo(args: argparse.Namespace) -> int:
     check_out_path("--out", args.out)
     episodes, onsets = {}, {}
     for scenario in fcc_env.SCENARIOS:
-        b = fcc_env.simulate_episodes([args.seed], scenario=scenario)
+        b = fcc_env.simulate_episodes([args.seed], fault=fcc_env.FaultSpec(scenario=scenario))
         episodes[scenario] = b.observations[0]
         onsets[scenario] = b.fault_onsets[0]
     path = plot_scenarios(episodes, onsets, b.sample_time_s, Path(args.out) / "scenarios.png")

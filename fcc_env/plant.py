@@ -139,6 +139,28 @@ class PlantConfig:
     def replace(self, **changes: Any) -> PlantConfig:
         return dataclasses.replace(self, **changes)
 
+    def to_json(self) -> dict[str, Any]:
+        """Everything that defines the plant, as JSON values (what result stores hash: two
+        plants with equal dicts simulate equal episodes for equal seeds and faults).
+
+        >>> PlantConfig().to_json()["regulatory"] is None
+        True
+        >>> PlantConfig.build(regulatory=True).to_json()["regulatory"]["loops"]
+        ['T_rx', 'T_rg1']
+        """
+        return _json_value(dataclasses.asdict(self))
+
+
+def _json_value(value: Any) -> Any:
+    """``value`` (nested dicts, tuples, floats of a dataclass's ``asdict``) as JSON values."""
+    if isinstance(value, dict):
+        return {str(k): _json_value(v) for k, v in value.items()}
+    if isinstance(value, list | tuple):
+        return [_json_value(v) for v in value]
+    if isinstance(value, np.generic):
+        return value.item()
+    return value
+
 
 @functools.lru_cache(maxsize=256)
 def _initial_setpoints(params: FCCParams) -> tuple[float, float]:

@@ -5,7 +5,7 @@
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Mapping, Sequence, Sized
+from collections.abc import Sequence, Sized
 from dataclasses import dataclass
 from typing import Any
 
@@ -38,7 +38,6 @@ from fcc_env.plant import (
     TERMINATION_REASONS,
     PlantConfig,
     envelope_codes,
-    plant_from_request,
 )
 from fcc_env.regulatory import check_setpoints, initial_controller_state
 from fcc_env.scenarios import (
@@ -46,7 +45,6 @@ from fcc_env.scenarios import (
     EpisodeFault,
     FaultSpec,
     Scenario,
-    fault_from_request,
 )
 from fcc_env.uncertainty import PlantUncertainty
 
@@ -138,23 +136,18 @@ class BatchResult:
     controller_saturated: np.ndarray | None = None
 
 
-def _episode_faults(
-    fault: FaultSpec | Sequence[FaultSpec] | None, keywords: Mapping[str, Any], n: int
-) -> list[FaultSpec]:
-    """The fault of each of ``n`` episodes: ``fault`` (one spec, or one per episode), or the
-    env's ``keywords``, whose ``scenario`` may be one name per episode."""
-    if fault is not None and not isinstance(fault, FaultSpec):
-        if isinstance(fault, str) or not isinstance(fault, Sequence):
-            raise invalid("fault", fault, "a FaultSpec, one FaultSpec per seed, or None")
-        specs = [fault_from_request(f, keywords) for f in fault]
-    else:
-        scenario = keywords.get("scenario")
-        if scenario is None or isinstance(scenario, str):
-            return [fault_from_request(fault, keywords)] * n
-        base = fault_from_request(fault, {**keywords, "scenario": None})
-        specs = [base.replace(scenario=sc) for sc in scenario]
+def _episode_faults(fault: FaultSpec | Sequence[FaultSpec] | None, n: int) -> list[FaultSpec]:
+    """The fault of each of ``n`` episodes: ``fault`` (one spec for all, or one per episode)."""
+    if fault is None or isinstance(fault, FaultSpec):
+        return [FaultSpec() if fault is None else fault] * n
+    if isinstance(fault, str) or not isinstance(fault, Sequence):
+        raise invalid("fault", fault, "a FaultSpec, one FaultSpec per seed, or None")
+    specs = list(fault)
+    bad = [f for f in specs if not isinstance(f, FaultSpec)]
+    if bad:
+        raise invalid("fault", bad[0], "a FaultSpec (one per seed)")
     if len(specs) != n:
-        raise ValueError(f"got {len(specs)} faults (scenarios) for {n} seeds")
+        raise ValueError(f"got {len(specs)} faults for {n} seeds; allowed: one, or one per seed")
     return specs
 
 
@@ -167,18 +160,6 @@ def simulate_episodes(
     plant_effects: Any = (),
     plant_uncertainty: PlantUncertainty | None = None,
     memory_budget_bytes: float = DEFAULT_MEMORY_BUDGET_BYTES,
-    scenario: str | Sequence[str] | None = None,
-    fault_time: int | None = None,
-    fault_magnitude: float | None = None,
-    fault_profile: str | None = None,
-    ramp_samples: int | None = None,
-    valve_beta: float | None = None,
-    sample_time_s: float | None = None,
-    rk4_substeps: int | None = None,
-    excitation: Any = None,
-    noise_scale: float | None = None,
-    params: FCCParams | None = None,
-    regulatory: Any = None,
 ) -> BatchResult:
     """Simulate many seeded episodes at once, identical to ``FCC-v0`` with zero actions.
 
@@ -186,13 +167,11 @@ def simulate_episodes(
         seeds: one episode per seed.
         n_samples: samples per episode (:data:`N_SAMPLES_RANGE`), the env's ``horizon``.
         fault: the fault asked for, a :class:`fcc_env.FaultSpec` or one per seed (default:
-            nominal). Or, as for ``gym.make``, the env's keywords ``scenario``, ``fault_time``,
-            ``fault_magnitude``, ``fault_profile``, ``ramp_samples`` (``scenario`` may be one name
-            per seed); never both.
-        plant: the plant, a :class:`fcc_env.PlantConfig` (default: the paper's). Or the env's
-            keywords ``valve_beta``, ``sample_time_s``, ``rk4_substeps``, ``excitation``,
-            ``noise_scale``, ``params``, ``regulatory`` (``None`` = not given); never both. A
-            plant with a :class:`fcc_env.RegulatoryLayer` runs closed loop, as
+            nominal). ``FaultSpec(scenario="f1", onset=150)`` is what ``gym.make``'s keywords
+            ``scenario=``, ``fault_time=`` build (:func:`fcc_env.scenarios.fault_from_request`).
+        plant: the plant, a :class:`fcc_env.PlantConfig` (default: the paper's), passed whole;
+            ``PlantConfig.build(noise_scale=2.0, regulatory=True)`` is what the env's keywords
+            build. A plant with a :class:`fcc_env.RegulatoryLayer` runs closed loop, as
             ``FCC-closedloop-v0``.
         plant_effects: as for the env (:mod:`fcc_env.effects`); one effect object serves the
             whole batch, with a leading episode axis on its arrays.
@@ -217,26 +196,10 @@ def simulate_episodes(
         check_memory(len(seeds), n_samples, memory_budget_bytes)  # before copying the seeds
     seeds = list(check("seeds", seeds, SEEDS_RANGE))
     check_memory(len(seeds), n_samples, memory_budget_bytes)
-    fault_keywords = {
-        "scenario": scenario,
-        "fault_time": fault_time,
-        "fault_magnitude": fault_magnitude,
-        "fault_profile": fault_profile,
-        "ramp_samples": ramp_samples,
-    }
-    specs = _episode_faults(fault, fault_keywords, len(seeds))
-    config = plant_from_request(
-        plant,
-        {
-            "valve_beta": valve_beta,
-            "sample_time_s": sample_time_s,
-            "rk4_substeps": rk4_substeps,
-            "excitation": excitation,
-            "noise_scale": noise_scale,
-            "params": params,
-            "regulatory": regulatory,
-        },
-    )
+    specs = _episode_faults(fault, len(seeds))
+    if plant is not None and not isinstance(plant, PlantConfig):
+        raise invalid("plant", plant, "a PlantConfig or None (the paper's plant)")
+    config = PlantConfig() if plant is None else plant
     effects = fx.resolve(plant_effects)
     B, T = len(seeds), int(n_samples)
     configs = [config] * B

@@ -12,7 +12,7 @@ print(
     sum(1 for x in h.termination_reasons if x),
     f" max gap per episode: median {np.median(gap.max(1)):.1f} p90 {np.percentile(gap.max(1), 90):.1f} max {gap.max():.1f}; nominal steady gap {gap[:, 0].mean():.1f}",
 )
-ex = fcc_env.simulate_episodes([0], 4000, excitation=False)
+ex = fcc_env.simulate_episodes([0], 4000, plant=fcc_env.PlantConfig.build(excitation=False))
 for sc, m in (
     ("f3", 0.03),
     ("f3", 0.05),
@@ -22,10 +22,15 @@ for sc, m in (
     ("f1", 0.13),
     ("f4", 0.7),
 ):
-    r = fcc_env.simulate_episodes(seeds, 4000, scenario=sc, fault_magnitude=m)
+    r = fcc_env.simulate_episodes(seeds, 4000, fault=fcc_env.FaultSpec(scenario=sc, magnitude=m))
     g = r.states[:, :, 9] - r.states[:, :, 4]
     bad = [i for i, x in enumerate(r.termination_reasons) if x]
-    ne = fcc_env.simulate_episodes([0], 4000, scenario=sc, fault_magnitude=m, excitation=False)
+    ne = fcc_env.simulate_episodes(
+        [0],
+        4000,
+        fault=fcc_env.FaultSpec(scenario=sc, magnitude=m),
+        plant=fcc_env.PlantConfig.build(excitation=False),
+    )
     gne = (ne.states[:, :, 9] - ne.states[:, :, 4]).max()
     print(
         f"{sc} m={m}: 100 seeds terminated {len(bad)} {sorted(set(r.termination_reasons[i] for i in bad))};"

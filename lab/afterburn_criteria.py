@@ -15,7 +15,9 @@ for sc, mags in (
     ("f3", [0.03, 0.05, 0.1, 0.15, 0.2, 0.25, 0.3, 0.4, 0.5, 0.7, 0.9]),
 ):
     for m in mags:
-        r = fcc_env.simulate_episodes(seeds, 4000, scenario=sc, fault_magnitude=m)
+        r = fcc_env.simulate_episodes(
+            seeds, 4000, fault=fcc_env.FaultSpec(scenario=sc, magnitude=m)
+        )
         X = r.states
         gap = X[:, :, 9] - X[:, :, 4]
         td = np.maximum(X[:, :, 9], X[:, :, 10])

@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 from scipy.optimize import least_squares
 
-from fcc_env import simulate_episodes
+from fcc_env import PlantConfig, simulate_episodes
 from fcc_env.params import NOMINAL_INPUTS
 from fcc_env.regulatory import RegulatoryLayer
 
@@ -39,10 +39,7 @@ class Step:
 
 
 def response(col: int, delta: float, channel: int, regulatory=None) -> np.ndarray:
-    b = simulate_episodes(
-        [0], N, noise_scale=0.0, excitation=False, regulatory=regulatory,
-        plant_effects=[Step(col, delta)],
-    )  # fmt: skip
+    b = simulate_episodes([0], N, plant=PlantConfig.build(noise_scale=0.0, excitation=False, regulatory=regulatory), plant_effects=[Step(col, delta)])  # fmt: skip
     y = b.y_clean[0, :, channel]
     return (y - y[STEP_AT - 1])[STEP_AT:] / delta
 

@@ -36,8 +36,9 @@ SCENARIOS = ["nominal", "f1", "f2", "f3", "f4"]
 
 
 def episodes(seeds: list[int], scenario: str) -> list[Episode]:
-    kwargs = {} if scenario == "nominal" else {"fault_time": ONSET}
-    res = fcc_env.simulate_episodes(seeds, N_SAMPLES, scenario=scenario, **kwargs)
+    onset = None if scenario == "nominal" else ONSET
+    fault = fcc_env.FaultSpec(scenario=scenario, onset=onset)
+    res = fcc_env.simulate_episodes(seeds, N_SAMPLES, fault=fault)
     return Episode.from_batch(res)
 
 

@@ -91,8 +91,16 @@ def layer(program: str) -> RegulatoryLayer | bool:
 def run_case(text: str | None, pname: str | None, truth: float | None, seed: int, reg) -> str:
     effects = [] if text is None else [fx.parse(text) if isinstance(text, str) else text]
     t0 = time.perf_counter()
-    data = d.from_batch(fcc_env.simulate_episodes([seed], N, plant_effects=effects, regulatory=reg))
-    floor = d.heldout_rmse(d.from_batch(fcc_env.simulate_episodes([seed], N, regulatory=reg)))
+    data = d.from_batch(
+        fcc_env.simulate_episodes(
+            [seed], N, plant=fcc_env.PlantConfig.build(regulatory=reg), plant_effects=effects
+        )
+    )
+    floor = d.heldout_rmse(
+        d.from_batch(
+            fcc_env.simulate_episodes([seed], N, plant=fcc_env.PlantConfig.build(regulatory=reg))
+        )
+    )
     rep = d.discover(data, max_effects=2, plots=False).to_json()
     named = rep["effects"][0]["id"] if rep["effects"] else "none"
     hidden = fx.parse(text).effect_id if isinstance(text, str) else None

@@ -16,7 +16,8 @@ T = 4000
 
 
 def run(sc, m, seeds=SEEDS, n=T, **kw):
-    return fcc_env.simulate_episodes(seeds, n, scenario=sc, fault_magnitude=m, **kw)
+    fault, plant = fcc_env.env_request(scenario=sc, fault_magnitude=m, **kw)
+    return fcc_env.simulate_episodes(seeds, n, fault=fault, plant=plant)
 
 
 def summary(r):

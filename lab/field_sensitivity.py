@@ -18,7 +18,7 @@ for arg in sys.argv[1:]:
     h = float(h)
     for sgn in (+1, -1):
         p = FCCParams().replace(**{f: getattr(FCCParams(), f) * (1 + sgn * h)})
-        r = fcc_env.simulate_episodes(seeds, 4000, params=p)
+        r = fcc_env.simulate_episodes(seeds, 4000, plant=fcc_env.PlantConfig.build(params=p))
         d = r.y_clean - nom.y_clean
         rms = np.sqrt((d[:, :, 3:8] ** 2).mean(axis=1)).mean(axis=0)
         nt = sum(1 for x in r.termination_reasons if x)

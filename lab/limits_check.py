@@ -33,9 +33,14 @@ for sc, m in (
     ("f3", 0.1),
     ("f4", 0.7),
 ):
-    a = fcc_env.simulate_episodes(range(100), 4000, scenario=sc, fault_magnitude=m)
+    a = fcc_env.simulate_episodes(
+        range(100), 4000, fault=fcc_env.FaultSpec(scenario=sc, magnitude=m)
+    )
     b = fcc_env.simulate_episodes(
-        range(40), 4000, scenario=sc, fault_magnitude=m, plant_uncertainty=PlantUncertainty()
+        range(40),
+        4000,
+        fault=fcc_env.FaultSpec(scenario=sc, magnitude=m),
+        plant_uncertainty=PlantUncertainty(),
     )
     ca, wa, ta = crit(a)
     cb, wb, tb = crit(b)

@@ -43,7 +43,9 @@ def fitted(cusum) -> Diagnoser:
 
 @pytest.fixture(scope="module")
 def faulty() -> Episode:
-    [ep] = Episode.from_batch(fcc_env.simulate_episodes([0], 400, scenario="f1", fault_time=200))
+    [ep] = Episode.from_batch(
+        fcc_env.simulate_episodes([0], 400, fault=fcc_env.FaultSpec(scenario="f1", onset=200))
+    )
     return ep
 
 

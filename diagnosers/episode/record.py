@@ -118,7 +118,8 @@ class Episode:
         >>> import fcc_env, diagnosers
         >>> batch = fcc_env.simulate_episodes([1000, 1001], 300)
         >>> det = diagnosers.make("limits").fit(diagnosers.Episode.from_batch(batch))
-        >>> test = fcc_env.simulate_episodes([0], 300, scenario="f1", fault_time=150)
+        >>> f1 = fcc_env.FaultSpec(scenario="f1", onset=150)
+        >>> test = fcc_env.simulate_episodes([0], 300, fault=f1)
         >>> [ep] = diagnosers.Episode.from_batch(test)
         >>> ep.scenario, ep.seed, ep.fault_onset, det.detect(ep).alarm.shape
         ('f1', 0, 150, (300,))

@@ -110,15 +110,17 @@ class FaultDirections:
         window = self.window
         regulatory = True if closed_loop else None  # the plant the detector reads
         healthy = fcc_env.simulate_episodes(
-            self.seeds, fcc_env.DEFAULT_N_SAMPLES, regulatory=regulatory
+            self.seeds,
+            fcc_env.DEFAULT_N_SAMPLES,
+            plant=fcc_env.PlantConfig.build(regulatory=regulatory),
         )
         out = {}
         for f in self.faults:
             res = fcc_env.simulate_episodes(
                 self.seeds,
                 fcc_env.DEFAULT_N_SAMPLES,
+                plant=fcc_env.PlantConfig.build(regulatory=regulatory),
                 fault=FaultSpec(scenario=f),
-                regulatory=regulatory,
             )
             diffs = []
             for b in range(len(self.seeds)):

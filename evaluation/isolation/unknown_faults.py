@@ -33,7 +33,6 @@ from evaluation.sweep.sources import LoadedEpisode
 from evaluation.tracks.track_data import TrackData
 from fcc_common.validation import Integer, Real, check
 from fcc_env.plant import DEFAULT_SAMPLE_TIME_S
-from fcc_env.uncertainty import PlantUncertainty
 
 __all__ = ["UNKNOWN_FAULTS", "UNKNOWN_ONSET", "GatedEffect", "unknown_fault_episodes"]
 
@@ -115,10 +114,10 @@ def unknown_fault_episodes(
         res = fcc_env.simulate_episodes(
             list(seeds),
             t.n_samples,
-            scenario="nominal",
-            noise_scale=t.noise_scale,
+            fault=fcc_env.FaultSpec(scenario="nominal"),
+            plant=t.plant,
             plant_effects=[effect],
-            plant_uncertainty=PlantUncertainty() if t.plant_variation else None,
+            plant_uncertainty=t.plant_draw,
         )
         for b, seed in enumerate(res.seeds):
             term = int(res.terminated_at[b])

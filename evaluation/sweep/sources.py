@@ -17,13 +17,13 @@ planned onset, the termination sample and its reason to the records.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Protocol, runtime_checkable
 
 import fcc_env
 from diagnosers.episode.record import Episode
-from fcc_common.validation import Boolean, IntegerSequence, OptionSequence, check
-from fcc_env.plant import NOISE_SCALE_RANGE, SAMPLE_TIME_RANGE
+from fcc_common.validation import IntegerSequence, OptionSequence, check, invalid
+from fcc_env.plant import PlantConfig
 from fcc_env.scenarios import (
     DEFAULT_N_SAMPLES,
     DEFAULT_RAMP_SAMPLES,
@@ -113,8 +113,9 @@ class SimulatedData:
             ``scenario`` is replaced by each test scenario (default: the paper's onsets and
             magnitudes, abrupt). ``magnitude_scale=0.7`` gives the smaller faults of the
             validation protocol (:mod:`evaluation.leaderboard` ``--validation``).
-        excitation, noise_scale, sample_time_s: the plant's operation, passed to
-            :func:`fcc_env.simulate_episodes` for training and test episodes alike.
+        plant: the plant and its operation (a :class:`fcc_env.PlantConfig`, default the
+            paper's), passed whole to :func:`fcc_env.simulate_episodes` for training and test
+            episodes alike (:meth:`fcc_env.PlantConfig.to_json` is in the store key).
     """
 
     scenarios: tuple[str, ...] = ("nominal", "f1", "f2", "f3", "f4")
@@ -122,9 +123,7 @@ class SimulatedData:
     train_seeds: tuple[int, ...] = tuple(range(TRAIN_SEED_BASE, TRAIN_SEED_BASE + 5))
     n_samples: int = DEFAULT_N_SAMPLES
     fault: FaultSpec | None = None
-    excitation: bool = True
-    noise_scale: float = 1.0
-    sample_time_s: float = 10.0
+    plant: PlantConfig = field(default_factory=PlantConfig)
 
     @property
     def fault_spec(self) -> FaultSpec:
@@ -142,9 +141,8 @@ class SimulatedData:
                 f"the episodes it was trained on); both hold {common}"
             )
         n = check("n_samples", self.n_samples, N_SAMPLES_RANGE)
-        check("excitation", self.excitation, Boolean())
-        check("noise_scale", self.noise_scale, NOISE_SCALE_RANGE)
-        check("sample_time_s", self.sample_time_s, SAMPLE_TIME_RANGE)
+        if not isinstance(self.plant, PlantConfig):
+            raise invalid("plant", self.plant, "an fcc_env.PlantConfig")
         spec = self.fault_spec
         for sc in self.scenarios:
             try:
@@ -166,9 +164,7 @@ class SimulatedData:
             "n_samples": self.n_samples,
             "train_seeds": list(self.train_seeds),
             "fault": fault,
-            "excitation": self.excitation,
-            "noise_scale": self.noise_scale,
-            "sample_time_s": self.sample_time_s,
+            "plant": self.plant.to_json(),
         }
 
     def describe(self) -> DataDescription:
@@ -194,7 +190,7 @@ class SimulatedData:
             spec.magnitude_scale == 1.0
             and spec.profile is FaultProfile.ABRUPT
             and spec.magnitude is None
-            and self.noise_scale == 1.0
+            and self.plant.noise_scale == 1.0
         )
         return DataDescription(
             label=f"{fcc_env.ENV_ID} ({fcc_env.MODEL_VERSION})",
@@ -210,9 +206,7 @@ class SimulatedData:
             seeds,
             self.n_samples,
             self.fault_spec.replace(scenario=scenario),
-            excitation=self.excitation,
-            noise_scale=self.noise_scale,
-            sample_time_s=self.sample_time_s,
+            plant=self.plant,
         )
 
     def train_episodes(self) -> list[Episode]:
@@ -243,23 +237,13 @@ def simulate_loaded(
     n_samples: int,
     spec: FaultSpec,
     *,
-    excitation: bool = True,
-    noise_scale: float = 1.0,
-    sample_time_s: float = 10.0,  # the env's default sample time [s]
+    plant: PlantConfig | None = None,
     plant_uncertainty: PlantUncertainty | None = None,
-    regulatory: bool = False,
 ) -> list[LoadedEpisode]:
-    """Simulate ``seeds`` with the fault ``spec`` and cut each at its termination sample
-    (``regulatory``: on the closed-loop plant, :class:`fcc_env.RegulatoryLayer`)."""
+    """Simulate ``seeds`` with the fault ``spec`` on ``plant`` (default: the paper's; with a
+    :class:`fcc_env.RegulatoryLayer`, closed loop) and cut each at its termination sample."""
     res = fcc_env.simulate_episodes(
-        list(seeds),
-        int(n_samples),
-        fault=spec,
-        excitation=excitation,
-        noise_scale=noise_scale,
-        sample_time_s=sample_time_s,
-        plant_uncertainty=plant_uncertainty,
-        regulatory=regulatory or None,
+        list(seeds), int(n_samples), fault=spec, plant=plant, plant_uncertainty=plant_uncertainty
     )
     out = []
     # Episode.from_batch cuts each episode at its termination and drops an onset it never reached

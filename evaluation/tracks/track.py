@@ -45,6 +45,7 @@ from evaluation.tracks.distributions import (
     check_distribution,
 )
 from fcc_common.validation import Boolean, Integer, Options, Real, check, invalid
+from fcc_env.plant import PlantConfig
 from fcc_env.scenarios import (
     DEFAULT_N_SAMPLES,
     FAULTS,
@@ -53,6 +54,7 @@ from fcc_env.scenarios import (
     FaultSpec,
     Scenario,
 )
+from fcc_env.uncertainty import PlantUncertainty
 
 __all__ = [
     "FAULT_NAMES",
@@ -265,6 +267,20 @@ class Track:
     @property
     def train_seeds(self) -> range:
         return range(self.train_seed_start, self.train_seed_start + self.n_train)
+
+    @property
+    def plant(self) -> PlantConfig:
+        """The track's plant, whole: the paper's, with the track's noise scale, under the
+        default regulatory layer on a closed-loop track (what every episode of the track runs
+        on; :meth:`fcc_env.PlantConfig.to_json` is in its store keys)."""
+        return PlantConfig.build(
+            noise_scale=self.noise_scale, regulatory=True if self.closed_loop else None
+        )
+
+    @property
+    def plant_draw(self) -> PlantUncertainty | None:
+        """Each episode's plant drawn by its seed (``plant_variation``), or ``None``."""
+        return PlantUncertainty() if self.plant_variation else None
 
     @property
     def train_fault_seeds(self) -> range:

@@ -20,13 +20,8 @@ from fcc_common.validation import invalid
 from fcc_env.closed_loop import CLOSED_LOOP_CHANNELS
 from fcc_env.params import INPUT_NAMES, MEASUREMENT_NAMES
 from fcc_env.plant import PlantConfig
-from fcc_env.regulatory import RegulatoryLayer
 from fcc_env.scenarios import FaultSpec
 from fcc_env.simulation import operating_program, simulate_inputs
-from fcc_env.uncertainty import PlantUncertainty
-
-#: the tracks' sample time [s] (the env's default)
-TRACK_SAMPLE_TIME_S = 10.0
 
 #: the plant inputs that are also measured (Table 1), as (input index, measurement index)
 _MEASURED_INPUTS = tuple(
@@ -86,7 +81,12 @@ class TrackData:
     def store_key(self) -> dict[str, Any]:
         key = self.track.to_json()
         del key["n_healthy"], key["n_faulty"], key["description"]
-        return {"kind": "track", "model_version": fcc_env.MODEL_VERSION, "track": key}
+        return {
+            "kind": "track",
+            "model_version": fcc_env.MODEL_VERSION,
+            "track": key,
+            "plant": self.track.plant.to_json(),
+        }
 
     def cells(self) -> list[tuple[str, int]]:
         return self.track.test_cells()
@@ -97,21 +97,16 @@ class TrackData:
         return {
             "model_version": fcc_env.MODEL_VERSION,
             "n_samples": t.n_samples,
-            "noise_scale": t.noise_scale,
+            "plant": t.plant.to_json(),
             "plant_variation": t.plant_variation,
-            **({"closed_loop": True} if t.closed_loop else {}),
             "train_seeds": [t.train_seeds.start, t.train_seeds.stop],
         }
 
     def simulate(self, seeds: Sequence[int], spec: FaultSpec) -> list[LoadedEpisode]:
         """Episodes of ``seeds`` with the fault ``spec``, under the track's noise and plant."""
+        track = self.track
         return simulate_loaded(
-            seeds,
-            self.track.n_samples,
-            spec,
-            noise_scale=self.track.noise_scale,
-            plant_uncertainty=PlantUncertainty() if self.track.plant_variation else None,
-            regulatory=self.track.closed_loop,
+            seeds, track.n_samples, spec, plant=track.plant, plant_uncertainty=track.plant_draw
         )
 
     def train_episodes(self) -> list[Episode]:
@@ -160,14 +155,14 @@ class TrackData:
             ep = self.simulate([seed], FaultSpec())[0].episode
             assert ep.y_clean is not None
             return ep.y_clean
-        replay = MeasuredInputs(measured, TRACK_SAMPLE_TIME_S)  # checks the shape and values
+        plant = self.track.plant
+        replay = MeasuredInputs(measured, plant.sample_time_s)  # checks the shape and values
         res = fcc_env.simulate_episodes(
             [seed],
             replay.y.shape[0],
+            plant=plant,
             plant_effects=[replay],
-            noise_scale=self.track.noise_scale,
-            sample_time_s=TRACK_SAMPLE_TIME_S,
-            plant_uncertainty=PlantUncertainty() if self.track.plant_variation else None,
+            plant_uncertainty=self.track.plant_draw,
         )
         return np.asarray(res.y_clean[0], dtype=np.float64)
 
@@ -191,7 +186,7 @@ class TrackData:
         (``lab/closed_f3_limit.py``); a row at what the measured channels allow would estimate
         the drift (an observer), which is not built. Returns ``(T, 8)``, the Table 1 channels.
         """
-        plant = PlantConfig(regulatory=RegulatoryLayer())
+        plant = self.track.plant
         if record is None:
             twin = fcc_env.simulate_episodes([seed], self.track.n_samples, plant=plant)
             record = twin.y_clean[0]
@@ -206,7 +201,7 @@ class TrackData:
         for name in ("u_F", "R_ar", "T_ar", "T_fp"):
             u[:, INPUT_NAMES.index(name)] = record[:, CLOSED_LOOP_CHANNELS.index(name)]
         x0 = PlantConfig().initial_state()
-        sim = simulate_inputs(u, x0=x0, sample_time_s=TRACK_SAMPLE_TIME_S)
+        sim = simulate_inputs(u, x0=x0, sample_time_s=self.track.plant.sample_time_s)
         return np.asarray(sim.y_clean, dtype=np.float64)
 
     def describe(self) -> DataDescription:

@@ -16,7 +16,8 @@ FAST = {"max_epochs": 300, "mem_max_epochs": 20}
 
 
 def _episodes(seeds, n=2000, scenario="nominal", **kw):
-    b = fcc_env.simulate_episodes(seeds, n, scenario=scenario, **kw)
+    fault, plant = fcc_env.env_request(scenario=scenario, **kw)
+    b = fcc_env.simulate_episodes(seeds, n, fault=fault, plant=plant)
     return [
         Episode(b.observations[i].astype(float), fcc_env.MEASUREMENT_NAMES, 10.0, b.fault_onsets[i])
         for i in range(len(seeds))

@@ -29,7 +29,7 @@ ROOT = Path(__file__).resolve().parents[2]
 # ---- Episode.from_batch ------------------------------------------------------------------------
 @pytest.fixture(scope="module")
 def batch() -> fcc_env.BatchResult:
-    return fcc_env.simulate_episodes([3, 4], 200, scenario="f1", fault_time=120)
+    return fcc_env.simulate_episodes([3, 4], 200, fault=fcc_env.FaultSpec(scenario="f1", onset=120))
 
 
 def test_from_batch_carries_labels_and_clean_data(batch) -> None:

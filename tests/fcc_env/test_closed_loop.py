@@ -62,7 +62,12 @@ def rollout(n, seed=0, actions=None, env_id="FCC-closedloop-v0", **kwargs):
 
 
 def assert_env_equals_batch(n, seeds, env_kwargs, batch_kwargs=None, per_seed_env_kwargs=None):
-    batch = fcc_env.simulate_episodes(seeds, n, regulatory=True, **(batch_kwargs or env_kwargs))
+    keywords = dict(batch_kwargs or env_kwargs)
+    batch_only = {
+        k: keywords.pop(k) for k in ("plant_effects", "plant_uncertainty") if k in keywords
+    }
+    fault, plant = fcc_env.env_request(regulatory=True, **keywords)
+    batch = fcc_env.simulate_episodes(seeds, n, fault=fault, plant=plant, **batch_only)
     assert batch.channels == CLOSED_LOOP_CHANNELS
     for b, seed in enumerate(seeds):
         kw = per_seed_env_kwargs(seed) if per_seed_env_kwargs else env_kwargs
@@ -236,11 +241,13 @@ def test_set_point_clipping_is_flagged():
         (lambda: SetpointProgram(T_rx_sp_halfrange_C=50), r"=50 .*\[0, 10\] °C"),
         (lambda: SetpointProgram(hold_min=10, hold_max=5), r"hold_max=5 .*>= hold_min=10"),
         (
-            lambda: fcc_env.simulate_episodes([0], 10, regulatory=True, plant=PlantConfig()),
-            r"\['regulatory'\] were both given",
+            lambda: fcc_env.simulate_episodes([0], 10, plant={"regulatory": True}),
+            r"plant=\{'regulatory': True\} is outside the allowed range: a PlantConfig",
         ),
         (
-            lambda: fcc_env.simulate_episodes([0], 10, regulatory=[1, 2]),
+            lambda: fcc_env.simulate_episodes(
+                [0], 10, plant=fcc_env.PlantConfig.build(regulatory=[1, 2])
+            ),
             r"regulatory=\[1, 2\] .*True, False, None, a RegulatoryLayer",
         ),
         (

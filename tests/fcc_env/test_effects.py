@@ -90,7 +90,7 @@ def test_bad_effects(call, match):
 def test_env_equals_batch_with_effects(plant_effects):
     n = 120
     batch = fcc_env.simulate_episodes(
-        [2, 9], n, scenario="f1", fault_time=60, plant_effects=plant_effects
+        [2, 9], n, fault=fcc_env.FaultSpec(scenario="f1", onset=60), plant_effects=plant_effects
     )
     for b, seed in enumerate((2, 9)):
         ys, infos = env_rollout(n, seed, scenario="f1", fault_time=60, plant_effects=plant_effects)
@@ -114,7 +114,7 @@ def test_reset_option_overrides_make_kwarg():
 
 def test_parameter_path_equals_derivative_path():
     """heat_loss:stage1 through the model's UA equals the same physics as a d_state term."""
-    kw = dict(n_samples=300, noise_scale=0.0)
+    kw = dict(n_samples=300, plant=fcc_env.PlantConfig(noise_scale=0.0))
     lib = fcc_env.simulate_episodes(
         [4], plant_effects=["heat_loss:stage1,extra_ua_kw_per_k=6"], **kw
     )
@@ -125,7 +125,7 @@ def test_parameter_path_equals_derivative_path():
 
 
 def test_sensor_effects_transform_the_noise_free_measurement():
-    kw = dict(n_samples=400, noise_scale=0.0)
+    kw = dict(n_samples=400, plant=fcc_env.PlantConfig(noise_scale=0.0))
     base = fcc_env.simulate_episodes([1], **kw).y_clean[0]
     bias = fcc_env.simulate_episodes([1], plant_effects=["sensor_bias:T_rg1,bias=3"], **kw)
     np.testing.assert_allclose(bias.y_clean[0, :, 4] - base[:, 4], 3.0, atol=1e-9)
@@ -148,7 +148,10 @@ def test_feed_temperature_sensor_bias_signature():
     T_rx runs ahead of the plant's by about 1 °C at once and 3–4 °C after 1.7 h.
     """
     b = fcc_env.simulate_episodes(
-        [3], 600, noise_scale=0.0, excitation=False, plant_effects=["sensor_bias:T_fp,bias=4"]
+        [3],
+        600,
+        plant=fcc_env.PlantConfig.build(noise_scale=0.0, excitation=False),
+        plant_effects=["sensor_bias:T_fp,bias=4"],
     )
     u_measured = b.inputs[0].copy()
     u_measured[:, 3] = b.y_clean[0, :, 2]  # what the sensor reports: true T_fp + 4
@@ -160,7 +163,7 @@ def test_feed_temperature_sensor_bias_signature():
 
 def test_catalyst_deactivation_shows_in_the_dilute_phases():
     """Spec §5 [V]: less activity → less coke → more O2 slip: T_d1 and T_dg rise."""
-    kw = dict(n_samples=2000, noise_scale=0.0, excitation=False)
+    kw = dict(n_samples=2000, plant=fcc_env.PlantConfig(noise_scale=0.0, excitation=None))
     base = fcc_env.simulate_episodes([0], **kw).y_clean[0]
     deact = fcc_env.simulate_episodes(
         [0], plant_effects=["catalyst_deactivation,loss_per_day=0.5"], **kw

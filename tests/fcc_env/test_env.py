@@ -115,7 +115,8 @@ def test_batch_equals_single_env(options):
     n = 300
     env = gym.make("FCC-v0", max_episode_steps=n - 1, horizon=n)
     seeds = [3, 4]
-    batch = fcc_env.simulate_episodes(seeds, n, **{k: v for k, v in options.items()})
+    fault, _ = fcc_env.env_request(**options)  # the env's keywords, as the env reads them
+    batch = fcc_env.simulate_episodes(seeds, n, fault=fault)
     for b, seed in enumerate(seeds):
         ys, infos = rollout(env, seed, n, options=options)
         np.testing.assert_array_equal(ys, batch.observations[b])
@@ -141,12 +142,12 @@ def test_noise_std_per_channel():
 
 
 def test_incipient_fault_ramps():
-    b = fcc_env.simulate_episodes(
-        [0], 700, scenario="f4", fault_time=100, fault_profile="incipient", ramp_samples=400,
-        noise_scale=0.0, excitation=False,
-    )  # fmt: skip
+    b = fcc_env.simulate_episodes([0], 700, fault=fcc_env.FaultSpec(scenario="f4", onset=100, profile="incipient", ramp_samples=400), plant=fcc_env.PlantConfig.build(noise_scale=0.0, excitation=False))  # fmt: skip
     a = fcc_env.simulate_episodes(
-        [0], 700, scenario="f4", fault_time=100, noise_scale=0.0, excitation=False
+        [0],
+        700,
+        fault=fcc_env.FaultSpec(scenario="f4", onset=100),
+        plant=fcc_env.PlantConfig.build(noise_scale=0.0, excitation=False),
     )
     # the ramp's effect builds up more slowly than the step's
     d_ramp = np.abs(b.y_clean[0, :, 4] - b.y_clean[0, 0, 4])
@@ -200,7 +201,7 @@ def test_vector_env():
     assert obs.shape == (2, 8)
     obs, rew, term, trunc, info = envs.step(np.zeros((2, 2), dtype=np.float32))
     assert obs.shape == (2, 8) and not term.any()
-    batch = fcc_env.simulate_episodes([1, 2], 2, scenario="f2", fault_time=1)
+    batch = fcc_env.simulate_episodes([1, 2], 2, fault=fcc_env.FaultSpec(scenario="f2", onset=1))
     np.testing.assert_array_equal(obs, batch.observations[:, 1])
 
 
@@ -293,16 +294,18 @@ def test_batch_bad_input():
         ValueError, match=r"n_samples=1 is outside the allowed range: an integer in \[2, inf\)"
     ):
         fcc_env.simulate_episodes([0], 1)
-    with pytest.raises(ValueError, match=r"got 2 faults \(scenarios\) for 1 seeds"):
-        fcc_env.simulate_episodes([0], 10, scenario=["f1", "f2"])
+    with pytest.raises(ValueError, match=r"got 2 faults for 1 seeds"):
+        fcc_env.simulate_episodes(
+            [0], 10, fault=[fcc_env.FaultSpec(scenario=_sc) for _sc in ["f1", "f2"]]
+        )
     with pytest.raises(
         ValueError, match=r"scenario='f5' is outside the allowed range: one of \['nominal'"
     ):
-        fcc_env.simulate_episodes([0], 10, scenario="f5")
+        fcc_env.simulate_episodes([0], 10, fault=fcc_env.FaultSpec(scenario="f5"))
 
 
 def test_operating_program_follows_spec_7_5():
-    b = fcc_env.simulate_episodes([0, 1, 2], 4000, noise_scale=0.0)
+    b = fcc_env.simulate_episodes([0, 1, 2], 4000, plant=fcc_env.PlantConfig.build(noise_scale=0.0))
     u = b.inputs
     nominal = fcc_env.NOMINAL_INPUTS
     np.testing.assert_array_equal(u[:, :100], np.broadcast_to(nominal, (3, 100, 6)))
@@ -330,9 +333,9 @@ def test_fault_spec_equals_the_old_keywords_in_make_reset_and_batch():
     assert ia[-1]["fault_active"] and not ia[39]["fault_active"]
     plant = fcc_env.PlantConfig.build(valve_beta=0.15, noise_scale=0.5)
     new = fcc_env.simulate_episodes([5, 6], 60, fault=spec, plant=plant)
-    ref = fcc_env.simulate_episodes([5, 6], 60, valve_beta=0.15, noise_scale=0.5, **old)
-    np.testing.assert_array_equal(new.observations, ref.observations)
-    np.testing.assert_array_equal(new.states, ref.states)
+    env = gym.make("FCC-v0", valve_beta=0.15, noise_scale=0.5, **old)  # the keyword bridge
+    obs, _ = env.reset(seed=5)
+    np.testing.assert_array_equal(new.observations[0, 0], obs)
     assert new.fault_onsets == (40, 40) and new.scenarios == ("f3", "f3")
 
 
@@ -342,25 +345,26 @@ def test_per_seed_faults_and_per_seed_scenario_keywords():
     b = fcc_env.simulate_episodes([1, 2], 50, fault=faults)
     assert b.scenarios == ("f1", "f4") and b.fault_onsets == (30, 30)
     assert b.fault_magnitudes == (0.05, 0.05)
-    kw = fcc_env.simulate_episodes([1, 2], 50, scenario=["f1", "f4"], fault_time=30)
+    kw = fcc_env.simulate_episodes(
+        [1, 2], 50, fault=[fcc_env.FaultSpec(scenario=_sc, onset=30) for _sc in ["f1", "f4"]]
+    )
     assert kw.scenarios == ("f1", "f4") and kw.fault_onsets == (30, 30)
-    with pytest.raises(ValueError, match=r"got 1 faults \(scenarios\) for 2 seeds"):
+    with pytest.raises(ValueError, match=r"got 1 faults for 2 seeds"):
         fcc_env.simulate_episodes([1, 2], 50, fault=faults[:1])
 
 
 def test_fault_and_fault_keywords_together_raise():
     spec = fcc_env.FaultSpec(scenario="f1", onset=30)
     both = r"fault keyword\(s\) \[{}\] were both given"
-    with pytest.raises(ValueError, match=both.format("'fault_time'")):
-        fcc_env.simulate_episodes([0], 50, fault=spec, fault_time=30)
+    with pytest.raises(TypeError, match="scenario"):  # batch simulation takes the objects only
+        fcc_env.simulate_episodes([0], 50, scenario="f1")  # type: ignore[call-arg]
     with pytest.raises(ValueError, match=both.format("'scenario'")):
         gym.make("FCC-v0", fault=spec, scenario="f1")
     env = gym.make("FCC-v0")
     with pytest.raises(ValueError, match=both.format("'fault_magnitude'")):
         env.reset(seed=0, options={"fault": spec, "fault_magnitude": 0.3})
-    plant = fcc_env.PlantConfig.build()
     with pytest.raises(ValueError, match=r"plant keyword\(s\) \['noise_scale'\] were both given"):
-        fcc_env.simulate_episodes([0], 50, plant=plant, noise_scale=0.0)
+        gym.make("FCC-v0", plant=fcc_env.PlantConfig(), noise_scale=0.0)
     with pytest.raises(ValueError, match=r"fault=3 is outside the allowed range: a FaultSpec"):
         fcc_env.simulate_episodes([0], 50, fault=3)
 
@@ -433,10 +437,12 @@ def test_fault_range_stops_where_the_plant_trips(scenario):
         match=rf"fault_magnitude={too_big!r} is outside .*\[0, {d.max_magnitude}\] \(for {scenario}: ",
     ):
         fcc_env.simulate_episodes(
-            [0], 50, scenario=scenario, fault_time=10, fault_magnitude=too_big
+            [0], 50, fault=fcc_env.FaultSpec(scenario=scenario, onset=10, magnitude=too_big)
         )
     if scenario != "f3":  # f3 trips in about 1 of 10 episodes already at its paper size
         res = fcc_env.simulate_episodes(
-            list(range(4)), 4000, scenario=scenario, fault_magnitude=d.max_magnitude
+            list(range(4)),
+            4000,
+            fault=fcc_env.FaultSpec(scenario=scenario, magnitude=d.max_magnitude),
         )
         assert (res.terminated_at < 0).all(), res.termination_reasons

@@ -21,7 +21,7 @@ def test_write_and_read_dataset_round_trip(tmp_path):
     assert meta["roles"]["measured"] == list(fcc_env.MEASUREMENT_NAMES)
     assert meta["roles"]["commanded"] == ["cmd_u_F", "cmd_R_ar"]
     assert "fault_active" in meta["roles"]["truth"]
-    batch = fcc_env.simulate_episodes([3, 5], 120, scenario="f4", fault_time=60)
+    batch = fcc_env.simulate_episodes([3, 5], 120, fault=fcc_env.FaultSpec(scenario="f4", onset=60))
     for i, name in enumerate(fcc_env.MEASUREMENT_NAMES):
         got = cols[name].reshape(2, 120)
         np.testing.assert_allclose(got, batch.observations[:, :, i], rtol=1e-9)
@@ -85,10 +85,7 @@ def test_sidecar_records_fault_and_plant_and_null_for_no_termination(tmp_path):
     assert meta["terminated_at"] == [None]
     assert meta["fault"] == spec.to_json() and meta["scenario"] == "f2"
     assert meta["plant"]["noise_scale"] == 0.0 and meta["plant"]["params"] is None
-    ref = fcc_env.simulate_episodes(
-        [1], 20, scenario="f2", fault_time=10, fault_profile="incipient", ramp_samples=5,
-        noise_scale=0.0,
-    )  # fmt: skip
+    ref = fcc_env.simulate_episodes([1], 20, fault=fcc_env.FaultSpec(scenario="f2", onset=10, profile="incipient", ramp_samples=5), plant=fcc_env.PlantConfig.build(noise_scale=0.0))  # fmt: skip
     np.testing.assert_array_equal(cols["fault_active"], ref.fault_active[0])
 
 
@@ -209,7 +206,12 @@ def test_closed_loop_dataset_records_the_valve_and_the_set_points(tmp_path, caps
     assert meta["roles"]["setpoint"] == ["T_rx_sp", "T_rg1_sp"]
     assert meta["columns"]["u_F"]["role"] == "manipulated" and meta["columns"]["u_F"]["unit"]
     assert meta["plant"]["regulatory"]["T_rx_gain"] == fcc_env.RegulatoryLayer().T_rx_gain
-    batch = fcc_env.simulate_episodes([2, 4], 150, scenario="f1", fault_time=60, regulatory=True)
+    batch = fcc_env.simulate_episodes(
+        [2, 4],
+        150,
+        fault=fcc_env.FaultSpec(scenario="f1", onset=60),
+        plant=fcc_env.PlantConfig.build(regulatory=True),
+    )
     for name in ("T_rx", "u_F", "T_rx_sp", "T_rg1_sp"):
         got = cols[name].reshape(2, 150)
         want = batch.observations[:, :, batch.channels.index(name)]
@@ -228,7 +230,12 @@ def test_closed_loop_dataset_reads_back_as_the_env_observes(tmp_path):
     )
     [ep] = Episode.from_dataset(path)
     [want] = Episode.from_batch(
-        fcc_env.simulate_episodes([3], 80, scenario="f2", fault_time=40, regulatory=True)
+        fcc_env.simulate_episodes(
+            [3],
+            80,
+            fault=fcc_env.FaultSpec(scenario="f2", onset=40),
+            plant=fcc_env.PlantConfig.build(regulatory=True),
+        )
     )
     assert ep.channels == want.channels == fcc_env.closed_loop.CLOSED_LOOP_CHANNELS
     np.testing.assert_allclose(ep.y, want.y, rtol=1e-9)

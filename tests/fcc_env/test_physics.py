@@ -16,6 +16,12 @@ REF = Path(__file__).parents[1] / "data" / "fcc-reference"
 P = FCCParams()
 
 
+def _simulate_keywords(seeds, n_samples, **keywords):
+    """Batch simulation of the env's keywords (the plant and fault they build)."""
+    fault, plant = fcc_env.env_request(**keywords)
+    return fcc_env.simulate_episodes(seeds, n_samples, fault=fault, plant=plant)
+
+
 def test_steady_state_matches_spec_table_2_10():
     x = steady_state()
     aux = rhs_aux(x, NOMINAL_INPUTS, P)
@@ -189,8 +195,8 @@ def test_fault_signatures_match_spec(fault):
     checked at constant inputs.
     """
     kw = dict(n_samples=4000, fault_time=2000, noise_scale=0.0)
-    healthy = fcc_env.simulate_episodes([7], scenario="nominal", **kw)
-    faulty = fcc_env.simulate_episodes([7], scenario=fault, **kw)
+    healthy = _simulate_keywords([7], scenario="nominal", **kw)
+    faulty = _simulate_keywords([7], scenario=fault, **kw)
     d = faulty.y_clean[0] - healthy.y_clean[0]
     assert np.all(d[:2000] == 0.0)  # identical until the onset: same excitation, same noise
     assert np.all(faulty.observations[0, :2000] == healthy.observations[0, :2000])
@@ -204,8 +210,8 @@ def test_fault_signatures_match_spec(fault):
             assert abs(got - want) < 0.5, (name, got, want)
     kw["excitation"] = False
     d = (
-        fcc_env.simulate_episodes([0], scenario=fault, **kw).y_clean[0]
-        - fcc_env.simulate_episodes([0], scenario="nominal", **kw).y_clean[0]
+        _simulate_keywords([0], scenario=fault, **kw).y_clean[0]
+        - _simulate_keywords([0], scenario="nominal", **kw).y_clean[0]
     )
     dilute = d[-200:, 6:].mean(axis=0)
     assert np.all(np.sign(dilute) == np.sign(SIGNATURES[fault][3:])), dilute
@@ -217,8 +223,8 @@ def test_valve_hydraulics_modes(valve_beta, invisible):
     hydraulics f2 moves the regenerator by about β_sv/0.3 × 2.7 °C."""
     kw = dict(n_samples=3000, fault_time=500, noise_scale=0.0, valve_beta=valve_beta)
     d = (
-        fcc_env.simulate_episodes([0], scenario="f2", **kw).y_clean[0]
-        - fcc_env.simulate_episodes([0], scenario="nominal", **kw).y_clean[0]
+        _simulate_keywords([0], scenario="f2", **kw).y_clean[0]
+        - _simulate_keywords([0], scenario="nominal", **kw).y_clean[0]
     )
     final = d[-200:, 3:].mean(axis=0)
     if invisible:

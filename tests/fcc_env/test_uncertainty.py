@@ -23,10 +23,17 @@ from fcc_env.uncertainty import (
 T = 400  # samples per test episode: short, the tests check bookkeeping, not dynamics
 
 
-def drawn_episodes(seeds, n_samples, **kwargs):
-    """Episodes on each seed's drawn plant (the ``uncertain`` track's ranges)."""
+def drawn_episodes(seeds, n_samples, **keywords):
+    """Episodes on each seed's drawn plant (the ``uncertain`` track's ranges); ``keywords``: the
+    env's."""
+    scenarios = keywords.pop("scenario", None)
+    fault, plant = fcc_env.env_request(**keywords)
+    if isinstance(scenarios, list):  # one scenario per seed
+        fault = [fault.replace(scenario=s) for s in scenarios]
+    elif scenarios is not None:
+        fault = fault.replace(scenario=scenarios)
     return fcc_env.simulate_episodes(
-        seeds, n_samples, plant_uncertainty=PlantUncertainty(), **kwargs
+        seeds, n_samples, fault=fault, plant=plant, plant_uncertainty=PlantUncertainty()
     )
 
 
@@ -137,9 +144,12 @@ def test_nothing_of_the_draw_reaches_the_observations_noise_stream():
 
 
 def test_zero_uncertainty_reproduces_the_nominal_batch():
-    plain = fcc_env.simulate_episodes([4, 9], T, scenario="f3", fault_time=100)
+    plain = fcc_env.simulate_episodes([4, 9], T, fault=fcc_env.FaultSpec(scenario="f3", onset=100))
     none = fcc_env.simulate_episodes(
-        [4, 9], T, plant_uncertainty=PlantUncertainty.none(), scenario="f3", fault_time=100
+        [4, 9],
+        T,
+        fault=fcc_env.FaultSpec(scenario="f3", onset=100),
+        plant_uncertainty=PlantUncertainty.none(),
     )
     np.testing.assert_array_equal(plain.observations, none.observations)
     assert none.seeds == (4, 9) and none.scenarios == ("f3", "f3")

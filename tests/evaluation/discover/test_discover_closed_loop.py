@@ -24,10 +24,18 @@ DECLARED = dataclasses.replace(
 
 def _check(text: str, pname: str, truth: float, rel_tol: float, seed: int) -> None:
     effect = fx.parse(text)
-    batch = fcc_env.simulate_episodes([seed], N, plant_effects=[effect], regulatory=DECLARED)
+    batch = fcc_env.simulate_episodes(
+        [seed], N, plant=fcc_env.PlantConfig.build(regulatory=DECLARED), plant_effects=[effect]
+    )
     assert "u_F" in batch.channels  # closed-loop data: the valve moved
     data = d.from_batch(batch)
-    floor = d.heldout_rmse(d.from_batch(fcc_env.simulate_episodes([seed], N, regulatory=DECLARED)))
+    floor = d.heldout_rmse(
+        d.from_batch(
+            fcc_env.simulate_episodes(
+                [seed], N, plant=fcc_env.PlantConfig.build(regulatory=DECLARED)
+            )
+        )
+    )
     rep = d.discover(data, max_effects=2, plots=False).to_json()
     assert rep["effects"] and rep["effects"][0]["id"] == effect.effect_id
     assert rep["effects"][0]["params"][pname] == pytest.approx(truth, rel=rel_tol)
@@ -57,6 +65,10 @@ def test_library_effect_is_found_in_closed_loop(text, pname, truth, rel_tol, see
 @pytest.mark.slow
 def test_clean_closed_loop_data_report_no_effect() -> None:
     for seed in (0, 1):
-        data = d.from_batch(fcc_env.simulate_episodes([seed], N, regulatory=DECLARED))
+        data = d.from_batch(
+            fcc_env.simulate_episodes(
+                [seed], N, plant=fcc_env.PlantConfig.build(regulatory=DECLARED)
+            )
+        )
         rep = d.discover(data, max_effects=1, plots=False).to_json()
         assert rep["effects"] == [] and rep["unexplained"] is False

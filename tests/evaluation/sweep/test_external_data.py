@@ -288,7 +288,7 @@ def test_episode_column_splits_a_multi_episode_file(tmp_path) -> None:
     assert loaded.episode.n_samples == 50 and loaded.episode.fault_onset == 20
     import fcc_env
 
-    batch = fcc_env.simulate_episodes([2], 50, scenario="f2", fault_time=20)
+    batch = fcc_env.simulate_episodes([2], 50, fault=fcc_env.FaultSpec(scenario="f2", onset=20))
     j = data.channels.index("T_rx")
     np.testing.assert_allclose(
         loaded.episode.y[:, j], batch.observations[0, :, fcc_env.MEASUREMENT_NAMES.index("T_rx")],

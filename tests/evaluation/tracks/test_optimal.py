@@ -29,6 +29,7 @@ from evaluation.tracks.oracle import (
     reference_records,
 )
 from evaluation.tracks.track_data import TrackData
+from fcc_env.plant import PlantConfig
 from fcc_env.scenarios import FaultSpec
 
 
@@ -52,7 +53,7 @@ def test_llr_is_the_gaussian_log_likelihood_ratio() -> None:
 
 def test_noise_std_is_the_env_noise() -> None:
     """(y − y_clean) / noise_std has unit std on every channel of a simulated episode."""
-    ep = simulate_loaded([3], 1500, FaultSpec(), noise_scale=2.0)[0].episode
+    ep = simulate_loaded([3], 1500, FaultSpec(), plant=PlantConfig(noise_scale=2.0))[0].episode
     assert ep.y_clean is not None
     z = (ep.y - ep.y_clean) / noise_std(ep.y_clean, 2.0)
     np.testing.assert_allclose(z.std(axis=0), 1.0, atol=0.06)
