@@ -422,11 +422,13 @@ MAX_TERMINATION_EPISODES = 10_000
 
 
 def _report(args: argparse.Namespace) -> int:
-    """The work of :func:`main`: its failures are refused by :func:`run_command`."""
+    """The work of :func:`main`: its failures (and a Ctrl-C) are reported by :func:`run_command`."""
     config = ReportConfig(
-        horizon=args.horizon, onset=args.onset, seeds=tuple(args.seeds),
+        horizon=args.horizon,
+        onset=args.onset,
+        seeds=tuple(args.seeds),
         response_samples=args.response_samples,
-    )  # fmt: skip
+    )
     why = "0 skips the count; 10000 episodes give a termination rate to within 0.2 %"
     check("--terminations", args.terminations, Integer(0, MAX_TERMINATION_EPISODES, why=why))
     # before any work: a healthy and a faulty episode per seed, one response per case
