@@ -37,9 +37,14 @@ import fcc_env
 from diagnosers import Episode
 from diagnosers.bank.relations import BANK_RELATIONS
 from diagnosers.classical.arx_band import fit_percent
+from diagnosers.lrgf.bank_detector import BANK_CONSTRAINTS
 from diagnosers.networks.lrgf_net import LRGF
 from diagnosers.networks.modules import paper_lrgf
 from diagnosers.networks.training import fit_lrgf
+from fcc_common.invocation import command_parser, run_command
+from fcc_common.validation import Integer, check
+from fcc_env.scenarios import DEFAULT_N_SAMPLES
+from fcc_env.simulation import check_memory
 
 CH = list(fcc_env.MEASUREMENT_NAMES)
 U_IDX = [CH.index("T_rg2"), CH.index("T_fp")]
@@ -82,7 +87,14 @@ def _throughput(d: diagnosers.Diagnoser, ep: Episode, detect_repeats: int) -> tu
 
 
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="python -m bench.detector_speed", description=__doc__)
+    parser = command_parser(
+        "bench.detector_speed",
+        (__doc__ or "").split("\n\n")[0],
+        (
+            ("", "the full report: forward pass, training, model quality, throughput"),
+            ("--bank 6 --n-jobs 2", "the banks' training time and fit on 6 episodes"),
+        ),
+    )
     parser.add_argument("--epochs", type=int, default=1500, help="Adam epochs (1500)")
     parser.add_argument("--spsa-iterations", type=int, default=3000, help="SPSA iterations (3000)")
     parser.add_argument(
@@ -91,8 +103,23 @@ def main(argv: list[str] | None = None) -> int:
     parser.add_argument(
         "--n-jobs", type=int, default=2, help="worker processes that train a bank (--bank; 2)"
     )
-    args = parser.parse_args(argv)
+    return run_command(parser, _report, argv)
+
+
+def _report(args: argparse.Namespace) -> int:
+    """The work of :func:`main`: its failures (and a Ctrl-C) are reported by :func:`run_command`."""
+    for flag, value, allowed in (
+        ("--epochs", args.epochs, BANK_CONSTRAINTS["max_epochs"]),
+        ("--spsa-iterations", args.spsa_iterations, BANK_CONSTRAINTS["max_epochs"]),
+        ("--bank", args.bank, Integer(0, 4000, why="training seeds 1000..4999")),
+        ("--n-jobs", args.n_jobs, Integer(1, 1024)),
+    ):
+        check(flag, value, allowed)
     if args.bank:
+        try:  # the bank's training episodes are held at once
+            check_memory(args.bank, DEFAULT_N_SAMPLES)
+        except ValueError as e:
+            raise ValueError(f"--bank {args.bank}: {e}") from None
         return _bank_report(args.bank, args.n_jobs)
 
     train = _episodes([1000])

@@ -9,11 +9,12 @@ rounds (find + confirm nothing else), which is the typical case.
 
 from __future__ import annotations
 
+import argparse
 import time
 
 import fcc_env
 from evaluation import discover as d
-from fcc_common.invocation import command_parser
+from fcc_common.invocation import command_parser, run_command
 
 EFFECT = "sensor_bias:T_fp,bias=3"
 
@@ -36,7 +37,11 @@ def main(argv: list[str] | None = None) -> int:
         ),
     )
     ap.add_argument("--quick", action="store_true", help="fewer points")
-    args = ap.parse_args(argv)
+    return run_command(ap, _report, argv)
+
+
+def _report(args: argparse.Namespace) -> int:
+    """The work of :func:`main`: its failures (and a Ctrl-C) are reported by :func:`run_command`."""
     run(500, ["sensor_bias:T_fp"])  # compile / warm caches
     all_ids = sorted(d.PhysicsModel().candidates())
     dt, rounds, n = run(4000, None)

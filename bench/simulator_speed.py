@@ -9,13 +9,16 @@ assertions.
 
 from __future__ import annotations
 
+import argparse
 import time
 
 import gymnasium as gym
 import numpy as np
 
 import fcc_env
-from fcc_common.invocation import command_parser
+from fcc_common.invocation import command_parser, run_command
+from fcc_common.validation import Integer, check
+from fcc_env.simulation import check_memory
 
 #: Closed-loop speed relative to open loop that issue 31 asks for (env and batch alike).
 CLOSED_LOOP_SPEED_GOAL = 0.8
@@ -79,7 +82,17 @@ def main(argv: list[str] | None = None) -> int:
     )
     parser.add_argument("--episodes", type=int, default=1024, help="batch size (1024)")
     parser.add_argument("--steps", type=int, default=20_000, help="single-env steps (20000)")
-    args = parser.parse_args(argv)
+    return run_command(parser, _report, argv)
+
+
+def _report(args: argparse.Namespace) -> int:
+    """The work of :func:`main`: its failures (and a Ctrl-C) are reported by :func:`run_command`."""
+    check("--episodes", args.episodes, Integer(1))
+    check("--steps", args.steps, Integer(1, 10_000_000, why="about 30 min at 5,000 steps/s"))
+    try:  # the batch is held whole, as a leaderboard's
+        check_memory(args.episodes, fcc_env.DEFAULT_N_SAMPLES)
+    except ValueError as e:
+        raise ValueError(f"--episodes {args.episodes}: {e}") from None
     n = fcc_env.DEFAULT_N_SAMPLES
     rate, episode_s = bench_single_env(args.steps)
     closed_rate, closed_episode_s = bench_single_env(args.steps, fcc_env.CLOSED_LOOP_ENV_ID)

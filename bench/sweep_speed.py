@@ -28,9 +28,12 @@ from pathlib import Path
 
 import numpy as np
 
+from evaluation.leaderboard.arguments import check_counts
 from evaluation.sweep.config import BASELINES, SweepConfig, default_specs
 from evaluation.sweep.runner import run_sweep
 from evaluation.sweep.sources import SimulatedData
+from fcc_common.invocation import command_parser, run_command
+from fcc_common.validation import Integer, check, invalid
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -75,15 +78,33 @@ def time_sweep(n_seeds: int, n_workers: int) -> tuple[float, float]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(
-        prog="python -m bench.sweep_speed",
-        description=__doc__,
-        formatter_class=argparse.RawDescriptionHelpFormatter,
+    p = command_parser(
+        "bench.sweep_speed",
+        (__doc__ or "").split("\n\n")[0],
+        (
+            ("", "the CLI timings, then sweeps of 1, 2, 5, 10 and 50 test seeds per scenario"),
+            ("--seeds 1,5 --skip-cli", "two sweep sizes only"),
+        ),
     )
     p.add_argument("--seeds", default="1,2,5,10,50", help="test seeds per scenario to time")
     p.add_argument("--skip-cli", action="store_true", help="skip the fresh-process CLI timings")
-    args = p.parse_args(argv)
-    seeds = [int(s) for s in args.seeds.split(",")]
+    return run_command(p, _report, argv)
+
+
+def _report(args: argparse.Namespace) -> int:
+    """The work of :func:`main`: its failures (and a Ctrl-C) are reported by :func:`run_command`."""
+    try:
+        seeds = [int(s) for s in args.seeds.split(",")]
+    except ValueError:
+        raise invalid("--seeds", args.seeds, "comma-separated integers, e.g. 1,2,5") from None
+    for n in seeds:  # test seeds 0..n-1 of five scenarios, as the leaderboard counts them
+        check_counts(
+            seeds=check("--seeds", n, Integer(1)),
+            seed_base=0,
+            train_episodes=None,
+            n_samples=4000,
+            n_cells_per_seed=5 * len(BASELINES),
+        )
     n_cpu = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
     print(f"machine: {n_cpu} cores, Python {sys.version.split()[0]}")
     if not args.skip_cli:
@@ -109,4 +130,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    raise SystemExit(main())

@@ -11,6 +11,7 @@ runs it several times faster.
 
 from __future__ import annotations
 
+import argparse
 import time
 from typing import Any
 
@@ -19,7 +20,9 @@ import numba
 import numpy as np
 
 import fcc_env
-from fcc_common.invocation import command_parser
+from fcc_common.invocation import command_parser, run_command
+from fcc_env.simulation import check_memory
+from fcc_env.vector_env import RING
 
 #: The issue's goals at 1024 envs: env-steps/s of the native env, and its speed-up over sync.
 NATIVE_GOAL = 500_000
@@ -51,7 +54,7 @@ def compare(env_id: str, n_envs: int, n_steps: int, sync_steps: int, **kwargs: A
         sync.close()
 
 
-def main(argv: list[str] | None = None) -> None:
+def main(argv: list[str] | None = None) -> int:
     ap = command_parser(
         "bench.vector_speed",
         __doc__ or "",
@@ -68,7 +71,11 @@ def main(argv: list[str] | None = None) -> None:
     ap.add_argument(
         "--threads", type=int, default=None, help="numba threads of the native env (default: all)"
     )
-    args = ap.parse_args(argv)
+    return run_command(ap, lambda args: _report(args, ap), argv)
+
+
+def _report(args: argparse.Namespace, ap: argparse.ArgumentParser) -> int:
+    """The work of :func:`main`: its failures (and a Ctrl-C) are reported by :func:`run_command`."""
     limits = {
         "--envs": (args.envs, 1),
         "--steps": (args.steps, 1),
@@ -83,6 +90,11 @@ def main(argv: list[str] | None = None) -> None:
             f"--threads {args.threads} is outside the allowed range: 1.."
             f"{numba.config.NUMBA_NUM_THREADS} (numba's thread pool on this machine)"
         )
+    try:  # each env holds its streams of RING samples (measured: 152 KiB per env, under half
+        # of what a simulated batch of RING samples holds, which the budget counts)
+        check_memory(args.envs, RING)
+    except ValueError as e:
+        raise ValueError(f"--envs {args.envs}: {e}") from None
     if args.threads is not None:
         numba.set_num_threads(args.threads)
     print(
@@ -94,7 +106,8 @@ def main(argv: list[str] | None = None) -> None:
         native, sync = compare(env_id, args.envs, args.steps, args.sync_steps, **kwargs)
         print(f"{env_id:<20} {native:>15,.0f} {sync:>13,.0f} {native / sync:>6.1f}x")
     print(f"goals: native >= {NATIVE_GOAL:,} env-steps/s, >= {SPEEDUP_GOAL:.0f}x sync")
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

@@ -56,9 +56,17 @@ class Diagnoser(DiagnoserContract):
         ``state.npz`` holds plain numeric arrays (``allow_pickle=False`` on load); subclasses with
         torch modules also write ``weights.pt``, a state dict loaded with ``weights_only=True``.
         Files are written to temporaries and renamed, so an interrupted save leaves no torn file.
+        A ``path`` that is a symbolic link is refused by name (a save never writes through a link
+        to elsewhere); a file inside that is a link is replaced by the file, its target left as
+        it was.
         """
         self._check_fitted()
         out = Path(path)
+        if out.is_symlink():
+            raise ValueError(
+                f"{out} is a symbolic link (to {os.readlink(out)!r}); refusing to save through it: "
+                "give the directory itself, or remove the link"
+            )
         out.mkdir(parents=True, exist_ok=True)
         config = {
             "format": SAVE_FORMAT,

@@ -24,6 +24,7 @@ __all__ = [
     "command_parser",
     "csv_list",
     "import_from_cwd",
+    "interrupted",
     "os_error_text",
     "out_path",
     "prog_name",
@@ -77,6 +78,8 @@ def command_parser(
         description="\n\n".join(textwrap.fill(p, width) for p in paragraphs),
         epilog="\n".join(lines),
         formatter_class=argparse.RawDescriptionHelpFormatter,
+        # no prefix matching: "--seed 1" must not be read as "--seeds 1", nor a typo as a flag
+        allow_abbrev=False,
     )
 
 
@@ -102,24 +105,41 @@ def refuse(parser: argparse.ArgumentParser, e: BaseException) -> NoReturn:
 
 def run_command(
     parser: argparse.ArgumentParser,
-    body: Callable[[argparse.Namespace], int],
+    body: Callable[[argparse.Namespace], int | None],
     argv: Sequence[str] | None,
+    *,
+    on_interrupt: str = "re-run the command to start again",
 ) -> int:
-    """Parse ``argv`` and run ``body(args)``; any of :data:`INPUT_ERRORS` becomes one line.
+    """Parse ``argv`` and run ``body(args)``; any of :data:`INPUT_ERRORS` becomes one line, and
+    so does a Ctrl-C (followed by ``on_interrupt``, what re-running does).
 
     The one place where every command turns a bad value or an unusable path, found however late,
-    into ``prog: error: ...`` and exit code 2 instead of a traceback.
+    into ``prog: error: ...`` and exit code 2 instead of a traceback; and an interruption into
+    ``prog: interrupted ...`` and exit code 130 (128 + SIGINT, the shell's convention). Every
+    file the commands write is written whole (:func:`fcc_common.io.atomic_write`), so an
+    interrupted command leaves no torn file. ``body`` returning ``None`` exits with 0.
     """
     args = parser.parse_args(argv)
     shown = warnings.formatwarning
     # a warning is one line too: the command's name and the message, not our source line
     warnings.formatwarning = lambda message, *_a, **_k: f"{parser.prog}: warning: {message}\n"
     try:
-        return body(args)
+        code = body(args)
     except INPUT_ERRORS as e:
         refuse(parser, e)
+    except KeyboardInterrupt:
+        interrupted(parser, on_interrupt)
     finally:
         warnings.formatwarning = shown
+    return 0 if code is None else code
+
+
+def interrupted(parser: argparse.ArgumentParser, then: str) -> NoReturn:
+    """Exit after a Ctrl-C with one line and code 130, without a traceback; ``then`` says what
+    re-running does."""
+    parser.exit(
+        130, f"{parser.prog}: interrupted (Ctrl-C); files written so far are whole: {then}\n"
+    )
 
 
 def out_path(text: str) -> Path:

@@ -310,6 +310,8 @@ def from_fields(cls: type, value: Mapping[str, Any], what: str) -> Any:
     ValueError: Unknown demo option(s) ['b']. Allowed: ['a']
     """
     allowed = [f.name for f in dataclasses.fields(cls)]
+    if not isinstance(value, Mapping):  # a string would be read as its characters
+        raise invalid(what, value, f"a mapping of {cls.__name__}'s fields {allowed}")
     unknown = sorted(set(value) - set(allowed))
     if unknown:
         raise ValueError(f"Unknown {what} option(s) {unknown}. Allowed: {allowed}")

@@ -39,6 +39,7 @@ Importing the package registers ``FCC-v0``:
 from gymnasium.envs.registration import register, registry
 
 from fcc_env.control_task import CONTROL_ENV_ID, EconomicReward
+from fcc_env.env import CLOSED_LOOP_ENV_ID, ENV_ID
 from fcc_env.env_keywords import env_request
 from fcc_env.excitation import Excitation
 from fcc_env.integrator import integrate_step
@@ -64,24 +65,26 @@ from fcc_env.scenarios import (
 )
 from fcc_env.simulation import BatchResult, simulate_episodes
 
-ENV_ID = "FCC-v0"
 #: 3999 steps = 4000 samples including the reset observation (the paper's horizon).
 MAX_EPISODE_STEPS = DEFAULT_N_SAMPLES - 1
 
-#: The closed-loop plant: the regulatory layer of :class:`RegulatoryLayer` running.
-CLOSED_LOOP_ENV_ID = "FCC-closedloop-v0"
 
 # The plant ids have a native vector env (gym.make_vec(..., vectorization_mode=
 # "vector_entry_point")), which Gymnasium refuses for a spec with additional wrappers: so the
 # check that gym.make's max_episode_steps does not end an episode before its fault onset
 # (fcc_env.env.OnsetHorizonCheck) is the vector env's own, and a wrapper a user adds for single
 # envs (use horizon= to shorten an episode: an onset outside it is refused).
-for _id, _kwargs in ((ENV_ID, {}), (CLOSED_LOOP_ENV_ID, {"regulatory": True})):
+# The closed-loop id has classes of its own, which refuse regulatory=False (gym.make would
+# otherwise let it override the registered True and build the open-loop plant silently).
+for _id, _kwargs, _env, _vector in (
+    (ENV_ID, {}, "FCCEnv", "FCCVectorEnv"),
+    (CLOSED_LOOP_ENV_ID, {"regulatory": True}, "FCCClosedLoopEnv", "FCCClosedLoopVectorEnv"),
+):
     if _id not in registry:
         register(
             id=_id,
-            entry_point="fcc_env.env:FCCEnv",
-            vector_entry_point="fcc_env.vector_env:FCCVectorEnv",
+            entry_point=f"fcc_env.env:{_env}",
+            vector_entry_point=f"fcc_env.vector_env:{_vector}",
             max_episode_steps=MAX_EPISODE_STEPS,
             kwargs=_kwargs,
         )

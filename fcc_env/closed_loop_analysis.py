@@ -15,13 +15,14 @@ Run ``python -m fcc_env.closed_loop_analysis`` for the table of the docs' closed
 
 from __future__ import annotations
 
+import argparse
 import itertools
 from dataclasses import dataclass
 
 import numpy as np
 from scipy.optimize import root
 
-from fcc_common.invocation import command_parser
+from fcc_common.invocation import command_parser, run_command
 from fcc_env.integrator import step_kernel
 from fcc_env.params import N_STATES, NOMINAL_INPUTS, FCCParams
 from fcc_env.physics import as_param_array, measure_core
@@ -203,7 +204,11 @@ def main(argv: list[str] | None = None) -> int:
         ),
     )
     ap.add_argument("--no-corners", action="store_true", help="skip the 16 uncertain corners")
-    args = ap.parse_args(argv)
+    return run_command(ap, _analyse, argv)
+
+
+def _analyse(args: argparse.Namespace) -> int:
+    """The work of :func:`main`: its failures (and a Ctrl-C) are reported by :func:`run_command`."""
     cases = stability_cases(corners=not args.no_corners)
     print(stability_table(cases))
     return 0 if all(c.stable for c in cases) else 1

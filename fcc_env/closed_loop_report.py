@@ -13,6 +13,7 @@ closed loop). Library functions compute and return; only :func:`main` prints.
 
 from __future__ import annotations
 
+import argparse
 import json
 import time
 from collections import Counter
@@ -23,9 +24,9 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from fcc_common.invocation import command_parser
+from fcc_common.invocation import check_out_path, command_parser, out_path, run_command
 from fcc_common.io import atomic_write, atomic_write_json
-from fcc_common.validation import Integer, IntegerSequence, check_params, invalid
+from fcc_common.validation import Integer, IntegerSequence, check, check_params, invalid
 from fcc_env import CLOSED_LOOP_ENV_ID
 from fcc_env.closed_loop import CHANNEL_UNITS, visibility_threshold
 from fcc_env.closed_loop_analysis import stability_cases, stability_table
@@ -34,7 +35,7 @@ from fcc_env.env import SETPOINT_ACTION_SCALE
 from fcc_env.params import INPUT_NAMES
 from fcc_env.plant import PlantConfig
 from fcc_env.scenarios import FaultSpec
-from fcc_env.simulation import BatchResult, simulate_episodes
+from fcc_env.simulation import BatchResult, check_memory, simulate_episodes
 
 __all__ = [
     "SIGNATURE_CHANNELS", "FaultDeltas", "Report", "ReportConfig", "Signature", "build_report",
@@ -416,22 +417,47 @@ def main(argv: list[str] | None = None) -> int:
             ),
         ),
     )
-    ap.add_argument("--out", type=Path, required=True, help="directory to write into")
+    ap.add_argument("--out", type=out_path, required=True, help="directory to write into")
     ap.add_argument("--terminations", type=int, default=0, help="healthy episodes to count (0)")
     ap.add_argument("--horizon", type=int, default=4000, help="fault-signature samples (4000)")
     ap.add_argument("--onset", type=int, default=None, help="fault onset (half the horizon)")
     ap.add_argument("--seeds", type=int, nargs="+", default=[5000, 5001, 5002, 5003])
     ap.add_argument("--response-samples", type=int, default=1500, help="response length (1500)")
-    args = ap.parse_args(argv)
-    try:
-        config = ReportConfig(
-            horizon=args.horizon, onset=args.onset, seeds=tuple(args.seeds),
-            response_samples=args.response_samples,
-        )  # fmt: skip
-    except ValueError as e:
-        ap.error(str(e))
-    if args.terminations < 0:
-        ap.error(f"--terminations={args.terminations}: must be >= 0 (0 skips the count)")
+    return run_command(ap, _report, argv)
+
+
+#: Most healthy episodes ``--terminations`` simulates (50 at a time, so memory is not the bound).
+MAX_TERMINATION_EPISODES = 10_000
+
+
+def _report(args: argparse.Namespace) -> int:
+    """The work of :func:`main`: its failures (and a Ctrl-C) are reported by :func:`run_command`."""
+    config = ReportConfig(
+        horizon=args.horizon,
+        onset=args.onset,
+        seeds=tuple(args.seeds),
+        response_samples=args.response_samples,
+    )
+    why = "0 skips the count; 10000 episodes give a termination rate to within 0.2 %"
+    check("--terminations", args.terminations, Integer(0, MAX_TERMINATION_EPISODES, why=why))
+    # before any work: a healthy and a faulty episode per seed, one response per case
+    for flags, n, samples in (
+        (
+            f"--seeds ({len(config.seeds)}) x --horizon {config.horizon}",
+            2 * len(config.seeds),
+            config.horizon,
+        ),
+        (
+            f"--response-samples {config.response_samples}",
+            len(RESPONSE_CASES),
+            config.response_samples,
+        ),
+    ):
+        try:
+            check_memory(n, samples)
+        except ValueError as e:
+            raise ValueError(f"{flags}: {e}") from None
+    check_out_path("--out", args.out)
     report = build_report(config, args.terminations)
     paths = write_report(args.out, report, config)
     print(f"stability: {'all stable' if report.all_stable else 'NOT all stable'}")

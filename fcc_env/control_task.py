@@ -62,8 +62,8 @@ from typing import Any, SupportsFloat
 import gymnasium as gym
 import numpy as np
 
-from fcc_common.validation import Real, check_params, from_fields
-from fcc_env.env import FCCEnv
+from fcc_common.validation import Real, check_params, from_fields, invalid
+from fcc_env.env import FCCEnv, closed_loop_keyword
 from fcc_env.plant import AFTERBURN_WARNING_C, afterburn_delta_C
 
 __all__ = [
@@ -191,6 +191,8 @@ class EconomicReward:
             return cls()
         if isinstance(value, cls):
             return value
+        if not isinstance(value, Mapping):
+            raise invalid("economics", value, "an EconomicReward, a mapping of its fields or None")
         return from_fields(cls, value, "economics")
 
 
@@ -253,16 +255,25 @@ class FCCControlEnv(gym.Env):
     """``FCC-closedloop-v0`` with the economic reward of :mod:`fcc_env.control_task`.
 
     Keywords are ``FCC-closedloop-v0``'s (``scenario`` defaults to ``"random"``: healthy or a
-    fault per episode) plus ``economics`` (an :class:`EconomicReward` or a mapping of its
+    fault per episode; ``regulatory`` to ``True``, and ``False`` or ``None`` are refused as there)
+    plus ``economics`` (an :class:`EconomicReward` or a mapping of its
     fields). ``info["reward_terms"]`` holds the terms of the step's reward. The plant is an
     ``FCCEnv`` inside (``plant``); spaces, seeding and rendering are its own.
     """
 
     metadata = FCCEnv.metadata
 
-    def __init__(self, *, economics: Any = None, scenario: str = "random", **kwargs: Any) -> None:
+    def __init__(
+        self,
+        *,
+        economics: Any = None,
+        scenario: str = "random",
+        regulatory: Any = True,
+        **kwargs: Any,
+    ) -> None:
         self.economics = EconomicReward.from_option(economics)
-        self.plant = FCCEnv(scenario=scenario, regulatory=True, **kwargs)
+        regulatory = closed_loop_keyword(regulatory, CONTROL_ENV_ID)
+        self.plant = FCCEnv(scenario=scenario, regulatory=regulatory, **kwargs)
         self.observation_space = self.plant.observation_space
         self.action_space = self.plant.action_space
         self.render_mode = self.plant.render_mode

@@ -22,11 +22,13 @@ import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 
 from fcc_env.control_task import (
+    CONTROL_ENV_ID,
     REWARD_TERMS,
     EconomicReward,
     reward_term_arrays,
     total_reward,
 )
+from fcc_env.env import closed_loop_keyword
 from fcc_env.scenarios import DEFAULT_N_SAMPLES
 from fcc_env.vector_env import FCCVectorEnv
 
@@ -55,6 +57,7 @@ class FCCControlVectorEnv(VectorEnv):
         *,
         economics: Any = None,
         scenario: str = "random",
+        regulatory: Any = True,
         max_episode_steps: int | None = DEFAULT_N_SAMPLES - 1,
         render_mode: str | None = None,
         **kwargs: Any,
@@ -65,7 +68,7 @@ class FCCControlVectorEnv(VectorEnv):
             max_episode_steps=max_episode_steps,
             render_mode=render_mode,
             scenario=scenario,
-            regulatory=True,
+            regulatory=closed_loop_keyword(regulatory, CONTROL_ENV_ID),
             **kwargs,
         )
         self.num_envs = self.plant.num_envs

@@ -56,6 +56,11 @@ CLOSED_OBS_HIGH = np.concatenate(
 #: Closed loop: the set-point move of a unit action (°C), T_rx_sp and T_rg1_sp.
 SETPOINT_ACTION_SCALE = np.array([15.0, 20.0])
 
+#: The registered ids of the plant: open loop, and under its regulatory layer
+#: (:class:`FCCClosedLoopEnv`).
+ENV_ID = "FCC-v0"
+CLOSED_LOOP_ENV_ID = "FCC-closedloop-v0"
+
 #: The keys ``reset(options=...)`` takes.
 RESET_OPTION_NAMES = ("fault", *ENV_FAULT_KEYWORDS, "plant_effects")
 
@@ -147,7 +152,9 @@ class FCCEnv(gym.Env):
     The plant runs under :class:`fcc_env.RegulatoryLayer` (T_rx on the valve, T_rg1 on the air).
     The observation adds ``u_F`` (kg/s) and the set points ``T_rx_sp``, ``T_rg1_sp`` (°C); the
     action moves the set points (1.0 = +15 / +20 °C, clipped to their ranges); info adds
-    ``controller_saturated``, ``setpoint_clipped`` and ``setpoints`` (docs: Closed loop).
+    ``controller_saturated``, ``setpoint_clipped`` and ``setpoints`` (docs: Closed loop). On
+    ``FCC-closedloop-v0`` and ``FCC-control-v0`` ``regulatory`` defaults to ``True``, and
+    ``False`` or ``None`` (open loop) are refused by name (:class:`FCCClosedLoopEnv`).
 
     ## Version History
     * v0: first release (spec revision with slide-valve hydraulics and entrainment return).
@@ -409,6 +416,34 @@ class OnsetHorizonCheck(gym.Wrapper, gym.utils.RecordConstructorArgs):
         return obs, info
 
 
+class FCCClosedLoopEnv(FCCEnv):
+    """``FCC-closedloop-v0``: :class:`FCCEnv` under its regulatory layer (its section "Closed
+    loop"; the keywords are :class:`FCCEnv`'s).
+
+    ``regulatory`` defaults to ``True`` (the default :class:`fcc_env.RegulatoryLayer`) and may be
+    a layer or a mapping of its fields; ``False`` or ``None`` (no layer) contradicts the id and is
+    refused by name (the open-loop plant is ``FCC-v0``). A ``plant=PlantConfig(...)`` without a
+    layer gets the default one.
+    """
+
+    def __init__(self, *, regulatory: Any = True, **kwargs: Any) -> None:
+        super().__init__(regulatory=closed_loop_keyword(regulatory, CLOSED_LOOP_ENV_ID), **kwargs)
+
+
+def closed_loop_keyword(regulatory: Any, env_id: str) -> Any:
+    """``regulatory`` as a closed-loop id (``env_id``) takes it: ``True``, a
+    :class:`~fcc_env.regulatory.RegulatoryLayer` or a mapping of its fields. ``False`` and
+    ``None`` (open loop) contradict the id, and other types are refused, by name."""
+    if regulatory is True or isinstance(regulatory, RegulatoryLayer | Mapping):
+        return regulatory
+    raise invalid(
+        "regulatory",
+        regulatory,
+        "True, a RegulatoryLayer or a mapping of its fields",
+        f"{env_id} is the plant under its regulatory layer; the open-loop plant is {ENV_ID}",
+    )
+
+
 def _registered_closed_loop(plant: Any, regulatory: Any) -> tuple[Any, Any]:
     """FCC-closedloop-v0 registers ``regulatory=True``: a plant given to it runs closed loop."""
     if plant is not None and regulatory is True and isinstance(plant, PlantConfig):
@@ -486,11 +521,15 @@ def actuator_inputs(program: np.ndarray, move: np.ndarray) -> tuple[np.ndarray, 
 
 __all__ = [
     "ACTUATOR_BOUNDS",
+    "CLOSED_LOOP_ENV_ID",
+    "ENV_ID",
     "RESET_OPTION_NAMES",
+    "FCCClosedLoopEnv",
     "FCCEnv",
     "OnsetHorizonCheck",
     "actuate",
     "actuator_inputs",
     "check_action",
+    "closed_loop_keyword",
     "episode_request",
 ]

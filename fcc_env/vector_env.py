@@ -34,9 +34,11 @@ from fcc_env import effects as fx
 from fcc_env.env import (
     ACTION_SCALE,
     ACTUATOR_BOUNDS,
+    CLOSED_LOOP_ENV_ID,
     SETPOINT_ACTION_SCALE,
     FCCEnv,
     actuate,
+    closed_loop_keyword,
     episode_request,
 )
 from fcc_env.episode_setup import CHUNK_SAMPLES, EpisodeSetup, setup_episode
@@ -61,7 +63,7 @@ from fcc_env.regulatory import (
 )
 from fcc_env.scenarios import DEFAULT_N_SAMPLES, Scenario
 
-__all__ = ["VECTOR_ENTRY_POINT", "FCCVectorEnv"]
+__all__ = ["VECTOR_ENTRY_POINT", "FCCClosedLoopVectorEnv", "FCCVectorEnv"]
 
 VECTOR_ENTRY_POINT = "fcc_env.vector_env:FCCVectorEnv"
 #: Samples of program/noise/multipliers held per env: two chunks, sample k at row k % RING, so
@@ -463,3 +465,13 @@ class FCCVectorEnv(VectorEnv):
             infos[key] = value
             infos[f"_{key}"] = reported
         return infos
+
+
+class FCCClosedLoopVectorEnv(FCCVectorEnv):
+    """``FCC-closedloop-v0``'s native vector env: :class:`FCCVectorEnv` with ``regulatory``
+    checked as :class:`~fcc_env.env.FCCClosedLoopEnv` checks it (default ``True``; ``False`` or
+    ``None`` refused by name)."""
+
+    def __init__(self, num_envs: int = 1, *, regulatory: Any = True, **kwargs: Any) -> None:
+        regulatory = closed_loop_keyword(regulatory, CLOSED_LOOP_ENV_ID)
+        super().__init__(num_envs, regulatory=regulatory, **kwargs)

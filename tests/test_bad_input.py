@@ -151,6 +151,48 @@ def test_garbage_weights_file(lrgf_dir, tmp_path, content) -> None:
     assert "weights_only" not in msg and e.value.__cause__ is None
 
 
+# ---- issue 45: a save never writes through a link ----------------------------------------------
+def test_save_refuses_a_linked_target_directory(pca, tmp_path) -> None:
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    link = tmp_path / "model"
+    link.symlink_to(elsewhere, target_is_directory=True)
+    with pytest.raises(ValueError, match=rf"{link} is a symbolic link .*refusing to save"):
+        pca.save(link)
+    assert list(elsewhere.iterdir()) == []
+    dangling = tmp_path / "dangling"
+    dangling.symlink_to(tmp_path / "nowhere")
+    with pytest.raises(ValueError, match=r"dangling is a symbolic link"):
+        pca.save(dangling)
+    assert not (tmp_path / "nowhere").exists()
+
+
+def test_save_replaces_a_linked_file_and_leaves_its_target(pca, tmp_path) -> None:
+    out = pca.save(tmp_path / "model")
+    victim = tmp_path / "victim.txt"
+    victim.write_text("keep me")
+    for name in ("state.npz", "config.json"):
+        (out / name).unlink()
+        (out / name).symlink_to(victim)
+    pca.save(out)
+    assert victim.read_text() == "keep me"
+    assert not (out / "state.npz").is_symlink() and not (out / "config.json").is_symlink()
+    assert Diagnoser.load(out).get_params() == pca.get_params()
+
+
+def test_save_of_torch_modules_replaces_linked_files(lrgf_dir, tmp_path) -> None:
+    diag = Diagnoser.load(lrgf_dir)
+    out = diag.save(tmp_path / "model")
+    victim = tmp_path / "victim.txt"
+    victim.write_text("keep me")
+    for name in ("weights.pt", "models.json"):
+        (out / name).unlink()
+        (out / name).symlink_to(victim)
+    diag.save(out)
+    assert victim.read_text() == "keep me"
+    assert Diagnoser.load(out).get_params() == diag.get_params()
+
+
 # ---- item 11: the result store ---------------------------------------------------------------
 def test_a_cell_path_that_is_a_directory_is_reported_when_read(tmp_path) -> None:
     st = ResultStore.open(tmp_path / "s", {"d": 1})

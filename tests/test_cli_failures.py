@@ -9,12 +9,17 @@ outside pytest, *crash* (killed: out of memory or time). Each root cause has sev
    :func:`fcc_common.invocation.run_command` and :func:`diagnosers.registry.import_modules`;
 2. counts beyond the memory budget, refused before any range of seeds is built;
 3. advice: "re-run to resume" only after an interruption, no overlap of seed ranges, no
-   empty ``--out``; two runs on one store accept each other's identical cells.
+   empty ``--out``; two runs on one store accept each other's identical cells;
+4. (issue 45) no prefix matching of flags (``--seed`` is not ``--seeds``), bounded counts in every
+   command (the isolation study and tables, the closed-loop report, the benchmarks), and a
+   Ctrl-C anywhere ends in one line with exit code 130, workers included.
 """
 
 from __future__ import annotations
 
+import inspect
 import os
+import signal
 import subprocess
 import sys
 import textwrap
@@ -25,16 +30,27 @@ from pathlib import Path
 
 import pytest
 
+from bench import detector_speed, simulator_speed, sweep_speed, vector_speed
 from diagnosers import registry
 from evaluation.discover.cli import main as discover_main
+from evaluation.isolation import isolability, study
 from evaluation.leaderboard.command import main as leaderboard_main
 from evaluation.sweep.store import ResultStore, StoreError
+from fcc_common.invocation import command_parser, run_command
+from fcc_env import closed_loop_report
 from fcc_env.generate import main as generate_main
 
 MAINS: dict[str, Callable[[list[str]], int]] = {
     "generate": generate_main,
     "leaderboard": leaderboard_main,
     "discover": discover_main,
+    "study": study.main,
+    "isolability": isolability.main,
+    "clreport": closed_loop_report.main,
+    "simspeed": simulator_speed.main,
+    "vecspeed": vector_speed.main,
+    "detspeed": detector_speed.main,
+    "sweepspeed": sweep_speed.main,
 }
 #: The modules the campaign runs with ``python -m`` outside pytest.
 MODULES = {
@@ -123,6 +139,37 @@ CASES: list[tuple[str, str, list[str], int, tuple[str, ...], tuple[str, ...]]] =
     ("lb-out-empty", "leaderboard", [*_LB, "--out", ""], 2, ("empty",), ()),
     ("disc-out-empty", "discover", ["--data", "{data}", "--out", ""], 2, ("empty",), ()),
     ("lb-fit-fails", "leaderboard", [*_RUN, "--import", "failfit_mod", "--diagnosers", "fail-fit", "--out", "{tmp}/ff"], 1, ("fail-fit always fails", "fails the same way"), ("re-run to resume",)),
+    # 4. no prefix matching: a near miss is refused, never read as another flag
+    ("abbrev-lb-seed", "leaderboard", [*_LB, "--seed", "1"], 2, ("unrecognized arguments: --seed 1",), ()),
+    ("abbrev-lb-train", "leaderboard", [*_LB, "--train", "1"], 2, ("unrecognized arguments: --train",), ()),
+    ("abbrev-gen-seed", "generate", ["--out", "{tmp}/g.csv", "--seed", "3"], 2, ("--seed 3",), ()),
+    ("abbrev-study-n", "study", ["--n", "3"], 2, ("--n 3",), ()),
+    ("abbrev-clr-term", "clreport", ["--out", "{tmp}/c", "--term", "3"], 2, ("--term 3",), ()),
+    # 4. bounded counts, refused before any training or simulation
+    ("study-seeds-1e9", "study", ["--n-seeds", "1000000000", "--out", "{tmp}/s"], 2, ("n_seeds=1000000000", "GiB"), ()),
+    ("study-test-into-training", "study", ["--seeds", "test", "--n-seeds", "2000", "--out", "{tmp}/s"], 2, ("n_seeds=2000", "training seeds 1000"), ()),
+    ("study-seeds-0", "study", ["--n-seeds", "0", "--out", "{tmp}/s"], 2, ("n_seeds=0",), ()),
+    ("study-unknown-over", "study", ["--n-unknown", "30", "--out", "{tmp}/s"], 2, ("n_unknown=30", "[0, 20]"), ()),
+    ("study-isolators-list", "study", ["--isolators", "[]", "--out", "{tmp}/s"], 2, ("isolators=[]",), ()),
+    ("study-isolators-json", "study", ["--isolators", "[[", "--out", "{tmp}/s"], 2, ("--isolators '[['", "not valid JSON"), ()),
+    ("study-track", "study", ["--track", "paper,nope", "--out", "{tmp}/s"], 2, ("'nope'",), ()),
+    ("study-out-under-file", "study", ["--out", "{file}/s"], 2, ("{file}",), ()),
+    ("isol-seeds-1e9", "isolability", ["--seeds", "1000000000"], 2, ("n_seeds=1000000000",), ()),
+    ("isol-horizon-1e12", "isolability", ["--horizon", "1000000000000"], 2, ("horizon=1000000000000",), ()),
+    ("isol-track", "isolability", ["--track", "nope"], 2, ("'nope'",), ()),
+    ("clr-terminations-1e9", "clreport", ["--out", "{tmp}/c", "--terminations", "1000000000"], 2, ("--terminations=1000000000", "[0, 10000]"), ()),
+    ("clr-terminations-neg", "clreport", ["--out", "{tmp}/c", "--terminations", "-1"], 2, ("--terminations=-1",), ()),
+    ("clr-response-1e12", "clreport", ["--out", "{tmp}/c", "--response-samples", "1000000000000"], 2, ("--response-samples 1000000000000", "GiB"), ()),
+    ("clr-horizon-1e11", "clreport", ["--out", "{tmp}/c", "--horizon", "100000000000"], 2, ("--horizon 100000000000", "GiB"), ()),
+    ("clr-seeds-negative", "clreport", ["--out", "{tmp}/c", "--seeds", "-1"], 2, ("seeds=(-1,)",), ()),
+    ("clr-out-empty", "clreport", ["--out", ""], 2, ("empty",), ()),
+    ("sim-episodes-1e8", "simspeed", ["--episodes", "100000000"], 2, ("--episodes 100000000", "GiB"), ()),
+    ("sim-steps-0", "simspeed", ["--steps", "0"], 2, ("--steps=0",), ()),
+    ("vec-envs-1e8", "vecspeed", ["--envs", "100000000"], 2, ("--envs 100000000", "GiB"), ()),
+    ("det-bank-1e5", "detspeed", ["--bank", "100000"], 2, ("--bank=100000",), ()),
+    ("det-epochs-0", "detspeed", ["--epochs", "0"], 2, ("--epochs=0",), ()),
+    ("sweep-seeds-float", "sweepspeed", ["--seeds", "1e9", "--skip-cli"], 2, ("'1e9'",), ()),
+    ("sweep-seeds-5000", "sweepspeed", ["--seeds", "1,5000", "--skip-cli"], 2, ("--seeds 5000", "training seeds 1000"), ()),
 ]  # fmt: skip
 
 
@@ -320,3 +367,94 @@ def test_a_closed_ray_backend_stops_its_watchdog() -> None:
     finally:
         proc.kill()
         proc.wait()
+
+
+# ---- 4. Ctrl-C: one line, exit code 130, anywhere -------------------------------------------
+#: Every ``python -m`` command of the packages and of bench/ (the lab scripts are a record, run
+#: at their commit).
+COMMAND_MODULES = (
+    "evaluation.leaderboard.command",
+    "evaluation.discover.cli",
+    "evaluation.isolation.study",
+    "evaluation.isolation.isolability",
+    "fcc_env.generate",
+    "fcc_env.demo",
+    "fcc_env.closed_loop_report",
+    "fcc_env.closed_loop_analysis",
+    "bench.detector_speed",
+    "bench.loop_speed",
+    "bench.simulator_speed",
+    "bench.sweep_speed",
+    "bench.vector_speed",
+)
+
+
+@pytest.mark.parametrize("module", COMMAND_MODULES)
+def test_every_command_runs_through_run_command(module: str) -> None:
+    """A command that parses on its own would let a Ctrl-C, or a bad value found late, print a
+    traceback: each ``main`` hands its work to :func:`run_command`."""
+    import importlib
+
+    main = importlib.import_module(module).main
+    assert "run_command(" in inspect.getsource(main), module
+
+
+def test_an_interruption_is_one_line_with_exit_code_130(capsys) -> None:
+    parser = command_parser("demo.cmd", "A demo.", (("", "runs"),))
+
+    def body(_args) -> int:
+        raise KeyboardInterrupt
+
+    with pytest.raises(SystemExit) as e:
+        run_command(parser, body, [], on_interrupt="re-run it")
+    err = capsys.readouterr().err
+    assert e.value.code == 130
+    assert err.strip().splitlines() == [
+        "python -m demo.cmd: interrupted (Ctrl-C); files written so far are whole: re-run it"
+    ]
+
+
+def test_abbreviations_are_off_in_every_parser() -> None:
+    parser = command_parser("demo.cmd", "A demo.", (("", "runs"),))
+    parser.add_argument("--seeds", type=int)
+    assert parser.allow_abbrev is False
+    with pytest.raises(SystemExit):
+        parser.parse_args(["--seed", "1"])
+
+
+def _read_until(proc: subprocess.Popen[bytes], text: bytes, timeout_s: float) -> bytes:
+    """Stderr of ``proc`` up to ``text`` (tqdm writes ``\\r``, no newline: read bytes)."""
+    import selectors
+
+    assert proc.stderr is not None
+    seen = b""
+    sel = selectors.DefaultSelector()
+    sel.register(proc.stderr, selectors.EVENT_READ)
+    deadline = time.monotonic() + timeout_s
+    while text not in seen and time.monotonic() < deadline and proc.poll() is None:
+        if sel.select(timeout=0.5):
+            seen += os.read(proc.stderr.fileno(), 4096)
+    return seen
+
+
+def test_ctrl_c_in_a_sweep_with_workers_prints_one_line(tmp_path) -> None:
+    """A real SIGINT to the whole process group, as a terminal sends it: the driver reports it
+    in one line and resumes on a re-run; the spawn workers, interrupted too, print nothing."""
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1])}
+    cmd = [sys.executable, "-m", "evaluation.leaderboard", "--quick", "--workers", "2"]
+    cmd += ["--no-figures", "--out", str(tmp_path / "lb")]
+    proc = subprocess.Popen(
+        cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, env=env, start_new_session=True
+    )
+    try:
+        before = _read_until(proc, b"training", 180)
+        assert b"training" in before, before.decode(errors="replace")
+        os.killpg(proc.pid, signal.SIGINT)
+        _, rest = proc.communicate(timeout=120)
+    finally:
+        if proc.poll() is None:
+            os.killpg(proc.pid, signal.SIGKILL)
+    err = (before + rest).decode(errors="replace")
+    assert proc.returncode == 130, err
+    assert "Traceback" not in err and "KeyboardInterrupt" not in err, err
+    assert err.count("interrupted") == 1 and "re-run the same command to resume" in err

@@ -29,6 +29,9 @@ COMMANDS = (
     "fcc_env.closed_loop_report",
     "fcc_env.closed_loop_analysis",
     "bench.simulator_speed",
+    "bench.detector_speed",
+    "bench.sweep_speed",
+    "bench.vector_speed",
 )
 
 
@@ -118,3 +121,50 @@ def test_leaderboard_help_imports_nothing_heavy() -> None:
     assert proc.returncode == 0, proc.stderr
     assert "examples:" in proc.stdout
     assert proc.stderr.strip().splitlines()[-1] == "[]", proc.stderr
+
+
+def _recorded(folder: Path) -> Path:
+    """A small recorded data set whose fault onset is assumed (manifest ``onset_assumed``)."""
+    import json
+
+    import numpy as np
+
+    rng = np.random.default_rng(3)
+    folder.mkdir()
+    for name, n, step in (("healthy", 300, None), ("normal", 200, None), ("leak", 200, 120)):
+        tr = 969.0 + rng.normal(0, 0.5, n)
+        if step is not None:
+            tr[step:] += 20.0
+        data = np.column_stack([rng.normal(30, 0.2, n), tr])
+        np.savetxt(folder / f"{name}.csv", data, delimiter=",", header="Frgc,Tr", comments="")
+    manifest = {
+        "inputs": ["Frgc"],
+        "outputs": ["Tr"],
+        "train_files": ["healthy.csv"],
+        "test_files": [
+            {"path": "normal.csv", "onset": None},
+            {"path": "leak.csv", "onset": 120, "name": "leak", "onset_assumed": True},
+        ],
+        "sample_time_s": 60,
+    }
+    (folder / "dataset.json").write_text(json.dumps(manifest))
+    return folder
+
+
+def test_external_data_get_their_own_folder_and_the_printed_dagger(
+    tmp_path, monkeypatch, capsys
+) -> None:
+    """``--external`` without ``--out`` once overwrote the ``--quick`` run's tables; and the
+    terminal's table lacked the † of an assumed onset that the file has."""
+    from evaluation.reports.tables import ASSUMED_MARK, ASSUMED_TEXT
+
+    data = _recorded(tmp_path / "rec")
+    monkeypatch.chdir(tmp_path)
+    argv = ["--external", str(data), "--diagnosers", "limits", "--workers", "0"]
+    assert _main("evaluation.leaderboard")([*argv, "--no-figures", "--no-progress"]) == 0
+    out = capsys.readouterr().out
+    assert (tmp_path / "results" / "external" / "leaderboard.md").is_file()
+    assert not (tmp_path / "results" / "leaderboard").exists()
+    assert f"leak{ASSUMED_MARK} r_td" in out and ASSUMED_TEXT in out
+    md = (tmp_path / "results" / "external" / "leaderboard.md").read_text()
+    assert f"leak{ASSUMED_MARK} r_td" in md

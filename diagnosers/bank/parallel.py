@@ -22,7 +22,6 @@ each worker imports the script's main module.
 
 from __future__ import annotations
 
-import multiprocessing
 import os
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
@@ -38,7 +37,7 @@ from diagnosers.networks.mem_net import NNARXErrorModel
 from diagnosers.networks.modules import build_module, export_module
 from diagnosers.networks.optimisers import FitResult, torch_threads
 from diagnosers.networks.training import fit_lrgf, fit_mem
-from fcc_common.workers import init_worker
+from fcc_common.workers import init_worker, spawn_context
 
 __all__ = ["BankSettings", "TrainedBank", "run_jobs", "train_banks"]
 
@@ -201,7 +200,7 @@ def run_jobs(
     order = sorted(range(len(jobs)), key=lambda i: -cost(jobs[i])) if cost else range(len(jobs))
     pool = ProcessPoolExecutor(
         max_workers=min(n_jobs, len(jobs)),
-        mp_context=multiprocessing.get_context("spawn"),
+        mp_context=spawn_context(),
         initializer=init_worker,
         initargs=(os.getpid(),),
     )

@@ -24,6 +24,7 @@ Run ``python -m evaluation.isolation.isolability --track paper`` for the tables.
 
 from __future__ import annotations
 
+import argparse
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass
@@ -33,7 +34,7 @@ import numpy as np
 from evaluation.tracks.catalogue import TRACKS
 from evaluation.tracks.track import FAULT_NAMES
 from evaluation.tracks.track_data import TrackData
-from fcc_common.invocation import command_parser
+from fcc_common.invocation import command_parser, run_command
 from fcc_common.validation import Integer, Real, check
 from fcc_env.params import MEASUREMENT_NAMES, MEASUREMENTS
 
@@ -244,7 +245,7 @@ def isolability_markdown(res: Isolability) -> str:
     return "\n".join(lines) + "\n"
 
 
-def main(argv: Sequence[str] | None = None) -> None:
+def main(argv: Sequence[str] | None = None) -> int:
     p = command_parser(
         "evaluation.isolation.isolability",
         (__doc__ or "").split("\n")[0],
@@ -258,12 +259,17 @@ def main(argv: Sequence[str] | None = None) -> None:
     p.add_argument("--horizon", type=int, default=1000, help="samples after onset analysed")
     p.add_argument("--alpha", type=float, default=0.01, help="error rate of the GLR threshold")
     p.add_argument("--window", type=int, default=100, help="samples of the mean signature")
-    a = p.parse_args(argv)
+    return run_command(p, _tables, argv)
+
+
+def _tables(a: argparse.Namespace) -> int:
+    """The work of :func:`main`: its failures (and a Ctrl-C) are reported by :func:`run_command`."""
     names = sorted(TRACKS) if a.track == "all" else [t.strip() for t in a.track.split(",")]
     for name in names:
         res = isolability(name, n_seeds=a.seeds, horizon=a.horizon, alpha=a.alpha, window=a.window)
         print(isolability_markdown(res))
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

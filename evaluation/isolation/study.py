@@ -19,6 +19,7 @@ Outputs: ``<out>/<track>-<seeds>.md|json`` and ``<out>/figures/<track>-<seeds>-<
 
 from __future__ import annotations
 
+import argparse
 import json
 import math
 import time
@@ -34,16 +35,20 @@ from diagnosers.detection import Detection
 from diagnosers.diagnoser import Diagnoser
 from diagnosers.episode.record import Episode
 from diagnosers.lrgf.lrgf_mem import LRGFMEM
-from evaluation.isolation.unknown_faults import unknown_fault_episodes
+from evaluation.isolation.unknown_faults import UNKNOWN_FAULTS, unknown_fault_episodes
 from evaluation.metrics.detection_metrics import r_td, t_dt
 from evaluation.metrics.intervals import bootstrap_ci
 from evaluation.metrics.isolation_metrics import UNKNOWN, confusion_matrix, isolation_scores
 from evaluation.reports.plots import confusion_figure
 from evaluation.tracks.catalogue import TRACKS
+from evaluation.tracks.track import Track
 from evaluation.tracks.track_data import TrackData
-from fcc_common.invocation import command_parser
+from fcc_common.invocation import check_out_path, command_parser, out_path, run_command
+from fcc_common.io import atomic_write
+from fcc_common.validation import Integer, check, invalid
+from fcc_env.simulation import check_memory
 
-__all__ = ["ISOLATORS", "Isolator", "episode_rows", "main", "summarise"]
+__all__ = ["ISOLATORS", "Isolator", "check_counts", "episode_rows", "main", "summarise"]
 
 
 class Isolator(Protocol):
@@ -190,6 +195,12 @@ def run(
     if seeds not in ("validation", "test"):
         raise ValueError(f"seeds={seeds!r} must be 'validation' or 'test'")
     tr = TRACKS[track]
+    start = _first_seed(tr, seeds)
+    n_seeds, n_unknown = check_counts(tr, start, n_seeds, n_unknown)  # before any training
+    if isolators is not None and not (
+        isinstance(isolators, dict) and all(isinstance(v, dict) for v in isolators.values())
+    ):
+        raise invalid("isolators", isolators, '{"label": {"name": registry name, params...}}')
     data = TrackData(track=tr)
     t0 = time.perf_counter()
     if detector is not None:
@@ -200,7 +211,6 @@ def run(
         inner = LRGFMEM().fit(data.train_episodes())
     train_f = data.train_fault_episodes()
     train_dets = [inner.detect(ep) for ep in train_f]
-    start = tr.validation_seed_start if seeds == "validation" else tr.test_seed_start
     seed_list = list(range(start, start + n_seeds))
     test = [
         data.simulate([s], tr.fault_spec(f, s))[0].episode for f in tr.faults for s in seed_list
@@ -238,13 +248,37 @@ def run(
     results["wall_s"] = time.perf_counter() - t0
     out.mkdir(parents=True, exist_ok=True)
     text = markdown(track, seeds, results)
-    (out / f"{track}-{seeds}.md").write_text(text)
-    (out / f"{track}-{seeds}.json").write_text(json.dumps(results, indent=1, default=float))
+    atomic_write(out / f"{track}-{seeds}.md", text)
+    atomic_write(out / f"{track}-{seeds}.json", json.dumps(results, indent=1, default=float))
     print(text)
     return results
 
 
-def main(argv: Sequence[str] | None = None) -> None:
+def _first_seed(track: Track, seeds: str) -> int:
+    return track.validation_seed_start if seeds == "validation" else track.test_seed_start
+
+
+def check_counts(track: Track, start: int, n_seeds: int, n_unknown: int) -> tuple[int, int]:
+    """``n_seeds`` and ``n_unknown`` checked: the scored episodes fit the memory budget
+    (:func:`fcc_env.simulation.check_memory`, as the leaderboard's counts) and test seeds from
+    ``start`` stay below the training seeds; the unknown faults run on the first ``n_unknown``
+    of the ``n_seeds`` seeds."""
+    n_seeds = check("n_seeds", n_seeds, Integer(1))
+    why = "the unknown faults run on the first n_seeds seeds"
+    n_unknown = check("n_unknown", n_unknown, Integer(0, n_seeds, why=why))
+    train = track.train_seed_start
+    if start < train < start + n_seeds:
+        why = f"seeds from {start} would reach the training seeds {train}.."
+        raise invalid("n_seeds", n_seeds, f"an integer in [1, {train - start}]", why)
+    # every scored episode is held at once: each fault's and each unknown fault's
+    try:
+        check_memory(len(track.faults) * n_seeds + len(UNKNOWN_FAULTS) * n_unknown, track.n_samples)
+    except ValueError as e:
+        raise ValueError(f"n_seeds={n_seeds}, n_unknown={n_unknown}: {e}") from None
+    return n_seeds, n_unknown
+
+
+def main(argv: Sequence[str] | None = None) -> int:
     p = command_parser(
         "evaluation.isolation.study",
         (__doc__ or "").split("\n")[0],
@@ -265,14 +299,27 @@ def main(argv: Sequence[str] | None = None) -> None:
     p.add_argument("--n-seeds", type=int, default=20, help="faulty episodes per fault")
     p.add_argument("--n-unknown", type=int, default=10, help="episodes per unknown fault")
     p.add_argument("--detector", help="directory of a saved lrgf-mem (trained on the track)")
-    p.add_argument("--out", type=Path, default=Path("results/isolation"))
+    p.add_argument("--out", type=out_path, default=Path("results/isolation"))
     p.add_argument(
         "--isolators",
         help='JSON {"label": {"name": registry name, params...}} (default: the registered two)',
     )
-    a = p.parse_args(argv)
-    isolators = json.loads(a.isolators) if a.isolators else None
-    for track in [t.strip() for t in a.track.split(",")]:
+    return run_command(p, _study, argv)
+
+
+def _study(a: argparse.Namespace) -> int:
+    """The work of :func:`main`: its failures (and a Ctrl-C) are reported by :func:`run_command`."""
+    try:
+        isolators = json.loads(a.isolators) if a.isolators else None
+    except json.JSONDecodeError as e:
+        raise ValueError(f"--isolators {a.isolators!r} is not valid JSON: {e}") from None
+    check_out_path("--out", a.out)
+    tracks = [t.strip() for t in a.track.split(",")]
+    for track in tracks:  # every track's counts before the first one trains
+        if track not in TRACKS:
+            raise ValueError(f"Unknown track {track!r}. Available: {sorted(TRACKS)}")
+        check_counts(TRACKS[track], _first_seed(TRACKS[track], a.seeds), a.n_seeds, a.n_unknown)
+    for track in tracks:
         run(
             track,
             a.seeds,
@@ -282,7 +329,8 @@ def main(argv: Sequence[str] | None = None) -> None:
             out=a.out,
             isolators=isolators,
         )
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

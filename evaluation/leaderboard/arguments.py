@@ -32,6 +32,7 @@ __all__ = [
     "DEFAULT_OUT",
     "DEFAULT_SEEDS",
     "DEFAULT_TRAIN_EPISODES",
+    "EXTERNAL_OUT",
     "HELP_DEFAULTS",
     "QUICK_SEEDS",
     "QUICK_TRAIN_EPISODES",
@@ -75,6 +76,8 @@ QUICK_TRAIN_EPISODES = 3
 DEFAULT_SEEDS = 10
 DEFAULT_TRAIN_EPISODES = 9  # lrgf-mem: 6 to train the models, 3 held out to calibrate
 DEFAULT_OUT = Path("results/leaderboard")
+#: --external: recorded data, scored into a folder of their own (not over the --quick tables)
+EXTERNAL_OUT = Path("results/external")
 #: --validation: seeds 5000.. (never the test seeds 0..), faults at 0.7x the paper's magnitudes.
 VALIDATION_SEED_BASE = 5000
 VALIDATION_SEEDS = 40
@@ -207,7 +210,8 @@ def build_parser() -> argparse.ArgumentParser:
         type=out_path,
         default=None,
         metavar="DIR",
-        help=f"output directory (default {DEFAULT_OUT}; --validation {VALIDATION_OUT})",
+        help=f"output directory (default {DEFAULT_OUT}; --validation {VALIDATION_OUT}; "
+        f"--external {EXTERNAL_OUT})",
     )
     p.add_argument(
         "--backend",

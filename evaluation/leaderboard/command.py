@@ -1,7 +1,8 @@
 """Leaderboard CLI: ``python -m evaluation.leaderboard [--quick] [...]``.
 
 Runs a sweep (:func:`evaluation.sweep.run_sweep`), then writes into ``--out``
-(default ``results/leaderboard``):
+(default ``results/leaderboard``; ``results/external`` with ``--external``, so that recorded data
+never overwrite the simulated tables):
 
 * ``leaderboard.md`` - the Markdown table printed to stdout (its legend,
   :func:`~evaluation.reports.tables.table_legend`, is in the file's header and printed to
@@ -48,6 +49,7 @@ from evaluation.leaderboard.arguments import (
     DEFAULT_OUT,
     DEFAULT_SEEDS,
     DEFAULT_TRAIN_EPISODES,
+    EXTERNAL_OUT,
     QUICK_SEEDS,
     QUICK_TRAIN_EPISODES,
     VALIDATION_FAULT_SCALE,
@@ -132,7 +134,14 @@ def resolve_options(
         parser.error("--ramp-samples needs --fault-profile incipient")
     if args.validation and (args.quick or args.external is not None):
         parser.error("--validation cannot be combined with --quick or --external")
-    out = args.out or (VALIDATION_OUT if args.validation else DEFAULT_OUT)
+    # recorded data get a folder of their own: never the --quick run's tables
+    out = args.out or (
+        VALIDATION_OUT
+        if args.validation
+        else EXTERNAL_OUT
+        if args.external is not None
+        else DEFAULT_OUT
+    )
     try:
         check_backend(args.backend)
         check_out_dir(out)
@@ -191,7 +200,8 @@ def main(argv: Sequence[str] | None = None) -> int:
 
         return control_main(rest)
     parser = build_parser()
-    return run_command(parser, lambda args: _leaderboard(args, parser), words)
+    resume = "finished cells are stored: re-run the same command to resume"
+    return run_command(parser, lambda args: _leaderboard(args, parser), words, on_interrupt=resume)
 
 
 def _split_task(words: Sequence[str]) -> tuple[str | None, list[str]]:
@@ -221,7 +231,7 @@ def _leaderboard(args: argparse.Namespace, parser: argparse.ArgumentParser) -> i
 
         return main_tracks(args, parser)
     from evaluation.leaderboard import paper
-    from evaluation.reports.outputs import write_outputs
+    from evaluation.reports.outputs import marked_results, write_outputs
     from evaluation.reports.tables import markdown_table, reference_row, sample_time, table_legend
 
     opts = resolve_options(args, parser)
@@ -233,6 +243,7 @@ def _leaderboard(args: argparse.Namespace, parser: argparse.ArgumentParser) -> i
     except (RuntimeError, KeyboardInterrupt) as e:  # finished cells are kept
         exit_on_failure(parser, e)
     written = write_outputs(results, opts.out, figures=opts.figures)
+    results = marked_results(results)  # as in the file: the † of an assumed onset, its legend
     reference = reference_row(results.config)
     # stdout is the table and its legend (`> table.md` keeps both); progress goes to stderr
     print(markdown_table(results.summary(), reference=reference))

@@ -20,7 +20,7 @@ from pathlib import Path
 from typing import Any, Protocol
 
 # the worker set-up is shared with diagnosers.bank.parallel (fcc_common.workers)
-from fcc_common.workers import cpu_count, init_worker
+from fcc_common.workers import cpu_count, init_worker, spawn_context
 
 #: Execution backends accepted by :func:`evaluation.sweep.run_sweep`.
 BACKENDS: tuple[str, ...] = ("local", "ray")
@@ -42,11 +42,9 @@ class LocalBackend:
     passes_paths = True
 
     def __init__(self, n_workers: int) -> None:
-        import multiprocessing
-
         self._pool = ProcessPoolExecutor(
             max_workers=n_workers,
-            mp_context=multiprocessing.get_context("spawn"),
+            mp_context=spawn_context(),
             initializer=init_worker,
             initargs=(os.getpid(),),
         )

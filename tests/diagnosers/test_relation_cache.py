@@ -2,9 +2,14 @@
 
 from __future__ import annotations
 
+import fcntl
+import os
+import stat
+import threading
 import zipfile
 
 import numpy as np
+import pytest
 from synthetic import inject_step_fault, make_episode
 
 import diagnosers
@@ -120,3 +125,142 @@ def test_the_cache_is_off_outside_a_block(train, tmp_path) -> None:
     diagnosers.make("lrgf-mem", **LRGFMEM.fast_params()).fit(train)
     assert _entries(tmp_path) == []
     assert RelationCache(tmp_path).path("ab" + "0" * 62).parent.name == "ab"
+
+
+# ---- a cache anyone may have edited (issue 45): refused by name, retrained, never a hang -------
+def _small_job(train):
+    s = BankSettings.from_params(
+        {**LRGFMEM(**LRGFMEM.fast_params()).get_params(), "n_hidden": 2, "max_epochs": 3}
+    )
+    return s, [[train[0].y]], [np.array([0, 1])], np.array([2])
+
+
+def _fit(job, cache, seed: int = 0) -> dict[str, np.ndarray]:
+    s, sets, in_idx, out_idx = job
+    with shared_relations(cache):
+        (bank,) = train_banks(s, sets, in_idx, out_idx, seed, 1)
+    return {k: v.numpy() for k, v in export_module(bank.lrgf[0])[1].items()}
+
+
+def _equal(a: dict[str, np.ndarray], b: dict[str, np.ndarray]) -> bool:
+    return a.keys() == b.keys() and all(np.array_equal(a[k], b[k]) for k in a)
+
+
+def _within(seconds: float, fn):
+    """``fn()``'s result, or a failure (not a hung test) when it takes longer than ``seconds``."""
+    out: dict[str, object] = {}
+    worker = threading.Thread(target=lambda: out.update(value=fn()), daemon=True)
+    worker.start()
+    worker.join(seconds)
+    assert not worker.is_alive(), f"still running after {seconds} s: a hang"
+    return out["value"]
+
+
+def test_a_fifo_in_place_of_a_lock_does_not_hang_the_fit(train, tmp_path, caplog) -> None:
+    job = _small_job(train)
+    fresh = _fit(job, None)
+    _fit(job, tmp_path)
+    (entry,) = _entries(tmp_path)
+    lock = entry.with_suffix(".lock")
+    lock.unlink()
+    os.mkfifo(lock)
+    with caplog.at_level("WARNING"):
+        again = _within(60, lambda: _fit(job, tmp_path))
+    assert _equal(again, fresh)
+    assert str(lock) in caplog.text and "not a regular file" in caplog.text
+    assert stat.S_ISFIFO(lock.lstat().st_mode)  # bypassed, not opened for writing
+
+
+def test_a_lock_held_too_long_is_bypassed_after_the_timeout(tmp_path, caplog) -> None:
+    cache = RelationCache(tmp_path, lock_timeout_s=0.2)
+    key = "ab" + "0" * 62
+    lock = cache.path(key).with_suffix(".lock")
+    lock.parent.mkdir(parents=True)
+    with open(lock, "w") as held:  # another holder of the key's lock (flock is per open file)
+        fcntl.flock(held.fileno(), fcntl.LOCK_EX)
+        with caplog.at_level("WARNING"):
+            _within(30, lambda: cache.fetch_or_train(key, lambda: "trained"))
+    assert "held by another process for over 0.2 s" in caplog.text and str(lock) in caplog.text
+
+
+def test_a_lock_link_is_not_followed(train, tmp_path, caplog) -> None:
+    job = _small_job(train)
+    _fit(job, tmp_path / "c")
+    (entry,) = _entries(tmp_path / "c")
+    victim = tmp_path / "victim"
+    victim.write_text("keep me")
+    lock = entry.with_suffix(".lock")
+    lock.unlink()
+    lock.symlink_to(victim)
+    with caplog.at_level("WARNING"):
+        _fit(job, tmp_path / "c")
+    assert victim.read_text() == "keep me" and str(lock) in caplog.text
+
+
+def test_another_jobs_entry_copied_in_is_refused_and_retrained(train, tmp_path, caplog) -> None:
+    job = _small_job(train)
+    fresh = _fit(job, None)
+    _fit(job, tmp_path)
+    _fit(job, tmp_path, seed=7)  # another job: another seed
+    first, other = sorted(_entries(tmp_path), key=lambda p: p.stat().st_mtime)
+    first.unlink()
+    first.symlink_to(other)  # linked in (a copy reads the same)
+    with caplog.at_level("WARNING"):
+        again = _fit(job, tmp_path)
+    assert _equal(again, fresh)  # not the other job's model
+    assert str(first) in caplog.text and "entry of another job" in caplog.text
+    assert not first.is_symlink()  # replaced by its own entry
+    with np.load(first) as npz:
+        assert first.stem in str(npz["meta"])  # the entry names its key
+
+
+def test_a_nan_entry_is_corrupt_and_retrained(train, tmp_path, caplog) -> None:
+    job = _small_job(train)
+    fresh = _fit(job, None)
+    _fit(job, tmp_path)
+    (entry,) = _entries(tmp_path)
+    with np.load(entry) as npz:
+        arrays = {k: npz[k] for k in npz.files}
+    name = next(k for k in arrays if k.startswith("net/") and arrays[k].size)
+    arrays[name] = np.full_like(arrays[name], np.nan)
+    np.savez(entry, **arrays)
+    with caplog.at_level("WARNING"):
+        again = _fit(job, tmp_path)  # no LinAlgError: the entry is never used
+    assert _equal(again, fresh)
+    assert str(entry) in caplog.text and f"{name!r} holds non-finite values" in caplog.text
+    with np.load(entry) as npz:
+        assert all(np.isfinite(npz[k]).all() for k in npz.files if k != "meta")
+
+
+def test_a_linked_shard_folder_puts_nothing_outside_the_cache(train, tmp_path, caplog) -> None:
+    job = _small_job(train)
+    fresh = _fit(job, None)
+    _fit(job, tmp_path / "probe")
+    (entry,) = _entries(tmp_path / "probe")
+    cache, outside = tmp_path / "cache", tmp_path / "outside"
+    cache.mkdir()
+    outside.mkdir()
+    (cache / entry.parent.name).symlink_to(outside, target_is_directory=True)
+    with caplog.at_level("WARNING"):
+        again = _fit(job, cache)
+    assert _equal(again, fresh)
+    assert list(outside.iterdir()) == []
+    assert "outside the cache" in caplog.text and entry.parent.name in caplog.text
+
+
+def test_a_special_file_as_entry_is_refused_by_name(train, tmp_path, caplog) -> None:
+    job = _small_job(train)
+    _fit(job, tmp_path)
+    (entry,) = _entries(tmp_path)
+    entry.unlink()
+    os.mkfifo(entry)
+    with caplog.at_level("WARNING"):
+        _within(60, lambda: _fit(job, tmp_path))
+    assert str(entry) in caplog.text and "FIFO" in caplog.text
+    assert zipfile.is_zipfile(entry)  # replaced by a good entry
+
+
+def test_a_bad_key_is_refused_by_value(tmp_path) -> None:
+    for key in ("../../etc/passwd", "AB" + "0" * 62, "ab", 5):
+        with pytest.raises(ValueError, match=r"key=.* is outside the allowed range: 64"):
+            RelationCache(tmp_path).path(key)  # type: ignore[arg-type]

@@ -3,12 +3,14 @@ naming the value (the rest of the project's bad-input tests are in ``tests/test_
 
 from __future__ import annotations
 
+import re
 import time
 
 import gymnasium as gym
 import numpy as np
 import pytest
 
+import fcc_env
 from fcc_env import simulate_episodes
 from fcc_env.generate import main
 from fcc_env.simulation import DEFAULT_MEMORY_BUDGET_BYTES, batch_nbytes
@@ -79,3 +81,82 @@ def test_random_scenario_with_an_onset_beyond_the_horizon_fails_at_make() -> Non
 def test_simulate_bad_seeds(seeds, match) -> None:
     with pytest.raises(ValueError, match=match):
         simulate_episodes(seeds, 3)
+
+
+# ---- issue 45: each id takes exactly the keywords its docstring lists ---------------------------
+CLOSED_IDS = (fcc_env.CLOSED_LOOP_ENV_ID, fcc_env.CONTROL_ENV_ID)
+
+
+def _closed(env) -> bool:
+    inner = env.unwrapped
+    return getattr(inner, "plant", inner).closed_loop
+
+
+@pytest.mark.parametrize("env_id", CLOSED_IDS)
+@pytest.mark.parametrize("value", [False, None, "yes", 1, np.True_])
+def test_a_closed_loop_id_refuses_an_open_loop_or_a_wrong_type(env_id, value) -> None:
+    """``regulatory=False`` once built the open-loop plant under the closed-loop id; on the
+    control id it raised ``TypeError: got multiple values``."""
+    match = re.escape(
+        f"regulatory={value!r} is outside the allowed range: True, a RegulatoryLayer or a "
+        f"mapping of its fields ({env_id} is the plant under its regulatory layer; the "
+        "open-loop plant is FCC-v0)"
+    )
+    with pytest.raises(ValueError, match=match):
+        gym.make(env_id, regulatory=value)
+    with pytest.raises(ValueError, match=match):
+        gym.make_vec(env_id, 2, vectorization_mode="vector_entry_point", regulatory=value)
+
+
+@pytest.mark.parametrize("env_id", CLOSED_IDS)
+@pytest.mark.parametrize("value", [True, fcc_env.RegulatoryLayer(), {"program": None}])
+def test_a_closed_loop_id_accepts_a_consistent_layer(env_id, value) -> None:
+    env = gym.make(env_id, regulatory=value, horizon=20)
+    obs, _ = env.reset(seed=0)
+    assert _closed(env) and obs.shape == (11,)
+    envs = gym.make_vec(env_id, 2, vectorization_mode="vector_entry_point", regulatory=value)
+    assert envs.single_observation_space.shape == (11,)
+
+
+def test_the_open_loop_id_keeps_its_keywords() -> None:
+    assert not _closed(gym.make(fcc_env.ENV_ID, regulatory=False))
+    assert _closed(gym.make(fcc_env.ENV_ID, regulatory=True))  # its docstring: closed by keyword
+    # a plant without a layer on the closed-loop id gets the default one, as documented
+    assert _closed(gym.make(fcc_env.CLOSED_LOOP_ENV_ID, plant=fcc_env.PlantConfig()))
+
+
+@pytest.mark.parametrize("value", ["cheap", [1, 2], 5, b"x"])
+def test_economics_of_a_wrong_type_is_refused_by_name(value) -> None:
+    """A string was read as the names of its characters."""
+    match = re.escape(f"economics={value!r} is outside the allowed range: an EconomicReward, a")
+    with pytest.raises(ValueError, match=match):
+        gym.make(fcc_env.CONTROL_ENV_ID, economics=value)
+    with pytest.raises(ValueError, match=match):
+        gym.make_vec(
+            fcc_env.CONTROL_ENV_ID, 2, vectorization_mode="vector_entry_point", economics=value
+        )
+
+
+def test_economics_keys_and_values_are_refused_by_name() -> None:
+    with pytest.raises(ValueError, match=r"Unknown economics option\(s\) \['price'\]"):
+        gym.make(fcc_env.CONTROL_ENV_ID, economics={"price": 1.0})
+    with pytest.raises(ValueError, match=r"trip_usd=-1 is outside the allowed range"):
+        gym.make(fcc_env.CONTROL_ENV_ID, economics={"trip_usd": -1})
+
+
+@pytest.mark.parametrize("env_id", [fcc_env.ENV_ID, *CLOSED_IDS])
+def test_a_keyword_no_docstring_lists_is_refused_by_name(env_id) -> None:
+    with pytest.raises(TypeError, match=r"unexpected keyword argument 'economy'"):
+        gym.make(env_id, economy=1)
+    if env_id != fcc_env.CONTROL_ENV_ID:  # only the control task has a reward to price
+        with pytest.raises(TypeError, match=r"unexpected keyword argument 'economics'"):
+            gym.make(env_id, economics={})
+
+
+def test_a_string_for_a_mapping_of_fields_is_refused_not_split() -> None:
+    from fcc_common.validation import from_fields
+
+    with pytest.raises(ValueError, match=r"regulatory='loops' is outside the allowed range"):
+        from_fields(fcc_env.RegulatoryLayer, "loops", "regulatory")
+    with pytest.raises(ValueError, match=r"program='ab' is outside the allowed range"):
+        gym.make(fcc_env.CLOSED_LOOP_ENV_ID, regulatory={"program": "ab"}).reset(seed=0)
