@@ -290,7 +290,10 @@ def test_bad_control_options_are_refused(make, match):
             r"onset=4000 is outside the allowed range: an integer in \[1, 3998\]",
         ),
         (["--seeds", "-3"], r"seeds=.*-3.* is outside the allowed range"),
-        (["--terminations", "-1"], r"terminations=-1 is outside the allowed range: an integer in \[0, 10000\]"),
+        (
+            ["--terminations", "-1"],
+            r"terminations=-1 is outside the allowed range: an integer in \[0, 10000\]",
+        ),
     ],
 )
 def test_report_cli_refuses_bad_values_by_name(argv, match, tmp_path, capsys):
