@@ -4,7 +4,8 @@ The rooms:
 
 =====================  ===========================================================================
 ``bank_detector``      :class:`~diagnosers.lrgf.bank_detector.BankDetector`: what every LRGF
-                       detector shares (the bank's hyperparameters, training, persistence)
+                       detector shares (the bank's hyperparameters, training, running it with
+                       an alarm stage, persistence)
 ``lrgf_mem``           ``lrgf-mem``: the paper's detector with an EWMA stage
 ``lrgf_glr``           ``lrgf-glr``: a cross-fitted limit and tests along fault directions
 ``lrgf_presets``       the registered variants (``lrgf-mem-paper``, ``lrgf-glr-adaptive``, ...)

@@ -1,17 +1,23 @@
-"""What every LRGF detector shares: the bank's hyperparameters, its training and persistence.
+"""What every LRGF detector shares: the bank's hyperparameters, its training, its running and
+persistence.
 
 :class:`BankDetector` is the common part of the two LRGF families, ``lrgf-mem``
 (:mod:`diagnosers.lrgf.lrgf_mem`) and ``lrgf-glr`` (:mod:`diagnosers.lrgf.lrgf_glr`): it owns a
-:class:`diagnosers.bank.relation_bank.RelationBank` (``bank_``), trains it, saves and loads it, and
-shows its bands (:meth:`BankDetector.band_view`). A family adds its alarm stage and declares
-its hyperparameters as ``{**BANK_DEFAULTS, ...}``; the registered names are presets of the
-families (:func:`diagnosers.presets.preset`). The bank's hyperparameters are documented on
-:class:`BankDetector` (defaults :data:`BANK_DEFAULTS` and :data:`RUN_DEFAULTS`, constraints
-:data:`BANK_CONSTRAINTS`).
+:class:`diagnosers.bank.relation_bank.RelationBank` (``bank_``), trains it, saves and loads it,
+shows its bands (:meth:`BankDetector.band_view`), and runs it with an alarm stage
+(:class:`~diagnosers.stages.alarm_stage.AlarmStage`, ``stage_``): streaming, batch detection and
+persistence are written here once. A family names its stage (``STAGE``), fills a few hooks (how
+a remaining error is normalised, what else its stage reads and what else it saves) and declares
+its hyperparameters as ``{**BANK_DEFAULTS, ..., **STAGE.DEFAULTS, ...}``; the registered names
+are presets of the families (:func:`diagnosers.presets.preset`). The bank's hyperparameters are
+documented on :class:`BankDetector` (defaults :data:`BANK_DEFAULTS` and :data:`RUN_DEFAULTS`,
+constraints :data:`BANK_CONSTRAINTS`).
 """
 
 from __future__ import annotations
 
+from abc import abstractmethod
+from collections.abc import Mapping
 from enum import StrEnum
 from pathlib import Path
 from typing import Any, ClassVar
@@ -21,12 +27,13 @@ import numpy as np
 from diagnosers.bank.parallel import BankSettings, TrainedBank, train_banks
 from diagnosers.bank.relation_bank import RelationBank
 from diagnosers.bank.relations import BANK_RELATIONS, parse_relations
-from diagnosers.detection import Detection
+from diagnosers.detection import Decision, Detection
 from diagnosers.diagnoser import Diagnoser
 from diagnosers.episode.record import Episode
 from diagnosers.networks.lrgf_net import LRGF
 from diagnosers.networks.mem_net import NNARXErrorModel, OutputActivation
 from diagnosers.networks.optimisers import Method
+from diagnosers.stages.alarm_stage import AlarmStage
 from diagnosers.stages.band import band
 from fcc_common.validation import Boolean, Integer, IntegerSequence, Options, Real, check, invalid
 
@@ -123,11 +130,12 @@ class BankDetector(Diagnoser):
     (:class:`diagnosers.networks.mem_net.NNARXErrorModel`, driven by the same inputs) models what the
     network misses. The band of the paper (eqs 10-11) is ``y_m + y_e ± t_α·v``.
 
-    A family sets ``DEFAULTS`` and ``__init__ = keyword_init(DEFAULTS)``, and implements
-    ``_fit`` (calling :meth:`_new_bank` and :meth:`_train_banks`), its alarm stage and
-    ``_finish``; ``v_`` (the drawn band's scale) is set by the family. Every family has the
-    hyperparameters below (defaults: ``lrgf-mem``'s; a family or preset may set others, see
-    the detector reference's table).
+    A family sets ``DEFAULTS``, ``__init__ = keyword_init(DEFAULTS)`` and ``STAGE`` (its alarm
+    stage's class, whose hyperparameters it passes through by name), implements ``_fit``
+    (with :meth:`_new_bank`, :meth:`_train_banks`, :meth:`_new_stage`) and ``_finish`` (``v_``,
+    the drawn band's scale, and ``signal_names_``), and may fill the hooks of the alarm stage.
+    Every family has the hyperparameters below (defaults: ``lrgf-mem``'s; a family or preset
+    may set others, see the detector reference's table).
 
     Args:
         relations: the monitored relations, ``[[output, [inputs...]], ...]`` in the channels'
@@ -190,6 +198,8 @@ class BankDetector(Diagnoser):
     """
 
     DEFAULTS: ClassVar[dict[str, Any]] = {**BANK_DEFAULTS, **RUN_DEFAULTS}
+    #: the family's alarm stage; its ``DEFAULTS`` are hyperparameters of the family too
+    STAGE: ClassVar[type[AlarmStage]]
     #: the relations when ``relations`` is None (a preset may set its own)
     DEFAULT_RELATIONS: ClassVar[list[list[Any]]] = BANK_RELATIONS
     execution_params = ("progress", "n_jobs")
@@ -204,6 +214,7 @@ class BankDetector(Diagnoser):
     n_jobs: int | None
     max_epochs: int
     v_: np.ndarray
+    stage_: AlarmStage
 
     @classmethod
     def fast_params(cls) -> dict[str, Any]:
@@ -322,14 +333,84 @@ class BankDetector(Diagnoser):
         names = tuple(o for o, _ in self._relations())  # units: the episode's, in figures
         return Detection(alarm, y_out, lower, upper, y_out - centre, names)
 
+    # ---- the alarm stage: what a family fills -------------------------------------------------
+    def _new_stage(self, **parts: Any) -> AlarmStage:
+        """The family's unfitted alarm stage, its hyperparameters taken by name (``parts``: its
+        other arguments)."""
+        return self.STAGE(**{k: getattr(self, k) for k in self.STAGE.DEFAULTS}, **parts)
+
+    @abstractmethod
+    def _finish(self) -> None:
+        """Derived state shared by ``_fit`` and :meth:`_set_state` (``v_``, ``signal_names_``)."""
+
+    def _normalise(self, resid: np.ndarray, y: np.ndarray) -> np.ndarray:
+        """The normalised remaining error ``(T, k)`` of a record ``y`` whose remaining error is
+        ``resid`` (what the stage reads): divided by its scale (a family may do more)."""
+        return resid / self.v_residual_
+
+    def _normalise_step(self, resid: np.ndarray, y_m: np.ndarray) -> np.ndarray:
+        """:meth:`_normalise` of one sample, given the networks' outputs ``y_m``."""
+        return resid / self.v_residual_
+
+    def _features(self, y: np.ndarray, y_m: np.ndarray) -> np.ndarray | None:
+        """A record's regressors for the stage's baseline (None: it has none)."""
+        return None
+
+    def _features_step(self, y: np.ndarray, y_m: np.ndarray) -> np.ndarray | None:
+        """:meth:`_features` of one sample (called at every sample, the warm-up too)."""
+        return None
+
+    def _family_state(self) -> dict[str, np.ndarray]:
+        """Learned arrays of the family's own besides the bank's, the stage's and ``v_residual``."""
+        return {}
+
+    def _set_family_state(self, state: Mapping[str, np.ndarray]) -> None:
+        """Inverse of :meth:`_family_state` (before the stage is rebuilt)."""
+
+    # ---- detection -----------------------------------------------------------------------------
+    def _reset(self) -> None:
+        self.bank_.reset()
+        self.stage_.reset()
+        self._k = 0
+
+    def _update(self, y: np.ndarray) -> Decision:
+        y_m, centre = self.bank_.step(y)
+        y_out = y[self.bank_.out_idx]
+        warm = self._k < self.steady_window  # silent: the stage reads a zero error there
+        self._k += 1
+        resid = y_out - centre
+        e, phi = self._normalise_step(resid, y_m), self._features_step(y, y_m)
+        return self.stage_.step(e, warm=warm, residual=resid, output=y_out, centre=centre, phi=phi)
+
+    def _detect(self, y: np.ndarray) -> Detection:
+        y_m, centre = self.bank_.outputs_and_centre(y)
+        y_out = y[:, self.bank_.out_idx]
+        resid = y_out - centre
+        e, phi, w = self._normalise(resid, y), self._features(y, y_m), self.steady_window
+        names = self.signal_names_
+        return self.stage_.detect(
+            e, warm_up=w, residual=resid, names=names, output=y_out, centre=centre, phi=phi
+        )
+
     # ---- persistence ---------------------------------------------------------------------------
-    def _set_bank_state(self, state: dict[str, np.ndarray]) -> None:
-        relations = self._relations()
-        self.bank_ = RelationBank(relations, self.channels_)
+    def _get_state(self) -> dict[str, np.ndarray]:
+        state = {**self.bank_.get_state(), **self.stage_.get_state()}
+        return {**state, "v_residual": self.v_residual_, **self._family_state()}
+
+    def _set_state(self, state: dict[str, np.ndarray]) -> None:
+        self.bank_ = RelationBank(self._relations(), self.channels_)
         try:
             self.bank_.set_state(state)
         except ValueError as e:
             raise ValueError(f"{e} of {self.name!r}") from None
+        try:
+            self.v_residual_ = state["v_residual"]
+        except KeyError as e:
+            raise ValueError(f"saved state lacks array {e.args[0]!r}") from None
+        self._set_family_state(state)
+        self.stage_ = self._new_stage()
+        self.stage_.set_state(state)
+        self._finish()
 
     def _save_extra(self, directory: Path) -> None:
         self.bank_.save_modules(directory)

@@ -21,13 +21,13 @@ Optional parts, built from hyperparameters: a held baseline (:mod:`diagnosers.st
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any, ClassVar
 
 import numpy as np
 
 from diagnosers.bank.parallel import TrainedBank
 from diagnosers.bank.relation_bank import RelationBank
-from diagnosers.detection import Decision, Detection
 from diagnosers.episode.record import Episode
 from diagnosers.lrgf.bank_detector import (
     BANK_CONSTRAINTS,
@@ -47,9 +47,8 @@ from diagnosers.lrgf.novelty import (
 )
 from diagnosers.presets import keyword_init
 from diagnosers.registry import register
-from diagnosers.stages.alarm import LimitMethod
 from diagnosers.stages.baseline import HeldBaseline
-from diagnosers.stages.directional_stage import DirectionalStage, Statistic
+from diagnosers.stages.directional_stage import DirectionalStage
 from fcc_common.validation import Integer, Options, Real, RealSequence, check_params
 
 __all__ = ["GLR_CONSTRAINTS", "GLR_DEFAULTS", "LRGFGLR", "Calibration"]
@@ -64,19 +63,10 @@ class Calibration(StrEnum):
     HOLDOUT = "holdout"
 
 
-#: declarative constraints of :class:`LRGFGLR`'s own hyperparameters, checked in ``fit``
+#: declarative constraints of :class:`LRGFGLR`'s own hyperparameters, checked in ``fit`` (the
+#: alarm stage's are :class:`~diagnosers.stages.directional_stage.DirectionalStage`'s own)
 GLR_CONSTRAINTS: dict[str, Any] = {
-    "false_alarm_target": Real(0, 0.5, closed="neither"),
-    "statistic": Options(Statistic),
-    "ewma_lambda": Real(0, 1, closed="right"),
-    "slow_ewma_lambda": (Real(0, 1, closed="left"), RealSequence(0, 1, closed="neither")),
-    "slow_share": Real(0, 1, closed="neither"),
-    "omnibus_share": Real(0, 1, closed="right"),
-    "glr_window": Integer(1, 5000),
-    "cusum_drift": Real(0),
-    "limit_method": Options(LimitMethod),
-    "threshold_margin": Real(0.5, 10),
-    "on_delay": Integer(1, 1000),
+    **DirectionalStage.CONSTRAINTS,
     "calibration": Options(Calibration),
     "n_folds": Integer(2, 20),
     "refit_epochs": (Integer(1, 100_000), None),
@@ -94,18 +84,7 @@ GLR_CONSTRAINTS: dict[str, Any] = {
 GLR_DEFAULTS: dict[str, Any] = {
     **BANK_DEFAULTS,
     "n_hidden": None,
-    # the alarm stage
-    "false_alarm_target": 0.025,
-    "statistic": "directional",
-    "ewma_lambda": 0.3,
-    "slow_ewma_lambda": 0.02,
-    "slow_share": 0.5,
-    "omnibus_share": 0.2,
-    "glr_window": 200,
-    "cusum_drift": 0.5,
-    "limit_method": "chi2-tail",
-    "threshold_margin": 1.0,
-    "on_delay": 1,
+    **DirectionalStage.DEFAULTS,  # the alarm stage's hyperparameters
     # where the limits are calibrated
     "calibration": "cross-fit",
     "n_folds": 3,
@@ -195,6 +174,8 @@ class LRGFGLR(BankDetector):
 
     DEFAULTS: ClassVar[dict[str, Any]] = GLR_DEFAULTS
     __init__ = keyword_init(DEFAULTS)
+    STAGE = DirectionalStage
+    stage_: DirectionalStage
 
     false_alarm_target: float
     statistic: str
@@ -241,8 +222,7 @@ class LRGFGLR(BankDetector):
                 ridge=self.baseline_ridge,
             )
             baseline.bind(self.bank_.in_idx, self.bank_.out_idx, self.bank_.lrgf)
-        settings = {k: getattr(self, k) for k in DirectionalStage.PARAMETERS}
-        return DirectionalStage(**settings, baseline=baseline)
+        return super()._new_stage(baseline=baseline)
 
     def _new_novelty(self) -> NoveltyScale:
         relations = exogenous_relations(self._relations())
@@ -359,55 +339,30 @@ class LRGFGLR(BankDetector):
         faults = self._fault_directions().faults
         self.signal_names_ = self.stage_.signal_names(faults)
 
-    # ---- detection -----------------------------------------------------------------------------
-    def _reset(self) -> None:
-        self.bank_.reset()
-        self.stage_.reset()
-        self._k = 0
+    # ---- what the alarm stage reads and what is saved beside it ----------------------------------
+    def _normalise(self, resid: np.ndarray, y: np.ndarray) -> np.ndarray:
+        return resid / self.v_residual_ / self.novelty_.scale(self.bank_, y)[:, None]
 
-    def _update(self, y: np.ndarray) -> Decision:
-        y_m, centre = self.bank_.step(y)
-        y_out = y[self.bank_.out_idx]
-        warm = self._k < self.steady_window
-        self._k += 1
-        e = np.zeros(len(centre)) if warm else (y_out - centre) / self.v_residual_
-        if not warm and self.novelty_.active:
+    def _normalise_step(self, resid: np.ndarray, y_m: np.ndarray) -> np.ndarray:
+        e = resid / self.v_residual_
+        if self.novelty_.active:
             e /= self.novelty_.scale_step(y_m)
-        baseline = self.stage_.baseline
-        # the baseline's filters run while warm too
-        phi = None if baseline is None else baseline.features_step(y, y_m)
-        _, signal = self.stage_.step(e, warm=warm, phi=phi)
-        return self.stage_.decision(y_out - centre, signal, warm)
+        return e
 
-    def _detect(self, y: np.ndarray) -> Detection:
-        y_m, centre = self.bank_.outputs_and_centre(y)
-        resid = y[:, self.bank_.out_idx] - centre
-        w = self.steady_window
-        e = resid / self.v_residual_ / self.novelty_.scale(self.bank_, y)[:, None]
-        e[:w] = 0.0
+    def _features(self, y: np.ndarray, y_m: np.ndarray) -> np.ndarray | None:
         baseline = self.stage_.baseline
-        # detect() has just reset the stage (base contract), so it starts fresh
-        phi = None if baseline is None else baseline.features(y, y_m)
-        sig = self.stage_.signals(e, w, phi)
-        return Detection.from_decisions(
-            [self.stage_.decision(resid[k], sig[k], k < w) for k in range(y.shape[0])],
-            self.signal_names_,
-        )
+        return None if baseline is None else baseline.features(y, y_m)
 
-    # ---- persistence ---------------------------------------------------------------------------
-    def _get_state(self) -> dict[str, np.ndarray]:
+    def _features_step(self, y: np.ndarray, y_m: np.ndarray) -> np.ndarray | None:
+        baseline = self.stage_.baseline  # its filters run while warm too
+        return None if baseline is None else baseline.features_step(y, y_m)
+
+    def _family_state(self) -> dict[str, np.ndarray]:
         rng = self.novelty_.range_
-        return {
-            **self.bank_.get_state(),
-            **self.stage_.get_state(),
-            "v_residual": self.v_residual_,
-            "prediction_range": (np.zeros((3, 0)) if rng is None else rng.to_array()),
-        }
+        return {"prediction_range": (np.zeros((3, 0)) if rng is None else rng.to_array())}
 
-    def _set_state(self, state: dict[str, np.ndarray]) -> None:
-        self._set_bank_state(state)
+    def _set_family_state(self, state: Mapping[str, np.ndarray]) -> None:
         try:
-            self.v_residual_ = state["v_residual"]
             rng = np.asarray(state["prediction_range"])
         except KeyError as e:
             raise ValueError(f"saved state lacks array {e.args[0]!r}") from None
@@ -418,9 +373,6 @@ class LRGFGLR(BankDetector):
                 f"with exogenous inputs ({len(self.novelty_.relations)})"
             )
         self.novelty_.range_ = PredictionRange.from_array(rng) if rng.size else None
-        self.stage_ = self._new_stage()
-        self.stage_.set_state(state)
-        self._finish()
 
     def _load_extra(self, directory: Any) -> None:
         super()._load_extra(directory)

@@ -11,12 +11,13 @@ constraints of its hyperparameters, documented on the class.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any, ClassVar
 
 import numpy as np
 
 from diagnosers.contract import require_varying
-from diagnosers.detection import Decision, Detection
+from diagnosers.detection import Detection
 from diagnosers.episode.record import Episode
 from diagnosers.lrgf.bank_detector import (
     BANK_CONSTRAINTS,
@@ -29,26 +30,20 @@ from diagnosers.lrgf.bank_detector import (
 )
 from diagnosers.presets import keyword_init
 from diagnosers.registry import register
-from diagnosers.stages.alarm import (
-    LimitMethod,
-    two_sided_normal_quantile,
-)
+from diagnosers.stages.alarm import two_sided_normal_quantile
 from diagnosers.stages.band import BandScale, band_scale
 from diagnosers.stages.ewma_stage import AlarmFilter, EWMAStage
-from fcc_common.validation import Options, Real, check_params
+from fcc_common.validation import Options, check_params
 
 __all__ = ["LRGFMEM", "PARAMETER_CONSTRAINTS", "AlarmFilter"]
 
 
-#: declarative hyperparameter constraints of :class:`LRGFMEM`, checked in ``fit``
+#: declarative hyperparameter constraints of :class:`LRGFMEM`, checked in ``fit`` (the alarm
+#: stage's are :class:`~diagnosers.stages.ewma_stage.EWMAStage`'s own)
 PARAMETER_CONSTRAINTS: dict[str, Any] = {
     **BANK_CONSTRAINTS,
     "band_definition": Options(BandScale),
-    "alarm_filter": Options(AlarmFilter),
-    "ewma_lambda": Real(0, 1, closed="right"),
-    "false_alarm_target": Real(0, 0.5, closed="neither"),
-    "threshold_margin": Real(0.5, 10),
-    "limit_method": Options(LimitMethod),
+    **EWMAStage.CONSTRAINTS,
 }
 
 
@@ -138,14 +133,12 @@ class LRGFMEM(BankDetector):
     DEFAULTS: ClassVar[dict[str, Any]] = {
         **BANK_DEFAULTS,
         "band_definition": "residual",
-        "alarm_filter": "ewma-t2",
-        "ewma_lambda": 0.3,
-        "false_alarm_target": 0.002,
-        "threshold_margin": 1.0,
-        "limit_method": "chi2-tail",
+        **EWMAStage.DEFAULTS,  # the alarm stage's hyperparameters
         **RUN_DEFAULTS,
     }
     __init__ = keyword_init(DEFAULTS)
+    STAGE = EWMAStage
+    stage_: EWMAStage
 
     band_definition: str
     alarm_filter: str
@@ -202,15 +195,6 @@ class LRGFMEM(BankDetector):
         self.stage_ = self._new_stage().fit([r / self.v_residual_ for r in rem])
         self._finish()
 
-    def _new_stage(self) -> EWMAStage:
-        return EWMAStage(
-            alarm_filter=self.alarm_filter,
-            ewma_lambda=self.ewma_lambda,
-            false_alarm_target=self.false_alarm_target,
-            limit_method=self.limit_method,
-            threshold_margin=self.threshold_margin,
-        )
-
     def _finish(self) -> None:
         """Derived state shared by ``_fit`` and ``_set_state``."""
         if self.band_definition == BandScale.PAPER:
@@ -224,33 +208,7 @@ class LRGFMEM(BankDetector):
         self.stage_.set_band(half_band)  # as band()
         self.signal_names_ = self.stage_.signal_names([o for o, _ in self._relations()])
 
-    # ---- detection -----------------------------------------------------------------------------
-    def _reset(self) -> None:
-        self.bank_.reset()
-        self.stage_.reset()
-        self._k = 0
-
-    def _update(self, y: np.ndarray) -> Decision:
-        _, centre = self.bank_.step(y)
-        y_out = y[self.bank_.out_idx]
-        warm = self._k < self.steady_window
-        self._k += 1
-        # the EWMA starts after the warm-up: it sees zeros there, as in _detect
-        e = np.zeros(len(centre)) if warm else (y_out - centre) / self.v_residual_
-        return self.stage_.decide(y_out, centre, self.stage_.filter_step(e), warm)
-
-    def _detect(self, y: np.ndarray) -> Detection:
-        centre = self.bank_.centre(y)
-        y_out = y[:, self.bank_.out_idx]
-        w = self.steady_window
-        e = (y_out - centre) / self.v_residual_
-        e[:w] = 0.0  # the EWMA starts after the warm-up
-        z = self.stage_.filter(e)
-        return Detection.from_decisions(
-            [self.stage_.decide(y_out[k], centre[k], z[k], k < w) for k in range(y.shape[0])],
-            self.signal_names_,
-        )
-
+    # ---- views ---------------------------------------------------------------------------------
     def band_view(self, episode: Episode) -> Detection | None:
         """The bands (:meth:`BankDetector.band_view`); ``None`` with ``alarm_filter="none"``,
         where :meth:`detect` reports them already."""
@@ -260,24 +218,14 @@ class LRGFMEM(BankDetector):
         return super().band_view(episode)
 
     # ---- persistence ---------------------------------------------------------------------------
-    def _get_state(self) -> dict[str, np.ndarray]:
-        state = {
-            **self.bank_.get_state(),
-            **self.stage_.get_state(),
-            "v_residual": self.v_residual_,
-        }
+    def _family_state(self) -> dict[str, np.ndarray]:
         if self.band_definition == BandScale.PAPER_RECORD:
-            state["v_record"] = self.v_record_  # only this band has it: other states unchanged
-        return state
+            return {"v_record": self.v_record_}  # only this band has it: other states unchanged
+        return {}
 
-    def _set_state(self, state: dict[str, np.ndarray]) -> None:
-        self._set_bank_state(state)
-        try:
-            self.v_residual_ = state["v_residual"]
-            if self.band_definition == BandScale.PAPER_RECORD:
+    def _set_family_state(self, state: Mapping[str, np.ndarray]) -> None:
+        if self.band_definition == BandScale.PAPER_RECORD:
+            try:
                 self.v_record_ = state["v_record"]
-        except KeyError as e:
-            raise ValueError(f"saved state lacks array {e.args[0]!r}") from None
-        self.stage_ = self._new_stage()
-        self.stage_.set_state(state)
-        self._finish()
+            except KeyError as e:
+                raise ValueError(f"saved state lacks array {e.args[0]!r}") from None

@@ -4,7 +4,10 @@ The rooms:
 
 =====================  ===========================================================================
 ``alarm``              the parts: residual filters (EWMA), statistics (Hotelling T², CUSUM,
-                       directional GLR, projections) and limit calibration
+                       directional GLR, projections), limit calibration and the on-delay
+``alarm_stage``        :class:`~diagnosers.stages.alarm_stage.AlarmStage`, what every stage does
+                       (fit, reset, step, detect, signal names, state, ``DEFAULTS``,
+                       ``CONSTRAINTS``)
 ``ewma_stage``         ``lrgf-mem``'s stage: the paper's band rule or EWMA persistence
 ``directional_stage``  ``lrgf-glr``'s stage: T² and tests along fault directions
 ``band``               the paper's uncertainty band ``y_m + y_e ± t_α v`` and its scale

@@ -45,6 +45,7 @@ __all__ = [
     "DirectionalProjection",
     "HotellingT2",
     "LimitMethod",
+    "OnDelay",
     "RecursiveStatistic",
     "ResidualEvaluator",
     "calibrate_limit",
@@ -379,6 +380,37 @@ class DirectionalGLR:
 
     def set_state(self, state: dict[str, np.ndarray]) -> None:
         pass  # nothing learned: the window is a hyperparameter
+
+
+class OnDelay:
+    """ISA-18.2's on-delay: an alarm once a condition has held for ``delay`` samples in a row.
+
+    Args:
+        delay: samples in a row, ``>= 1`` (1: the condition itself).
+
+    Shape: ``update`` ``bool -> bool``; ``filter`` ``(T,) -> (T,)`` bool, equal to ``reset()``
+    then ``update`` on every sample.
+
+    >>> OnDelay(2).filter(np.array([True, True, False, True, True, True])).tolist()
+    [False, True, False, False, True, True]
+    """
+
+    def __init__(self, delay: int) -> None:
+        self.delay = int(check("delay", delay, Integer(1)))
+        self.reset()
+
+    def reset(self) -> None:
+        self._run = 0  # samples in a row with the condition
+
+    def update(self, x: bool) -> bool:
+        self._run = self._run + 1 if x else 0
+        return self._run >= self.delay
+
+    def filter(self, X: np.ndarray) -> np.ndarray:
+        # the samples with the condition among the last `delay`, from a cumulative count
+        count = np.concatenate([[0], np.cumsum(np.asarray(X, dtype=bool))])
+        k = np.arange(1, len(count))
+        return (k >= self.delay) & (count[k] - count[np.maximum(k - self.delay, 0)] == self.delay)
 
 
 def normal_tail_limit(

@@ -15,31 +15,38 @@ records, healthy for :meth:`~DirectionalStage.fit`) and turns them into alarms:
 4. **rule**: alarm when any statistic is over its limit for ``on_delay`` samples in a row.
 
 ``false_alarm_target`` lives here and nowhere else: a detector or a reference row that uses
-this stage passes its target to it. The stage knows nothing of models, so the perfect-model
-reference row of :mod:`evaluation.tracks.oracle` runs exactly the detector's stage.
+this stage passes its target to it. It is an :class:`~diagnosers.stages.alarm_stage.AlarmStage`
+whose ``DEFAULTS`` are ``lrgf-glr``'s. The stage knows nothing of models, so the perfect-model
+reference rows of :mod:`evaluation.tracks.oracle` run exactly the detector's stage (the
+physical-limit row with ``statistic="t2"`` and a centred T², ``centered=True``).
 """
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from enum import StrEnum
+from typing import Any, ClassVar
 
 import numpy as np
 from scipy.linalg import block_diag
 
-from diagnosers.detection import Decision
+from diagnosers.detection import Decision, Detection
+from diagnosers.presets import keyword_init
 from diagnosers.stages.alarm import (
     CUSUM,
     EWMA,
     DirectionalGLR,
     DirectionalProjection,
     HotellingT2,
+    OnDelay,
     calibrate_limit,
     normal_tail_limit,
 )
+from diagnosers.stages.alarm_stage import stage_constraints
 from diagnosers.stages.baseline import HeldBaseline
+from fcc_common.validation import Integer, Options, Real, RealSequence
 
-__all__ = ["DirectionalStage", "Statistic"]
+__all__ = ["DirectionalStage", "Statistic", "projection_limits", "sequential_limits"]
 
 
 class Statistic(StrEnum):
@@ -54,6 +61,8 @@ class Statistic(StrEnum):
 class DirectionalStage:
     """Filters, statistics, limits and alarm rule on normalised errors (module docstring).
 
+    The hyperparameters default to :attr:`DEFAULTS` (``lrgf-glr``'s).
+
     Args:
         false_alarm_target: the declared share of healthy samples in alarm, split over the
             statistics by a union bound.
@@ -65,77 +74,67 @@ class DirectionalStage:
         glr_window, cusum_drift: the GLR's onset window and the CUSUM's drift.
         limit_method, threshold_margin: the T² limit's method and every limit's factor.
         on_delay: samples in a row over a limit before an alarm.
+        centered: the T² about the calibration mean of the fast EWMA (``mean_``) instead of
+            zero (default False: a detector's healthy normalised error is zero-mean by
+            construction).
         baseline: a held baseline removed before the EWMAs, or None.
 
     Attributes (after :meth:`fit` or :meth:`set_state`): ``s_inv_`` the fast EWMA's T²
-    precision, ``h_`` the T² limit ``(1,)``, ``dir_weights_`` the projections, ``h_dir_`` the
-    directional limits, ``upper_`` every limit in signal order.
+    precision, ``mean_`` its centre, ``h_`` the T² limit ``(1,)``, ``dir_weights_`` the
+    projections, ``h_dir_`` the directional limits, ``upper_`` every limit in signal order.
     """
 
-    #: the settings a detector passes through under the same names (its hyperparameters)
-    PARAMETERS = (
-        "false_alarm_target",
-        "statistic",
-        "ewma_lambda",
-        "slow_ewma_lambda",
-        "slow_share",
-        "omnibus_share",
-        "glr_window",
-        "cusum_drift",
-        "limit_method",
-        "threshold_margin",
-        "on_delay",
+    DEFAULTS: ClassVar[Mapping[str, Any]] = {
+        "false_alarm_target": 0.025,
+        "statistic": "directional",
+        "ewma_lambda": 0.3,
+        "slow_ewma_lambda": 0.02,
+        "slow_share": 0.5,
+        "omnibus_share": 0.2,
+        "glr_window": 200,
+        "cusum_drift": 0.5,
+        "limit_method": "chi2-tail",
+        "threshold_margin": 1.0,
+        "on_delay": 1,
+    }
+    CONSTRAINTS: ClassVar[Mapping[str, Any]] = stage_constraints(
+        DEFAULTS,
+        {
+            "statistic": Options(Statistic),
+            "slow_ewma_lambda": (Real(0, 1, closed="left"), RealSequence(0, 1, closed="neither")),
+            "slow_share": Real(0, 1, closed="neither"),
+            "omnibus_share": Real(0, 1, closed="right"),
+            "glr_window": Integer(1, 5000),
+            "cusum_drift": Real(0),
+            "on_delay": Integer(1, 1000),
+        },
     )
-
-    def __init__(
-        self,
-        *,
-        false_alarm_target: float,
-        statistic: str = "directional",
-        ewma_lambda: float = 0.3,
-        slow_ewma_lambda: float | Sequence[float] = 0.02,
-        slow_share: float = 0.5,
-        omnibus_share: float = 0.2,
-        glr_window: int = 200,
-        cusum_drift: float = 0.5,
-        limit_method: str = "chi2-tail",
-        threshold_margin: float = 1.0,
-        on_delay: int = 1,
-        baseline: HeldBaseline | None = None,
-    ) -> None:
-        self.false_alarm_target = false_alarm_target
-        self.statistic = statistic
-        self.ewma_lambda = ewma_lambda
-        self.slow_ewma_lambda = slow_ewma_lambda
-        self.slow_share = slow_share
-        self.omnibus_share = omnibus_share
-        self.glr_window = glr_window
-        self.cusum_drift = cusum_drift
-        self.limit_method = limit_method
-        self.threshold_margin = threshold_margin
-        self.on_delay = on_delay
-        self.baseline = baseline
+    # the stage's own parts beside its hyperparameters: how T² is centred, the baseline
+    __init__ = keyword_init({**DEFAULTS, "centered": False, "baseline": None})
+    baseline: HeldBaseline | None
 
     # ---- calibration ---------------------------------------------------------------------------
     def fit(
         self,
-        norm: list[np.ndarray],
-        directions: np.ndarray,
+        norm: Sequence[np.ndarray],
+        directions: np.ndarray | None = None,
         features: list[np.ndarray | None] | None = None,
     ) -> DirectionalStage:
         """Covariances and limits from healthy normalised error records ``norm`` (past their
-        warm-up) and the unit fault ``directions`` ``(m, k)``; ``features``: each record's
-        regressors for a regression baseline.
+        warm-up) and the unit fault ``directions`` ``(m, k)`` (None: none, the T² alone);
+        ``features``: each record's regressors for a regression baseline.
 
         Without a baseline the statistics are fixed filters of the error: one fit. With one,
         what the baseline absorbs depends on when it holds, which depends on the limits: fit on
         an always-adapting baseline, then once more on the baseline held by those limits.
         """
+        if directions is None:  # no fault direction: the T² alone
+            directions = np.zeros((0, norm[0].shape[1]))
         self.directions_ = np.asarray(directions)
         phis = [None] * len(norm) if features is None else features
         pairs = list(zip(norm, phis, strict=True))
         if self.baseline is None:
-            self._fit_limits(norm)
+            self._fit_limits(list(norm))
             return self
         self._fit_limits([self.baseline.track(e, p) for e, p in pairs])
         self._fit_limits([self.track_held(e, p) for e, p in pairs])
@@ -147,15 +146,15 @@ class DirectionalStage:
         self.reset()
         out = np.empty_like(e)
         for k in range(e.shape[0]):
-            out[k] = self.step(e[k], warm=False, phi=None if phi is None else phi[k])[0]
+            out[k] = self._advance(e[k], warm=False, phi=None if phi is None else phi[k])[0]
         return out
 
     def _fit_limits(self, norm: list[np.ndarray]) -> None:
         """Covariances and limits on healthy (baseline-removed) normalised errors ``norm``."""
         k, m = self.directions_.shape[1], len(self.directions_)
         z = np.concatenate([EWMA(self.ewma_lambda).filter(e) for e in norm])
-        t2 = HotellingT2(centered=False).fit(z)
-        self.s_inv_ = t2.precision_
+        t2 = HotellingT2(centered=self.centered).fit(z)
+        self.s_inv_, self.mean_ = t2.precision_, t2.mean_
         det = Statistic(self.statistic)
         share = 1.0 if m == 0 or det is Statistic.T2 else self.omnibus_share
         self.h_ = calibrate_limit(
@@ -165,38 +164,18 @@ class DirectionalStage:
             dof=k,
             margin=self.threshold_margin,
         )
-        self.dir_weights_ = np.zeros((0, k))
-        self.h_dir_ = np.zeros(0)
+        self.dir_weights_, self.h_dir_ = np.zeros((0, k)), np.zeros(0)
         if m and det is not Statistic.T2:
             t_dir = self.false_alarm_target * (1.0 - share) / m
+            margin = self.threshold_margin
             if det is Statistic.DIRECTIONAL:
                 zz = self._scales(z, norm)
-                # one block of projections per EWMA scale, each with its own healthy covariance
-                blocks = [
-                    DirectionalProjection().fit(self.directions_, np.cov(zz[:, i : i + k].T))
-                    for i in range(0, zz.shape[1], k)
-                ]
-                self.dir_weights_ = block_diag(*[b.weights_ for b in blocks])
-                n_slow = len(blocks) - 1
-                # the fast scale keeps 1 - slow_share, the slow scales split slow_share equally
-                shares = (
-                    [1.0 - self.slow_share] + [self.slow_share / n_slow] * n_slow
-                    if n_slow
-                    else [1.0]
-                )
-                scores = zz @ self.dir_weights_.T  # m columns per scale
-                self.h_dir_ = self.threshold_margin * np.concatenate(
-                    [
-                        normal_tail_limit(scores[:, i * m : (i + 1) * m], t_dir * sh)
-                        for i, sh in enumerate(shares)
-                    ]
+                self.dir_weights_, self.h_dir_ = projection_limits(
+                    zz, self.directions_, t_dir, self.slow_share, margin
                 )
             else:
-                proj = DirectionalProjection().fit(self.directions_, np.cov(np.concatenate(norm).T))
-                self.dir_weights_ = proj.weights_
-                seq = np.concatenate([self._sequential().filter(proj.score(e)) for e in norm])
-                self.h_dir_ = self.threshold_margin * np.full(
-                    m, np.quantile(seq.max(axis=1), 1.0 - t_dir * m)
+                self.dir_weights_, self.h_dir_ = sequential_limits(
+                    norm, self.directions_, self._sequential(), t_dir, margin
                 )
         self._finish()
 
@@ -220,8 +199,8 @@ class DirectionalStage:
 
     def _finish(self) -> None:
         """The derived state shared by :meth:`fit` and :meth:`set_state`."""
-        self.t2_ = HotellingT2(centered=False)
-        self.t2_.set_state({"mean": np.zeros(len(self.s_inv_)), "precision": self.s_inv_})
+        self.t2_ = HotellingT2(centered=self.centered)
+        self.t2_.set_state({"mean": self.mean_, "precision": self.s_inv_})
         self._proj = DirectionalProjection()
         self._proj.set_state({"weights": self.dir_weights_})
         self.upper_ = np.concatenate([self.h_, self.h_dir_])
@@ -251,21 +230,58 @@ class DirectionalStage:
         self._ewma = EWMA(self.ewma_lambda)
         self._ewma_slow = [EWMA(lam) for lam in self.slow_lambdas()[: self.n_slow_scales]]
         self._seq = self._sequential() if len(self.h_dir_) else None
-        self._over_run = 0  # samples in a row with a statistic over its limit
+        self._delay = OnDelay(self.on_delay)  # samples in a row over a limit
         if self.baseline is not None:
             self.baseline.reset()
 
     def step(
+        self,
+        e: np.ndarray,
+        *,
+        warm: bool,
+        residual: np.ndarray,
+        output: np.ndarray | None = None,
+        centre: np.ndarray | None = None,
+        phi: np.ndarray | None = None,
+    ) -> Decision:
+        """The decision of one sample (:class:`~diagnosers.stages.alarm_stage.AlarmStage`):
+        its normalised error ``e``; ``phi``: its regressors with a regression baseline."""
+        return self._decide(residual, self._advance(e, warm=warm, phi=phi)[1], warm)
+
+    def detect(
+        self,
+        e: np.ndarray,
+        *,
+        warm_up: int,
+        residual: np.ndarray,
+        names: Sequence[str],
+        output: np.ndarray | None = None,
+        centre: np.ndarray | None = None,
+        phi: np.ndarray | None = None,
+    ) -> Detection:
+        """The decisions of a whole record (:class:`~diagnosers.stages.alarm_stage.
+        AlarmStage`): its :meth:`signals`, then the alarm rule on every row."""
+        self.reset()
+        signal = self.signals(e, warm_up, phi)
+        upper = np.tile(self.upper_, (len(signal), 1))
+        upper[:warm_up] = self._no_limit
+        alarm = OnDelay(self.on_delay).filter((signal > upper).any(axis=1))
+        lower = np.full(upper.shape, -np.inf)
+        return Detection(alarm, signal, lower, upper, residual, tuple(names))
+
+    def _advance(
         self, e: np.ndarray, *, warm: bool, phi: np.ndarray | None = None
     ) -> tuple[np.ndarray, np.ndarray]:
         """One sample of the stage: (baseline-removed error, signal). The one place the
         recursion is written; streaming and batch with a baseline both call it. ``phi``: the
         sample's regressors with a regression baseline."""
+        if warm:  # the statistics start after the warm-up: they see zeros there
+            e = np.zeros(np.shape(e))
         base = self.baseline
         et = e if base is None else e - base.value(phi)
         z = self._ewma.update(et)
         signal = np.empty(len(self.upper_))
-        signal[0] = z @ self.s_inv_ @ z
+        signal[0] = self.t2_.score(z)
         if self._seq is None:
             pass
         elif self.statistic == Statistic.DIRECTIONAL:
@@ -280,53 +296,50 @@ class DirectionalStage:
         return et, signal
 
     def signals(self, e: np.ndarray, warm_up: int, phi: np.ndarray | None = None) -> np.ndarray:
-        """The signals ``(T, n)`` of a whole record ``e`` (zero in its first ``warm_up``
-        samples), from a fresh :meth:`reset`; equal to :meth:`step` on every row."""
+        """The signals ``(T, n)`` of a whole record ``e`` (read as zero in its first
+        ``warm_up`` samples), from a fresh :meth:`reset`; equal to :meth:`step`'s on every
+        row (up to rounding: the batch T² is vectorised)."""
+        e = np.array(e, dtype=np.float64)
+        e[:warm_up] = 0.0
         if self.baseline is not None:  # the baseline's hold makes the stage a recursion
             rows = [None] * len(e) if phi is None else list(phi)
             return np.array(
-                [self.step(e[k], warm=k < warm_up, phi=rows[k])[1] for k in range(len(e))]
+                [self._advance(e[k], warm=k < warm_up, phi=rows[k])[1] for k in range(len(e))]
             )
         z = EWMA(self.ewma_lambda).filter(e)
         if self.n_slow_scales > 0:
             z = self._scales(z, [e])
-        seq = None
-        if len(self.h_dir_) and self.statistic != Statistic.DIRECTIONAL:
-            seq = self._sequential().filter(self._proj.score(e))
-        return self._scores(z, seq)
-
-    def _scores(self, z: np.ndarray, seq: np.ndarray | None) -> np.ndarray:
-        """T² of the fast EWMA (the first k columns of ``z``) and the directional scores of all
-        of ``z`` (or the sequential statistics ``seq``), row by row."""
+        # T² of the fast EWMA (the first k columns of z), then the directional statistics
         t2 = np.atleast_1d(self.t2_.score(z[..., : len(self.s_inv_)]))
         if not len(self.h_dir_):
             return t2[..., None]
         if self.statistic == Statistic.DIRECTIONAL:
-            d = self._proj.score(z)
-        else:
-            assert seq is not None
-            d = seq
-        return np.column_stack([t2, d])
+            return np.column_stack([t2, self._proj.score(z)])
+        return np.column_stack([t2, self._sequential().filter(self._proj.score(e))])
 
-    def decision(self, residual: np.ndarray, signal: np.ndarray, warm: bool) -> Decision:
+    def _decide(self, residual: np.ndarray, signal: np.ndarray, warm: bool) -> Decision:
         """The alarm of one sample's ``signal`` (none while ``warm``), with the on-delay."""
         upper = self._no_limit if warm else self.upper_
-        self._over_run = self._over_run + 1 if (signal > upper).any() else 0
-        return Decision(self._over_run >= self.on_delay, signal, self._lower, upper, residual)
+        alarm = self._delay.update(bool((signal > upper).any()))
+        return Decision(alarm, signal, self._lower, upper, residual)
 
     # ---- persistence ---------------------------------------------------------------------------
     def get_state(self) -> dict[str, np.ndarray]:
-        return {
+        state = {
             "s_inv": self.s_inv_,
             "h": self.h_,
             "directions": self.directions_,
             "dir_weights": self.dir_weights_,
             "h_dir": self.h_dir_,
         }
+        if self.centered:  # only a centred T² has a centre: a detector's state is unchanged
+            state["mean"] = self.mean_
+        return state
 
-    def set_state(self, state: dict[str, np.ndarray]) -> None:
+    def set_state(self, state: Mapping[str, np.ndarray]) -> None:
         try:
             self.s_inv_ = state["s_inv"]
+            self.mean_ = state["mean"] if self.centered else np.zeros(len(self.s_inv_))
             self.h_ = state["h"]
             self.directions_ = state["directions"]
             self.dir_weights_ = state["dir_weights"]
@@ -334,3 +347,48 @@ class DirectionalStage:
         except KeyError as e:
             raise ValueError(f"saved state lacks array {e.args[0]!r}") from None
         self._finish()
+
+
+# ---- the directional tests' limits -------------------------------------------------------------
+def projection_limits(
+    zz: np.ndarray, directions: np.ndarray, target: float, slow_share: float, margin: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """Weights and limits of the ``"directional"`` tests: the matched filters of the unit fault
+    ``directions`` ``(m, k)`` on each EWMA scale of the healthy ``zz`` ``(T, k · scales)`` (fast
+    first), block-diagonal ``(m · scales, k · scales)``, and one normal-tail limit per score,
+    each direction getting ``target`` (the fast scale ``1 − slow_share`` of it)."""
+    m, k = directions.shape
+    # one block of projections per EWMA scale, each with its own healthy covariance
+    blocks = [
+        DirectionalProjection().fit(directions, np.cov(zz[:, i : i + k].T))
+        for i in range(0, zz.shape[1], k)
+    ]
+    weights = block_diag(*[b.weights_ for b in blocks])
+    n_slow = len(blocks) - 1
+    # the fast scale keeps 1 - slow_share, the slow scales split slow_share equally
+    shares = [1.0 - slow_share] + [slow_share / n_slow] * n_slow if n_slow else [1.0]
+    scores = zz @ weights.T  # m columns per scale
+    limits = margin * np.concatenate(
+        [
+            normal_tail_limit(scores[:, i * m : (i + 1) * m], target * sh)
+            for i, sh in enumerate(shares)
+        ]
+    )
+    return weights, limits
+
+
+def sequential_limits(
+    norm: list[np.ndarray],
+    directions: np.ndarray,
+    sequential: DirectionalGLR | CUSUM,
+    target: float,
+    margin: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Weights and limits of the ``"glr"``/``"cusum"`` tests: the matched filters of the unit
+    fault ``directions`` ``(m, k)`` on the healthy records ``norm``, and one limit shared by the
+    directions, the empirical quantile of the largest ``sequential`` statistic of a sample at
+    ``1 − m · target``."""
+    m = len(directions)
+    proj = DirectionalProjection().fit(directions, np.cov(np.concatenate(norm).T))
+    seq = np.concatenate([sequential.filter(proj.score(e)) for e in norm])
+    return proj.weights_, margin * np.full(m, np.quantile(seq.max(axis=1), 1.0 - target * m))

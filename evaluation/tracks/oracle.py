@@ -6,7 +6,9 @@ measurement noise until the fault acts, and its detection time is the earliest a
 a perfect model could reach at the same false-alarm rate. Every diagnoser's ``t_dt`` is reported
 against it as ``(t_dt + 1) / (oracle t_dt + 1)`` (:func:`evaluation.metrics.intervals.limit_ratio`).
 
-The statistic (the same alarm stage as ``lrgf-mem``, :mod:`diagnosers.stages.alarm`):
+The statistic (``lrgf-mem``'s rule, run as a configured alarm stage: ``lrgf-glr``'s
+:class:`~diagnosers.stages.directional_stage.DirectionalStage` with the T² alone, centred; why
+centred: :meth:`PhysicalLimit._t2_stage`):
 
 1. residual r_k = (y_k − y_ref,k) / σ on the five temperatures T_rx, T_rg1, T_rg2, T_d1, T_dg,
    σ the channel's noise standard deviation times the track's noise scale;
@@ -45,14 +47,14 @@ from diagnosers.detection import Detection
 from diagnosers.episode.record import Episode
 from diagnosers.lrgf.fault_directions import FaultDirections
 from diagnosers.registry import diagnoser_class
-from diagnosers.stages.alarm import EWMA, HotellingT2, LimitMethod, calibrate_limit
+from diagnosers.stages.alarm import LimitMethod
 from diagnosers.stages.directional_stage import DirectionalStage
 from evaluation.sweep.records import CellResult, score_episode
 from evaluation.sweep.sources import LoadedEpisode
 from evaluation.tracks.optimal import CUSUM_LABEL, GLR_LABEL, FaultSignatures, KnownFaultBank
 from evaluation.tracks.track import Track
 from evaluation.tracks.track_data import TrackData
-from fcc_common.validation import Integer, Options, Real, check
+from fcc_common.validation import Integer, Options, check
 from fcc_env.params import MEASUREMENT_NAMES, MEASUREMENTS
 
 __all__ = [
@@ -200,9 +202,10 @@ class OracleConfig:
     n_calibration: int | None = None
 
     def __post_init__(self) -> None:
-        check("ewma_lambda", self.ewma_lambda, Real(0.0, 1.0, closed="right"))
+        stage = DirectionalStage.CONSTRAINTS  # the ranges of the stage the row runs
+        check("ewma_lambda", self.ewma_lambda, stage["ewma_lambda"])
         if self.target is not None:
-            check("target", self.target, Real(0.0, 0.5, closed="neither"))
+            check("target", self.target, stage["false_alarm_target"])
         if self.n_calibration is not None:
             check("n_calibration", self.n_calibration, Integer(1))
         check("inputs", self.inputs, Options(OracleInputs))
@@ -292,11 +295,39 @@ class PhysicalLimit:
             ref = self._sims.reference(episode.seed, episode.y if measured else None)
         return reference_over(ref, episode.y)
 
-    def _statistic(self, episode: Episode) -> tuple[np.ndarray, np.ndarray]:
+    def _residual(self, episode: Episode) -> np.ndarray:
+        """The residual ``r`` ``(T, c)`` of an episode in units of the channels' noise."""
         y = episode.y
         y_ref = self._reference(episode)
-        r = (y[:, self._idx] - y_ref[: y.shape[0], self._idx]) / self.noise_std
-        return r, EWMA(self.config.ewma_lambda).filter(r)
+        return (y[:, self._idx] - y_ref[: y.shape[0], self._idx]) / self.noise_std
+
+    def _t2_stage(self) -> DirectionalStage:
+        """The T² rows' stage: the EWMA of ``r``, Hotelling's T² of it, one ``chi2-tail`` limit
+        at the target (``lrgf-glr``'s stage with the omnibus T² alone, ``lrgf-mem``'s rule).
+
+        Decision: its T² stays *centred* (``centered=True``: about the calibration mean of the
+        EWMA), where a detector's is not. A detector's normalised error is zero-mean by
+        construction (its error model and scale are fitted to that very error); the exact
+        model's residual is not fitted to anything. Under the true inputs it is measurement
+        noise, zero-mean, and centring moves nothing; under the *measured* inputs the exact
+        model is driven by noisy inputs through a nonlinear plant, and its healthy residual
+        keeps an offset of its own, the same sign on every channel (about a tenth of the EWMA's
+        standard deviation against a hundredth under the true inputs: ``lab/detector-lab.md``,
+        "The T² reference rows' centre"). A perfect model calibrated on healthy data would have
+        that offset removed, so the row removes it; and centred, every published reference row
+        stays as it was. The stage is ``lrgf-glr``'s rather than ``lrgf-mem``'s
+        (:class:`~diagnosers.stages.ewma_stage.EWMAStage`, the same rule) because this row has
+        always computed T² on the whole record at once, as ``lrgf-glr``'s stage does in batch,
+        where ``lrgf-mem``'s computes it sample by sample (the last bits differ).
+        """
+        return DirectionalStage(
+            statistic="t2",
+            centered=True,
+            ewma_lambda=self.config.ewma_lambda,
+            false_alarm_target=self.config.false_alarm_target,
+            limit_method=LimitMethod.CHI2_TAIL,
+            threshold_margin=1.0,
+        )
 
     def fit(self, seeds: Sequence[int] | None = None) -> PhysicalLimit:
         """Calibrate the stage on healthy episodes of ``seeds`` (default:
@@ -304,7 +335,7 @@ class PhysicalLimit:
         seeds = list(self.config.calibration_seeds(self.data.track) if seeds is None else seeds)
         healthy = [self._sims.healthy(s) for s in seeds]
         if self.config.stage in TRUE_INPUT_STAGES:
-            self.stage_: KnownFaultBank | _PerfectModelStage = KnownFaultBank(
+            self.stage_: KnownFaultBank | _PerfectModelStage | DirectionalStage = KnownFaultBank(
                 self._sims.signatures,
                 self._reference,
                 statistic=self.config.stage,
@@ -319,34 +350,17 @@ class PhysicalLimit:
                 ewma_lambda=self.config.ewma_lambda,
             ).fit(healthy)
             return self
-        Z = np.concatenate([self._statistic(ep)[1] for ep in healthy])
-        self.t2_ = HotellingT2().fit(Z)
-        stat = np.asarray(self.t2_.score(Z))
-        self.limit_ = float(
-            calibrate_limit(
-                stat[:, None],
-                self.config.false_alarm_target,
-                method=LimitMethod.CHI2_TAIL,
-                dof=len(self._idx),
-            )[0]
-        )
+        self.stage_ = self._t2_stage().fit([self._residual(ep) for ep in healthy])
         return self
 
     def detect(self, episode: Episode) -> Detection:
         assert episode.seed is not None, "the physical limit needs the episode's seed"
         if self.config.stage != OracleStage.T2:
             return self.stage_.detect(episode)
-        r, z = self._statistic(episode)
-        stat = np.asarray(self.t2_.score(z)).reshape(-1, 1)
-        upper = np.full_like(stat, self.limit_)
-        return Detection(
-            alarm=stat[:, 0] > self.limit_,
-            signal=stat,
-            lower=np.full_like(stat, -np.inf),
-            upper=upper,
-            residual=np.linalg.norm(r, axis=1, keepdims=True),
-            signal_names=("T2[oracle]" if self.name == ORACLE_LABEL else "T2[measured inputs]",),
-        )
+        r = self._residual(episode)
+        norm = np.linalg.norm(r, axis=1, keepdims=True)  # the decisions' residual: its size
+        name = "T2[oracle]" if self.name == ORACLE_LABEL else "T2[measured inputs]"
+        return self.stage_.detect(r, warm_up=0, residual=norm, names=(name,))
 
 
 def reference_over(ref: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -390,7 +404,7 @@ class _PerfectModelStage:
             glr["fault_scenarios"], glr["fault_seeds"], glr["direction_window"]
         )
         self.faults = self.directions.faults
-        stage_params = {k: glr[k] for k in DirectionalStage.PARAMETERS}
+        stage_params = {k: glr[k] for k in DirectionalStage.DEFAULTS}
         stage_params.update(false_alarm_target=false_alarm_target, ewma_lambda=ewma_lambda)
         self.stage = DirectionalStage(**stage_params)
 
@@ -423,13 +437,7 @@ class _PerfectModelStage:
         resid = y[:, self.out_idx_] - self._centre_of(episode)
         w = self.steady_window
         e = resid / self.v_residual_
-        e[:w] = 0.0
-        self.stage.reset()
-        sig = self.stage.signals(e, w)
-        return Detection.from_decisions(
-            [self.stage.decision(resid[k], sig[k], k < w) for k in range(y.shape[0])],
-            self.signal_names_,
-        )
+        return self.stage.detect(e, warm_up=w, residual=resid, names=self.signal_names_)
 
     def update(self, y: np.ndarray) -> Any:
         raise NotImplementedError(

@@ -42,10 +42,9 @@ def test_batch_equals_stream_and_the_target_is_split(statistic: str, with_baseli
     stage.reset()
     batch = stage.signals(e, warm_up=0)
     stage.reset()
-    stream = np.array([stage.step(row, warm=False)[1] for row in e])
+    stream = np.array([stage.step(row, warm=False, residual=row).signal for row in e])
     np.testing.assert_allclose(batch, stream, rtol=1e-9, atol=1e-12)
-    stage.reset()
-    alarms = [stage.decision(np.zeros(3), s, warm=False).alarm for s in batch]
+    alarms = stage.detect(e, warm_up=0, residual=e, names=()).alarm
     assert np.mean(alarms[300:]) > np.mean(alarms[:300])
 
 
@@ -59,3 +58,18 @@ def test_the_state_round_trips() -> None:
     np.testing.assert_array_equal(again.signals(e, 0), stage.signals(e, 0))
     with pytest.raises(ValueError, match="lacks array 'directions'"):
         DirectionalStage(false_alarm_target=0.01).set_state({"s_inv": np.eye(3), "h": [1.0]})
+
+
+def test_a_centred_t2_is_about_the_calibration_mean_and_saves_it() -> None:
+    """``centered=True`` (the physical-limit rows): T² about the mean of the healthy EWMA."""
+    norm = [r + np.array([0.5, -0.2, 0.0]) for r in _records(3, 3)]
+    stage = DirectionalStage(statistic="t2", centered=True).fit(norm)
+    z = np.concatenate([EWMA(0.3).filter(e) for e in norm])
+    np.testing.assert_allclose(stage.mean_, z.mean(axis=0), rtol=1e-12)
+    assert set(stage.get_state()) == {"s_inv", "h", "directions", "dir_weights", "h_dir", "mean"}
+    plain = DirectionalStage(statistic="t2").fit(norm)
+    assert "mean" not in plain.get_state() and not plain.mean_.any()  # a detector's: about 0
+    e = norm[0]
+    centred = stage.detect(e, warm_up=0, residual=e, names=("T2",)).signal[:, 0]
+    d = EWMA(0.3).filter(e) - stage.mean_
+    np.testing.assert_allclose(centred, np.einsum("ti,ij,tj->t", d, stage.s_inv_, d), rtol=1e-12)

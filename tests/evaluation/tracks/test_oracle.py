@@ -71,10 +71,12 @@ def test_oracle_is_exact_on_noise_free_episodes(oracle: PhysicalLimit) -> None:
     ref = data.reference(seed)
     r = (clean[:, idx] - ref[:, idx]) / oracle.noise_std
     z = EWMA(oracle.config.ewma_lambda).filter(r)
-    d = z - oracle.t2_.mean_
-    t2 = np.einsum("ti,ij,tj->t", d, oracle.t2_.precision_, d)
-    first = int(np.argmax(t2 > oracle.limit_))
-    assert t2[first] > oracle.limit_ and det.alarm.argmax() == first >= onset
+    stage = oracle.stage_
+    d = z - stage.mean_  # the row's T² is centred (PhysicalLimit._t2_stage says why)
+    t2 = np.einsum("ti,ij,tj->t", d, stage.s_inv_, d)
+    limit = stage.h_[0]
+    first = int(np.argmax(t2 > limit))
+    assert t2[first] > limit and det.alarm.argmax() == first >= onset
 
 
 def test_oracle_false_alarm_rate_near_its_target(oracle: PhysicalLimit) -> None:
