@@ -291,8 +291,8 @@ def test_cli_external_santander(tmp_path, capsys) -> None:
     assert main(args) == 0
     lines = _table_and_legend(capsys.readouterr().out)[0].splitlines()
     assert lines[0] == (
-        "| diagnoser | r_fd (NOC_stableFeedFlow) | deltaP_increase r_td | deltaP_increase t_dt |"
-    )
+        "| diagnoser | r_fd (NOC_stableFeedFlow) | deltaP_increase† r_td | deltaP_increase† t_dt |"
+    )  # † : the recorded fault's onset is assumed, marked in the printed table as in the file
     assert len(lines) == 4  # two diagnosers, no paper row: the paper's plant is another one
     assert (tmp_path / "figures" / "deltaP_increase" / "arx-band.png").is_file()
     assert "\n\n| diagnoser |" in (tmp_path / "leaderboard.md").read_text()
