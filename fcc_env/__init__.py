@@ -4,7 +4,8 @@ The modules, by job:
 
 - :mod:`~fcc_env.params`, :mod:`~fcc_env.physics`: the frozen parameters; the pure right-hand
   side, the measurement map and the steady state; :mod:`~fcc_env.integrator`: RK4 stepping;
-- :mod:`~fcc_env.scenarios`: :class:`FaultSpec`, the one typed fault request, and the faults;
+- :mod:`~fcc_env.faults`: the fault registry (:data:`FAULTS`, :func:`register_fault`);
+  :mod:`~fcc_env.scenarios`: :class:`FaultSpec`, the one typed fault request;
   :mod:`~fcc_env.excitation`: the operating program; :mod:`~fcc_env.plant`: :class:`PlantConfig`,
   the noise and the envelope; :mod:`~fcc_env.effects`, :mod:`~fcc_env.uncertainty`: undeclared
   effects and per-episode plant draws;
@@ -33,6 +34,16 @@ from gymnasium.envs.registration import register, registry
 
 from fcc_env.control_task import CONTROL_ENV_ID, EconomicReward
 from fcc_env.excitation import Excitation
+from fcc_env.faults import (
+    FAULTS,
+    PAPER_FAULTS,
+    FaultDefinition,
+    Scenario,
+    fault_names,
+    register_fault,
+    scenario_names,
+    unregister_fault,
+)
 from fcc_env.integrator import integrate_step
 from fcc_env.params import (
     INPUT_NAMES,
@@ -46,14 +57,7 @@ from fcc_env.params import (
 from fcc_env.physics import measure, rhs, steady_state
 from fcc_env.plant import PlantConfig
 from fcc_env.regulatory import RegulatoryLayer, SetpointProgram
-from fcc_env.scenarios import (
-    DEFAULT_N_SAMPLES,
-    FAULTS,
-    SCENARIOS,
-    FaultProfile,
-    FaultSpec,
-    Scenario,
-)
+from fcc_env.scenarios import DEFAULT_N_SAMPLES, FaultProfile, FaultSpec
 from fcc_env.simulation import BatchResult, simulate_episodes
 
 ENV_ID = "FCC-v0"
@@ -104,12 +108,13 @@ __all__ = [
     "MEASUREMENT_NAMES",
     "MODEL_VERSION",
     "NOMINAL_INPUTS",
-    "SCENARIOS",
+    "PAPER_FAULTS",
     "STATE_NAMES",
     "BatchResult",
     "EconomicReward",
     "Excitation",
     "FCCParams",
+    "FaultDefinition",
     "FaultProfile",
     "FaultSpec",
     "Measurement",
@@ -117,9 +122,13 @@ __all__ = [
     "RegulatoryLayer",
     "Scenario",
     "SetpointProgram",
+    "fault_names",
     "integrate_step",
     "measure",
+    "register_fault",
     "rhs",
+    "scenario_names",
     "simulate_episodes",
     "steady_state",
+    "unregister_fault",
 ]

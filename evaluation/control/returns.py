@@ -49,7 +49,7 @@ from fcc_common.io import atomic_write, atomic_write_json
 from fcc_env.closed_loop import CLOSED_LOOP_CHANNELS
 from fcc_env.control_task import CONTROL_ENV_ID, REWARD_TERMS
 from fcc_env.plant import PlantConfig
-from fcc_env.scenarios import SCENARIOS
+from fcc_env.scenarios import fault_names, scenario_names
 
 __all__ = [
     "EpisodeScore",
@@ -196,15 +196,17 @@ def supervisor(
 ) -> DiagnosisSupervisor:
     """A :class:`DiagnosisSupervisor` around registered diagnoser ``name``, trained on episodes
     of :data:`TRAIN_SEEDS` run at the supervisor's healthy set points (healthy ones, and for an
-    isolator each fault at the paper's size too). Trained on the operating program instead, a
+    isolator or a detector that learns from faults each fault at its default size too, on the
+    same seeds: each faulty episode's healthy twin is there). Trained on the operating program instead, a
     detector alarms as soon as the supervisor moves the set points to their optimum: the unit
     has left the region it learned (every episode, pca and lrgf-glr-closed alike, measured)."""
     from diagnosers import diagnoser_class, make
 
     fixed = fixed_setpoints()
     train = operated_episodes(fixed, "nominal", TRAIN_SEEDS, n_steps)
-    if diagnoser_class(name).isolates:
-        for fault in SCENARIOS[1:]:
+    cls = diagnoser_class(name)
+    if cls.isolates or cls.learns_from_faults:
+        for fault in fault_names():
             train += operated_episodes(fixed, fault, TRAIN_SEEDS, n_steps)
     label = name + "".join(f" {k}={v}" for k, v in (params or {}).items())
     return DiagnosisSupervisor(
@@ -304,7 +306,8 @@ def _study(args: argparse.Namespace, extra_policies: Sequence[Policy] = ()) -> i
         policies += [supervisor(n, params=params.get(n)) for n in names]
     policies += list(extra_policies)
     policies.append(oracle())
-    scores = run_study(policies, range(args.seeds), args.steps, SCENARIOS)
+    scenarios = scenario_names()
+    scores = run_study(policies, range(args.seeds), args.steps, scenarios)
     summaries = summarise(scores, reference=policies[-1].name)
     args.out.mkdir(parents=True, exist_ok=True)
     rows = [asdict(s) for s in scores]
@@ -316,7 +319,7 @@ def _study(args: argparse.Namespace, extra_policies: Sequence[Policy] = ()) -> i
         {"summaries": [asdict(s) for s in summaries], "episodes": rows},
     )
     figures = []
-    for scenario in SCENARIOS[1:]:  # one episode per fault, every policy: what each did
+    for scenario in scenarios[1:]:  # one episode per fault, every policy: what each did
         traces: dict[str, dict[str, list[Any]]] = {}
         for p in policies:
             traces[p.name] = {}
@@ -331,7 +334,7 @@ def _study(args: argparse.Namespace, extra_policies: Sequence[Policy] = ()) -> i
         )
     print(_table(summaries), end="")
     print(
-        f"\n{len(scores)} episodes ({args.seeds} test seeds x {len(SCENARIOS)} scenarios x "
+        f"\n{len(scores)} episodes ({args.seeds} test seeds x {len(scenarios)} scenarios x "
         f"{len(policies)} policies) in {time.perf_counter() - t0:.0f} s; wrote {args.out} "
         f"(control.csv, control.json, {len(figures)} figures)",
     )

@@ -38,7 +38,7 @@ from fcc_common.invocation import check_out_path, command_parser, out_path, run_
 from fcc_common.io import atomic_write_json
 from fcc_common.validation import invalid
 from fcc_env.control_task import CONTROL_ENV_ID
-from fcc_env.scenarios import SCENARIOS
+from fcc_env.scenarios import scenario_names
 
 __all__ = [
     "REWARD_SCALE_USD",
@@ -324,10 +324,11 @@ def validate(policy: Any, n_seeds: int, n_steps: int = 3999) -> dict[str, Any]:
     """``policy`` and the best fixed set points on validation seeds 5000.. (each scenario at the
     paper's size and onset), with the control study's harness: mean returns and the gap."""
     seeds = range(VALIDATION_SEED, VALIDATION_SEED + n_seeds)
-    scores = returns.run_study([fixed_setpoints(), policy], seeds, n_steps, SCENARIOS)
+    scenarios = scenario_names()
+    scores = returns.run_study([fixed_setpoints(), policy], seeds, n_steps, scenarios)
     out: dict[str, Any] = {"seeds": list(seeds), "policies": {}}
     for s in returns.summarise(scores, reference=policy.name):
-        by = {sc: np.mean([e.return_usd for e in scores if e.policy == s.policy and e.scenario == sc]) for sc in SCENARIOS}  # fmt: skip
+        by = {sc: np.mean([e.return_usd for e in scores if e.policy == s.policy and e.scenario == sc]) for sc in scenarios}  # fmt: skip
         out["policies"][s.policy] = {
             "mean_return_usd": s.return_usd.estimate,
             "trips_per_100": s.trips_per_100,

@@ -161,8 +161,11 @@ class OracleConfig:
       stage (measured inputs)``: the same perfect model evaluated by ``lrgf-glr``'s own parts
       (:class:`diagnosers.stages.directional_stage.DirectionalStage` and
       :class:`diagnosers.lrgf.fault_directions.FaultDirections` on the reference's residual): fault
-      directions from the noise-free signatures of the training faults (seeds 1000-1002, as
-      the detector's), a fast and a slow EWMA scale projected on them, an omnibus T². It is
+      directions from the noise-free signatures of the track's labelled training faults
+      (:meth:`~evaluation.tracks.track_data.TrackData.train_fault_episodes` on the detector's
+      ``fault_seeds``, with their healthy twins among the track's training episodes: the
+      track's own fault sizes, plant and noise), a fast and a slow EWMA scale projected on
+      them, an omnibus T². It is
       what a detector of that family would reach with a perfect model, from what a detector
       can read: where it misses the physical-limit row's bounds, no model improvement can
       close the gap with that stage.
@@ -312,12 +315,13 @@ class PhysicalLimit:
             ).fit(healthy)
             return self
         if self.config.stage == OracleStage.DIRECTIONAL:
-            self.stage_ = _PerfectModelStage(
+            stage = _PerfectModelStage(
                 self._reference,
                 self.config.channels,
                 false_alarm_target=self.config.false_alarm_target,
                 ewma_lambda=self.config.ewma_lambda,
-            ).fit(healthy)
+            )
+            self.stage_ = stage.fit(healthy, self._sims.direction_episodes(stage.directions))
             return self
         Z = np.concatenate([self._statistic(ep)[1] for ep in healthy])
         self.t2_ = HotellingT2().fit(Z)
@@ -389,7 +393,6 @@ class _PerfectModelStage:
         self.directions = FaultDirections(
             glr["fault_scenarios"], glr["fault_seeds"], glr["direction_window"]
         )
-        self.faults = self.directions.faults
         stage_params = {k: glr[k] for k in DirectionalStage.PARAMETERS}
         stage_params.update(false_alarm_target=false_alarm_target, ewma_lambda=ewma_lambda)
         self.stage = DirectionalStage(**stage_params)
@@ -401,21 +404,28 @@ class _PerfectModelStage:
     def _centre_of(self, episode: Episode) -> np.ndarray:
         return self.reference_of(episode)[: episode.y.shape[0]][:, self.out_idx_]
 
-    def fit(self, episodes: Sequence[Episode]) -> _PerfectModelStage:
+    def fit(
+        self, episodes: Sequence[Episode], training: Sequence[Episode]
+    ) -> _PerfectModelStage:
+        """Calibrate on the healthy ``episodes``; the fault directions from the labelled faults
+        of ``training`` and their healthy twins there (the track's training episodes)."""
         channels = episodes[0].channels
         self.out_idx_ = np.array([channels.index(c) for c in self.monitored])
         w = self.steady_window
         rem = [(ep.y[:, self.out_idx_] - self._centre_of(ep))[w:] for ep in episodes]
         self.v_residual_ = np.maximum(np.sqrt(np.mean(np.concatenate(rem) ** 2, axis=0)), 1e-9)
-        self.directions_ = self.directions.learn(channels, len(self.out_idx_), self._signature)
+        self.directions_, faults = self.directions.learn(
+            training, len(self.out_idx_), self._signature
+        )
         self.stage.fit([r / self.v_residual_ for r in rem], self.directions_)
-        self.signal_names_ = self.stage.signal_names(self.faults)
+        self.signal_names_ = self.stage.signal_names(faults)
         return self
 
-    def _signature(self, faulty: Any, healthy: Any, b: int, end: int) -> np.ndarray:
+    def _signature(self, faulty: Episode, healthy: Episode, end: int) -> np.ndarray:
         """The training fault's noise-free signature: the faulty plant's clean output minus its
         healthy twin's, normalised (what a perfect model's residual difference is)."""
-        d = np.asarray(faulty.y_clean[b][:end], dtype=np.float64) - healthy.y_clean[b][:end]
+        assert faulty.y_clean is not None and healthy.y_clean is not None  # simulated
+        d = faulty.y_clean[:end] - healthy.y_clean[:end]
         return d[:, self.out_idx_] / self.v_residual_
 
     def detect(self, episode: Episode) -> Detection:
@@ -445,6 +455,7 @@ class _Simulations:
 
     def __init__(self, data: TrackData) -> None:
         self.data = data
+        self._training: list[Episode] | None = None
         self._healthy: dict[int, Episode] = {}
         self._references: dict[tuple[int, bytes | None], np.ndarray] = {}
         self.signatures = FaultSignatures(data)
@@ -453,6 +464,15 @@ class _Simulations:
         if seed not in self._healthy:
             self._healthy[seed] = self.data.load_test("nominal", seed).episode
         return self._healthy[seed]
+
+    def direction_episodes(self, part: FaultDirections) -> list[Episode]:
+        """The track's healthy training episodes and its labelled training faults on
+        ``part``'s seeds (None: every training fault seed), what the harness passes a detector
+        that learns from faults (simulated once)."""
+        if self._training is None:
+            faults = self.data.train_fault_episodes(part.seeds)
+            self._training = [*self.data.train_episodes(), *faults]
+        return self._training
 
     def reference(self, seed: int, measured: np.ndarray | None) -> np.ndarray:
         key = (seed, None if measured is None else hashlib.sha1(measured.tobytes()).digest())
