@@ -60,11 +60,12 @@ def default_episodes(
     """Small FCC-v0 episodes: ``(healthy training, faulty test, labelled faulty training)``.
 
     Two healthy episodes (seeds 1000, 1001), a test episode with fault ``f1`` from two thirds of
-    it (seed 3), and four labelled faulty episodes (``f1`` and ``f2``, onset at half) for the
-    diagnosers that isolate or learn from faults, on the healthy seeds 1000 and 1001 so that
-    each has its healthy noise twin. Two faults are a deliberate sample, not "the faults": two
-    classes are what the contract needs, and they keep the checks fast. Simulating them takes
-    well under a second.
+    it (seed 3), and eight labelled faulty episodes (``f1`` and ``f2``, onset at half) for the
+    diagnosers that isolate or learn from faults: on seeds 11 and 12, and on the healthy seeds
+    1000 and 1001, where each has its healthy noise twin (what a detector that learns from
+    faults pairs; on its own training seeds a detector may not alarm at all). Two faults are a
+    deliberate sample, not "the faults": two classes are what the contract needs, and they keep
+    the checks fast. Simulating them takes well under a second.
     ``closed_loop``: the same on the closed-loop plant (``FCC-closedloop-v0``).
     """
     import fcc_env  # here: the diagnosers package does not need the simulator to import
@@ -79,7 +80,7 @@ def default_episodes(
     faulty = [
         ep
         for scenario in ("f1", "f2")
-        for ep in sim([1000, 1001], n_test, scenario=scenario, fault_time=n_test // 2)
+        for ep in sim([11, 12, 1000, 1001], n_test, scenario=scenario, fault_time=n_test // 2)
     ]
     return train, test, faulty
 

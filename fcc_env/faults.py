@@ -147,9 +147,11 @@ def _check_definition(name: str, d: FaultDefinition) -> None:
             raise invalid(f"{name}.{hook}", fn, "a callable or None")
     if not params and d.measure is None and d.transform_inputs is None:
         raise invalid(
-            f"{name}.parameters", params, "at least one parameter, or a measure or "
-            "transform_inputs hook", "a fault must act on the plant somewhere",
-        )  # fmt: skip
+            f"{name}.parameters",
+            params,
+            "at least one parameter, or a measure or transform_inputs hook",
+            "a fault must act on the plant somewhere",
+        )
     top = check(f"{name}.max_magnitude", d.max_magnitude, Real(0.0, MAX_FAULT_MAGNITUDE))
     check(f"{name}.default_magnitude", d.default_magnitude, Real(0.0, top))
     check(f"{name}.default_onset", d.default_onset, Integer(0))
@@ -177,9 +179,11 @@ def register_fault(name: str, definition: FaultDefinition) -> FaultDefinition:
     """
     if not isinstance(name, str) or not _NAME.match(name) or name in _RESERVED:
         raise invalid(
-            "name", name, "a lowercase name of letters, digits, '-' or '_'",
+            "name",
+            name,
+            "a lowercase name of letters, digits, '-' or '_'",
             f"not {' or '.join(map(repr, _RESERVED))}",
-        )  # fmt: skip
+        )
     if name in FAULTS:
         raise ValueError(
             f"fault {name!r} is already registered; registered: {list(FAULTS)} (unregister_fault "

@@ -316,12 +316,7 @@ def simulate_episodes(
             Y[:, kk] = schedule.measure(kk, Y[:, kk])
         noisy_batch_kernel(Y, Z, NOISE_STD_ABS, NOISE_STD_REL, config.noise_scale, obs)
     del Z
-    active = np.stack(
-        [
-            (k >= f.onset) if not f.nominal else np.zeros(T, bool)
-            for f in faults
-        ]
-    )
+    active = np.stack([(k >= f.onset) if not f.nominal else np.zeros(T, bool) for f in faults])
     codes = envelope_codes(X)
     bad = codes != 0
     term_at = np.where(bad.any(axis=1), np.argmax(bad, axis=1), -1)

@@ -361,9 +361,11 @@ class FCCVectorEnv(VectorEnv):
             )  # fmt: skip
         if setup.schedule.fault_measure is not None:
             raise invalid(
-                "scenario", setup.fault.scenario, "a fault acting through parameters or inputs",
+                "scenario",
+                setup.fault.scenario,
+                "a fault acting through parameters or inputs",
                 "a fault's measure hook needs Python per sample: use vectorization_mode='sync'",
-            )  # fmt: skip
+            )
         self._setups[b] = setup
         fault = setup.fault
         self._faulty[b] = not fault.nominal

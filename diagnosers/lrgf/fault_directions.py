@@ -10,11 +10,17 @@ normalised remaining errors over ``window`` samples from the onset is the fault'
 without the noise. The mean signature over the seeds, made a unit vector, is the direction.
 
 ``fault_scenarios`` and ``fault_seeds`` filter which of the episodes passed give directions.
-Without any labelled faulty episode there are no directions: the detector runs its omnibus T²
-alone and says so once per ``fit`` in the log (a warning): recorded data without labelled faults
-are a normal case, not an error. A fault that was asked for, or an episode that was selected,
-that cannot give a signature (no such episode, no noise twin, every one ended inside the window)
-is an error naming it.
+What is a warning and what an error (both raised or logged before anything is trained):
+
+* no labelled faulty episode at all: no directions, the detector runs its omnibus T² alone and
+  says so once per ``fit`` in the log (a warning): recorded data without labelled faults are a
+  normal case, not an error;
+* with ``fault_scenarios=None`` (every fault passed), a fault none of whose episodes is on
+  ``fault_seeds``: no direction for it, a warning (``fault_seeds`` is a filter: data on other
+  seeds, e.g. a user's synthetic records, simply give none);
+* a fault that ``fault_scenarios`` names but no episode on ``fault_seeds`` carries, a selected
+  episode without its noise twin (the training fault seeds must be among the healthy training
+  seeds), or a fault whose every selected episode ended inside the window: an error naming it.
 """
 
 from __future__ import annotations
@@ -36,6 +42,7 @@ __all__ = [
     "NAMES_FILE",
     "PAPER_FAULTS",
     "FaultDirections",
+    "Pairs",
     "Signature",
     "load_names",
     "paired_difference",
@@ -56,6 +63,9 @@ DEFAULT_FAULT_SEEDS = (1000, 1001, 1002)
 #: the file of a saved detector that names its fault directions (``{"faults": [...]}``): the
 #: names depend on the faults passed to ``fit``, the state arrays hold the directions only
 NAMES_FILE = "fault_directions.json"
+
+#: per fault, its labelled faulty training episodes, each with its healthy noise twin
+Pairs = dict[str, list[tuple[Episode, Episode]]]
 
 #: ``signature(faulty, healthy, end)``: the normalised remaining error of a labelled faulty
 #: episode minus that of its healthy twin, over their first ``end`` samples
@@ -100,9 +110,11 @@ class FaultDirections:
             for f in self.scenarios:
                 if not isinstance(f, str) or f in ("", "nominal", "unknown"):
                     raise invalid(
-                        "fault_scenarios", list(self.scenarios), "None or fault names (labels "
+                        "fault_scenarios",
+                        list(self.scenarios),
+                        "None or fault names (labels "
                         "of faulty training episodes, not '', 'nominal' or 'unknown')",
-                    )  # fmt: skip
+                    )
             if len(set(self.scenarios)) != len(self.scenarios):
                 raise invalid("fault_scenarios", list(self.scenarios), "distinct fault names")
         if self.seeds is not None:
@@ -113,67 +125,82 @@ class FaultDirections:
         ``fault_scenarios``, or the paper's four it then always learned."""
         return PAPER_FAULTS if self.scenarios is None else self.scenarios
 
-    def learn(
-        self, episodes: Sequence[Episode], n_relations: int, signature: Signature
-    ) -> tuple[np.ndarray, tuple[str, ...]]:
-        """Unit fault directions ``(m, n_relations)`` and the names of their faults.
-
-        From the labelled faulty episodes of ``episodes`` (those with a ``fault_onset``), each
-        paired with the healthy episode of its seed among ``episodes``: the direction is the
-        mean of ``signature`` over ``window`` samples from the onset, made a unit vector.
+    def pairs(self, episodes: Sequence[Episode]) -> Pairs:
+        """Per fault to learn, its selected labelled faulty episodes of ``episodes`` (those with
+        a ``fault_onset``), each with its healthy twin there, in the order of ``fault_seeds``
+        (else as passed); those that end inside the window are left out. Checked here, before
+        anything is trained (module docstring: what is an error, what a warning).
         """
-        faulty = [ep for ep in episodes if ep.fault_onset is not None]
-        if not faulty:
-            logger.warning(
-                "no labelled faulty training episode was passed to fit: no fault directions, "
-                "the omnibus T² alone (pass the training faults, e.g. the harness's "
-                "train_fault_episodes, to learn them)"
-            )
-            return np.zeros((0, n_relations)), ()
-        out, faults = [], []
-        for f, diffs in self.differences(episodes, signature).items():
-            mean = np.mean([d.mean(axis=0) for d in diffs], axis=0)
-            out.append(mean / np.linalg.norm(mean))
-            faults.append(f)
-        return np.array(out).reshape(len(out), n_relations), tuple(faults)
-
-    def differences(
-        self, episodes: Sequence[Episode], signature: Signature
-    ) -> dict[str, list[np.ndarray]]:
-        """Per fault, the ``signature`` of each selected training fault over the ``window``
-        samples from the onset: ``(window, k)`` arrays, in the order of ``fault_seeds`` (else
-        as passed). Episodes that end inside the window are left out."""
         faulty = [ep for ep in episodes if ep.fault_onset is not None]
         twins: dict[int, Episode] = {}
         for ep in episodes:
             if ep.fault_onset is None and ep.seed is not None:
                 twins.setdefault(ep.seed, ep)
         given = list(dict.fromkeys(ep.scenario for ep in faulty))
-        faults = given if self.scenarios is None else list(self.scenarios)
-        out = {}
-        for f in faults:
+        out: Pairs = {}
+        for f in given if self.scenarios is None else self.scenarios:
             selected = self._select([ep for ep in faulty if ep.scenario == f], f, given)
-            diffs = []
-            for ep in selected:
-                twin = twins.get(ep.seed) if ep.seed is not None else None
-                if twin is None:
-                    raise ValueError(
-                        f"the training fault {f} of seed {ep.seed} has no healthy episode of "
-                        f"that seed among the training episodes (its noise twin; healthy seeds: "
-                        f"{sorted(twins)}): pass the healthy episode of every faulty seed, or "
-                        "choose fault_seeds among the healthy ones"
-                    )
-                end = ep.fault_onset + self.window  # type: ignore[operator]
-                if ep.n_samples < end or twin.n_samples < end:
-                    continue
-                diffs.append(signature(ep, twin, end)[ep.fault_onset :])
-            if not diffs:
-                raise ValueError(f"no training episode of fault {f} lasted through its window")
-            out[f] = diffs
+            if selected:  # empty only for a fault passed off fault_seeds (fault_scenarios=None)
+                out[f] = self._paired(f, selected, twins)
+        if not given:
+            logger.warning(
+                "no labelled faulty training episode was passed to fit: no fault directions, "
+                "the omnibus T² alone (pass the training faults, e.g. the harness's "
+                "train_fault_episodes, to learn them)"
+            )
+        elif self.scenarios is None and len(out) < len(given):
+            left = [f for f in given if f not in out]
+            logger.warning(
+                "no training episode of fault(s) %s is on fault_seeds=%s: no direction for "
+                "them (directions for %s)",
+                left,
+                self.seeds,
+                list(out),
+            )
         return out
 
+    def _paired(
+        self, fault: str, selected: list[Episode], twins: dict[int, Episode]
+    ) -> list[tuple[Episode, Episode]]:
+        """``selected`` episodes of ``fault`` with their twins, but those ending in the window."""
+        kept = []
+        for ep in selected:
+            twin = None if ep.seed is None else twins.get(ep.seed)
+            if twin is None:
+                raise ValueError(
+                    f"the training fault {fault} of seed {ep.seed} has no healthy episode of "
+                    f"that seed among the training episodes (its noise twin; healthy seeds: "
+                    f"{sorted(twins)}): pass the healthy episode of every faulty seed, or "
+                    "choose fault_seeds among the healthy ones"
+                )
+            end = ep.fault_onset + self.window  # type: ignore[operator]
+            if ep.n_samples >= end and twin.n_samples >= end:
+                kept.append((ep, twin))
+        if not kept:
+            raise ValueError(f"no training episode of fault {fault} lasted through its window")
+        return kept
+
+    def learn(
+        self, pairs: Pairs, n_relations: int, signature: Signature
+    ) -> tuple[np.ndarray, tuple[str, ...]]:
+        """Unit fault directions ``(m, n_relations)`` and the names of their faults, from the
+        :meth:`pairs`: the mean of ``signature`` over ``window`` samples from the onset."""
+        out = []
+        for ps in pairs.values():
+            diffs = [self._window(signature, ep, twin) for ep, twin in ps]
+            mean = np.mean([d.mean(axis=0) for d in diffs], axis=0)
+            out.append(mean / np.linalg.norm(mean))
+        return np.array(out).reshape(len(out), n_relations), tuple(pairs)
+
+    def _window(self, signature: Signature, faulty: Episode, twin: Episode) -> np.ndarray:
+        """``signature`` of one pair over the ``window`` samples from the onset ``(window, k)``."""
+        onset = faulty.fault_onset
+        assert onset is not None  # a pair's faulty episode has one
+        return signature(faulty, twin, onset + self.window)[onset:]
+
     def _select(self, of_fault: list[Episode], fault: str, given: list[str]) -> list[Episode]:
-        """The episodes of ``fault`` on ``fault_seeds`` (in their order; None: all)."""
+        """The episodes of ``fault`` on ``fault_seeds`` (in their order; None: all); a fault
+        that ``fault_scenarios`` names must have some."""
         if not of_fault:
             raise ValueError(
                 f"fault_scenarios names {fault!r}, but no labelled faulty training episode has "
@@ -182,7 +209,7 @@ class FaultDirections:
         if self.seeds is None:
             return of_fault
         selected = [ep for s in self.seeds for ep in of_fault if ep.seed == s]
-        if not selected:
+        if not selected and self.scenarios is not None:
             raise ValueError(
                 f"no training episode of fault {fault} has a seed of fault_seeds={self.seeds} "
                 f"(its seeds: {sorted({ep.seed for ep in of_fault}, key=str)}): choose "

@@ -43,6 +43,7 @@ from diagnosers.lrgf.bank_detector import (
 from diagnosers.lrgf.fault_directions import (
     DEFAULT_FAULT_SEEDS,
     FaultDirections,
+    Pairs,
     load_names,
     paired_difference,
     save_names,
@@ -291,7 +292,8 @@ class LRGFGLR(BankDetector):
 
     # ---- fitting -------------------------------------------------------------------------------
     def _fit(self, episodes: list[Episode]) -> None:
-        training, episodes = episodes, [e for e in episodes if e.fault_onset is None]
+        pairs = self._fault_directions().pairs(episodes)  # checked before anything trains
+        episodes = [e for e in episodes if e.fault_onset is None]
         bank = self._new_bank()
         self.novelty_ = self._new_novelty()
         w = self.steady_window
@@ -307,7 +309,7 @@ class LRGFGLR(BankDetector):
             cal_parts = [bank.parts(y) for y in cal]
             distances = self.novelty_.distances(bank, train, cal)
         self.novelty_.fit(bank, train)
-        self._calibrate(cal_parts, w, distances, cal, training)
+        self._calibrate(cal_parts, w, distances, cal, pairs)
 
     def _calibrate(
         self,
@@ -315,13 +317,13 @@ class LRGFGLR(BankDetector):
         w: int,
         distances: list[np.ndarray],
         cal_ys: list[np.ndarray],
-        training: list[Episode],
+        pairs: Pairs,
     ) -> None:
         """Error-model choice, scale, fault directions and the stage's limits from healthy
         calibration records ``cal_parts`` (``(y_out − y_m, y_e)`` each; the first ``w`` samples
         skipped) with, per record, its distance outside the training predictions
         ``distances`` (``(T,)``) and its measurements ``cal_ys``; the directions from the
-        labelled faults of ``training`` (all of ``fit``'s episodes)."""
+        training faults ``pairs`` (:meth:`FaultDirections.pairs`)."""
         bank = self.bank_
         n_cal = sum(max(0, r.shape[0] - w) for r, _ in cal_parts)
         if n_cal < MIN_CALIBRATION_SAMPLES:
@@ -342,7 +344,7 @@ class LRGFGLR(BankDetector):
         self.v_residual_ = np.maximum(np.sqrt(np.mean(np.concatenate(rem) ** 2, axis=0)), 1e-9)
         norm = [r / self.v_residual_ for r in rem]
         directions, self.direction_faults_ = self._fault_directions().learn(
-            training, len(bank), paired_difference(self.normalised)
+            pairs, len(bank), paired_difference(self.normalised)
         )
         self.stage_ = self._new_stage()
         features: list[np.ndarray | None] = [None] * len(cal_parts)

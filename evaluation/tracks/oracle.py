@@ -404,9 +404,7 @@ class _PerfectModelStage:
     def _centre_of(self, episode: Episode) -> np.ndarray:
         return self.reference_of(episode)[: episode.y.shape[0]][:, self.out_idx_]
 
-    def fit(
-        self, episodes: Sequence[Episode], training: Sequence[Episode]
-    ) -> _PerfectModelStage:
+    def fit(self, episodes: Sequence[Episode], training: Sequence[Episode]) -> _PerfectModelStage:
         """Calibrate on the healthy ``episodes``; the fault directions from the labelled faults
         of ``training`` and their healthy twins there (the track's training episodes)."""
         channels = episodes[0].channels
@@ -414,9 +412,8 @@ class _PerfectModelStage:
         w = self.steady_window
         rem = [(ep.y[:, self.out_idx_] - self._centre_of(ep))[w:] for ep in episodes]
         self.v_residual_ = np.maximum(np.sqrt(np.mean(np.concatenate(rem) ** 2, axis=0)), 1e-9)
-        self.directions_, faults = self.directions.learn(
-            training, len(self.out_idx_), self._signature
-        )
+        pairs = self.directions.pairs(training)
+        self.directions_, faults = self.directions.learn(pairs, len(self.out_idx_), self._signature)
         self.stage.fit([r / self.v_residual_ for r in rem], self.directions_)
         self.signal_names_ = self.stage.signal_names(faults)
         return self
