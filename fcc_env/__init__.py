@@ -1,4 +1,5 @@
-"""FCC converter (riser + two-stage regenerator) as a Gymnasium environment with faults f1–f4.
+"""FCC converter (riser + two-stage regenerator) as a Gymnasium environment with faults f1–f4
+(and any added with :func:`register_fault`).
 
 The modules, by job:
 

@@ -100,10 +100,9 @@ class FCCEnv(gym.Env):
 
     ## Faults
     ``nominal``; ``f1`` catalyst density +10 % (onset 1900); ``f2`` weir constants −15 % (1900);
-    ``f3`` CO2/CO ratio constant −10 % (2020); ``f4`` reactor holdup +5 % (2000); and any fault
-    added by :func:`fcc_env.register_fault` (:mod:`fcc_env.faults`). ``"random"`` draws a
-    scenario (among the registered), onset and magnitude per episode. Profiles: ``"abrupt"`` or ``"incipient"``
-    (linear ramp over ``ramp_samples``). The label is ``info["fault_active"]``, never the observation.
+    ``f3`` CO2/CO ratio constant −10 % (2020); ``f4`` reactor holdup +5 % (2000); any added by
+    :func:`fcc_env.register_fault`. ``"random"`` draws scenario, onset and magnitude. Profiles:
+    ``"abrupt"`` or ``"incipient"`` (ramp over ``ramp_samples``). Label: ``info["fault_active"]``.
 
     ## Starting State
     The hot steady state at nominal inputs, found by a root solver (:func:`fcc_env.steady_state`).

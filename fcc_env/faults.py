@@ -50,15 +50,12 @@ import re
 from collections.abc import Callable
 from dataclasses import dataclass
 from enum import StrEnum
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from fcc_common.validation import Integer, Options, Real, check, invalid
 from fcc_env.params import PARAM_INDEX
-
-if TYPE_CHECKING:  # annotations only: scenarios imports this module
-    from fcc_env.scenarios import EpisodeFault
 
 __all__ = [
     "FAULTS",
@@ -98,10 +95,11 @@ PAPER_FAULTS: tuple[str, ...] = tuple(s.value for s in Scenario if s is not Scen
 #: Upper bound on fault magnitudes: beyond it the plant leaves the hot state (f2 at 100 % stops flow).
 MAX_FAULT_MAGNITUDE = 0.9
 
+# (the first argument is a fcc_env.scenarios.EpisodeFault, which imports this module: Any here)
 #: ``measure(fault, k, y) -> y'`` (module docstring)
-MeasureHook = Callable[["EpisodeFault", int, np.ndarray], np.ndarray]
+MeasureHook = Callable[[Any, int, np.ndarray], np.ndarray]
 #: ``transform_inputs(fault, k, u) -> u'`` (module docstring)
-InputHook = Callable[["EpisodeFault", np.ndarray, np.ndarray], np.ndarray]
+InputHook = Callable[[Any, np.ndarray, np.ndarray], np.ndarray]
 
 
 @dataclass(frozen=True)

@@ -161,14 +161,12 @@ class OracleConfig:
       stage (measured inputs)``: the same perfect model evaluated by ``lrgf-glr``'s own parts
       (:class:`diagnosers.stages.directional_stage.DirectionalStage` and
       :class:`diagnosers.lrgf.fault_directions.FaultDirections` on the reference's residual): fault
-      directions from the noise-free signatures of the track's labelled training faults
-      (:meth:`~evaluation.tracks.track_data.TrackData.train_fault_episodes` on the detector's
-      ``fault_seeds``, with their healthy twins among the track's training episodes: the
-      track's own fault sizes, plant and noise), a fast and a slow EWMA scale projected on
-      them, an omnibus T². It is
-      what a detector of that family would reach with a perfect model, from what a detector
-      can read: where it misses the physical-limit row's bounds, no model improvement can
-      close the gap with that stage.
+      directions from the noise-free signatures of the track's labelled training faults on the
+      detector's ``fault_seeds`` and their healthy twins (the track's fault sizes, plant and
+      noise: what the harness passes the detector), a fast and a slow EWMA scale projected on
+      them, an omnibus T². It is what a detector of that family would reach with a perfect
+      model, from what a detector can read: where it misses the physical-limit row's bounds, no
+      model improvement can close the gap with that stage.
     * ``OracleConfig(stage="cusum")`` and ``OracleConfig(stage="glr")``, the optimal-detector
       rows (:mod:`evaluation.tracks.optimal`): true inputs only, calibrated like the physical
       limit (validation seeds, :data:`REFERENCE_TARGET`).
@@ -321,7 +319,9 @@ class PhysicalLimit:
                 false_alarm_target=self.config.false_alarm_target,
                 ewma_lambda=self.config.ewma_lambda,
             )
-            self.stage_ = stage.fit(healthy, self._sims.direction_episodes(stage.directions))
+            # what the harness passes a detector that learns from faults, on its fault_seeds
+            faults = self.data.train_fault_episodes(stage.directions.seeds)
+            self.stage_ = stage.fit(healthy, [*self.data.train_episodes(), *faults])
             return self
         Z = np.concatenate([self._statistic(ep)[1] for ep in healthy])
         self.t2_ = HotellingT2().fit(Z)
@@ -452,7 +452,6 @@ class _Simulations:
 
     def __init__(self, data: TrackData) -> None:
         self.data = data
-        self._training: list[Episode] | None = None
         self._healthy: dict[int, Episode] = {}
         self._references: dict[tuple[int, bytes | None], np.ndarray] = {}
         self.signatures = FaultSignatures(data)
@@ -461,15 +460,6 @@ class _Simulations:
         if seed not in self._healthy:
             self._healthy[seed] = self.data.load_test("nominal", seed).episode
         return self._healthy[seed]
-
-    def direction_episodes(self, part: FaultDirections) -> list[Episode]:
-        """The track's healthy training episodes and its labelled training faults on
-        ``part``'s seeds (None: every training fault seed), what the harness passes a detector
-        that learns from faults (simulated once)."""
-        if self._training is None:
-            faults = self.data.train_fault_episodes(part.seeds)
-            self._training = [*self.data.train_episodes(), *faults]
-        return self._training
 
     def reference(self, seed: int, measured: np.ndarray | None) -> np.ndarray:
         key = (seed, None if measured is None else hashlib.sha1(measured.tobytes()).digest())
