@@ -12,9 +12,9 @@ without the noise. The mean signature over the seeds, made a unit vector, is the
 ``fault_scenarios`` and ``fault_seeds`` filter which of the episodes passed give directions.
 What is a warning and what an error (both raised or logged before anything is trained):
 
-* no labelled faulty episode at all: no directions, the detector runs its omnibus T² alone and
-  says so once per ``fit`` in the log (a warning): recorded data without labelled faults are a
-  normal case, not an error;
+* no labelled faulty episode at all (whatever ``fault_scenarios`` names): no directions, the
+  detector runs its omnibus T² alone and says so once per ``fit`` in the log (a warning):
+  recorded data without labelled faults are a normal case, not an error;
 * with ``fault_scenarios=None`` (every fault passed), a fault none of whose episodes is on
   ``fault_seeds``: no direction for it, a warning (``fault_seeds`` is a filter: data on other
   seeds, e.g. a user's synthetic records, simply give none);
@@ -132,6 +132,13 @@ class FaultDirections:
         anything is trained (module docstring: what is an error, what a warning).
         """
         faulty = [ep for ep in episodes if ep.fault_onset is not None]
+        if not faulty:
+            logger.warning(
+                "no labelled faulty training episode was passed to fit: no fault directions, "
+                "the omnibus T² alone (pass the training faults, e.g. the harness's "
+                "train_fault_episodes, to learn them)"
+            )
+            return {}
         twins: dict[int, Episode] = {}
         for ep in episodes:
             if ep.fault_onset is None and ep.seed is not None:
@@ -142,13 +149,7 @@ class FaultDirections:
             selected = self._select([ep for ep in faulty if ep.scenario == f], f, given)
             if selected:  # empty only for a fault passed off fault_seeds (fault_scenarios=None)
                 out[f] = self._paired(f, selected, twins)
-        if not given:
-            logger.warning(
-                "no labelled faulty training episode was passed to fit: no fault directions, "
-                "the omnibus T² alone (pass the training faults, e.g. the harness's "
-                "train_fault_episodes, to learn them)"
-            )
-        elif self.scenarios is None and len(out) < len(given):
+        if self.scenarios is None and len(out) < len(given):
             left = [f for f in given if f not in out]
             logger.warning(
                 "no training episode of fault(s) %s is on fault_seeds=%s: no direction for "

@@ -54,6 +54,7 @@ from evaluation.tracks.track import Track
 from evaluation.tracks.track_data import TrackData
 from fcc_common.validation import Integer, Options, Real, check
 from fcc_env.params import MEASUREMENT_NAMES, MEASUREMENTS
+from fcc_env.scenarios import FaultSpec
 
 __all__ = [
     "DEFAULT_REFERENCES",
@@ -163,7 +164,7 @@ class OracleConfig:
       :class:`diagnosers.lrgf.fault_directions.FaultDirections` on the reference's residual): fault
       directions from the noise-free signatures of the track's labelled training faults on the
       detector's ``fault_seeds`` and their healthy twins (the track's fault sizes, plant and
-      noise: what the harness passes the detector), a fast and a slow EWMA scale projected on
+      noise, as the harness gives the detector), a fast and a slow EWMA scale projected on
       them, an omnibus T². It is what a detector of that family would reach with a perfect
       model, from what a detector can read: where it misses the physical-limit row's bounds, no
       model improvement can close the gap with that stage.
@@ -319,9 +320,11 @@ class PhysicalLimit:
                 false_alarm_target=self.config.false_alarm_target,
                 ewma_lambda=self.config.ewma_lambda,
             )
-            # what the harness passes a detector that learns from faults, on its fault_seeds
+            # the training faults a detector gets, on its fault_seeds, and their healthy twins
             faults = self.data.train_fault_episodes(stage.directions.seeds)
-            self.stage_ = stage.fit(healthy, [*self.data.train_episodes(), *faults])
+            seeds = sorted({e.seed for e in faults if e.seed is not None})
+            twins = self.data.simulate(seeds, FaultSpec())
+            self.stage_ = stage.fit(healthy, [*(le.episode for le in twins), *faults])
             return self
         Z = np.concatenate([self._statistic(ep)[1] for ep in healthy])
         self.t2_ = HotellingT2().fit(Z)
@@ -413,9 +416,10 @@ class _PerfectModelStage:
         rem = [(ep.y[:, self.out_idx_] - self._centre_of(ep))[w:] for ep in episodes]
         self.v_residual_ = np.maximum(np.sqrt(np.mean(np.concatenate(rem) ** 2, axis=0)), 1e-9)
         pairs = self.directions.pairs(training)
-        self.directions_, faults = self.directions.learn(pairs, len(self.out_idx_), self._signature)
+        n = len(self.out_idx_)
+        self.directions_, self.faults = self.directions.learn(pairs, n, self._signature)
         self.stage.fit([r / self.v_residual_ for r in rem], self.directions_)
-        self.signal_names_ = self.stage.signal_names(faults)
+        self.signal_names_ = self.stage.signal_names(self.faults)
         return self
 
     def _signature(self, faulty: Episode, healthy: Episode, end: int) -> np.ndarray:

@@ -313,3 +313,13 @@ def test_tracks_markdown_lists_every_track() -> None:
     text = tracks_markdown()
     for t in TRACKS.values():
         assert f"| `{t.name}` |" in text and t.description in text
+
+
+def test_lrgf_glr_default_fault_seeds_are_the_tracks_first_training_seeds() -> None:
+    # diagnosers cannot import the tracks: the default is written there, and pinned here
+    from diagnosers.lrgf.fault_directions import DEFAULT_FAULT_SEEDS
+    from evaluation.tracks import TRAIN_SEED_START
+
+    assert DEFAULT_FAULT_SEEDS == tuple(range(TRAIN_SEED_START, TRAIN_SEED_START + 3))
+    for track in TRACKS.values():  # each has its healthy twin among the training episodes
+        assert set(DEFAULT_FAULT_SEEDS) <= set(track.train_seeds) & set(track.train_fault_seeds)
