@@ -225,54 +225,60 @@ def fault_width() -> int:
     return max(len(d.parameters) for d in FAULTS.values())
 
 
-def _paper(*args: Any, **kwargs: Any) -> None:
-    """Register one of the paper's faults (the first registrations)."""
-    name = PAPER_FAULTS[len(FAULTS)]
-    register_fault(name, FaultDefinition(*args, **kwargs))
-
-
 # The maxima were measured on 20 excited seeds (bisection) and checked on 100 (no termination at
 # the maximum except f3): the plant has a finite catalyst well (30 t free inventory) and bed levels
 # fixed by the weirs, so a real unit would trip on an unsealed standpipe rather than carry the
 # change. The model is not altered to hide that; the allowed range stops where it starts.
-_paper(
-    ("rho_b",),
-    +1,
-    0.10,
-    1900,
-    "catalyst density +10 %",
-    max_magnitude=0.13,
-    max_reason="at weir-fixed bed levels a denser catalyst takes its extra mass from the "
-    "30 t well, which unseals (below 3 t) beyond +13.9 %",
+register_fault(
+    Scenario.F1.value,
+    FaultDefinition(
+        ("rho_b",),
+        +1,
+        0.10,
+        1900,
+        "catalyst density +10 %",
+        max_magnitude=0.13,
+        max_reason="at weir-fixed bed levels a denser catalyst takes its extra mass from the "
+        "30 t well, which unseals (below 3 t) beyond +13.9 %",
+    ),
 )
-_paper(
-    ("K_w1", "K_w2"),
-    -1,
-    0.15,
-    1900,
-    "weir constant of stages 1 and 2 −15 %",
-    max_magnitude=0.35,
-    max_reason="higher weir crests cut the circulation; beyond −38 % the hotter regenerator "
-    "pushes excited episodes into an afterburn",
+register_fault(
+    Scenario.F2.value,
+    FaultDefinition(
+        ("K_w1", "K_w2"),
+        -1,
+        0.15,
+        1900,
+        "weir constant of stages 1 and 2 −15 %",
+        max_magnitude=0.35,
+        max_reason="higher weir crests cut the circulation; beyond −38 % the hotter regenerator "
+        "pushes excited episodes into an afterburn",
+    ),
 )
-_paper(
-    ("k_sigma",),
-    -1,
-    0.10,
-    2020,
-    "CO2/CO ratio constant −10 %",
-    max_magnitude=0.15,
-    max_reason="more CO reaches the dilute phases: from −4 % some excited episodes end in an "
-    "afterburn (about 1 in 10 at the paper's −10 %, counted per cell on the leaderboard), "
-    "beyond −15 % most do",
+register_fault(
+    Scenario.F3.value,
+    FaultDefinition(
+        ("k_sigma",),
+        -1,
+        0.10,
+        2020,
+        "CO2/CO ratio constant −10 %",
+        max_magnitude=0.15,
+        max_reason="more CO reaches the dilute phases: from −4 % some excited episodes end in an "
+        "afterburn (about 1 in 10 at the paper's −10 %, counted per cell on the leaderboard), "
+        "beyond −15 % most do",
+    ),
 )
-_paper(
-    ("V_rx_sp_m3",),
-    +1,
-    0.05,
-    2000,
-    "catalyst reactor holdup +5 %",
-    max_magnitude=0.70,
-    max_reason="the level loop moves 40 t × m of catalyst from the well into the reactor; "
-    "beyond +73 % the well unseals (below 3 t)",
+register_fault(
+    Scenario.F4.value,
+    FaultDefinition(
+        ("V_rx_sp_m3",),
+        +1,
+        0.05,
+        2000,
+        "catalyst reactor holdup +5 %",
+        max_magnitude=0.70,
+        max_reason="the level loop moves 40 t × m of catalyst from the well into the reactor; "
+        "beyond +73 % the well unseals (below 3 t)",
+    ),
 )
