@@ -60,8 +60,12 @@ def default_episodes(
     """Small FCC-v0 episodes: ``(healthy training, faulty test, labelled faulty training)``.
 
     Two healthy episodes (seeds 1000, 1001), a test episode with fault ``f1`` from two thirds of
-    it (seed 3), and four labelled faulty episodes (``f1`` and ``f2``, seeds 11 and 12, onset at
-    half) for the diagnosers that isolate. Simulating them takes well under a second.
+    it (seed 3), and eight labelled faulty episodes (``f1`` and ``f2``, onset at half) for the
+    diagnosers that isolate or learn from faults: on seeds 11 and 12, and on the healthy seeds
+    1000 and 1001, where each has its healthy noise twin (what a detector that learns from
+    faults pairs; on its own training seeds a detector may not alarm at all). Two faults are a
+    deliberate sample, not "the faults": two classes are what the contract needs, and they keep
+    the checks fast. Simulating them takes well under a second.
     ``closed_loop``: the same on the closed-loop plant (``FCC-closedloop-v0``).
     """
     import fcc_env  # here: the diagnosers package does not need the simulator to import
@@ -78,7 +82,9 @@ def default_episodes(
     faulty = [
         ep
         for scenario in ("f1", "f2")
-        for ep in sim([11, 12], n_test, fcc_env.FaultSpec(scenario=scenario, onset=n_test // 2))
+        for ep in sim(
+            [11, 12, 1000, 1001], n_test, fcc_env.FaultSpec(scenario=scenario, onset=n_test // 2)
+        )
     ]
     return train, test, faulty
 
@@ -380,7 +386,8 @@ def check_diagnoser(
         train: healthy training episodes (default: :func:`default_episodes`' FCC-v0 ones).
         test: the episode to detect on, ideally with a fault (default: FCC-v0 with ``f1``).
         faulty_train: labelled faulty episodes (``fault_onset`` and ``scenario`` set), added to
-            ``train`` when the diagnoser isolates (:attr:`~diagnosers.Diagnoser.isolates`).
+            ``train`` when the diagnoser isolates (:attr:`~diagnosers.Diagnoser.isolates`) or
+            learns from faults (:attr:`~diagnosers.Diagnoser.learns_from_faults`).
         tmp_dir: where to save the model for the round trip (default: a temporary directory,
             removed afterwards).
 
@@ -405,7 +412,8 @@ def check_diagnoser(
             f"check_diagnoser takes an unfitted diagnoser; {label} is fitted: pass "
             "sklearn.base.clone(diagnoser) (or a new instance) instead"
         )
-    if train is None or test is None or (diagnoser.isolates and faulty_train is None):
+    labelled = diagnoser.isolates or diagnoser.learns_from_faults
+    if train is None or test is None or (labelled and faulty_train is None):
         # a diagnoser that reads the controllers' channels gets closed-loop episodes
         default_train, default_test, default_faulty = default_episodes(
             closed_loop="u_F" in read_channels(diagnoser)
@@ -413,7 +421,7 @@ def check_diagnoser(
         train = default_train if train is None else train
         test = default_test if test is None else test
         faulty_train = default_faulty if faulty_train is None else faulty_train
-    training = list(train) + (list(faulty_train or ()) if diagnoser.isolates else [])
+    training = list(train) + (list(faulty_train or ()) if labelled else [])
     with tempfile.TemporaryDirectory(prefix="check_diagnoser_") as scratch:
         run = _Run(
             diagnoser, training, test, Path(tmp_dir) if tmp_dir is not None else Path(scratch)

@@ -65,11 +65,12 @@ class NotFittedError(RuntimeError):
 
 
 def check_labelled(episodes: Sequence[Episode]) -> None:
-    """Training episodes of an isolating diagnoser: one healthy at least, faults labelled."""
+    """Training episodes of a diagnoser that learns from labelled faults (it isolates, or
+    :attr:`~DiagnoserContract.learns_from_faults`): one healthy at least, faults labelled."""
     if not any(ep.fault_onset is None for ep in episodes):
         raise ValueError(
-            "an isolating diagnoser needs at least one healthy episode (fault_onset=None) "
-            "among its training episodes, got none"
+            "a diagnoser that learns from labelled faults needs at least one healthy episode "
+            "(fault_onset=None) among its training episodes, got none"
         )
     for ep in episodes:
         if ep.fault_onset is not None and ep.scenario in (UNKNOWN, NO_DIAGNOSIS, "nominal"):
@@ -93,6 +94,11 @@ class DiagnoserContract(ABC):
     #: whether the diagnoser also isolates: it is then trained on healthy *and* labelled faulty
     #: episodes (``fault_onset`` and ``scenario`` set) and its decisions carry a diagnosis
     isolates: ClassVar[bool] = False
+    #: whether the diagnoser learns from labelled faulty episodes without isolating (e.g.
+    #: ``lrgf-glr``'s fault directions): the harness then passes them to ``fit`` beside the
+    #: healthy ones (on the healthy training seeds' noise twins), and only healthy episodes
+    #: train its models; it still works when none are given
+    learns_from_faults: ClassVar[bool] = False
     #: hyperparameters that say how to compute, never what: the fitted model is the same for
     #: every value (a progress bar, the number of worker processes). :meth:`result_params` leaves
     #: them out, so the result store's hashes do not change with them.
@@ -173,7 +179,8 @@ class DiagnoserContract(ABC):
         """Learn from healthy episodes and return ``self``.
 
         An isolating diagnoser (:attr:`isolates`) also receives labelled faulty episodes
-        (``fault_onset`` set, ``scenario`` the fault class); it needs at least one healthy one.
+        (``fault_onset`` set, ``scenario`` the fault class), and so may one that learns from
+        faults (:attr:`learns_from_faults`); both need at least one healthy one.
         """
         if isinstance(episodes, Episode):
             episodes = [episodes]
@@ -182,7 +189,7 @@ class DiagnoserContract(ABC):
         episodes = [_as_episode(ep, "fit") for ep in episodes]
         if not episodes:
             raise ValueError("fit needs at least one healthy episode, got none")
-        if self.isolates:
+        if self.isolates or self.learns_from_faults:
             check_labelled(episodes)
         channels = episodes[0].channels
         for ep in episodes:

@@ -1,10 +1,12 @@
-"""FCC converter (riser + two-stage regenerator) as a Gymnasium environment with faults f1–f4.
+"""FCC converter (riser + two-stage regenerator) as a Gymnasium environment with faults f1–f4
+(and any added with :func:`register_fault`).
 
 The modules, by job:
 
 - :mod:`~fcc_env.params`, :mod:`~fcc_env.physics`: the frozen parameters; the pure right-hand
   side, the measurement map and the steady state; :mod:`~fcc_env.integrator`: RK4 stepping;
-- :mod:`~fcc_env.scenarios`: :class:`FaultSpec`, the one typed fault request, and the faults;
+- :mod:`~fcc_env.faults`: the fault registry (:data:`FAULTS`, :func:`register_fault`);
+  :mod:`~fcc_env.scenarios`: :class:`FaultSpec`, the one typed fault request;
   :mod:`~fcc_env.excitation`: the operating program; :mod:`~fcc_env.plant`: :class:`PlantConfig`,
   the noise and the envelope; :mod:`~fcc_env.effects`, :mod:`~fcc_env.uncertainty`: undeclared
   effects and per-episode plant draws;
@@ -42,6 +44,16 @@ from fcc_env.control_task import CONTROL_ENV_ID, EconomicReward
 from fcc_env.env import CLOSED_LOOP_ENV_ID, ENV_ID
 from fcc_env.env_keywords import env_request
 from fcc_env.excitation import Excitation
+from fcc_env.faults import (
+    FAULTS,
+    PAPER_FAULTS,
+    FaultDefinition,
+    Scenario,
+    fault_names,
+    register_fault,
+    scenario_names,
+    unregister_fault,
+)
 from fcc_env.integrator import integrate_step
 from fcc_env.params import (
     INPUT_NAMES,
@@ -55,14 +67,7 @@ from fcc_env.params import (
 from fcc_env.physics import measure, rhs, steady_state
 from fcc_env.plant import PlantConfig
 from fcc_env.regulatory import RegulatoryLayer, SetpointProgram
-from fcc_env.scenarios import (
-    DEFAULT_N_SAMPLES,
-    FAULTS,
-    SCENARIOS,
-    FaultProfile,
-    FaultSpec,
-    Scenario,
-)
+from fcc_env.scenarios import DEFAULT_N_SAMPLES, FaultProfile, FaultSpec
 from fcc_env.simulation import BatchResult, simulate_episodes
 
 #: 3999 steps = 4000 samples including the reset observation (the paper's horizon).
@@ -115,12 +120,13 @@ __all__ = [
     "MEASUREMENT_NAMES",
     "MODEL_VERSION",
     "NOMINAL_INPUTS",
-    "SCENARIOS",
+    "PAPER_FAULTS",
     "STATE_NAMES",
     "BatchResult",
     "EconomicReward",
     "Excitation",
     "FCCParams",
+    "FaultDefinition",
     "FaultProfile",
     "FaultSpec",
     "Measurement",
@@ -129,9 +135,13 @@ __all__ = [
     "Scenario",
     "SetpointProgram",
     "env_request",
+    "fault_names",
     "integrate_step",
     "measure",
+    "register_fault",
     "rhs",
+    "scenario_names",
     "simulate_episodes",
     "steady_state",
+    "unregister_fault",
 ]

@@ -13,7 +13,12 @@ from typing import Any
 import numpy as np
 
 from fcc_common.validation import invalid
-from fcc_env.episode_setup import PlantSchedule, apply_multipliers, generic_sample
+from fcc_env.episode_setup import (
+    BatchSchedule,
+    PlantSchedule,
+    apply_multipliers,
+    generic_sample,
+)
 from fcc_env.integrator import aux_kernel, measure_kernel, noisy_batch_kernel, step_kernel
 from fcc_env.params import (
     INPUT_NAMES,
@@ -155,10 +160,11 @@ def simulate_closed_per_sample(
     pidx: np.ndarray,
     PM: np.ndarray,
     Z: np.ndarray,
-    schedule: PlantSchedule,
+    schedule: PlantSchedule | BatchSchedule,
     config: PlantConfig,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Closed-loop episodes with measurement or ``d_state`` effects, sample by sample.
+    """Closed-loop episodes with measurement or ``d_state`` effects (or a fault's measure hook),
+    sample by sample.
 
     The controllers must read each sample's observation after the effects, which the compiled
     batch kernel cannot call; this loop calls the env's own kernels per episode (or the numpy
@@ -198,7 +204,7 @@ def simulate_closed_per_sample(
                         x_next[b], u[b], p_base[b], pidx[b], PM[b, k], h, config.rk4_substeps
                     )
         Y[:, k], A[:, k], X[:, k] = y, aux, x
-        Y[:, k] = schedule.measure(k, Y[:, k]) if schedule.measure_effects else Y[:, k]
+        Y[:, k] = schedule.measure(k, Y[:, k]) if schedule.measures else Y[:, k]
         noisy_batch_kernel(
             Y[:, k : k + 1], Z[:, k : k + 1], NOISE_STD_ABS, NOISE_STD_REL, config.noise_scale,
             OBS[:, k : k + 1],

@@ -33,7 +33,7 @@ from fcc_env.regulatory import (
     apply_controller_outputs,
     controller_update,
 )
-from fcc_env.scenarios import FAULTS, Scenario
+from fcc_env.scenarios import FAULTS, EpisodeFault
 from fcc_env.uncertainty import GROUP_FIELDS, PlantUncertainty
 
 __all__ = ["StabilityCase", "closed_loop_eigenvalues", "stability_cases", "stability_table"]
@@ -150,18 +150,17 @@ def _case(name: str, params: FCCParams, layer: RegulatoryLayer, ts: float) -> St
 def stability_cases(
     layer: RegulatoryLayer | None = None, ts: float = DEFAULT_SAMPLE_TIME_S, corners: bool = True
 ) -> list[StabilityCase]:
-    """Nominal, each fault at its largest allowed size, and (``corners``) the 16 corners of the
-    ``uncertain`` track's parameter draw (every group at ± its default half-range)."""
+    """Nominal, each registered fault at its largest allowed size, and (``corners``) the 16
+    corners of the ``uncertain`` track's parameter draw (every group at ± its default
+    half-range). A fault that scales no parameter (it acts on the measurement or actuator
+    path only) leaves the linearised plant as it is and has no case of its own."""
     layer = layer or RegulatoryLayer()
     base = FCCParams()
     cases = [_case("nominal", base, layer, ts)]
-    for sc in (Scenario.F1, Scenario.F2, Scenario.F3, Scenario.F4):
-        d = FAULTS[sc]
-        m = 1.0 + d.direction * d.max_magnitude
-        changes = {f: getattr(base, f) * m for f in d.parameters}
-        cases.append(
-            _case(f"{sc.value} at {d.max_magnitude:.0%}", base.replace(**changes), layer, ts)
-        )
+    for sc, d in FAULTS.items():
+        if d.parameters:
+            plant = EpisodeFault(sc, 0, d.max_magnitude).faulty_params(base)
+            cases.append(_case(f"{sc} at {d.max_magnitude:.0%}", plant, layer, ts))
     if corners:
         u = PlantUncertainty()
         groups = list(GROUP_FIELDS)

@@ -3,8 +3,8 @@
 ``python -m fcc_env.closed_loop_report --out DIR [--terminations N]`` writes to ``DIR``:
 ``stability.md`` (:func:`fcc_env.closed_loop_analysis.stability_table`: nominal, each fault at its
 largest size, the 16 ``uncertain`` corners); ``responses.png`` (noise-free responses to set-point
-and disturbance steps); ``fault_signatures.md``/``.csv`` (f1–f4 at the paper's sizes, faulty −
-healthy on the same seeds, open and closed loop, as the specification's §7.6 table, with what the
+and disturbance steps); ``fault_signatures.md``/``.csv`` (every registered fault,
+:func:`report_faults`, at its default size, faulty − healthy on the same seeds, open and closed loop, as the specification's §7.6 table, with what the
 controllers mask and where the signature goes); ``closed_minus_open.png`` (those differences over
 time); with ``--terminations N``, ``terminations.json`` (N excited healthy episodes, open against
 closed loop). Library functions compute and return; only :func:`main` prints.
@@ -34,17 +34,17 @@ from fcc_env.closed_loop_figures import closed_minus_open_figure, responses_figu
 from fcc_env.env import SETPOINT_ACTION_SCALE
 from fcc_env.params import INPUT_NAMES
 from fcc_env.plant import PlantConfig
-from fcc_env.scenarios import FaultSpec
+from fcc_env.scenarios import FaultSpec, fault_names
 from fcc_env.simulation import BatchResult, check_memory, simulate_episodes
 
 __all__ = [
     "SIGNATURE_CHANNELS", "FaultDeltas", "Report", "ReportConfig", "Signature", "build_report",
-    "count_terminations", "fault_deltas", "masking_table", "signature_rows", "signatures_csv",
+    "count_terminations", "fault_deltas", "masking_table", "report_faults", "signature_rows",
+    "signatures_csv",
     "signatures_note", "signatures_table", "step_responses", "trace_signature",
     "write_report",
 ]  # fmt: skip
 
-FAULT_NAMES: tuple[str, ...] = ("f1", "f2", "f3", "f4")
 LOOPS: tuple[str, ...] = ("open", "closed")
 #: The channels whose signature is reported: the temperatures that move, the air, the valve.
 SIGNATURE_CHANNELS: tuple[str, ...] = ("T_rx", "T_rg1", "T_rg2", "T_d1", "T_dg", "R_ar", "u_F")
@@ -131,6 +131,12 @@ def _channel(b: BatchResult, name: str) -> np.ndarray:
     if name in b.channels:
         return b.y_clean[..., b.channels.index(name)]
     return b.inputs[..., INPUT_NAMES.index(name)]  # open loop: u_F is the program's command
+
+
+def report_faults() -> tuple[str, ...]:
+    """The faults the report simulates: every registered one (:func:`fcc_env.fault_names`),
+    read when the report is built."""
+    return fault_names()
 
 
 def fault_deltas(fault: str, loop: str, config: ReportConfig) -> FaultDeltas:
@@ -359,7 +365,7 @@ def build_report(config: ReportConfig | None = None, terminations: int = 0) -> R
     """Compute every table and figure of the report (``terminations`` 0: skip that count)."""
     config = config or ReportConfig()
     cases = stability_cases()
-    runs = [fault_deltas(f, loop, config) for f in FAULT_NAMES for loop in LOOPS]
+    runs = [fault_deltas(f, loop, config) for f in report_faults() for loop in LOOPS]
     rows = signature_rows(runs)
     return Report(
         stability_md=stability_table(cases),

@@ -28,7 +28,7 @@ def _demo(args: argparse.Namespace) -> int:
     """The work of :func:`main`: its failures are refused by :func:`run_command`."""
     check_out_path("--out", args.out)
     episodes, onsets = {}, {}
-    for scenario in fcc_env.SCENARIOS:
+    for scenario in fcc_env.scenario_names():
         b = fcc_env.simulate_episodes([args.seed], fault=fcc_env.FaultSpec(scenario=scenario))
         episodes[scenario] = b.observations[0]
         onsets[scenario] = b.fault_onsets[0]

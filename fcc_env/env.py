@@ -32,7 +32,6 @@ from fcc_env.scenarios import (
     ENV_FAULT_KEYWORDS,
     RANDOM_SCENARIO,
     FaultSpec,
-    Scenario,
     fault_from_request,
     fault_time_range,
 )
@@ -106,9 +105,9 @@ class FCCEnv(gym.Env):
 
     ## Faults
     ``nominal``; ``f1`` catalyst density +10 % (onset 1900); ``f2`` weir constants −15 % (1900);
-    ``f3`` CO2/CO ratio constant −10 % (2020); ``f4`` reactor holdup +5 % (2000). ``"random"``
-    draws a scenario, onset and magnitude per episode. Profiles: ``"abrupt"`` or ``"incipient"``
-    (linear ramp over ``ramp_samples``). The label is ``info["fault_active"]``, never the observation.
+    ``f3`` CO2/CO ratio constant −10 % (2020); ``f4`` reactor holdup +5 % (2000); any added by
+    :func:`fcc_env.register_fault`. ``"random"`` draws scenario, onset and magnitude. Profiles:
+    ``"abrupt"`` or ``"incipient"`` (ramp over ``ramp_samples``). Label: ``info["fault_active"]``.
 
     ## Starting State
     The hot steady state at nominal inputs, found by a root solver (:func:`fcc_env.steady_state`).
@@ -128,7 +127,7 @@ class FCCEnv(gym.Env):
     |---|---|---|
     | fault | None | a :class:`fcc_env.FaultSpec` instead of the five options below (not both); |
     |  |  | as a reset option it replaces the make fault |
-    | scenario | "nominal" | nominal, f1–f4 or random |
+    | scenario | "nominal" | nominal, a registered fault (f1–f4 and added ones) or random |
     | fault_time | paper's | onset sample (int, inside the horizon) |
     | fault_magnitude | paper's | relative change ≥ 0 (direction fixed by the fault) |
     | fault_profile | "abrupt" | or "incipient" |
@@ -249,7 +248,7 @@ class FCCEnv(gym.Env):
 
                 * ``fault``: a whole :class:`fcc_env.FaultSpec` replacing the ``make`` fault
                   (not together with the keys below);
-                * ``scenario`` (``"nominal"``, ``"f1"``..``"f4"`` or ``"random"``),
+                * ``scenario`` (``"nominal"``, a registered fault or ``"random"``),
                   ``fault_time`` (onset sample), ``fault_magnitude`` (relative size),
                   ``fault_profile`` (``"abrupt"`` or ``"incipient"``), ``ramp_samples``
                   (incipient ramp length): change single fields of the ``make`` fault;
@@ -348,9 +347,9 @@ class FCCEnv(gym.Env):
         return {
             "t": self._k,
             "time_s": self._k * self.config.sample_time_s,
-            "scenario": self.fault.scenario.value,
+            "scenario": self.fault.scenario,
             "fault_active": self.fault.active(self._k),
-            **({} if self.fault.scenario is Scenario.NOMINAL else {"fault_time": self.fault.onset}),
+            **({} if self.fault.nominal else {"fault_time": self.fault.onset}),
             "fault_magnitude": self.fault.magnitude,
             "y_clean": self._clean_observation(),
             "state": self._x.copy(),
@@ -373,12 +372,12 @@ def _trend_frame(env: FCCEnv) -> np.ndarray:
     """The ``rgb_array`` frame: the Table 1 trends of the last 500 samples (H, W, 3) uint8."""
     if not hasattr(env, "_x"):
         raise gym.error.ResetNeeded("call reset() before render()")
-    nominal = env.fault.scenario is Scenario.NOMINAL
+    nominal = env.fault.nominal
     return env._renderer.frame(
         np.array(env._history)[:, :8],
         env._k,
         env.config.sample_time_s,
-        scenario=env.fault.scenario.value,
+        scenario=env.fault.scenario,
         fault_onset=None if nominal else env.fault.onset,
     )
 

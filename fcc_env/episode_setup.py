@@ -36,10 +36,12 @@ class PlantSchedule:
     """What changes the plant over an episode: the fault and the undeclared plant effects.
 
     Parameter changes (the fault's and the library process effects') become per-sample
-    multipliers of parameter slots ``pidx``; input effects transform the operating program;
-    ``measure`` effects transform the noise-free measurements; ``d_state`` effects need the
-    generic (Python-level RK4) path. Every method is elementwise in the sample index, so the env
-    (chunk by chunk) and batch simulation (whole episodes) compute the same numbers.
+    multipliers of parameter slots ``pidx``; input effects, then the fault's
+    ``transform_inputs`` hook, transform the operating program; ``measure`` effects, then the
+    fault's ``measure`` hook (:mod:`fcc_env.faults`), transform the noise-free measurements;
+    ``d_state`` effects need the generic (Python-level RK4) path. Every method is elementwise in
+    the sample index, so the env (chunk by chunk) and batch simulation (whole episodes) compute
+    the same numbers.
     """
 
     def __init__(
@@ -52,6 +54,9 @@ class PlantSchedule:
         self.input_effects = [e for e in effects if fx.has_hook(e, "transform_inputs")]
         self.measure_effects = [e for e in effects if fx.has_hook(e, "measure")]
         self.state_effects = [e for e in effects if fx.has_hook(e, "d_state")]
+        d = fault.definition
+        self.fault_measure = None if d is None else d.measure
+        self.fault_inputs = None if d is None else d.transform_inputs
         names: list[str] = []
         for e in self.param_effects:
             names.extend(e.param_multipliers(np.zeros(1), params))
@@ -63,6 +68,12 @@ class PlantSchedule:
     def generic(self) -> bool:
         """True when a user effect adds to the state derivative (Python-level integration)."""
         return bool(self.state_effects)
+
+    @property
+    def measures(self) -> bool:
+        """True when something acts on the measurements (an effect or the fault's hook), which
+        the compiled kernels cannot call."""
+        return bool(self.measure_effects) or self.fault_measure is not None
 
     def multipliers(self, k: np.ndarray) -> np.ndarray:
         """Parameter multipliers over samples ``k``: shape (n, len(pidx))."""
@@ -77,19 +88,66 @@ class PlantSchedule:
         t = np.asarray(k) * self.sample_time_s
         for e in self.input_effects:
             u = e.transform_inputs(t, u)
+        if self.fault_inputs is not None:
+            u = np.asarray(self.fault_inputs(self.fault, np.asarray(k), u), dtype=np.float64)
         return u
 
-    def measure(self, k: int, y: np.ndarray) -> np.ndarray:
+    def measure_effects_only(self, k: int, y: np.ndarray) -> np.ndarray:
+        """``y`` after the plant effects' ``measure`` (``y``: one sample, any leading axes)."""
         t = k * self.sample_time_s
         for e in self.measure_effects:
             y = np.asarray(e.measure(t, y), dtype=np.float64)
         return y
+
+    def measure_fault(self, k: int, y: np.ndarray) -> np.ndarray:
+        """``y`` (one sample of this episode, ``(8,)``) after the fault's ``measure`` hook."""
+        if self.fault_measure is None:
+            return y
+        return np.asarray(self.fault_measure(self.fault, k, y), dtype=np.float64)
+
+    def measure(self, k: int, y: np.ndarray) -> np.ndarray:
+        """The measurement of sample ``k`` after the effects, then the fault (the transmitter
+        is last: a sensor fault sits at its output)."""
+        return self.measure_fault(k, self.measure_effects_only(k, y))
 
     def d_state(self, t: float, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         total = np.zeros_like(x)
         for e in self.state_effects:
             total = total + np.asarray(e.d_state(t, x, u, self.params), dtype=np.float64)
         return total
+
+
+class BatchSchedule:
+    """The schedules of a batch's episodes as :func:`fcc_env.simulate_episodes` runs them.
+
+    The plant effects are the same objects in every episode, so they act on the whole batch
+    once per sample (the last episode's schedule holds them, as every one does); each
+    episode's fault hook acts on its own row.
+    """
+
+    def __init__(self, schedules: list[PlantSchedule]) -> None:
+        self.shared = schedules[-1]
+        self.faulty_rows = [(b, s) for b, s in enumerate(schedules) if s.fault_measure is not None]
+
+    @property
+    def generic(self) -> bool:
+        return self.shared.generic
+
+    @property
+    def measures(self) -> bool:
+        return bool(self.shared.measure_effects or self.faulty_rows)
+
+    def d_state(self, t: float, x: np.ndarray, u: np.ndarray) -> np.ndarray:
+        return self.shared.d_state(t, x, u)
+
+    def measure(self, k: int, y: np.ndarray) -> np.ndarray:
+        """Sample ``k`` of every episode ``(B, 8)`` after the effects, then each fault."""
+        y = self.shared.measure_effects_only(k, y)
+        if self.faulty_rows:
+            y = np.array(y, dtype=np.float64, copy=True)
+            for b, s in self.faulty_rows:
+                y[b] = s.measure_fault(k, y[b])
+        return y
 
 
 def apply_multipliers(p_base: np.ndarray, pidx: np.ndarray, mult: np.ndarray) -> np.ndarray:
@@ -107,7 +165,7 @@ def generic_sample(
     u: np.ndarray,
     p: np.ndarray,
     k: int,
-    schedule: PlantSchedule,
+    schedule: PlantSchedule | BatchSchedule,
     sample_time_s: float,
     substeps: int,
     advance: bool = True,
@@ -295,7 +353,7 @@ class EpisodeStream:
             y = y[0]
         else:
             y = measure_kernel(x, u, self._p_base, self._pidx, self.multipliers(k))
-        return self.schedule.measure(k, y) if self.schedule.measure_effects else y
+        return self.schedule.measure(k, y) if self.schedule.measures else y
 
     def aux(self, x: np.ndarray, u: np.ndarray, k: int) -> np.ndarray:
         """The auxiliary variables (:data:`fcc_env.physics.AUX_NAMES`) at sample ``k``."""

@@ -58,9 +58,9 @@ from fcc_env.plant import DEFAULT_VALVE_BETA, ENV_PLANT_KEYWORDS, PlantConfig, p
 from fcc_env.scenarios import (
     DEFAULT_N_SAMPLES,
     ENV_FAULT_KEYWORDS,
-    SCENARIOS,
     FaultSpec,
     fault_from_request,
+    scenario_names,
 )
 from fcc_env.simulation import (
     DEFAULT_MEMORY_BUDGET_BYTES,
@@ -385,7 +385,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="output .csv or .parquet (needs pyarrow) path (sidecar: same stem .json)",
     )
     parser.add_argument(
-        "--scenario", default="nominal", help=f"one of {list(SCENARIOS)} or 'random'"
+        "--scenario", default="nominal", help=f"one of {list(scenario_names())} or 'random'"
     )
     parser.add_argument("--seeds", default="0", help="seeds, e.g. '0-9,20' (default 0)")
     parser.add_argument(

@@ -1,20 +1,10 @@
-"""Scenarios (healthy and faults f1–f4), fault profiles and the operating program (excitation).
+"""Fault requests and resolved faults: :class:`FaultSpec` and :class:`EpisodeFault`.
 
-Faults follow the paper (Section 5.3, after Sotomayor et al. 2004) and enter through the parameters
-named in the specification's §3:
-
-=========  ====================================  ================  ================
-scenario   parameter change                       default onset     magnitude
-=========  ====================================  ================  ================
-nominal    none                                   –                 –
-f1         catalyst density ρ_b × (1 + m)          1900              m = 0.10
-f2         weir constants K_w1, K_w2 × (1 − m)     1900              m = 0.15
-f3         CO2/CO ratio constant k_σ × (1 − m)     2020              m = 0.10
-f4         reactor holdup set point × (1 + m)      2000              m = 0.05
-=========  ====================================  ================  ================
-
-``fault_magnitude`` is the size of the relative change and is never negative; its direction is
-the paper's (density and holdup up, weir and ratio constants down).
+The faults themselves (the paper's f1–f4 and any registered since) live in the registry of
+:mod:`fcc_env.faults` (:data:`FAULTS`, :func:`register_fault`); the names below are re-exported
+from there. ``fault_magnitude`` is the size of the relative change and is never negative; its
+direction is the fault's (for the paper's: density and holdup up, weir and ratio constants
+down).
 """
 
 from __future__ import annotations
@@ -29,15 +19,50 @@ from typing import Any
 import numpy as np
 
 from fcc_common.validation import Integer, Options, Real, check, invalid
+from fcc_env.faults import (
+    FAULTS,
+    MAX_FAULT_MAGNITUDE,
+    NOMINAL,
+    PAPER_FAULTS,
+    RANDOM_SCENARIO,
+    FaultDefinition,
+    Scenario,
+    fault_definition,
+    fault_names,
+    fault_width,
+    register_fault,
+    scenario_names,
+    unregister_fault,
+)
 from fcc_env.params import PARAM_INDEX, FCCParams
 
-
-class Scenario(StrEnum):
-    NOMINAL = "nominal"
-    F1 = "f1"
-    F2 = "f2"
-    F3 = "f3"
-    F4 = "f4"
+__all__ = [
+    "DEFAULT_N_SAMPLES",
+    "DEFAULT_RAMP_SAMPLES",
+    "ENV_FAULT_KEYWORDS",
+    "FAULTS",
+    "FAULT_MAGNITUDE_RANGE",
+    "MAGNITUDE_SCALE_RANGE",
+    "MAX_FAULT_MAGNITUDE",
+    "NOMINAL",
+    "PAPER_FAULTS",
+    "RAMP_SAMPLES_RANGE",
+    "RANDOM_SCENARIO",
+    "EpisodeFault",
+    "FaultDefinition",
+    "FaultProfile",
+    "FaultSpec",
+    "Scenario",
+    "fault_definition",
+    "fault_from_request",
+    "fault_names",
+    "fault_time_range",
+    "fault_width",
+    "register_fault",
+    "scenario_names",
+    "scenario_options",
+    "unregister_fault",
+]
 
 
 class FaultProfile(StrEnum):
@@ -45,73 +70,6 @@ class FaultProfile(StrEnum):
     INCIPIENT = "incipient"
 
 
-@dataclass(frozen=True)
-class FaultDefinition:
-    """One fault: which parameters it scales, its paper size and onset, and the largest size the
-    plant carries (``max_magnitude``, with the physical reason)."""
-
-    parameters: tuple[str, ...]  # FCCParams fields scaled by the fault
-    direction: int  # +1: parameter grows, -1: parameter shrinks
-    default_magnitude: float
-    default_onset: int
-    description: str
-    max_magnitude: float
-    max_reason: str
-
-
-# The maxima were measured on 20 excited seeds (bisection) and checked on 100 (no termination at
-# the maximum except f3): the plant has a finite catalyst well (30 t free inventory) and bed levels
-# fixed by the weirs, so a real unit would trip on an unsealed standpipe rather than carry the
-# change. The model is not altered to hide that; the allowed range stops where it starts.
-FAULTS: dict[Scenario, FaultDefinition] = {
-    Scenario.F1: FaultDefinition(
-        ("rho_b",),
-        +1,
-        0.10,
-        1900,
-        "catalyst density +10 %",
-        max_magnitude=0.13,
-        max_reason="at weir-fixed bed levels a denser catalyst takes its extra mass from the "
-        "30 t well, which unseals (below 3 t) beyond +13.9 %",
-    ),
-    Scenario.F2: FaultDefinition(
-        ("K_w1", "K_w2"),
-        -1,
-        0.15,
-        1900,
-        "weir constant of stages 1 and 2 −15 %",
-        max_magnitude=0.35,
-        max_reason="higher weir crests cut the circulation; beyond −38 % the hotter regenerator "
-        "pushes excited episodes into an afterburn",
-    ),
-    Scenario.F3: FaultDefinition(
-        ("k_sigma",),
-        -1,
-        0.10,
-        2020,
-        "CO2/CO ratio constant −10 %",
-        max_magnitude=0.15,
-        max_reason="more CO reaches the dilute phases: from −4 % some excited episodes end in an "
-        "afterburn (about 1 in 10 at the paper's −10 %, counted per cell on the leaderboard), "
-        "beyond −15 % most do",
-    ),
-    Scenario.F4: FaultDefinition(
-        ("V_rx_sp_m3",),
-        +1,
-        0.05,
-        2000,
-        "catalyst reactor holdup +5 %",
-        max_magnitude=0.70,
-        max_reason="the level loop moves 40 t × m of catalyst from the well into the reactor; "
-        "beyond +73 % the well unseals (below 3 t)",
-    ),
-}
-
-SCENARIOS: tuple[str, ...] = tuple(s.value for s in Scenario)
-#: The scenario name that draws scenario, onset and magnitude per episode.
-RANDOM_SCENARIO = "random"
-#: Upper bound on fault magnitudes: beyond it the plant leaves the hot state (f2 at 100 % stops flow).
-MAX_FAULT_MAGNITUDE = 0.9
 #: Samples an incipient fault takes to reach its magnitude when ``ramp_samples`` is not given.
 DEFAULT_RAMP_SAMPLES = 500
 #: Episode length of the paper (4000 samples of 10 s); the env's and the harness's default.
@@ -126,8 +84,12 @@ FAULT_MAGNITUDE_RANGE = Real(
 )
 #: Allowed ``ramp_samples`` of an incipient fault.
 RAMP_SAMPLES_RANGE = Integer(1, why="samples an incipient fault takes to reach its magnitude")
-#: Allowed scenario names (``"random"`` draws one per episode).
-SCENARIO_OPTIONS = Options([*SCENARIOS, RANDOM_SCENARIO])
+
+
+def scenario_options() -> Options:
+    """Allowed scenario names now: every registered one, and ``"random"`` (draws one per
+    episode)."""
+    return Options([*scenario_names(), RANDOM_SCENARIO])
 
 
 def fault_time_range(horizon: int | None) -> Integer:
@@ -140,57 +102,79 @@ def fault_time_range(horizon: int | None) -> Integer:
 class EpisodeFault:
     """The fault of one episode, resolved by :meth:`FaultSpec.resolve` (``nominal``: none).
 
-    What the physics reads: which parameter slots the fault scales and by how much per sample.
+    What the physics reads: which parameter slots the fault scales and by how much per sample,
+    and the fault's hooks on the measurement and actuator paths (:mod:`fcc_env.faults`).
+    ``scenario`` is the registered name (a ``str``).
     """
 
-    scenario: Scenario
+    scenario: str
     onset: int = -1  # sample index at which the parameter switches; -1 = never
     magnitude: float = 0.0  # relative change, ≥ 0
     profile: FaultProfile = FaultProfile.ABRUPT
     ramp_samples: int = 0  # incipient: samples to reach the full magnitude
 
     @property
+    def nominal(self) -> bool:
+        return self.scenario == NOMINAL
+
+    @property
+    def definition(self) -> FaultDefinition | None:
+        """The registered definition (None when nominal)."""
+        return None if self.nominal else fault_definition(self.scenario)
+
+    @property
     def param_indices(self) -> np.ndarray:
-        idx = np.full(2, -1, dtype=np.int64)
-        if self.scenario is not Scenario.NOMINAL:
-            for j, name in enumerate(FAULTS[self.scenario].parameters):
+        """The parameter slots the fault scales, ``-1`` where unused: :func:`fault_width` of
+        them (the widest registered fault's), so every episode of a batch has as many."""
+        idx = np.full(fault_width(), -1, dtype=np.int64)
+        d = self.definition
+        if d is not None:
+            for j, name in enumerate(d.parameters):
                 idx[j] = PARAM_INDEX[name]
         return idx
 
     @property
     def final_multiplier(self) -> float:
-        if self.scenario is Scenario.NOMINAL:
-            return 1.0
-        return 1.0 + FAULTS[self.scenario].direction * self.magnitude
+        d = self.definition
+        return 1.0 if d is None else 1.0 + d.direction * self.magnitude
 
     def faulty_params(self, params: FCCParams) -> FCCParams:
         """``params`` with the fault at its full size (the plant long after the onset)."""
-        if self.scenario is Scenario.NOMINAL:
+        d = self.definition
+        if d is None:
             return params
         m = self.final_multiplier
-        names = FAULTS[self.scenario].parameters
-        return params.replace(**{n: getattr(params, n) * m for n in names})
+        return params.replace(**{n: getattr(params, n) * m for n in d.parameters})
 
     @property
     def ramp(self) -> int:
         return self.ramp_samples if self.profile is FaultProfile.INCIPIENT else 0
 
-    def multipliers(self, k: np.ndarray) -> np.ndarray:
-        """Multipliers of the two fault-parameter slots over samples ``k``: shape (n, 2).
+    def fraction(self, k: np.ndarray) -> np.ndarray:
+        """How far the fault has developed over samples ``k``: 0 before the onset (and when
+        nominal), 1 at its full size, reached linearly over ``ramp_samples`` for an incipient
+        fault (at sample ``onset + ramp_samples − 1``). What a hook scales its effect by."""
+        k = np.asarray(k)
+        if self.nominal:
+            return np.zeros(k.shape)
+        frac = np.minimum(1.0, (k - self.onset + 1) / self.ramp) if self.ramp > 0 else 1.0
+        return np.where(k >= self.onset, frac, 0.0)
 
-        1 before the onset; afterwards the final multiplier, reached linearly over
-        ``ramp_samples`` for an incipient fault (at sample ``onset + ramp_samples − 1``).
+    def multipliers(self, k: np.ndarray) -> np.ndarray:
+        """Multipliers of the fault's parameter slots over samples ``k``: shape
+        ``(n, fault_width())``, every slot the same.
+
+        1 before the onset; afterwards the final multiplier, reached as :meth:`fraction`.
         """
         k = np.asarray(k)
         m = np.ones(k.shape[0])
-        if self.scenario is not Scenario.NOMINAL:
+        if not self.nominal:
             after = k >= self.onset
-            frac = np.minimum(1.0, (k - self.onset + 1) / self.ramp) if self.ramp > 0 else 1.0
-            m = np.where(after, 1.0 + (self.final_multiplier - 1.0) * frac, 1.0)
-        return np.column_stack([m, m])
+            m = np.where(after, 1.0 + (self.final_multiplier - 1.0) * self.fraction(k), 1.0)
+        return np.repeat(m[:, None], fault_width(), axis=1)
 
     def active(self, k: int) -> bool:
-        return self.scenario is not Scenario.NOMINAL and 0 <= self.onset <= k
+        return not self.nominal and 0 <= self.onset <= k
 
 
 #: The env's keyword names for the :class:`FaultSpec` fields (``gym.make`` kwargs, ``reset``
@@ -204,10 +188,10 @@ ENV_FAULT_KEYWORDS: dict[str, str] = {
 }
 
 
-def _checked_magnitude(scenario: Scenario, magnitude: float) -> float:
+def _checked_magnitude(scenario: str, magnitude: float) -> float:
     """``magnitude`` of fault ``scenario``, within what the plant carries (the one check)."""
-    d = FAULTS[scenario]
-    why = f"for {scenario.value}: {d.max_reason}"
+    d = fault_definition(scenario)
+    why = f"for {scenario}: {d.max_reason}"
     return check("fault_magnitude", magnitude, Real(0.0, d.max_magnitude, why=why))
 
 
@@ -224,9 +208,11 @@ class FaultSpec:
     the env's names.
 
     Attributes:
-        scenario: ``"nominal"``, ``"f1"``–``"f4"`` or ``"random"`` (scenario uniform over all
-            five, onset uniform in the middle half of the horizon, magnitude uniform in
-            [0.5, 1.5] × the paper's; explicit ``onset``/``magnitude`` override the draws).
+        scenario: ``"nominal"``, a registered fault (:func:`fault_names`: ``"f1"``–``"f4"``
+            and any added by :func:`register_fault`) or ``"random"`` (scenario uniform over
+            ``nominal`` and the registered faults, onset uniform in the middle half of the
+            horizon, magnitude uniform in [0.5, 1.5] × the fault's default; explicit
+            ``onset``/``magnitude`` override the draws).
         onset: sample at which the fault starts (default: the fault's paper onset).
         magnitude: relative size of the change, ≥ 0 (default: the fault's paper magnitude).
         profile: ``"abrupt"`` (a step) or ``"incipient"`` (a linear ramp).
@@ -245,7 +231,7 @@ class FaultSpec:
     ValueError: fault_magnitude=0.5 is outside the allowed range: a number in [0, 0.13] (for f1: ...)
     """
 
-    scenario: str = Scenario.NOMINAL.value
+    scenario: str = NOMINAL
     onset: int | None = None
     magnitude: float | None = None
     profile: FaultProfile = FaultProfile.ABRUPT
@@ -254,7 +240,7 @@ class FaultSpec:
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__
-        set_(self, "scenario", str(check("scenario", self.scenario, SCENARIO_OPTIONS)))
+        set_(self, "scenario", str(check("scenario", self.scenario, scenario_options())))
         set_(self, "onset", check("fault_time", self.onset, fault_time_range(None), None))
         set_(
             self,
@@ -275,8 +261,7 @@ class FaultSpec:
             check("magnitude_scale", self.magnitude_scale, MAGNITUDE_SCALE_RANGE),
         )
         if self.scenario in FAULTS:  # a fixed fault: its size is known now (a drawn one later)
-            sc = Scenario(self.scenario)
-            _checked_magnitude(sc, self._scaled(sc, self.magnitude))
+            _checked_magnitude(self.scenario, self._scaled(self.scenario, self.magnitude))
 
     def with_env_options(self, options: Mapping[str, Any]) -> FaultSpec:
         """This spec with the env's keywords (:data:`ENV_FAULT_KEYWORDS`) applied; ``None``
@@ -314,9 +299,9 @@ class FaultSpec:
             "magnitude_scale": self.magnitude_scale,
         }
 
-    def _scaled(self, scenario: Scenario, magnitude: float | None) -> float:
-        """The magnitude of fault ``scenario`` (``None``: its paper default) × ``magnitude_scale``."""
-        base = FAULTS[scenario].default_magnitude if magnitude is None else magnitude
+    def _scaled(self, scenario: str, magnitude: float | None) -> float:
+        """The magnitude of fault ``scenario`` (``None``: its default) × ``magnitude_scale``."""
+        base = fault_definition(scenario).default_magnitude if magnitude is None else magnitude
         # unscaled values pass untouched, so a magnitude given is the magnitude simulated
         return base if self.magnitude_scale == 1.0 else base * self.magnitude_scale
 
@@ -327,25 +312,24 @@ class FaultSpec:
         does not depend on them. Only what depends on the horizon or the draw is checked here
         (the onset inside the episode, a drawn fault's size); errors name the value and the range.
         """
-        sc_name, onset, magnitude = self.scenario, self.onset, self.magnitude
-        drawn = sc_name == RANDOM_SCENARIO
+        sc, onset, magnitude = self.scenario, self.onset, self.magnitude
+        drawn = sc == RANDOM_SCENARIO
         if drawn:
             if rng is None:
                 raise ValueError("scenario='random' needs a random generator to draw from")
-            sc = list(Scenario)[int(rng.integers(len(Scenario)))]
+            names = scenario_names()  # read now: a fault registered since is drawn too
+            sc = names[int(rng.integers(len(names)))]
             drawn_onset = int(rng.integers(horizon // 4, max(horizon // 4 + 1, 3 * horizon // 4)))
             scale = float(rng.uniform(0.5, 1.5))
-            sc_name = sc.value
-            if sc is not Scenario.NOMINAL:
+            if sc != NOMINAL:
                 onset = drawn_onset if onset is None else onset
                 if magnitude is None:
                     # clipped at what the plant carries (f1 above +13 % empties the well)
-                    d = FAULTS[sc]
+                    d = fault_definition(sc)
                     magnitude = min(d.default_magnitude * scale, d.max_magnitude)
-        sc = Scenario(sc_name)
-        if sc is Scenario.NOMINAL:
-            return EpisodeFault(Scenario.NOMINAL)
-        onset = FAULTS[sc].default_onset if onset is None else onset
+        if sc == NOMINAL:
+            return EpisodeFault(NOMINAL)
+        onset = fault_definition(sc).default_onset if onset is None else onset
         onset = check("fault_time", onset, fault_time_range(horizon))
         magnitude = self._scaled(sc, magnitude)
         if drawn:

@@ -18,7 +18,13 @@ from fcc_env.closed_loop import (
     observation_channels,
     simulate_closed_per_sample,
 )
-from fcc_env.episode_setup import apply_multipliers, generic_sample, setup_episode
+from fcc_env.episode_setup import (
+    BatchSchedule,
+    PlantSchedule,
+    apply_multipliers,
+    generic_sample,
+    setup_episode,
+)
 from fcc_env.integrator import noisy_batch_kernel, open_loop_controller_args, simulate_kernel
 from fcc_env.params import (
     MEASUREMENT_NAMES,
@@ -44,7 +50,6 @@ from fcc_env.scenarios import (
     DEFAULT_N_SAMPLES,
     EpisodeFault,
     FaultSpec,
-    Scenario,
 )
 from fcc_env.uncertainty import PlantUncertainty
 
@@ -213,23 +218,19 @@ def simulate_episodes(
     SP = np.empty((B, T, 2)) if config.closed_loop else None
     Z = np.empty((B, T, N_MEASUREMENTS))
     faults: list[EpisodeFault] = []
-    pidx_rows, pm_rows = [], []
-    schedule = None
+    schedules: list[PlantSchedule] = []
     for b, (seed, spec) in enumerate(zip(seeds, specs, strict=True)):
         rng, _ = seeding.np_random(seed)
         setup = setup_episode(rng, configs[b], spec, T, [*effects, *drawn[b]])
-        schedule = setup.schedule
         U[b], sp = setup.take_program(k)
         if SP is not None:
             SP[b], _ = check_setpoints(sp)
         Z[b] = setup.noise_rng.standard_normal((T, N_MEASUREMENTS))
         faults.append(setup.fault)
-        pidx_rows.append(schedule.pidx)
-        pm_rows.append(schedule.multipliers(k))
-    assert schedule is not None
+        schedules.append(setup.schedule)
     fx.reset_all(effects)  # measurement effects start afresh for the batch as a whole
-    pidx = np.stack(pidx_rows)
-    PM = np.stack(pm_rows)
+    pidx, PM = _slots(schedules, k)
+    schedule = BatchSchedule(schedules)
     if plant_uncertainty is None:
         x0 = np.tile(config.initial_state(), (B, 1))
         p_base = np.tile(config.params.as_array(), (B, 1))
@@ -246,7 +247,7 @@ def simulate_episodes(
         assert SP is not None
         C = np.tile(initial_controller_state(NOMINAL_INPUTS), (B, 1))
         gains = config.regulatory.gains(config.sample_time_s)
-        if schedule.generic or schedule.measure_effects:
+        if schedule.generic or schedule.measures:
             Y, obs, X, A, SAT = simulate_closed_per_sample(
                 x0, U, SP, C, gains, p_base, pidx, PM, Z, schedule, config
             )
@@ -271,19 +272,14 @@ def simulate_episodes(
         simulate_kernel(
             x0, U, p_base, pidx, PM, config.sample_time_s / config.rk4_substeps,
             config.rk4_substeps, Z, NOISE_STD_ABS, NOISE_STD_REL, config.noise_scale, Y, obs, X,
-            A, not schedule.measure_effects, *open_loop_controller_args(B, T),
+            A, not schedule.measures, *open_loop_controller_args(B, T),
         )  # fmt: skip
-    if config.regulatory is None and (schedule.generic or schedule.measure_effects):
+    if config.regulatory is None and (schedule.generic or schedule.measures):
         for kk in range(T):
             Y[:, kk] = schedule.measure(kk, Y[:, kk])
         noisy_batch_kernel(Y, Z, NOISE_STD_ABS, NOISE_STD_REL, config.noise_scale, obs)
     del Z
-    active = np.stack(
-        [
-            (k >= f.onset) if f.scenario is not Scenario.NOMINAL else np.zeros(T, bool)
-            for f in faults
-        ]
-    )
+    active = np.stack([(k >= f.onset) if not f.nominal else np.zeros(T, bool) for f in faults])
     codes = envelope_codes(X)
     bad = codes != 0
     term_at = np.where(bad.any(axis=1), np.argmax(bad, axis=1), -1)
@@ -298,8 +294,8 @@ def simulate_episodes(
         states=X,
         aux=A,
         seeds=tuple(seeds),
-        scenarios=tuple(f.scenario.value for f in faults),
-        fault_onsets=tuple(f.onset if f.scenario is not Scenario.NOMINAL else None for f in faults),
+        scenarios=tuple(f.scenario for f in faults),
+        fault_onsets=tuple(None if f.nominal else f.onset for f in faults),
         fault_magnitudes=tuple(f.magnitude for f in faults),
         terminated_at=term_at,
         termination_reasons=reasons,
@@ -308,6 +304,19 @@ def simulate_episodes(
         setpoints=SP,
         controller_saturated=SAT,
     )
+
+
+def _slots(schedules: list[PlantSchedule], k: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Every episode's parameter slots ``(B, K)`` and their multipliers over samples ``k``
+    ``(B, T, K)``, padded to the widest episode (slot -1, multiplier 1: untouched)."""
+    width = max(s.pidx.shape[0] for s in schedules)
+    pidx = np.full((len(schedules), width), -1, dtype=np.int64)
+    PM = np.ones((len(schedules), k.shape[0], width))
+    for b, s in enumerate(schedules):
+        n = s.pidx.shape[0]
+        pidx[b, :n] = s.pidx
+        PM[b, :, :n] = s.multipliers(k)
+    return pidx, PM
 
 
 def operating_program(

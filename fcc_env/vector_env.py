@@ -61,7 +61,7 @@ from fcc_env.regulatory import (
     controller_update,
     initial_controller_state,
 )
-from fcc_env.scenarios import DEFAULT_N_SAMPLES, Scenario
+from fcc_env.scenarios import DEFAULT_N_SAMPLES
 
 __all__ = ["VECTOR_ENTRY_POINT", "FCCClosedLoopVectorEnv", "FCCVectorEnv"]
 
@@ -361,11 +361,18 @@ class FCCVectorEnv(VectorEnv):
                 "plant_effects", python_only, "effects acting through parameters or inputs",
                 "measure/d_state effects need Python per sample: use vectorization_mode='sync'",
             )  # fmt: skip
+        if setup.schedule.fault_measure is not None:
+            raise invalid(
+                "scenario",
+                setup.fault.scenario,
+                "a fault acting through parameters or inputs",
+                "a fault's measure hook needs Python per sample: use vectorization_mode='sync'",
+            )
         self._setups[b] = setup
         fault = setup.fault
-        self._faulty[b] = fault.scenario is not Scenario.NOMINAL
+        self._faulty[b] = not fault.nominal
         self._onset[b], self._magnitude[b] = fault.onset, fault.magnitude
-        self._scenario[b] = fault.scenario.value
+        self._scenario[b] = fault.scenario
         n_mult = setup.schedule.pidx.shape[0]
         if n_mult > self._s.pidx.shape[1]:  # more multiplied parameters than any episode yet
             grown = self._streams(self.num_envs, n_mult)

@@ -6,8 +6,11 @@ Used to prove that a refactor changes no behaviour: run it before and after, the
     python lab/detection_fingerprint.py --out /tmp/after.json --compare /tmp/before.json
 
 Each diagnoser is built with its ``fast_params()`` (small, deterministic training), fitted on
-three healthy training episodes (isolators also on labelled f1-f4 training episodes) and run
-with ``detect`` on one nominal and one episode per fault. The fingerprint is a SHA-256 of the
+three healthy training episodes (isolators also on labelled f1-f4 training episodes; detectors
+that learn from faults, ``learns_from_faults``, also on f1-f4 at their paper onset and size on
+the same training seeds, the episodes their ``fault_seeds`` once simulated themselves: the
+simulation is prefix-invariant, so 2400 samples of them are the first 2400 of the 4000 they
+had) and run with ``detect`` on one nominal and one episode per fault. The fingerprint is a SHA-256 of the
 alarm, score signal, band and diagnosis arrays, so "identical" means bit-identical. Only the
 public API is used (``diagnosers.make``, ``fast_params``, ``fcc_env.simulate_episodes``,
 ``Episode.from_batch``), so the script runs on both sides of a refactor.
@@ -35,8 +38,9 @@ TEST_SEED = 5000  # a validation seed: never a test seed
 SCENARIOS = ["nominal", "f1", "f2", "f3", "f4"]
 
 
-def episodes(seeds: list[int], scenario: str) -> list[Episode]:
-    onset = None if scenario == "nominal" else ONSET
+def episodes(seeds: list[int], scenario: str, onset: int | None = ONSET) -> list[Episode]:
+    """Episodes of ``scenario`` from ``onset`` (None: the fault's paper onset)."""
+    onset = None if scenario == "nominal" else onset
     fault = fcc_env.FaultSpec(scenario=scenario, onset=onset)
     res = fcc_env.simulate_episodes(seeds, N_SAMPLES, fault=fault)
     return Episode.from_batch(res)
@@ -57,13 +61,16 @@ def digest(arrays: list[np.ndarray | None]) -> str:
 def fingerprint(names: list[str]) -> dict[str, dict[str, str]]:
     train = episodes(TRAIN_SEEDS, "nominal")
     faults = [ep for sc in SCENARIOS[1:] for ep in episodes(TRAIN_SEEDS, sc)]
+    paper = [ep for sc in SCENARIOS[1:] for ep in episodes(TRAIN_SEEDS, sc, onset=None)]
+    paper = [ep for ep in paper if ep.fault_onset is not None]
     tests = {sc: episodes([TEST_SEED], sc)[0] for sc in SCENARIOS}
     out: dict[str, dict[str, str]] = {}
     for name in names:
         t0 = time.perf_counter()
         cls = diagnosers.diagnoser_class(name)
         det = diagnosers.make(name, **cls.fast_params())
-        det.fit(train + faults if det.isolates else train)
+        learns = getattr(det, "learns_from_faults", False)  # the flag is newer than the script
+        det.fit(train + faults if det.isolates else train + paper if learns else train)
         row = {}
         for sc, ep in tests.items():
             d = det.detect(ep)

@@ -98,6 +98,31 @@ def inject_step_fault(
     return dataclasses.replace(episode, y=y, fault_onset=onset, scenario=f"step_{channel}")
 
 
+#: Steps [°C] of :func:`with_fault_twins`' default fault: its direction in an ``lrgf-glr`` bank's
+#: normalised remaining error is close to f3's as the detector learned it on the FCC plant
+#: (-0.58, -0.74, -0.34 over T_rx, T_rg1, T_rg2), the direction the lrgf-glr tests were tuned on.
+F3_LIKE_STEPS: dict[str, float] = {"T_rx": -1.5, "T_rg1": -0.75, "T_rg2": -1.9}
+
+
+def with_fault_twins(
+    healthy: list[Episode],
+    scenario: str = "f3",
+    *,
+    onset: int = 600,
+    steps: dict[str, float] | None = None,
+) -> list[Episode]:
+    """``healthy`` and, for each, its labelled faulty noise twin (the same record, seed and noise
+    with ``steps`` {channel: step} from ``onset``, default :data:`F3_LIKE_STEPS`, labelled
+    ``scenario``): what a detector that learns from faults (``lrgf-glr``'s directions) pairs."""
+    twins = []
+    for ep in healthy:
+        y = ep.y.copy()
+        for channel, step in (F3_LIKE_STEPS if steps is None else steps).items():
+            y[onset:, ep.channels.index(channel)] += step
+        twins.append(dataclasses.replace(ep, y=y, fault_onset=onset, scenario=scenario))
+    return [*healthy, *twins]
+
+
 def cell_record(
     label: str, scenario: str, seed: int, *, r_td: float, t_dt: float, r_fd: float, n_alarms: int
 ):

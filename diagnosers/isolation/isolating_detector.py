@@ -2,10 +2,11 @@
 
 Both diagnosers here *compose* an inner detector (``detector_``): the registered LRGF detector
 named ``detector_name`` (default ``lrgf-mem``; ``lrgf-glr`` and its presets too) with the
-hyperparameters ``detector``, trained on the healthy training episodes exactly as that detector
-is: their alarms are its alarms, sample for sample, so isolation cannot cost detection. The
-isolator reads the detection only through its public parts: the residual of each relation and
-the detector's ``residual_scale_`` and ``steady_window``. While alarmed, they
+hyperparameters ``detector``, trained on the training episodes exactly as that detector is (the
+healthy ones, and the labelled faults too if it learns from them): their alarms are its alarms,
+sample for sample, so isolation cannot cost detection. The isolator reads the detection only
+through its public parts: the residual of each relation and the detector's
+``residual_scale_`` and ``steady_window``. While alarmed, they
 compare the bank's residuals with what they learned from labelled training faults
 (``Episode.fault_onset`` and ``Episode.scenario``, training seeds only).
 
@@ -199,10 +200,12 @@ class IsolatingDetector(Diagnoser):
     # ---- fitting -------------------------------------------------------------------------------
     def _fit(self, episodes: list[Episode]) -> None:
         healthy = [e for e in episodes if e.fault_onset is None]
+        faulty = [e for e in episodes if e.fault_onset is not None]
         detector = make(self.detector_name, **(self.detector or {}))
         assert isinstance(detector, BankDetector)  # checked by _validate_params
-        self.detector_ = detector.fit(healthy)
-        self.fit_isolation([e for e in episodes if e.fault_onset is not None])
+        # a detector that learns from faults (lrgf-glr's directions) gets them as it would alone
+        self.detector_ = detector.fit(episodes if detector.learns_from_faults else healthy)
+        self.fit_isolation(faulty)
 
     def fit_on_detector(
         self,

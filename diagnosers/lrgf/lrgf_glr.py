@@ -8,7 +8,8 @@ they help, the band scale from held-out remaining error) and changes two things:
   episode and the detector's models see every episode too;
 * **how the remaining error is evaluated**: a fault moves the normalised remaining errors of
   the relations in its own direction (f2 and f4 pull T_rx down and T_rg2 up; f3 cools the
-  regenerator), learned in ``fit`` from training faults; the alarm stage
+  regenerator), learned in ``fit`` from the labelled training faults passed with the healthy
+  episodes (:attr:`LRGFGLR.learns_from_faults`); the alarm stage
   (:class:`diagnosers.stages.directional_stage.DirectionalStage`) tests along each direction on a
   fast and a slow EWMA scale, beside an omnibus Hotelling T² for faults outside them.
 
@@ -22,6 +23,7 @@ Optional parts, built from hyperparameters: a held baseline (:mod:`diagnosers.st
 from __future__ import annotations
 
 from collections.abc import Mapping
+from pathlib import Path
 from typing import Any, ClassVar
 
 import numpy as np
@@ -38,7 +40,14 @@ from diagnosers.lrgf.bank_detector import (
     MemSelect,
     holdout_split,
 )
-from diagnosers.lrgf.fault_directions import FaultDirections, paired_difference
+from diagnosers.lrgf.fault_directions import (
+    DEFAULT_FAULT_SEEDS,
+    FaultDirections,
+    Pairs,
+    load_names,
+    paired_difference,
+    save_names,
+)
 from diagnosers.lrgf.novelty import (
     NoveltyScale,
     PredictionRange,
@@ -51,7 +60,7 @@ from diagnosers.stages.baseline import HeldBaseline
 from diagnosers.stages.directional_stage import DirectionalStage
 from fcc_common.validation import Integer, Options, Real, RealSequence, check_params
 
-__all__ = ["GLR_CONSTRAINTS", "GLR_DEFAULTS", "LRGFGLR", "Calibration"]
+__all__ = ["GLR_CONSTRAINTS", "GLR_DEFAULTS", "LRGFGLR", "Calibration", "cross_fit_models"]
 
 from enum import StrEnum
 
@@ -91,7 +100,7 @@ GLR_DEFAULTS: dict[str, Any] = {
     "refit_epochs": None,
     # the optional parts
     "fault_scenarios": None,
-    "fault_seeds": None,
+    "fault_seeds": list(DEFAULT_FAULT_SEEDS),
     "direction_window": 300,
     "baseline_lambda": 0.0,
     "baseline_hold": 0.5,
@@ -102,6 +111,38 @@ GLR_DEFAULTS: dict[str, Any] = {
     **RUN_DEFAULTS,
     "progress": False,
 }
+
+
+def cross_fit_models(
+    det: LRGFGLR, ys: list[np.ndarray]
+) -> tuple[list[tuple[np.ndarray, np.ndarray]], list[np.ndarray], TrainedBank]:
+    """``det``'s out-of-fold ``(y_out − y_m, y_e)`` of every record of ``ys`` and their novelty
+    against the fold bank's own training range, and the bank trained on all.
+
+    With ``refit_epochs=None`` the ``n_folds`` banks without a fold and the bank on all
+    records are trained from scratch in one call, so that ``n_jobs`` processes share all of
+    their (relation, training set) jobs. Otherwise the fold banks train first, and the bank
+    on all records starts from the first fold's networks for ``refit_epochs`` epochs (at
+    most ``max_epochs``): it only has to take in one more fold, and the out-of-fold
+    residuals stay out of fold (the warm start flows from a fold bank into the final bank,
+    never back).
+    """
+    folds = np.array_split(np.arange(len(ys)), det.n_folds)
+    sets = [[ys[i] for i in range(len(ys)) if i not in set(f.tolist())] for f in folds]
+    if det.refit_epochs is None:
+        *fold_banks, final = det._train_banks([*sets, ys])
+    else:
+        fold_banks = det._train_banks(sets)
+        final = det._train_banks(
+            [ys], init=[fold_banks[0]], max_epochs=min(det.refit_epochs, det.max_epochs)
+        )[0]
+    cal_parts, distances = [], []
+    for fold, train, trained in zip(folds, sets, fold_banks, strict=True):
+        bank = RelationBank(det._relations(), det.channels_)
+        bank.set_models(trained)
+        cal_parts += [bank.parts(ys[i]) for i in fold]
+        distances += det.novelty_.distances(bank, train, [ys[i] for i in fold])
+    return cal_parts, distances, final
 
 
 @register("lrgf-glr")
@@ -151,11 +192,11 @@ class LRGFGLR(BankDetector):
         refit_epochs: ``None`` (default): the final bank trains from scratch; an integer in
             [1, 100000]: it starts from the first fold's networks for that many epochs
             (faster, more false alarms on validation seeds).
-        fault_scenarios: faults whose directions are learned; default ``None``: f1-f4. Each
-            is simulated with the healthy episode of the same seed; their normalised error
-            difference, averaged and made a unit vector, is its direction.
-        fault_seeds: training seeds the faults are simulated on (1000-4999 only); default
-            ``None``: 1000-1002.
+        fault_scenarios: the labelled faults passed to ``fit`` that give directions (each
+            paired with the healthy episode of its seed, :mod:`diagnosers.lrgf.fault_directions`;
+            none passed: the omnibus T² alone); default ``None``: every one passed.
+        fault_seeds: the seeds whose faulty episodes give them; ``None``: every seed passed;
+            default 1000-1002 (the tracks' first three training seeds).
         direction_window: samples after the onset averaged, in [1, 2000]; default 300.
         baseline_lambda: gain of a held baseline of each relation's normalised error,
             subtracted before the EWMAs: it learns a unit's own offset from the model and
@@ -176,6 +217,7 @@ class LRGFGLR(BankDetector):
     __init__ = keyword_init(DEFAULTS)
     STAGE = DirectionalStage
     stage_: DirectionalStage
+    learns_from_faults: ClassVar[bool] = True
 
     false_alarm_target: float
     statistic: str
@@ -230,12 +272,14 @@ class LRGFGLR(BankDetector):
 
     # ---- fitting -------------------------------------------------------------------------------
     def _fit(self, episodes: list[Episode]) -> None:
+        pairs = self._fault_directions().pairs(episodes)  # checked before anything trains
+        episodes = [e for e in episodes if e.fault_onset is None]
         bank = self._new_bank()
         self.novelty_ = self._new_novelty()
         w = self.steady_window
         ys = [e.y for e in episodes]
         if self.calibration == Calibration.CROSS_FIT and len(ys) >= self.n_folds:
-            cal_parts, distances, final = self._cross_fit_models(ys)
+            cal_parts, distances, final = cross_fit_models(self, ys)
             bank.set_models(final)
             train, cal = ys, ys  # every record is out of fold once, in order
         else:  # lrgf-mem's split (also when there are fewer episodes than folds)
@@ -245,7 +289,7 @@ class LRGFGLR(BankDetector):
             cal_parts = [bank.parts(y) for y in cal]
             distances = self.novelty_.distances(bank, train, cal)
         self.novelty_.fit(bank, train)
-        self._calibrate(cal_parts, w, distances, cal)
+        self._calibrate(cal_parts, w, distances, cal, pairs)
 
     def _calibrate(
         self,
@@ -253,11 +297,13 @@ class LRGFGLR(BankDetector):
         w: int,
         distances: list[np.ndarray],
         cal_ys: list[np.ndarray],
+        pairs: Pairs,
     ) -> None:
         """Error-model choice, scale, fault directions and the stage's limits from healthy
         calibration records ``cal_parts`` (``(y_out − y_m, y_e)`` each; the first ``w`` samples
         skipped) with, per record, its distance outside the training predictions
-        ``distances`` (``(T,)``) and its measurements ``cal_ys``."""
+        ``distances`` (``(T,)``) and its measurements ``cal_ys``; the directions from the
+        training faults ``pairs`` (:meth:`FaultDirections.pairs`)."""
         bank = self.bank_
         n_cal = sum(max(0, r.shape[0] - w) for r, _ in cal_parts)
         if n_cal < MIN_CALIBRATION_SAMPLES:
@@ -277,8 +323,8 @@ class LRGFGLR(BankDetector):
         ]
         self.v_residual_ = np.maximum(np.sqrt(np.mean(np.concatenate(rem) ** 2, axis=0)), 1e-9)
         norm = [r / self.v_residual_ for r in rem]
-        directions = self._fault_directions().learn(
-            self.channels_, len(bank), paired_difference(self.normalised)
+        directions, self.direction_faults_ = self._fault_directions().learn(
+            pairs, len(bank), paired_difference(self.normalised)
         )
         self.stage_ = self._new_stage()
         features: list[np.ndarray | None] = [None] * len(cal_parts)
@@ -294,37 +340,6 @@ class LRGFGLR(BankDetector):
         self.stage_.fit(norm, directions, features)
         self._finish()
 
-    def _cross_fit_models(
-        self, ys: list[np.ndarray]
-    ) -> tuple[list[tuple[np.ndarray, np.ndarray]], list[np.ndarray], TrainedBank]:
-        """Out-of-fold ``(y_out − y_m, y_e)`` of every record of ``ys`` and their novelty
-        against the fold bank's own training range, and the bank trained on all.
-
-        With ``refit_epochs=None`` the ``n_folds`` banks without a fold and the bank on all
-        records are trained from scratch in one call, so that ``n_jobs`` processes share all of
-        their (relation, training set) jobs. Otherwise the fold banks train first, and the bank
-        on all records starts from the first fold's networks for ``refit_epochs`` epochs (at
-        most ``max_epochs``): it only has to take in one more fold, and the out-of-fold
-        residuals stay out of fold (the warm start flows from a fold bank into the final bank,
-        never back).
-        """
-        folds = np.array_split(np.arange(len(ys)), self.n_folds)
-        sets = [[ys[i] for i in range(len(ys)) if i not in set(f.tolist())] for f in folds]
-        if self.refit_epochs is None:
-            *fold_banks, final = self._train_banks([*sets, ys])
-        else:
-            fold_banks = self._train_banks(sets)
-            final = self._train_banks(
-                [ys], init=[fold_banks[0]], max_epochs=min(self.refit_epochs, self.max_epochs)
-            )[0]
-        cal_parts, distances = [], []
-        for fold, train, trained in zip(folds, sets, fold_banks, strict=True):
-            bank = RelationBank(self._relations(), self.channels_)
-            bank.set_models(trained)
-            cal_parts += [bank.parts(ys[i]) for i in fold]
-            distances += self.novelty_.distances(bank, train, [ys[i] for i in fold])
-        return cal_parts, distances, final
-
     def normalised(self, y: np.ndarray) -> np.ndarray:
         """The normalised remaining error ``(T, k)`` of a record ``y`` with the fitted bank,
         scale and novelty (what the alarm stage reads)."""
@@ -336,7 +351,8 @@ class LRGFGLR(BankDetector):
         """Derived state shared by ``_fit`` and ``_set_state``."""
         self.v_ = np.maximum(self.v_residual_, 1e-9)
         self.directions_ = self.stage_.directions_
-        faults = self._fault_directions().faults
+        # a model being loaded has its faults' names from _load_extra, which runs after this
+        faults = getattr(self, "direction_faults_", self._fault_directions().saved_faults())
         self.signal_names_ = self.stage_.signal_names(faults)
 
     # ---- what the alarm stage reads and what is saved beside it ----------------------------------
@@ -374,7 +390,14 @@ class LRGFGLR(BankDetector):
             )
         self.novelty_.range_ = PredictionRange.from_array(rng) if rng.size else None
 
+    def _save_extra(self, directory: Path) -> None:
+        super()._save_extra(directory)
+        save_names(directory, self.direction_faults_)  # they depend on the faults passed to fit
+
     def _load_extra(self, directory: Any) -> None:
+        n, fallback = len(self.stage_.directions_), self._fault_directions().saved_faults()
+        self.direction_faults_ = load_names(Path(directory), n, fallback)
+        self._finish()
         super()._load_extra(directory)
         if self.stage_.baseline is not None:  # the baseline reads the loaded networks' scalers
             self.stage_.baseline.bind(self.bank_.in_idx, self.bank_.out_idx, self.bank_.lrgf)

@@ -31,7 +31,7 @@ from evaluation.control.setpoints import OperatingPoint, best_setpoints
 from fcc_env.closed_loop import CLOSED_LOOP_CHANNELS
 from fcc_env.control_task import EconomicReward
 from fcc_env.env import SETPOINT_ACTION_SCALE
-from fcc_env.scenarios import EpisodeFault, FaultSpec, Scenario
+from fcc_env.scenarios import NOMINAL, EpisodeFault, FaultSpec, fault_names
 
 __all__ = [
     "ARM_AFTER",
@@ -108,7 +108,7 @@ def oracle(economics: EconomicReward | None = None) -> SetpointPolicy:
 
     def target(k: int, info: Mapping[str, Any]) -> np.ndarray:
         onset = info.get("fault_time")
-        if info.get("scenario") in (None, Scenario.NOMINAL.value) or onset is None or k < onset:
+        if info.get("scenario") in (None, NOMINAL) or onset is None or k < onset:
             return healthy
         key = (str(info["scenario"]), round(float(info["fault_magnitude"]), 4))
         if key not in cache:
@@ -126,12 +126,12 @@ ARM_AFTER = 300
 
 
 def fault_setpoints(economics: EconomicReward | None = None) -> dict[str, np.ndarray]:
-    """The best set points of the plant with each fault at the paper's size, by fault name."""
+    """The best set points of the plant with each registered fault at its default size, by
+    fault name."""
     out = {}
-    for sc in Scenario:
-        if sc is not Scenario.NOMINAL:
-            fault = FaultSpec(scenario=sc.value).resolve(horizon=4000)
-            out[sc.value] = best_setpoints(fault, economics=economics).setpoints
+    for sc in fault_names():
+        fault = FaultSpec(scenario=sc).resolve(horizon=4000)
+        out[sc] = best_setpoints(fault, economics=economics).setpoints
     return out
 
 

@@ -36,7 +36,7 @@ from evaluation.metrics.intervals import Interval, bootstrap_ci
 from fcc_env.closed_loop import CLOSED_LOOP_CHANNELS
 from fcc_env.control_task import CONSTRAINT_TERMS, CONTROL_ENV_ID
 from fcc_env.plant import PlantConfig
-from fcc_env.scenarios import SCENARIOS
+from fcc_env.scenarios import fault_names, scenario_names
 
 __all__ = [
     "TRAIN_SEEDS",
@@ -163,10 +163,11 @@ def study(
     policies: Sequence[Policy],
     seeds: Sequence[int],
     n_steps: int,
-    scenarios: Sequence[str] = SCENARIOS,
+    scenarios: Sequence[str] | None = None,
 ) -> StudyResults:
     """:func:`run_study` and :func:`summarise`, against the last policy (the oracle, in the
     command: the reference sits last in the table)."""
+    scenarios = scenario_names() if scenarios is None else scenarios  # the registry, now
     scores = run_study(policies, seeds, n_steps, scenarios)
     reference = policies[-1].name
     return StudyResults(
@@ -185,7 +186,7 @@ def fault_traces(
     """Per fault (at the paper's size and onset), per policy, the ``trace`` of
     :func:`run_episode` on seed ``seed``: what each policy did, for a figure."""
     out: dict[str, dict[str, dict[str, list[Any]]]] = {}
-    for scenario in SCENARIOS[1:]:
+    for scenario in fault_names():
         out[scenario] = {}
         for p in policies:
             out[scenario][p.name] = {}
@@ -232,15 +233,17 @@ def supervisor(
 ) -> DiagnosisSupervisor:
     """A :class:`DiagnosisSupervisor` around registered diagnoser ``name``, trained on episodes
     of :data:`TRAIN_SEEDS` run at the supervisor's healthy set points (healthy ones, and for an
-    isolator each fault at the paper's size too). Trained on the operating program instead, a
+    isolator or a detector that learns from faults each fault at its default size too, on the
+    same seeds: each faulty episode's healthy twin is there). Trained on the operating program instead, a
     detector alarms as soon as the supervisor moves the set points to their optimum: the unit
     has left the region it learned (every episode, pca and lrgf-glr-closed alike, measured)."""
     from diagnosers import diagnoser_class, make
 
     fixed = fixed_setpoints()
     train = operated_episodes(fixed, "nominal", TRAIN_SEEDS, n_steps)
-    if diagnoser_class(name).isolates:
-        for fault in SCENARIOS[1:]:
+    cls = diagnoser_class(name)
+    if cls.isolates or cls.learns_from_faults:
+        for fault in fault_names():
             train += operated_episodes(fixed, fault, TRAIN_SEEDS, n_steps)
     label = name + "".join(f" {k}={v}" for k, v in (params or {}).items())
     return DiagnosisSupervisor(

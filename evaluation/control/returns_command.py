@@ -154,7 +154,9 @@ def _study(args: argparse.Namespace, extra_policies: Sequence[Policy] = ()) -> i
     from diagnosers.bank.relation_cache import shared_relations
     from diagnosers.registry import import_modules
     from evaluation.control import returns, returns_report
-    from fcc_env.scenarios import SCENARIOS
+    from fcc_env.scenarios import scenario_names
+
+    scenarios = scenario_names()
 
     if args.seeds < 1 or not 1 <= args.steps <= 3999:
         raise ValueError(
@@ -192,12 +194,12 @@ def _study(args: argparse.Namespace, extra_policies: Sequence[Policy] = ()) -> i
         raise ValueError(
             f"two policies share a name in the table: {shown}; give each policy its own name"
         )
-    results = returns.study(policies, range(args.seeds), args.steps, SCENARIOS)
+    results = returns.study(policies, range(args.seeds), args.steps, scenarios)
     traces = returns.fault_traces(policies, args.steps, seed=0)
     figures = returns_report.write_study(results, traces, args.out, trace_seed=0)
     print(returns_report.summary_table(results.summaries), end="")
     print(
-        f"\n{len(results.scores)} episodes ({args.seeds} test seeds x {len(SCENARIOS)} "
+        f"\n{len(results.scores)} episodes ({args.seeds} test seeds x {len(scenarios)} "
         f"scenarios x {len(policies)} policies) in {time.perf_counter() - t0:.0f} s; wrote "
         f"{args.out} (control.csv, control.json, {len(figures)} figures)",
     )

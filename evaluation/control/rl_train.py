@@ -31,7 +31,7 @@ from evaluation.control.rl_policy import FORMAT, MLPPolicy
 from evaluation.control.rl_vec_env import require_sb3, sb3_vec_env
 from fcc_common.validation import invalid
 from fcc_env.control_task import CONTROL_ENV_ID
-from fcc_env.scenarios import SCENARIOS
+from fcc_env.scenarios import scenario_names
 
 __all__ = [
     "REWARD_SCALE_USD",
@@ -214,12 +214,13 @@ def validate(policy: Any, n_seeds: int, n_steps: int = 3999) -> dict[str, Any]:
     """``policy`` and the best fixed set points on validation seeds 5000.. (each scenario at the
     paper's size and onset), with the control study's harness: mean returns and the gap."""
     seeds = range(VALIDATION_SEED, VALIDATION_SEED + n_seeds)
-    scores = returns.run_study([fixed_setpoints(), policy], seeds, n_steps, SCENARIOS)
+    scenarios = scenario_names()
+    scores = returns.run_study([fixed_setpoints(), policy], seeds, n_steps, scenarios)
     out: dict[str, Any] = {"seeds": list(seeds), "policies": {}}
     for s in returns.summarise(scores, reference=policy.name):
         by = {
             sc: np.mean([e.return_usd for e in scores if e.policy == s.policy and e.scenario == sc])
-            for sc in SCENARIOS
+            for sc in scenarios
         }
         out["policies"][s.policy] = {
             "mean_return_usd": s.return_usd.estimate,

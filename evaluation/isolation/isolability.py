@@ -32,7 +32,6 @@ from dataclasses import dataclass
 import numpy as np
 
 from evaluation.tracks.catalogue import TRACKS
-from evaluation.tracks.track import FAULT_NAMES
 from evaluation.tracks.track_data import TrackData
 from fcc_common.invocation import command_parser, run_command
 from fcc_common.validation import Integer, Real, check
@@ -175,7 +174,7 @@ def isolability(
         raise ValueError(f"Unknown track {track!r}. Available: {sorted(TRACKS)}")
     tr = TRACKS[track]
     data = TrackData(track=tr)
-    faults = tuple(faults or [f for f in FAULT_NAMES if f in tr.faults])
+    faults = tuple(faults or tr.faults)
     n_seeds = check("n_seeds", n_seeds, Integer(1, 1000))
     window = check("window", window, Integer(1, horizon))
     seeds = tuple(range(tr.validation_seed_start, tr.validation_seed_start + n_seeds))

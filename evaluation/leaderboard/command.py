@@ -119,7 +119,7 @@ def resolve_options(
             print(line, file=sys.stderr)
         diags = tuple(keep)
     else:
-        allowed = list(fcc_env.SCENARIOS)
+        allowed = list(fcc_env.scenario_names())
     scenarios = args.scenarios if args.scenarios is not None else tuple(allowed)
     bad = [s for s in scenarios if s not in allowed]
     if bad:

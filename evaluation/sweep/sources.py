@@ -27,8 +27,10 @@ from fcc_env.plant import PlantConfig
 from fcc_env.scenarios import (
     DEFAULT_N_SAMPLES,
     DEFAULT_RAMP_SAMPLES,
+    NOMINAL,
     FaultProfile,
     FaultSpec,
+    scenario_names,
 )
 from fcc_env.simulation import N_SAMPLES_RANGE
 from fcc_env.uncertainty import PlantUncertainty
@@ -104,7 +106,8 @@ class SimulatedData:
     """``FCC-v0`` episodes simulated on demand (deterministic in the seed and options).
 
     Args:
-        scenarios: test scenarios, a subset of ``fcc_env.SCENARIOS``.
+        scenarios: test scenarios, registered ones (:func:`fcc_env.scenario_names`); default:
+            every scenario registered when the source is built.
         test_seeds: seeds of the test episodes (the same seeds for every scenario, so the
             scenarios share excitation programs: a paired design).
         train_seeds: seeds of the healthy training episodes; disjoint from ``test_seeds``.
@@ -118,7 +121,7 @@ class SimulatedData:
             episodes alike (:meth:`fcc_env.PlantConfig.to_json` is in the store key).
     """
 
-    scenarios: tuple[str, ...] = ("nominal", "f1", "f2", "f3", "f4")
+    scenarios: tuple[str, ...] = field(default_factory=scenario_names)
     test_seeds: tuple[int, ...] = tuple(range(10))
     train_seeds: tuple[int, ...] = tuple(range(TRAIN_SEED_BASE, TRAIN_SEED_BASE + 5))
     n_samples: int = DEFAULT_N_SAMPLES
@@ -131,7 +134,7 @@ class SimulatedData:
         return FaultSpec() if self.fault is None else self.fault
 
     def validate(self) -> None:
-        check("scenarios", self.scenarios, OptionSequence(fcc_env.SCENARIOS))
+        check("scenarios", self.scenarios, OptionSequence(scenario_names()))
         test = check("test_seeds", self.test_seeds, SEEDS)
         train = check("train_seeds", self.train_seeds, SEEDS)
         common = sorted(set(test) & set(train))
@@ -220,7 +223,7 @@ class SimulatedData:
         of ``scenarios`` on every training seed, with the test episodes' fault settings."""
         out = []
         for sc in self.scenarios:
-            if sc == "nominal":
+            if sc == NOMINAL:
                 continue
             for le in self._simulate(self.train_seeds, sc):
                 ep = le.episode

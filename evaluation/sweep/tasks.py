@@ -17,6 +17,7 @@ from typing import Any
 
 from diagnosers.bank.relation_cache import shared_relations
 from diagnosers.diagnoser import Diagnoser
+from diagnosers.episode.record import Episode
 from diagnosers.registry import diagnoser_class, import_modules
 from evaluation.sweep.config import DiagnoserSpec
 from evaluation.sweep.records import (
@@ -26,7 +27,15 @@ from evaluation.sweep.records import (
 from evaluation.sweep.sources import DataSource
 from fcc_common.workers import limit_threads
 
-__all__ = ["EpisodeTask", "dir_files", "episode_task", "load_model", "train_task", "training_jobs"]
+__all__ = [
+    "EpisodeTask",
+    "dir_files",
+    "episode_task",
+    "load_model",
+    "train_task",
+    "training_episodes",
+    "training_jobs",
+]
 
 _MODEL_CACHE: dict[str, Diagnoser] = {}
 _MODEL_CACHE_SIZE = 8
@@ -91,7 +100,9 @@ def train_task(
 ) -> tuple[dict[str, bytes], dict[str, Any]]:
     """Fit one diagnoser on the healthy training episodes; return its saved files and facts.
 
-    ``n_jobs``: set on the diagnoser (see :func:`training_jobs`) unless ``None``.
+    A diagnoser that isolates or learns from faults also gets the labelled training faults
+    (:func:`training_episodes`). ``n_jobs``: set on the diagnoser (see :func:`training_jobs`)
+    unless ``None``.
     ``relation_cache``: a directory of trained relations shared with the other trainings
     (:mod:`diagnosers.bank.relation_cache`), or ``None``.
     """
@@ -99,17 +110,8 @@ def train_task(
         limit_threads()
     import_modules(imports)  # a fresh worker has not seen the user's registrations
     t0 = time.perf_counter()
-    episodes = data.train_episodes()
-    if spec.build().isolates:
-        # an isolating diagnoser also learns labelled faults (training seeds only)
-        faulty = getattr(data, "train_fault_episodes", None)
-        if faulty is None:
-            raise RuntimeError(
-                f"training {spec.key}: it isolates faults, but the data source "
-                f"{type(data).__name__} has no labelled training faults (train_fault_episodes)"
-            )
-        episodes = episodes + faulty()
     diag = spec.build()
+    episodes = training_episodes(diag, data, spec.key)
     if n_jobs is not None:
         diag.set_params(n_jobs=n_jobs)
     try:
@@ -127,6 +129,29 @@ def train_task(
         "n_train_samples": int(sum(ep.n_samples for ep in episodes)),
     }
     return files, info
+
+
+def training_episodes(diag: Diagnoser, data: DataSource, key: str) -> list[Episode]:
+    """What ``diag`` (labelled ``key`` in errors) is fitted on: the healthy training episodes,
+    and the labelled training faults (training seeds only) when it isolates or learns from
+    faults (:attr:`~diagnosers.Diagnoser.learns_from_faults`).
+
+    An isolator needs them: a data source without ``train_fault_episodes`` is an error. A
+    detector that learns from faults works without (recorded data have none: it then learns
+    no fault directions, and says so).
+    """
+    episodes = data.train_episodes()
+    if not (diag.isolates or diag.learns_from_faults):
+        return episodes
+    faulty = getattr(data, "train_fault_episodes", None)
+    if faulty is None:
+        if diag.isolates:
+            raise RuntimeError(
+                f"training {key}: it isolates faults, but the data source "
+                f"{type(data).__name__} has no labelled training faults (train_fault_episodes)"
+            )
+        return episodes
+    return episodes + faulty()
 
 
 @dataclass(frozen=True)

@@ -20,7 +20,6 @@ the other rooms are imported by their own names.
 from evaluation.tracks.catalogue import SMALL_MAGNITUDES, TRACKS, parse_tracks, tracks_markdown
 from evaluation.tracks.distributions import Choice, Distribution, Fixed, Uniform
 from evaluation.tracks.track import (
-    FAULT_NAMES,
     MIN_HEALTHY,
     RAMP_LENGTHS,
     RAMP_MARGIN,
@@ -33,7 +32,6 @@ from evaluation.tracks.track import (
 )
 
 __all__ = [
-    "FAULT_NAMES",
     "MIN_HEALTHY",
     "RAMP_LENGTHS",
     "RAMP_MARGIN",

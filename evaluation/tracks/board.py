@@ -148,7 +148,8 @@ def _cache_dir(config: SweepConfig, spec: DiagnoserSpec, cache: Path) -> Path:
     assert isinstance(data, TrackData)
     # model_hash with a constant data part: the package version and the resolved settings
     key = {"training": data.training_key(), "model": config.model_hash(spec, "training-key")}
-    if spec.build().isolates:  # it also learns the track's labelled faults
+    diag = spec.build()
+    if diag.isolates or diag.learns_from_faults:  # it also learns the track's labelled faults
         key["faults"] = data.fault_training_key()
     return cache / spec.key / canonical_hash(key)[:16]
 

@@ -13,9 +13,9 @@
 from __future__ import annotations
 
 from evaluation.tracks.distributions import Choice, Distribution, Fixed, Uniform
-from evaluation.tracks.track import FAULT_NAMES, RAMP_LENGTHS, Track
+from evaluation.tracks.track import RAMP_LENGTHS, Track
 from fcc_common.validation import Options, check, invalid
-from fcc_env.scenarios import FAULTS, FaultProfile, Scenario
+from fcc_env.scenarios import PAPER_FAULTS, FaultProfile, fault_definition
 
 __all__ = ["SMALL_MAGNITUDES", "TRACKS", "parse_tracks", "tracks_markdown"]
 
@@ -23,10 +23,10 @@ __all__ = ["SMALL_MAGNITUDES", "TRACKS", "parse_tracks", "tracks_markdown"]
 def _paper_scaled(low: float, high: float) -> dict[str, Distribution]:
     return {
         f: Uniform(
-            low * FAULTS[Scenario(f)].default_magnitude,
-            high * FAULTS[Scenario(f)].default_magnitude,
+            low * fault_definition(f).default_magnitude,
+            high * fault_definition(f).default_magnitude,
         )
-        for f in FAULT_NAMES
+        for f in PAPER_FAULTS
     }
 
 

@@ -56,6 +56,7 @@ from evaluation.tracks.track import Track
 from evaluation.tracks.track_data import TrackData
 from fcc_common.validation import Integer, Options, check
 from fcc_env.params import MEASUREMENT_NAMES, MEASUREMENTS
+from fcc_env.scenarios import FaultSpec
 
 __all__ = [
     "DEFAULT_REFERENCES",
@@ -163,11 +164,12 @@ class OracleConfig:
       stage (measured inputs)``: the same perfect model evaluated by ``lrgf-glr``'s own parts
       (:class:`diagnosers.stages.directional_stage.DirectionalStage` and
       :class:`diagnosers.lrgf.fault_directions.FaultDirections` on the reference's residual): fault
-      directions from the noise-free signatures of the training faults (seeds 1000-1002, as
-      the detector's), a fast and a slow EWMA scale projected on them, an omnibus T². It is
-      what a detector of that family would reach with a perfect model, from what a detector
-      can read: where it misses the physical-limit row's bounds, no model improvement can
-      close the gap with that stage.
+      directions from the noise-free signatures of the track's labelled training faults on the
+      detector's ``fault_seeds`` and their healthy twins (the track's fault sizes, plant and
+      noise, as the harness gives the detector), a fast and a slow EWMA scale projected on
+      them, an omnibus T². It is what a detector of that family would reach with a perfect
+      model, from what a detector can read: where it misses the physical-limit row's bounds, no
+      model improvement can close the gap with that stage.
     * ``OracleConfig(stage="cusum")`` and ``OracleConfig(stage="glr")``, the optimal-detector
       rows (:mod:`evaluation.tracks.optimal`): true inputs only, calibrated like the physical
       limit (validation seeds, :data:`REFERENCE_TARGET`).
@@ -343,12 +345,17 @@ class PhysicalLimit:
             ).fit(healthy)
             return self
         if self.config.stage == OracleStage.DIRECTIONAL:
-            self.stage_ = _PerfectModelStage(
+            stage = _PerfectModelStage(
                 self._reference,
                 self.config.channels,
                 false_alarm_target=self.config.false_alarm_target,
                 ewma_lambda=self.config.ewma_lambda,
-            ).fit(healthy)
+            )
+            # the training faults a detector gets, on its fault_seeds, and their healthy twins
+            faults = self.data.train_fault_episodes(stage.directions.seeds)
+            seeds = sorted({e.seed for e in faults if e.seed is not None})
+            twins = self.data.simulate(seeds, FaultSpec())
+            self.stage_ = stage.fit(healthy, [*(le.episode for le in twins), *faults])
             return self
         self.stage_ = self._t2_stage().fit([self._residual(ep) for ep in healthy])
         return self
@@ -403,7 +410,6 @@ class _PerfectModelStage:
         self.directions = FaultDirections(
             glr["fault_scenarios"], glr["fault_seeds"], glr["direction_window"]
         )
-        self.faults = self.directions.faults
         stage_params = {k: glr[k] for k in DirectionalStage.DEFAULTS}
         stage_params.update(false_alarm_target=false_alarm_target, ewma_lambda=ewma_lambda)
         self.stage = DirectionalStage(**stage_params)
@@ -415,21 +421,26 @@ class _PerfectModelStage:
     def _centre_of(self, episode: Episode) -> np.ndarray:
         return self.reference_of(episode)[: episode.y.shape[0]][:, self.out_idx_]
 
-    def fit(self, episodes: Sequence[Episode]) -> _PerfectModelStage:
+    def fit(self, episodes: Sequence[Episode], training: Sequence[Episode]) -> _PerfectModelStage:
+        """Calibrate on the healthy ``episodes``; the fault directions from the labelled faults
+        of ``training`` and their healthy twins there (the track's training episodes)."""
         channels = episodes[0].channels
         self.out_idx_ = np.array([channels.index(c) for c in self.monitored])
         w = self.steady_window
         rem = [(ep.y[:, self.out_idx_] - self._centre_of(ep))[w:] for ep in episodes]
         self.v_residual_ = np.maximum(np.sqrt(np.mean(np.concatenate(rem) ** 2, axis=0)), 1e-9)
-        self.directions_ = self.directions.learn(channels, len(self.out_idx_), self._signature)
+        pairs = self.directions.pairs(training)
+        n = len(self.out_idx_)
+        self.directions_, self.faults = self.directions.learn(pairs, n, self._signature)
         self.stage.fit([r / self.v_residual_ for r in rem], self.directions_)
         self.signal_names_ = self.stage.signal_names(self.faults)
         return self
 
-    def _signature(self, faulty: Any, healthy: Any, b: int, end: int) -> np.ndarray:
+    def _signature(self, faulty: Episode, healthy: Episode, end: int) -> np.ndarray:
         """The training fault's noise-free signature: the faulty plant's clean output minus its
         healthy twin's, normalised (what a perfect model's residual difference is)."""
-        d = np.asarray(faulty.y_clean[b][:end], dtype=np.float64) - healthy.y_clean[b][:end]
+        assert faulty.y_clean is not None and healthy.y_clean is not None  # simulated
+        d = faulty.y_clean[:end] - healthy.y_clean[:end]
         return d[:, self.out_idx_] / self.v_residual_
 
     def detect(self, episode: Episode) -> Detection:

@@ -48,16 +48,17 @@ from fcc_common.validation import Boolean, Integer, Options, Real, check, invali
 from fcc_env.plant import PlantConfig
 from fcc_env.scenarios import (
     DEFAULT_N_SAMPLES,
-    FAULTS,
     MAX_FAULT_MAGNITUDE,
+    NOMINAL,
+    PAPER_FAULTS,
     FaultProfile,
     FaultSpec,
-    Scenario,
+    fault_definition,
+    fault_names,
 )
 from fcc_env.uncertainty import PlantUncertainty
 
 __all__ = [
-    "FAULT_NAMES",
     "MIN_HEALTHY",
     "RAMP_LENGTHS",
     "RAMP_MARGIN",
@@ -82,8 +83,6 @@ RAMP_LENGTHS: tuple[int, ...] = (500, 1000, 1500, 2000)
 RAMP_MARGIN = 200
 #: Bumped when the meaning of a track's fields changes (part of :meth:`Track.to_json`).
 TRACKS_VERSION = 1
-#: The fault scenarios a track can hold.
-FAULT_NAMES: tuple[str, ...] = tuple(s.value for s in FAULTS)
 #: The healthy-episode count of the published tracks. A small r_fd needs many episodes: an
 #: episode's alarms come in streaks, so the per-episode rates are heavy-tailed. On 400 healthy
 #: validation episodes of ``lrgf-glr`` (realised rate 0.0054), the upper end of the 95 % interval
@@ -111,12 +110,15 @@ class Track:
     Attributes:
         name: lowercase identifier (letters, digits, ``-``, ``_``).
         description: what the track tests and why (feeds the documentation's track catalogue).
-        faults: fault scenarios of the track, from ``f1``–``f4``.
+        faults: fault scenarios of the track, registered faults (:func:`fcc_env.fault_names`,
+            read when the track is built); default the paper's f1–f4
+            (:data:`fcc_env.PAPER_FAULTS`).
         magnitudes: per fault, the distribution of the magnitude as an absolute relative change
-            (0.1 = 10 %); ``None`` takes the paper's magnitudes (:data:`fcc_env.scenarios.FAULTS`).
+            (0.1 = 10 %); ``None`` takes each fault's default magnitude (the paper's for f1–f4,
+            :data:`fcc_env.FAULTS`).
             Stored as sorted ``(fault, distribution)`` pairs (hashable); read with
             :meth:`magnitude`.
-        onset: onset sample distribution; ``None`` takes each fault's paper onset.
+        onset: onset sample distribution; ``None`` takes each fault's default onset.
         profiles: the profiles an episode is drawn among (one: fixed).
         ramp: ramp-length distribution [samples] of incipient faults (:class:`Fixed` or
             :class:`Choice`); ``None`` means :data:`RAMP_LENGTHS` when a profile is incipient.
@@ -143,7 +145,7 @@ class Track:
 
     name: str
     description: str
-    faults: tuple[str, ...] = FAULT_NAMES
+    faults: tuple[str, ...] = PAPER_FAULTS
     magnitudes: Mapping[str, Distribution] | tuple[tuple[str, Distribution], ...] | None = None
     onset: Distribution | None = None
     profiles: tuple[FaultProfile, ...] = (FaultProfile.ABRUPT,)
@@ -168,12 +170,12 @@ class Track:
             raise invalid("name", self.name, "a lowercase name of letters, digits, '-' or '_'")
         if not isinstance(self.description, str) or not self.description.strip():
             raise invalid("description", self.description, "a non-empty string")
-        faults = self.faults
+        faults, registered = self.faults, fault_names()
         if isinstance(faults, str) or not isinstance(faults, tuple | list) or not faults:
-            raise invalid("faults", faults, f"a non-empty tuple of {list(FAULT_NAMES)}")
-        faults = tuple(str(check("faults", f, Options(FAULT_NAMES))) for f in faults)
+            raise invalid("faults", faults, f"a non-empty tuple of {list(registered)}")
+        faults = tuple(str(check("faults", f, Options(registered))) for f in faults)
         if len(set(faults)) != len(faults):
-            raise invalid("faults", faults, f"distinct faults of {list(FAULT_NAMES)}")
+            raise invalid("faults", faults, f"distinct faults of {list(registered)}")
         set_(self, "faults", faults)
         for int_field, low in [
             ("n_samples", 2 * RAMP_MARGIN),
@@ -249,7 +251,7 @@ class Track:
     def _latest_onset(self) -> int:
         if self.onset is not None:
             return math.floor(self.onset.high)
-        return max(FAULTS[Scenario(f)].default_onset for f in self.faults)
+        return max(fault_definition(f).default_onset for f in self.faults)
 
     # ---- seeds ---------------------------------------------------------------------------------
     @property
@@ -327,14 +329,14 @@ class Track:
         Deterministic in (track name, scenario, seed) and independent of call order. ``nominal``
         gives the healthy spec.
         """
-        scenario = str(check("scenario", scenario, Options([Scenario.NOMINAL.value, *self.faults])))
+        scenario = str(check("scenario", scenario, Options([NOMINAL, *self.faults])))
         seed = check("seed", seed, Integer(0))
-        if scenario == Scenario.NOMINAL.value:
+        if scenario == NOMINAL:
             return FaultSpec(scenario=scenario)
         g_mag, g_onset, g_profile, g_ramp = self._streams(seed, scenario, 4)
         magnitude = self.magnitude(scenario).sample(g_mag)
         onset = (
-            FAULTS[Scenario(scenario)].default_onset
+            fault_definition(scenario).default_onset
             if self.onset is None
             else self.onset.sample_int(g_onset)
         )
@@ -366,7 +368,7 @@ class Track:
         ``test_seed_start``) and each cell names the fault drawn for its seed.
         """
         s0 = self.test_seed_start
-        cells = [(Scenario.NOMINAL.value, s0 + i) for i in range(self.n_healthy)]
+        cells = [(NOMINAL, s0 + i) for i in range(self.n_healthy)]
         if self.draw_fault:
             seeds = range(s0, s0 + self.n_faulty_total)
             return cells + [(self.drawn_fault(s), s) for s in seeds]
@@ -413,7 +415,7 @@ def _checked_magnitudes(
 ) -> tuple[tuple[str, Distribution], ...]:
     """``magnitudes`` of a track as sorted ``(fault, distribution)`` pairs, one per fault."""
     if given is None:
-        given = {f: Fixed(FAULTS[Scenario(f)].default_magnitude) for f in faults}
+        given = {f: Fixed(fault_definition(f).default_magnitude) for f in faults}
     if isinstance(given, tuple):
         given = dict(given)
     if not isinstance(given, Mapping):

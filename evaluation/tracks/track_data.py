@@ -113,17 +113,20 @@ class TrackData:
         loaded = self.simulate(list(self.track.train_seeds), FaultSpec())
         return [le.episode for le in loaded if le.episode.n_samples >= 2]
 
-    def train_fault_episodes(self) -> list[Episode]:
-        """Labelled faulty training episodes, for diagnosers that isolate (``isolates``).
+    def train_fault_episodes(self, seeds: Sequence[int] | None = None) -> list[Episode]:
+        """Labelled faulty training episodes, for diagnosers that isolate (``isolates``) or
+        learn from faults (``learns_from_faults``).
 
-        Every fault of the track on every training seed, its size, onset and profile drawn from
-        the track's distributions with that training seed (:meth:`Track.fault_spec`): the same
-        seeds as the healthy training episodes, never a test or validation seed. An episode that
-        ended before its onset has no faulty sample and is dropped.
+        Every fault of the track on every training fault seed (:attr:`Track.train_fault_seeds`;
+        ``seeds``: only those of them, in that order), its size, onset and profile drawn from
+        the track's distributions with that training seed (:meth:`Track.fault_spec`), on the
+        track's plant and noise: training seeds, never a test or validation seed. An episode
+        that ended before its onset has no faulty sample and is dropped.
         """
+        own = self.track.train_fault_seeds
         out = []
         for fault in self.track.faults:
-            for seed in self.track.train_fault_seeds:
+            for seed in own if seeds is None else [s for s in seeds if s in own]:
                 ep = self.simulate([seed], self.track.fault_spec(fault, seed))[0].episode
                 if ep.fault_onset is not None and ep.n_samples - ep.fault_onset >= 2:
                     out.append(ep)

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from scipy import signal, stats
-from synthetic import inject_step_fault, make_episode
+from synthetic import inject_step_fault, make_episode, with_fault_twins
 
 import diagnosers
 from diagnosers.bank.relation_bank import RelationBank
@@ -111,7 +111,13 @@ def test_normal_tail_limit_normal_and_heavy_tail() -> None:
 
 
 # ---- lrgf-glr ------------------------------------------------------------------------------------
-FAST = {**LRGFGLR.fast_params(), "fault_scenarios": ["f3"]}
+FAST = {**LRGFGLR.fast_params(), "fault_scenarios": ["f3"], "fault_seeds": None}
+
+
+@pytest.fixture(scope="module")
+def train(train) -> list[diagnosers.Episode]:
+    """The healthy training episodes and their f3-labelled noise twins (the direction's data)."""
+    return with_fault_twins(train)
 
 
 def test_cross_fit_calibrates_on_out_of_fold_residuals(train, monkeypatch) -> None:
@@ -185,14 +191,52 @@ def test_statistics_stream_equals_batch_and_roundtrip(train, statistic, tmp_path
     np.testing.assert_array_equal(again.alarm, batch.alarm)
 
 
-def test_directions_are_unit_vectors_from_training_seeds_only(train) -> None:
+def test_directions_are_unit_vectors_of_the_labelled_faults(train) -> None:
     det = LRGFGLR(**FAST).fit(train)
     assert det.directions_.shape == (1, 3)  # f3 over the three relations
     np.testing.assert_allclose(np.linalg.norm(det.directions_, axis=1), 1.0)
-    with pytest.raises(ValueError, match="training seeds"):
-        LRGFGLR(fault_seeds=[5000]).fit(train)
-    with pytest.raises(ValueError, match="fault_scenarios"):
+    assert det.direction_faults_ == ("f3",) and det.signal_names_[1] == "directional[f3]"
+    # the signature is the faulty episode's normalised error minus its noise twin's
+    f3 = [e for e in train if e.fault_onset is not None]
+    twin = {e.seed: e for e in train if e.fault_onset is None}
+    d = [
+        (det.normalised(e.y[:900]) - det.normalised(twin[e.seed].y[:900]))[600:].mean(axis=0)
+        for e in f3
+    ]
+    mean = np.mean(d, axis=0)
+    np.testing.assert_allclose(det.directions_[0], mean / np.linalg.norm(mean), rtol=1e-12)
+    # refused before anything trains (default, slow hyperparameters)
+    with pytest.raises(ValueError, match=r"fault_seeds=\[5000\]"):
+        LRGFGLR(fault_scenarios=["f3"], fault_seeds=[5000]).fit(train)
+    with pytest.raises(ValueError, match="fault_scenarios names 'f9'"):
         LRGFGLR(fault_scenarios=["f9"]).fit(train)
+    with pytest.raises(ValueError, match="no healthy episode of that seed"):
+        LRGFGLR(fault_seeds=None).fit(train[1:])  # seed 1's twin left out
+
+
+@pytest.mark.parametrize("labelled", [False, True])
+def test_without_usable_faults_no_directions_and_a_warning(train, caplog, labelled) -> None:
+    # none passed, or (every fault passed asked for) none on fault_seeds: the T² alone
+    given = train if labelled else [e for e in train if e.fault_onset is None]
+    params = {**FAST, "fault_scenarios": None, "fault_seeds": [1000], "n_folds": 2}
+    with caplog.at_level("WARNING", logger="diagnosers.lrgf.fault_directions"):
+        det = LRGFGLR(**params).fit(given)
+    said = "is on fault_seeds=[1000]" if labelled else "no labelled faulty training episode"
+    assert said in caplog.text
+    assert det.directions_.shape == (0, 3) and det.signal_names_ == ("T2[ewma]",)
+
+
+def test_direction_names_are_saved_with_the_model(train, tmp_path) -> None:
+    faults = with_fault_twins(
+        [e for e in train if e.fault_onset is None], "g7", steps={"T_rg2": 2.0}
+    )
+    det = LRGFGLR(**{**FAST, "fault_scenarios": None, "n_folds": 2}).fit(faults)
+    det.save(tmp_path / "m")
+    loaded = diagnosers.Diagnoser.load(tmp_path / "m")
+    assert loaded.direction_faults_ == ("g7",) and loaded.signal_names_ == det.signal_names_
+    # a model saved before the names were saved learned the faults its parameters named
+    (tmp_path / "m" / "fault_directions.json").unlink()
+    assert diagnosers.Diagnoser.load(tmp_path / "m").signal_names_[1] == "directional[f1]"
 
 
 # ---- the held baseline ---------------------------------------------------------------------------
@@ -216,7 +260,7 @@ def test_baseline_stream_equals_batch_and_roundtrip(baseline_det, statistic, tmp
     det = baseline_det
     if statistic != det.statistic:
         det = LRGFGLR(**{**det.get_params(), "statistic": statistic})
-        det.fit([make_episode(1500, seed=s) for s in (1, 2, 3)])
+        det.fit(with_fault_twins([make_episode(1500, seed=s) for s in (1, 2, 3)]))
     ep = inject_step_fault(make_episode(900, seed=9), onset=500, magnitude=3.0)
     batch = _stream_equals_batch(det, ep)
     det.save(tmp_path / "m")
@@ -239,7 +283,7 @@ def test_baseline_absorbs_an_offset_present_from_the_start(baseline_det) -> None
     w = baseline_det.steady_window + baseline_det.baseline_settle
     with_baseline = baseline_det.detect(ep).alarm[w:]
     plain = LRGFGLR(**{**baseline_det.get_params(), "baseline_lambda": 0.0})
-    plain.fit([make_episode(1500, seed=s) for s in (1, 2, 3)])
+    plain.fit(with_fault_twins([make_episode(1500, seed=s) for s in (1, 2, 3)]))
     without = plain.detect(ep).alarm[w:]
     assert without.mean() > 0.9
     assert with_baseline.mean() < 0.05

@@ -4,19 +4,26 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from synthetic import make_episode
+from synthetic import make_episode, with_fault_twins
 
 import diagnosers
 from diagnosers.lrgf.lrgf_glr import LRGFGLR
 from diagnosers.lrgf.lrgf_presets import LRGFGLRAdaptive
 from diagnosers.stages.baseline import HeldBaseline
 
-FAST = {**LRGFGLR.fast_params(), "fault_scenarios": ["f3"], "baseline_settle": 50}
+FAST = {
+    **LRGFGLR.fast_params(),
+    "fault_scenarios": ["f3"],
+    "fault_seeds": None,
+    "baseline_settle": 50,
+}
 
 
 @pytest.fixture(scope="module")
 def adaptive() -> LRGFGLRAdaptive:
-    return LRGFGLRAdaptive(**FAST).fit([make_episode(1500, seed=s) for s in (1, 2, 3)])
+    return LRGFGLRAdaptive(**FAST).fit(
+        with_fault_twins([make_episode(1500, seed=s) for s in (1, 2, 3)])
+    )
 
 
 def test_variant_is_lrgf_glr_with_the_baseline_target_and_all_samples_only() -> None:
@@ -67,7 +74,7 @@ def test_absorbs_a_plant_offset_and_holds_on_a_later_fault(adaptive) -> None:
     w = det.steady_window + det.baseline_settle
     assert det.detect(ep).alarm[w:].mean() < 0.05
     plain = LRGFGLR(**{**det.get_params(), "baseline_lambda": 0.0, "baseline_filters": None})
-    plain.fit([make_episode(1500, seed=s) for s in (1, 2, 3)])
+    plain.fit(with_fault_twins([make_episode(1500, seed=s) for s in (1, 2, 3)]))
     assert plain.detect(ep).alarm[w:].mean() > 0.9
     faulty = _offset(ep, col, 8.0 * scale, onset=800)
     alarm = det.detect(faulty).alarm
@@ -79,7 +86,7 @@ def test_the_running_mean_variant_round_trips_and_a_bad_state_is_refused(adaptiv
     # baseline_filters=None (the running mean) is saved as such, not replaced by the preset's
     # default (the regression) on loading
     plain = LRGFGLRAdaptive(**{**adaptive.get_params(), "baseline_filters": None})
-    plain.fit([make_episode(1500, seed=s) for s in (1, 2, 3)])
+    plain.fit(with_fault_twins([make_episode(1500, seed=s) for s in (1, 2, 3)]))
     plain.save(tmp_path / "m")
     again = diagnosers.Diagnoser.load(tmp_path / "m")
     assert again.baseline_filters is None

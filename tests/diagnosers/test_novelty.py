@@ -7,7 +7,7 @@ import copy
 
 import numpy as np
 import pytest
-from synthetic import make_episode
+from synthetic import make_episode, with_fault_twins
 
 from diagnosers.bank.relations import BANK_RELATIONS, DILUTE_RELATIONS
 from diagnosers.lrgf.lrgf_glr import LRGFGLR
@@ -46,12 +46,12 @@ def test_bad_ranges_are_refused() -> None:
         PredictionRange.from_array(np.zeros((2, 2)))
 
 
-FAST = {**LRGFGLR.fast_params(), "fault_scenarios": ["f3"], "n_folds": 2}
+FAST = {**LRGFGLR.fast_params(), "fault_scenarios": ["f3"], "fault_seeds": None, "n_folds": 2}
 
 
 @pytest.fixture(scope="module")
 def det() -> LRGFGLR:
-    return LRGFGLR(**FAST).fit([make_episode(1500, seed=s) for s in (1, 2, 3)])
+    return LRGFGLR(**FAST).fit(with_fault_twins([make_episode(1500, seed=s) for s in (1, 2, 3)]))
 
 
 def _beyond_training(det: LRGFGLR):
@@ -148,7 +148,7 @@ def test_out_of_fold_novelty_is_measured_against_the_fold_banks_own_range(monkey
         return out
 
     monkeypatch.setattr(NoveltyScale, "distances", spy)
-    det = LRGFGLR(**{**FAST, "n_folds": 3}).fit(train)
+    det = LRGFGLR(**{**FAST, "n_folds": 3}).fit(with_fault_twins(train))
     assert [(t, c) for t, c, _ in seen] == [([1, 2], [0]), ([0, 2], [1]), ([0, 1], [2])]
     # the fold banks' ranges differ from each other and from the final bank's
     finals = det.novelty_.range_.to_array()

@@ -10,7 +10,7 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import fcc_env
-from fcc_env.scenarios import SCENARIOS
+from fcc_env.scenarios import scenario_names
 
 ZERO = np.zeros(2, dtype=np.float32)
 
@@ -28,7 +28,7 @@ def rollout(env, seed, n, options=None, action=ZERO):
     return np.array(ys), infos
 
 
-@pytest.mark.parametrize("scenario", [*SCENARIOS, "random"])
+@pytest.mark.parametrize("scenario", [*scenario_names(), "random"])
 def test_check_env_without_warnings(scenario):
     env = gym.make("FCC-v0", scenario=scenario, fault_time=5, render_mode="rgb_array")
     with warnings.catch_warnings(record=True) as caught:

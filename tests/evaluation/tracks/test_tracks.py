@@ -11,7 +11,6 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from evaluation.tracks import (
-    FAULT_NAMES,
     MIN_HEALTHY,
     RAMP_LENGTHS,
     RAMP_MARGIN,
@@ -24,10 +23,10 @@ from evaluation.tracks import (
     stable_hash,
     tracks_markdown,
 )
-from fcc_env.scenarios import FAULTS, FaultProfile, FaultSpec, Scenario
+from fcc_env.scenarios import FAULTS, PAPER_FAULTS, FaultProfile, FaultSpec
 
-PAPER_MAG = {f: FAULTS[Scenario(f)].default_magnitude for f in FAULT_NAMES}
-PAPER_ONSET = {f: FAULTS[Scenario(f)].default_onset for f in FAULT_NAMES}
+PAPER_MAG = {f: FAULTS[f].default_magnitude for f in PAPER_FAULTS}
+PAPER_ONSET = {f: FAULTS[f].default_onset for f in PAPER_FAULTS}
 
 
 def faulty_cells(track: Track) -> list[tuple[str, int]]:
@@ -50,7 +49,7 @@ def test_paper_track_is_todays_leaderboard() -> None:
     t = TRACKS["paper"]
     cells = t.test_cells()
     assert cells[:50] == [("nominal", s) for s in range(50)]
-    for f in FAULT_NAMES:
+    for f in PAPER_FAULTS:
         assert [s for sc, s in cells if sc == f] == list(range(20))
         spec = t.fault_spec(f, 7)
         assert spec == FaultSpec(
@@ -60,16 +59,16 @@ def test_paper_track_is_todays_leaderboard() -> None:
 
 def test_small_track_magnitudes() -> None:
     t = TRACKS["small"]
-    mags = {f: t.fault_spec(f, 0).magnitude for f in FAULT_NAMES}
+    mags = {f: t.fault_spec(f, 0).magnitude for f in PAPER_FAULTS}
     assert mags == {"f1": 0.005, "f2": 0.03, "f3": 0.012, "f4": 0.01}
-    assert all(t.fault_spec(f, 0).onset == PAPER_ONSET[f] for f in FAULT_NAMES)
+    assert all(t.fault_spec(f, 0).onset == PAPER_ONSET[f] for f in PAPER_FAULTS)
 
 
 def test_every_cell_resolves_in_the_env_horizon() -> None:
     for t in TRACKS.values():
         for sc, seed in t.test_cells():
             cfg = t.fault_spec(sc, seed).resolve(horizon=t.n_samples)
-            assert cfg.scenario.value == sc
+            assert cfg.scenario == sc
 
 
 # ---- determinism -------------------------------------------------------------------------------
@@ -128,7 +127,7 @@ def test_incipient_ramps_fit_in_the_horizon() -> None:
 
 @settings(max_examples=60, deadline=None)
 @given(
-    st.sampled_from(["incipient", "random"]), st.sampled_from(FAULT_NAMES), st.integers(0, 10**6)
+    st.sampled_from(["incipient", "random"]), st.sampled_from(PAPER_FAULTS), st.integers(0, 10**6)
 )
 def test_any_seed_gives_a_ramp_that_completes(name: str, fault: str, seed: int) -> None:
     t = TRACKS[name]
@@ -141,14 +140,14 @@ def test_any_seed_gives_a_ramp_that_completes(name: str, fault: str, seed: int) 
 def test_random_track_cells_name_true_faults_and_draw_all_fields() -> None:
     t = TRACKS["random"]
     cells = faulty_cells(t)
-    assert len(cells) == t.n_faulty * len(FAULT_NAMES)
+    assert len(cells) == t.n_faulty * len(PAPER_FAULTS)
     assert [s for _, s in cells] == list(range(len(cells)))
     seen_faults, seen_profiles, onsets, scales = set(), set(), set(), set()
     for sc, s in cells:
         assert sc == t.drawn_fault(s)
         spec = t.fault_spec(sc, s)
         assert spec.scenario == sc
-        assert spec.resolve(horizon=t.n_samples).scenario.value == sc
+        assert spec.resolve(horizon=t.n_samples).scenario == sc
         scale = spec.magnitude / PAPER_MAG[sc]
         assert 0.3 - 1e-12 <= scale <= 1.3 + 1e-12
         assert 1000 <= spec.onset <= 3000
@@ -156,7 +155,7 @@ def test_random_track_cells_name_true_faults_and_draw_all_fields() -> None:
         seen_profiles.add(spec.profile)
         onsets.add(spec.onset)
         scales.add(round(scale, 6))
-    assert seen_faults == set(FAULT_NAMES)
+    assert seen_faults == set(PAPER_FAULTS)
     assert seen_profiles == set(FaultProfile)
     assert len(onsets) > 40 and len(scales) > 40
 
@@ -314,3 +313,13 @@ def test_tracks_markdown_lists_every_track() -> None:
     text = tracks_markdown()
     for t in TRACKS.values():
         assert f"| `{t.name}` |" in text and t.description in text
+
+
+def test_lrgf_glr_default_fault_seeds_are_the_tracks_first_training_seeds() -> None:
+    # diagnosers cannot import the tracks: the default is written there, and pinned here
+    from diagnosers.lrgf.fault_directions import DEFAULT_FAULT_SEEDS
+    from evaluation.tracks import TRAIN_SEED_START
+
+    assert DEFAULT_FAULT_SEEDS == tuple(range(TRAIN_SEED_START, TRAIN_SEED_START + 3))
+    for track in TRACKS.values():  # each has its healthy twin among the training episodes
+        assert set(DEFAULT_FAULT_SEEDS) <= set(track.train_seeds) & set(track.train_fault_seeds)
