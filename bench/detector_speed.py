@@ -185,9 +185,13 @@ def _report(args: argparse.Namespace) -> int:
         net = paper_lrgf(seed=0, initial_state="steady", steady_window=WARM_UP, **kw).double()
         t0 = time.perf_counter()
         fit_lrgf(
-            net, [e.y[:, U_IDX] for e in six], [e.y[:, Y_IDX] for e in six], max_epochs=3000,
-            patience=600, lr=lr,
-        )  # fmt: skip
+            net,
+            [e.y[:, U_IDX] for e in six],
+            [e.y[:, Y_IDX] for e in six],
+            max_epochs=3000,
+            patience=600,
+            lr=lr,
+        )
         elapsed = time.perf_counter() - t0
         fit, rmse = _quality(lambda ep, net=net: net.predict(ep.y[:, U_IDX])[:, 0], held_out)
         print(

@@ -189,9 +189,15 @@ def simulate_closed_per_sample(
         if schedule.generic:
             p = apply_multipliers(p_base, pidx, PM[:, k])
             y, aux, x_next = generic_sample(
-                x, u, p, k, schedule, config.sample_time_s, config.rk4_substeps,
+                x,
+                u,
+                p,
+                k,
+                schedule,
+                config.sample_time_s,
+                config.rk4_substeps,
                 advance=k + 1 < T,
-            )  # fmt: skip
+            )
         else:
             y = np.stack(
                 [measure_kernel(x[b], u[b], p_base[b], pidx[b], PM[b, k]) for b in range(B)]
@@ -206,9 +212,13 @@ def simulate_closed_per_sample(
         Y[:, k], A[:, k], X[:, k] = y, aux, x
         Y[:, k] = schedule.measure(k, Y[:, k]) if schedule.measures else Y[:, k]
         noisy_batch_kernel(
-            Y[:, k : k + 1], Z[:, k : k + 1], NOISE_STD_ABS, NOISE_STD_REL, config.noise_scale,
+            Y[:, k : k + 1],
+            Z[:, k : k + 1],
+            NOISE_STD_ABS,
+            NOISE_STD_REL,
+            config.noise_scale,
             OBS[:, k : k + 1],
-        )  # fmt: skip
+        )
         for b in range(B):
             saturated = controller_update(C[b], SP[b, k], OBS[b, k], gains)
             if k + 1 < T:  # the flag of the output in force over the next sample

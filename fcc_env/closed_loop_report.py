@@ -38,12 +38,24 @@ from fcc_env.scenarios import FaultSpec, fault_names
 from fcc_env.simulation import BatchResult, check_memory, simulate_episodes
 
 __all__ = [
-    "SIGNATURE_CHANNELS", "FaultDeltas", "Report", "ReportConfig", "Signature", "build_report",
-    "count_terminations", "fault_deltas", "masking_table", "report_faults", "signature_rows",
+    "SIGNATURE_CHANNELS",
+    "FaultDeltas",
+    "Report",
+    "ReportConfig",
+    "Signature",
+    "build_report",
+    "count_terminations",
+    "fault_deltas",
+    "masking_table",
+    "report_faults",
+    "signature_rows",
     "signatures_csv",
-    "signatures_note", "signatures_table", "step_responses", "trace_signature",
+    "signatures_note",
+    "signatures_table",
+    "step_responses",
+    "trace_signature",
     "write_report",
-]  # fmt: skip
+]
 
 LOOPS: tuple[str, ...] = ("open", "closed")
 #: The channels whose signature is reported: the temperatures that move, the air, the valve.
@@ -158,9 +170,7 @@ def fault_deltas(fault: str, loop: str, config: ReportConfig) -> FaultDeltas:
     ok = (healthy.terminated_at < 0) & (faulty.terminated_at < 0)
     if not ok.any():
         raise RuntimeError(f"every {loop}-loop {fault} pair left the envelope: no signature")
-    deltas = {
-        c: (_channel(faulty, c) - _channel(healthy, c))[ok] for c in SIGNATURE_CHANNELS
-    }  # fmt: skip
+    deltas = {c: (_channel(faulty, c) - _channel(healthy, c))[ok] for c in SIGNATURE_CHANNELS}
     return FaultDeltas(fault, loop, config.onset, healthy.sample_time_s, deltas, int((~ok).sum()))
 
 
@@ -185,10 +195,15 @@ def signature_rows(runs: list[FaultDeltas]) -> list[SignatureRow]:
             finals = d[:, -min(FINAL_WINDOW, d.shape[1] - r.onset) :].mean(axis=1)
             rows.append(
                 SignatureRow(
-                    r.fault, r.loop, c, trace_signature(r.mean(c), r.onset, thr),
-                    float(finals.std()), thr, d.shape[0],
+                    r.fault,
+                    r.loop,
+                    c,
+                    trace_signature(r.mean(c), r.onset, thr),
+                    float(finals.std()),
+                    thr,
+                    d.shape[0],
                 )
-            )  # fmt: skip
+            )
     return rows
 
 
@@ -303,9 +318,14 @@ def step_responses(config: ReportConfig) -> list[Response]:
     for title, move, step in RESPONSE_CASES:
         effects = [] if step is None else [InputStep(step[0], step[1], k0 * ts)]
         env = gym.make(
-            CLOSED_LOOP_ENV_ID, excitation=False, noise_scale=0.0, sample_time_s=ts,
-            regulatory={"program": None}, max_episode_steps=n, plant_effects=effects,
-        )  # fmt: skip
+            CLOSED_LOOP_ENV_ID,
+            excitation=False,
+            noise_scale=0.0,
+            sample_time_s=ts,
+            regulatory={"program": None},
+            max_episode_steps=n,
+            plant_effects=effects,
+        )
         _, info = env.reset(seed=0)
         ys = [info["y_clean"]]
         action = np.asarray(move) / SETPOINT_ACTION_SCALE

@@ -217,10 +217,12 @@ def reward_term_arrays(
     too_hot = _excess(x[_T_RG2] - e.regenerator_max_C)
     too_cold = _excess(e.regenerator_min_C - x[_T_RG1])
     terms = {
-        "conversion": u[_F_FEED] * np.asarray(info["X"], dtype=np.float64) * dt_s / 1000.0
+        "conversion": u[_F_FEED]
+        * np.asarray(info["X"], dtype=np.float64)
+        * dt_s
+        / 1000.0
         * e.conversion_usd_per_t,
-        "coke": -np.asarray(info["coke_make"], dtype=np.float64) * dt_s / 1000.0
-        * e.coke_usd_per_t,
+        "coke": -np.asarray(info["coke_make"], dtype=np.float64) * dt_s / 1000.0 * e.coke_usd_per_t,
         "air": -u[_R_AR] * hours * e.air_usd_per_t,
         "afterburn": -_excess(afterburn_delta_C(x) - AFTERBURN_WARNING_C)
         * hours
@@ -229,7 +231,7 @@ def reward_term_arrays(
         "well": -_excess(e.well_min_t - x[_W_SP] / 1000.0) * hours * e.well_usd_per_t_h,
         "saturation": np.where(info["controller_saturated"], -hours * e.saturation_usd_per_h, 0.0),
         "trip": np.where(terminated, -e.trip_usd, 0.0),
-    }  # fmt: skip
+    }
     shape = np.broadcast_shapes(*(np.shape(v) for v in terms.values()))
     return {name: np.broadcast_to(v, shape).astype(np.float64) for name, v in terms.items()}
 

@@ -332,24 +332,40 @@ class EpisodeStream:
         cfg = self.config
         if self.schedule.generic:
             _, _, xn = generic_sample(
-                x[None], u[None], self._params(k), k, self.schedule, cfg.sample_time_s,
+                x[None],
+                u[None],
+                self._params(k),
+                k,
+                self.schedule,
+                cfg.sample_time_s,
                 cfg.rk4_substeps,
-            )  # fmt: skip
+            )
             return xn[0]
         x_next = x.copy()
         step_kernel(
-            x_next, u, self._p_base, self._pidx, self.multipliers(k),
-            cfg.sample_time_s / cfg.rk4_substeps, cfg.rk4_substeps,
-        )  # fmt: skip
+            x_next,
+            u,
+            self._p_base,
+            self._pidx,
+            self.multipliers(k),
+            cfg.sample_time_s / cfg.rk4_substeps,
+            cfg.rk4_substeps,
+        )
         return x_next
 
     def measure(self, x: np.ndarray, u: np.ndarray, k: int) -> np.ndarray:
         """Noise-free measurement of sample ``k`` (state, held input, plant effects)."""
         if self.schedule.generic:
             y, _, _ = generic_sample(
-                x[None], u[None], self._params(k), k, self.schedule, self.config.sample_time_s,
-                self.config.rk4_substeps, advance=False,
-            )  # fmt: skip
+                x[None],
+                u[None],
+                self._params(k),
+                k,
+                self.schedule,
+                self.config.sample_time_s,
+                self.config.rk4_substeps,
+                advance=False,
+            )
             y = y[0]
         else:
             y = measure_kernel(x, u, self._p_base, self._pidx, self.multipliers(k))

@@ -119,11 +119,18 @@ def scenarios_figure(
     for i, onset in enumerate(sorted(set(known.values()))):
         for ax in axes:
             ax.axvline(
-                onset * sample_time_s / 3600.0, ls="--", lw=0.8, color="k", alpha=0.5,
-                label="_" if i else "fault onset: " + ", ".join(
+                onset * sample_time_s / 3600.0,
+                ls="--",
+                lw=0.8,
+                color="k",
+                alpha=0.5,
+                label="_"
+                if i
+                else "fault onset: "
+                + ", ".join(
                     f"{name} {k * sample_time_s / 3600.0:.2f} h" for name, k in known.items()
                 ),
-            )  # fmt: skip
+            )
     for ax, c in zip(axes, channels, strict=True):
         ax.set_ylabel(f"{MEASUREMENTS[c].name} [{MEASUREMENTS[c].unit}]")
     axes[-1].set_xlabel("time [h]")

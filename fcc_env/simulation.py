@@ -254,26 +254,63 @@ def simulate_episodes(
         else:
             SAT = np.zeros((B, T), dtype=np.bool_)
             simulate_kernel(
-                x0, U, p_base, pidx, PM, config.sample_time_s / config.rk4_substeps,
-                config.rk4_substeps, Z, NOISE_STD_ABS, NOISE_STD_REL, config.noise_scale, Y,
-                obs, X, A, True, C, SP, gains, SAT,
-            )  # fmt: skip
+                x0,
+                U,
+                p_base,
+                pidx,
+                PM,
+                config.sample_time_s / config.rk4_substeps,
+                config.rk4_substeps,
+                Z,
+                NOISE_STD_ABS,
+                NOISE_STD_REL,
+                config.noise_scale,
+                Y,
+                obs,
+                X,
+                A,
+                True,
+                C,
+                SP,
+                gains,
+                SAT,
+            )
     elif schedule.generic:
         x = x0
         for kk in range(T):
             p = apply_multipliers(p_base, pidx, PM[:, kk])
             y, aux, x_next = generic_sample(
-                x, np.ascontiguousarray(U[:, kk]), p, kk, schedule, config.sample_time_s,
-                config.rk4_substeps, advance=kk + 1 < T,
-            )  # fmt: skip
+                x,
+                np.ascontiguousarray(U[:, kk]),
+                p,
+                kk,
+                schedule,
+                config.sample_time_s,
+                config.rk4_substeps,
+                advance=kk + 1 < T,
+            )
             Y[:, kk], A[:, kk], X[:, kk] = y, aux, x
             x = x_next
     else:
         simulate_kernel(
-            x0, U, p_base, pidx, PM, config.sample_time_s / config.rk4_substeps,
-            config.rk4_substeps, Z, NOISE_STD_ABS, NOISE_STD_REL, config.noise_scale, Y, obs, X,
-            A, not schedule.measures, *open_loop_controller_args(B, T),
-        )  # fmt: skip
+            x0,
+            U,
+            p_base,
+            pidx,
+            PM,
+            config.sample_time_s / config.rk4_substeps,
+            config.rk4_substeps,
+            Z,
+            NOISE_STD_ABS,
+            NOISE_STD_REL,
+            config.noise_scale,
+            Y,
+            obs,
+            X,
+            A,
+            not schedule.measures,
+            *open_loop_controller_args(B, T),
+        )
     if config.regulatory is None and (schedule.generic or schedule.measures):
         for kk in range(T):
             Y[:, kk] = schedule.measure(kk, Y[:, kk])
@@ -395,11 +432,24 @@ def simulate_inputs(
     A = np.empty((B, T, N_AUX))
     dummy = np.empty((B, 1, N_MEASUREMENTS), dtype=np.float32)
     simulate_kernel(
-        X0.copy(), np.ascontiguousarray(U), np.tile(p.as_array(), (B, 1)), pidx, PM,
-        sample_time_s / rk4_substeps, rk4_substeps, np.empty((B, 1, N_MEASUREMENTS)),
-        NOISE_STD_ABS, NOISE_STD_REL, 0.0, Y, dummy, X, A, False,
+        X0.copy(),
+        np.ascontiguousarray(U),
+        np.tile(p.as_array(), (B, 1)),
+        pidx,
+        PM,
+        sample_time_s / rk4_substeps,
+        rk4_substeps,
+        np.empty((B, 1, N_MEASUREMENTS)),
+        NOISE_STD_ABS,
+        NOISE_STD_REL,
+        0.0,
+        Y,
+        dummy,
+        X,
+        A,
+        False,
         *open_loop_controller_args(B, T),
-    )  # fmt: skip
+    )
     if single:
         return InputSimulation(Y[0], X[0], A[0])
     return InputSimulation(Y, X, A)

@@ -255,21 +255,35 @@ class FCCVectorEnv(VectorEnv):
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         n, d = self.num_envs, self.single_observation_space.shape[0]
         self._e = Episodes(
-            np.zeros((n, N_STATES)), np.zeros((n, N_INPUTS)),
-            np.zeros((n, CONTROLLER_STATE_SIZE)), np.zeros((n, 2)),
-            np.zeros((n, d), np.float32), np.zeros((n, d)), np.zeros((n, N_AUX)),
-            np.zeros((n, 2)), np.zeros(n, np.int64), np.zeros(n, np.int8),
-            np.zeros(n, np.bool_), np.zeros(n, np.bool_), np.zeros(n, np.bool_),
-        )  # fmt: skip
+            np.zeros((n, N_STATES)),
+            np.zeros((n, N_INPUTS)),
+            np.zeros((n, CONTROLLER_STATE_SIZE)),
+            np.zeros((n, 2)),
+            np.zeros((n, d), np.float32),
+            np.zeros((n, d)),
+            np.zeros((n, N_AUX)),
+            np.zeros((n, 2)),
+            np.zeros(n, np.int64),
+            np.zeros(n, np.int8),
+            np.zeros(n, np.bool_),
+            np.zeros(n, np.bool_),
+            np.zeros(n, np.bool_),
+        )
         self._s = self._streams(n, 1)
         cfg = self.config
         gains = cfg.regulatory.gains(cfg.sample_time_s) if self.closed_loop else np.empty(0)
         self._plant = Plant(
-            cfg.params.as_array(), cfg.sample_time_s / cfg.rk4_substeps, cfg.rk4_substeps,
-            float(cfg.noise_scale), gains, ACTUATOR_BOUNDS, _SP_LIMITS,
-            self.single_observation_space.low, self.single_observation_space.high,
+            cfg.params.as_array(),
+            cfg.sample_time_s / cfg.rk4_substeps,
+            cfg.rk4_substeps,
+            float(cfg.noise_scale),
+            gains,
+            ACTUATOR_BOUNDS,
+            _SP_LIMITS,
+            self.single_observation_space.low,
+            self.single_observation_space.high,
             SETPOINT_ACTION_SCALE if self.closed_loop else ACTION_SCALE,
-        )  # fmt: skip
+        )
         self._x0 = cfg.initial_state()
         self._rngs: list[np.random.Generator | None] = [None] * n
         self._setups: list[EpisodeSetup | None] = [None] * n
@@ -284,10 +298,12 @@ class FCCVectorEnv(VectorEnv):
     @staticmethod
     def _streams(n: int, n_mult: int) -> Streams:
         return Streams(
-            np.zeros((n, RING, N_INPUTS)), np.zeros((n, RING, 2)),
-            np.zeros((n, RING, N_MEASUREMENTS)), np.ones((n, RING, n_mult)),
+            np.zeros((n, RING, N_INPUTS)),
+            np.zeros((n, RING, 2)),
+            np.zeros((n, RING, N_MEASUREMENTS)),
+            np.ones((n, RING, n_mult)),
             np.full((n, n_mult), -1, np.int64),
-        )  # fmt: skip
+        )
 
     # ---- Gymnasium API -------------------------------------------------------------------------
     def reset(
@@ -358,9 +374,11 @@ class FCCVectorEnv(VectorEnv):
         python_only = setup.schedule.measure_effects + setup.schedule.state_effects
         if python_only:
             raise invalid(
-                "plant_effects", python_only, "effects acting through parameters or inputs",
+                "plant_effects",
+                python_only,
+                "effects acting through parameters or inputs",
                 "measure/d_state effects need Python per sample: use vectorization_mode='sync'",
-            )  # fmt: skip
+            )
         if setup.schedule.fault_measure is not None:
             raise invalid(
                 "scenario",
@@ -412,10 +430,11 @@ class FCCVectorEnv(VectorEnv):
         if raw.dtype.kind not in "biuf" or raw.shape != shape:
             # the array's kind and shape, not its repr: a batch of 1024 rows names nothing
             raise invalid(
-                "actions", f"<{raw.dtype} array of shape {raw.shape}>",
+                "actions",
+                f"<{raw.dtype} array of shape {raw.shape}>",
                 f"real numbers of shape {shape}, one row [Δu_F, ΔR_ar] (closed loop: set-point "
                 "moves) per env, in [-1, 1]",
-            )  # fmt: skip
+            )
         a = raw.astype(np.float64)
         if not np.isfinite(a).all():
             bad = np.argwhere(~np.isfinite(a))[0]

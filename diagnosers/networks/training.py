@@ -122,10 +122,14 @@ def fit_lrgf(
     except ValueError:
         raise ValueError(f"method={method!r}; choose one of {[m.value for m in Method]}") from None
     check_params(
-        {"max_epochs": max_epochs, "patience": patience, "val_fraction": val_fraction,
-         "washout": washout},
+        {
+            "max_epochs": max_epochs,
+            "patience": patience,
+            "val_fraction": val_fraction,
+            "washout": washout,
+        },
         TRAINING_CONSTRAINTS,
-    )  # fmt: skip
+    )
     us, ys, uvs, yvs = training_pairs(u, y, u_val, y_val, model.n_inputs, model.n_outputs, "y")
     has_val = uvs is not None
     split = train_val_split(val_fraction, washout, has_val)
@@ -227,10 +231,16 @@ def fit_mem(
         the training record; ``mem`` holds the best parameters found.
     """
     check_params(
-        {"max_epochs": max_epochs, "patience": patience, "val_fraction": val_fraction,
-         "window": window, "val_every": val_every, "pretrain_epochs": pretrain_epochs},
+        {
+            "max_epochs": max_epochs,
+            "patience": patience,
+            "val_fraction": val_fraction,
+            "window": window,
+            "val_every": val_every,
+            "pretrain_epochs": pretrain_epochs,
+        },
         TRAINING_CONSTRAINTS,
-    )  # fmt: skip
+    )
     us, rs, uvs, rvs = training_pairs(u, r, u_val, r_val, mem.n_inputs, mem.n_outputs, "r")
     has_val = uvs is not None
     split = train_val_split(val_fraction, 0, has_val)

@@ -168,9 +168,14 @@ class ARXModel(MissingInputAdapter):
         return self.na + self.nb + max(self.candidate_delays, default=0)
 
     def _simulate_channel(
-        self, data: MeasuredData, target: str, coef: np.ndarray, extra: Sequence[MissingInput],
-        gains: np.ndarray, n: int,
-    ) -> np.ndarray:  # fmt: skip
+        self,
+        data: MeasuredData,
+        target: str,
+        coef: np.ndarray,
+        extra: Sequence[MissingInput],
+        gains: np.ndarray,
+        n: int,
+    ) -> np.ndarray:
         """Output-error simulation of one channel: (E, n)."""
         a = coef[: self.na]
         A = np.concatenate([[1.0], -a])
@@ -219,9 +224,14 @@ class ARXModel(MissingInputAdapter):
         return out
 
     def fit(
-        self, data: MeasuredData, effects: Sequence[Candidate], theta0: np.ndarray,
-        free: np.ndarray, n_train: int, sqrt_w: np.ndarray,
-    ) -> FitResult:  # fmt: skip
+        self,
+        data: MeasuredData,
+        effects: Sequence[Candidate],
+        theta0: np.ndarray,
+        free: np.ndarray,
+        n_train: int,
+        sqrt_w: np.ndarray,
+    ) -> FitResult:
         """Closed-form joint least squares of each affected channel with its extra inputs."""
         theta = np.asarray(theta0, float).copy()
         cov = np.zeros((theta.size, theta.size))

@@ -73,9 +73,14 @@ def ar1_inflation(res: np.ndarray) -> float:
 
 
 def weighted_residuals(
-    model: ModelAdapter, data: MeasuredData, effects: Sequence[Candidate], thetas: np.ndarray,
-    Y: np.ndarray, n: int, sqrt_w: np.ndarray,
-) -> np.ndarray:  # fmt: skip
+    model: ModelAdapter,
+    data: MeasuredData,
+    effects: Sequence[Candidate],
+    thetas: np.ndarray,
+    Y: np.ndarray,
+    n: int,
+    sqrt_w: np.ndarray,
+) -> np.ndarray:
     """Weighted simulation errors (B, E·n·C) of the B parameter rows ``thetas`` on ``n`` samples."""
     P = model.predict(data, effects, thetas, n)
     R = (Y[None, :, :n] - P) * sqrt_w

@@ -193,16 +193,27 @@ def discover(
             }
             for r in rows
         ]
-        rounds.append({"round": rnd, "p_threshold": thresh, "candidates": table,
-                       "accepted": sig[0]["id"] if sig else None})  # fmt: skip
+        rounds.append(
+            {
+                "round": rnd,
+                "p_threshold": thresh,
+                "candidates": table,
+                "accepted": sig[0]["id"] if sig else None,
+            }
+        )
         if not sig:
             break
         win = sig[0]
         k = win["k"]
         accepted.append(
-            _Accepted(win["cand"], win["fit"].theta[-k:], win["fit"].stderr[-k:], rnd,
-                      {x: win[x] for x in ("score", "rel_reduction", "p_value")})
-        )  # fmt: skip
+            _Accepted(
+                win["cand"],
+                win["fit"].theta[-k:],
+                win["fit"].stderr[-k:],
+                rnd,
+                {x: win[x] for x in ("score", "rel_reduction", "p_value")},
+            )
+        )
         if len(accepted) > 1:  # joint re-fit of everything accepted so far
             effs = [a.cand for a in accepted]
             th = np.concatenate([a.theta for a in accepted])
@@ -298,9 +309,16 @@ def discover(
 
 
 def _backward_elimination(
-    model: ModelAdapter, data: MeasuredData, accepted: list[_Accepted], Y: np.ndarray,
-    n_train: int, sqrt_w: np.ndarray, block_len: int, alpha: float, min_rel: float,
-) -> list[str]:  # fmt: skip
+    model: ModelAdapter,
+    data: MeasuredData,
+    accepted: list[_Accepted],
+    Y: np.ndarray,
+    n_train: int,
+    sqrt_w: np.ndarray,
+    block_len: int,
+    alpha: float,
+    min_rel: float,
+) -> list[str]:
     """Drop earlier effects made redundant by later ones (greedy forward selection's repair).
 
     For each accepted effect but the newest, the others are re-fitted jointly without it; if the
@@ -317,9 +335,16 @@ def _backward_elimination(
         rest = [x for x in accepted if x is not a]
         th = np.concatenate([x.theta for x in rest])
         fit = fit_effects(
-            model, data, [x.cand for x in rest], th, np.ones(th.size, bool), Y, n_train,
-            sqrt_w, grid=False,
-        )  # fmt: skip
+            model,
+            data,
+            [x.cand for x in rest],
+            th,
+            np.ones(th.size, bool),
+            Y,
+            n_train,
+            sqrt_w,
+            grid=False,
+        )
         e_without = Y - model.predict(data, [x.cand for x in rest], fit.theta[None], T)[0]
         e_with = Y - model.predict(data, full_e, full_th[None], T)[0]
         cmp = heldout_comparison(e_without[:, n_train:], e_with[:, n_train:], sqrt_w, block_len)

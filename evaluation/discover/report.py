@@ -127,9 +127,12 @@ class DiscoveryReport:
             "effects": [e.to_json() for e in self.effects],
         }
         for key in (
-            "rmse_before", "rmse_after", "rmse_train_before", "rmse_train_after",
+            "rmse_before",
+            "rmse_after",
+            "rmse_train_before",
+            "rmse_train_after",
             "noise_std_estimate",
-        ):  # fmt: skip
+        ):
             out[key] = dict(getattr(self, key))
         out["unexplained"] = self.unexplained
         out["unexplained_channels"] = list(self.unexplained_channels)
@@ -154,9 +157,13 @@ class DiscoveryReport:
 
 
 def residual_diagnostics(
-    data: MeasuredData, E: np.ndarray, n_train: int, chans: Sequence[str], others: Sequence[str],
+    data: MeasuredData,
+    E: np.ndarray,
+    n_train: int,
+    chans: Sequence[str],
+    others: Sequence[str],
     max_lag: int,
-) -> dict[str, Any]:  # fmt: skip
+) -> dict[str, Any]:
     """Residual tests of episode 0's held-out part, per channel."""
     out = {}
     for j, c in enumerate(chans):
@@ -172,9 +179,14 @@ def residual_diagnostics(
 
 
 def plot_residuals(
-    out: Path, data: MeasuredData, E0: np.ndarray, E1: np.ndarray, n_train: int,
-    chans: Sequence[str], max_lag: int,
-) -> list[str]:  # fmt: skip
+    out: Path,
+    data: MeasuredData,
+    E0: np.ndarray,
+    E1: np.ndarray,
+    n_train: int,
+    chans: Sequence[str],
+    max_lag: int,
+) -> list[str]:
     t_h = data.t_s / 3600.0
     fig = Figure(figsize=(10, 2.0 * len(chans)), constrained_layout=True)
     FigureCanvasAgg(fig)

@@ -69,8 +69,14 @@ def heldout_comparison(
     sse0 = float(np.sum(w * e0**2))
     sse1 = float(np.sum(w * e1**2))
     if not np.isfinite(sse1):
-        return {"sse0": sse0, "sse1": float("inf"), "rel_reduction": -np.inf, "t": -np.inf,
-                "p_value": 1.0, "t_unconditional": -np.inf}  # fmt: skip
+        return {
+            "sse0": sse0,
+            "sse1": float("inf"),
+            "rel_reduction": -np.inf,
+            "t": -np.inf,
+            "p_value": 1.0,
+            "t_unconditional": -np.inf,
+        }
     if blocks.size < 2:
         raise ValueError("held-out part too short for the block test (needs 2 blocks)")
     mean = float(blocks.mean())
@@ -108,6 +114,8 @@ def structure_statistics(e: np.ndarray, sigma: np.ndarray) -> dict[str, np.ndarr
 def noise_levels(e: np.ndarray) -> np.ndarray:
     """σ̂ per channel from the training residual (E, n, C): robust first-difference estimate."""
     return np.array(
-        [np.median([rt.robust_noise_std(e[i, :, c]) for i in range(e.shape[0])])
-         for c in range(e.shape[2])]
-    )  # fmt: skip
+        [
+            np.median([rt.robust_noise_std(e[i, :, c]) for i in range(e.shape[0])])
+            for c in range(e.shape[2])
+        ]
+    )

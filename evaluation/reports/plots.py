@@ -271,8 +271,9 @@ def detection_figure(
                 labels.append(lab)
     handles.append(Patch(color=_ALARM_COLOR, alpha=0.4))
     labels.append(f"{ALARM_LABEL} (shaded)")
-    fig.legend(handles, labels, loc="outside lower center", ncol=min(len(labels), 3),
-               fontsize="small")  # fmt: skip
+    fig.legend(
+        handles, labels, loc="outside lower center", ncol=min(len(labels), 3), fontsize="small"
+    )
     if title is None:
         title = f"{episode.scenario}, seed {episode.seed}"
     fig.suptitle(f"{title}\n{_shown_text(det, idx, kind)}", fontsize="medium")
