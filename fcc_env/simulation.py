@@ -243,6 +243,31 @@ def simulate_episodes(
     X = np.empty((B, T, N_STATES))
     A = np.empty((B, T, N_AUX))
     SAT = None
+
+    def run_kernel(noise: np.ndarray, add_noise: bool, *controller: np.ndarray) -> None:
+        """The compiled batch kernel on this batch with the standard-normal draws ``noise``; ``controller``: the loops' state, set
+        points, gains and saturation flags (placeholders in open loop)."""
+        dt_s = config.sample_time_s / config.rk4_substeps
+        simulate_kernel(
+            x0,
+            U,
+            p_base,
+            pidx,
+            PM,
+            dt_s,
+            config.rk4_substeps,
+            noise,
+            NOISE_STD_ABS,
+            NOISE_STD_REL,
+            config.noise_scale,
+            Y,
+            obs,
+            X,
+            A,
+            add_noise,
+            *controller,
+        )
+
     if config.regulatory is not None:
         assert SP is not None
         C = np.tile(initial_controller_state(NOMINAL_INPUTS), (B, 1))
@@ -253,28 +278,7 @@ def simulate_episodes(
             )
         else:
             SAT = np.zeros((B, T), dtype=np.bool_)
-            simulate_kernel(
-                x0,
-                U,
-                p_base,
-                pidx,
-                PM,
-                config.sample_time_s / config.rk4_substeps,
-                config.rk4_substeps,
-                Z,
-                NOISE_STD_ABS,
-                NOISE_STD_REL,
-                config.noise_scale,
-                Y,
-                obs,
-                X,
-                A,
-                True,
-                C,
-                SP,
-                gains,
-                SAT,
-            )
+            run_kernel(Z, True, C, SP, gains, SAT)
     elif schedule.generic:
         x = x0
         for kk in range(T):
@@ -292,25 +296,7 @@ def simulate_episodes(
             Y[:, kk], A[:, kk], X[:, kk] = y, aux, x
             x = x_next
     else:
-        simulate_kernel(
-            x0,
-            U,
-            p_base,
-            pidx,
-            PM,
-            config.sample_time_s / config.rk4_substeps,
-            config.rk4_substeps,
-            Z,
-            NOISE_STD_ABS,
-            NOISE_STD_REL,
-            config.noise_scale,
-            Y,
-            obs,
-            X,
-            A,
-            not schedule.measures,
-            *open_loop_controller_args(B, T),
-        )
+        run_kernel(Z, not schedule.measures, *open_loop_controller_args(B, T))
     if config.regulatory is None and (schedule.generic or schedule.measures):
         for kk in range(T):
             Y[:, kk] = schedule.measure(kk, Y[:, kk])
