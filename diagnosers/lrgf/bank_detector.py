@@ -420,3 +420,7 @@ class BankDetector(Diagnoser):
         # a model saved before ``n_linear`` existed has tanh neurons only, whatever the default
         # is now: the hyperparameter follows the networks that were loaded
         self.n_linear = min((int(net.n_linear) for net in self.bank_.lrgf), default=0)
+        self._models_loaded()
+
+    def _models_loaded(self) -> None:
+        """What a family's parts read from the loaded networks (after :meth:`_load_extra`)."""

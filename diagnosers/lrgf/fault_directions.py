@@ -27,26 +27,19 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Sequence
-from pathlib import Path
 
 import numpy as np
 
-from diagnosers.diagnoser import MAX_JSON_BYTES
 from diagnosers.episode.record import Episode
-from fcc_common.io import atomic_write_json
-from fcc_common.safe_files import read_json
 from fcc_common.validation import IntegerSequence, check, invalid
 
 __all__ = [
     "DEFAULT_FAULT_SEEDS",
-    "NAMES_FILE",
     "PAPER_FAULTS",
     "FaultDirections",
     "Pairs",
     "Signature",
-    "load_names",
     "paired_difference",
-    "save_names",
 ]
 
 logger = logging.getLogger(__name__)
@@ -60,9 +53,6 @@ PAPER_FAULTS = ("f1", "f2", "f3", "f4")
 #: the seeds the directions have always been learned on
 DEFAULT_FAULT_SEEDS = (1000, 1001, 1002)
 
-#: the file of a saved detector that names its fault directions (``{"faults": [...]}``): the
-#: names depend on the faults passed to ``fit``, the state arrays hold the directions only
-NAMES_FILE = "fault_directions.json"
 
 #: per fault, its labelled faulty training episodes, each with its healthy noise twin
 Pairs = dict[str, list[tuple[Episode, Episode]]]
@@ -217,26 +207,3 @@ class FaultDirections:
                 "fault_seeds among them, or None for every one"
             )
         return selected
-
-
-def save_names(directory: Path, faults: Sequence[str]) -> None:
-    """Write the names of a detector's fault directions into its saved ``directory``."""
-    atomic_write_json(Path(directory) / NAMES_FILE, {"faults": list(faults)})
-
-
-def load_names(directory: Path, n: int, fallback: Sequence[str]) -> tuple[str, ...]:
-    """The names of the ``n`` fault directions saved in ``directory``; ``fallback`` for a model
-    saved before they were (it learned those faults: :meth:`FaultDirections.saved_faults`)."""
-    path = Path(directory) / NAMES_FILE
-    if not path.exists():
-        return tuple(fallback)
-    saved = read_json(path, max_bytes=MAX_JSON_BYTES)
-    names = saved.get("faults") if isinstance(saved, dict) else None
-    if not isinstance(names, list) or not all(isinstance(f, str) for f in names):
-        raise ValueError(f"{path}: 'faults' must be a list of fault names, got {saved!r}")
-    if len(names) != n:
-        raise ValueError(
-            f"{path} names {len(names)} faults for {n} fault directions; the saved diagnoser "
-            "is corrupted or edited"
-        )
-    return tuple(names)

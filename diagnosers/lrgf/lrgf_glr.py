@@ -23,7 +23,6 @@ Optional parts, built from hyperparameters: a held baseline (:mod:`diagnosers.st
 from __future__ import annotations
 
 from collections.abc import Mapping
-from pathlib import Path
 from typing import Any, ClassVar
 
 import numpy as np
@@ -44,9 +43,7 @@ from diagnosers.lrgf.fault_directions import (
     DEFAULT_FAULT_SEEDS,
     FaultDirections,
     Pairs,
-    load_names,
     paired_difference,
-    save_names,
 )
 from diagnosers.lrgf.novelty import (
     NoveltyScale,
@@ -351,9 +348,14 @@ class LRGFGLR(BankDetector):
         """Derived state shared by ``_fit`` and ``_set_state``."""
         self.v_ = np.maximum(self.v_residual_, 1e-9)
         self.directions_ = self.stage_.directions_
-        # a model being loaded has its faults' names from _load_extra, which runs after this
-        faults = getattr(self, "direction_faults_", self._fault_directions().saved_faults())
-        self.signal_names_ = self.stage_.signal_names(faults)
+        # a model saved before the names were assumes its hyperparameters' faults, in order
+        self.direction_faults_ = self.direction_faults_[: len(self.directions_)]
+        if len(self.direction_faults_) != len(self.directions_):
+            raise ValueError(
+                f"direction_faults names {len(self.direction_faults_)} faults for "
+                f"{len(self.directions_)} fault directions"
+            )
+        self.signal_names_ = self.stage_.signal_names(self.direction_faults_)
 
     # ---- what the alarm stage reads and what is saved beside it ----------------------------------
     def _normalise(self, resid: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -375,7 +377,11 @@ class LRGFGLR(BankDetector):
 
     def _family_state(self) -> dict[str, np.ndarray]:
         rng = self.novelty_.range_
-        return {"prediction_range": (np.zeros((3, 0)) if rng is None else rng.to_array())}
+        return {
+            "prediction_range": (np.zeros((3, 0)) if rng is None else rng.to_array()),
+            # the names depend on the faults passed to fit: saved with the directions
+            "direction_faults": np.array(self.direction_faults_, dtype=str),
+        }
 
     def _set_family_state(self, state: Mapping[str, np.ndarray]) -> None:
         try:
@@ -389,15 +395,11 @@ class LRGFGLR(BankDetector):
                 f"with exogenous inputs ({len(self.novelty_.relations)})"
             )
         self.novelty_.range_ = PredictionRange.from_array(rng) if rng.size else None
+        names = state.get("direction_faults")
+        # a model saved before the names were: it learned the faults its hyperparameters name
+        faults = self._fault_directions().saved_faults() if names is None else names.tolist()
+        self.direction_faults_ = tuple(str(f) for f in faults)
 
-    def _save_extra(self, directory: Path) -> None:
-        super()._save_extra(directory)
-        save_names(directory, self.direction_faults_)  # they depend on the faults passed to fit
-
-    def _load_extra(self, directory: Any) -> None:
-        n, fallback = len(self.stage_.directions_), self._fault_directions().saved_faults()
-        self.direction_faults_ = load_names(Path(directory), n, fallback)
-        self._finish()
-        super()._load_extra(directory)
+    def _models_loaded(self) -> None:
         if self.stage_.baseline is not None:  # the baseline reads the loaded networks' scalers
             self.stage_.baseline.bind(self.bank_.in_idx, self.bank_.out_idx, self.bank_.lrgf)
