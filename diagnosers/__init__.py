@@ -11,6 +11,8 @@ The rooms (the contract, the registry and the presets at the top; the parts belo
 ``presets``            hyperparameters declared once; registered variants that differ in defaults
 ``conformance``        :func:`check_diagnoser`: the contract as a public test suite
 ``search``             :func:`grid_search` of hyperparameters on validation episodes
+``tuning``             the detection score of labelled episodes; :func:`make_scorer` and
+                       :func:`episode_labels` for scikit-learn's ``GridSearchCV``
 ``episode/``           :class:`Episode`, the input, with its checks and units
 ``classical/``         the baselines: ``limits``, ``pca``, ``arx-band``
 ``networks/``          the LRGF network, the NNARX model-error model and their training
@@ -32,6 +34,7 @@ from diagnosers.diagnoser import Diagnoser
 from diagnosers.episode import Episode
 from diagnosers.registry import available, diagnoser_class, import_modules, make, register
 from diagnosers.search import grid_search  # scikit-learn is imported when it runs
+from diagnosers.tuning import episode_labels, make_scorer
 from fcc_env import __version__  # the project's one version
 
 # isort: split
@@ -55,8 +58,10 @@ __all__ = [
     "available",
     "check_diagnoser",
     "diagnoser_class",
+    "episode_labels",
     "grid_search",
     "import_modules",
     "make",
+    "make_scorer",
     "register",
 ]

@@ -24,6 +24,7 @@ import numpy as np
 
 from diagnosers.detection import NO_DIAGNOSIS, UNKNOWN, Decision, Detection
 from diagnosers.episode.record import Episode
+from diagnosers.tuning import check_episode_labels, make_scorer
 
 __all__ = ["DiagnoserContract", "NotFittedError", "check_labelled", "require_varying"]
 
@@ -58,6 +59,29 @@ def require_varying(y: np.ndarray, names: Sequence[str], who: str, *, every: boo
             f"{who} cannot be trained: the training data are constant in channel(s) {flat} "
             "(every sample has the same value); train on records in which they vary"
         )
+
+
+def _training_episodes(episodes: Any, y: Any, isolates: bool) -> list[Episode]:
+    """``fit``'s argument as a list of episodes; with labels ``y``, a detector's healthy ones."""
+    if isinstance(episodes, Episode):
+        episodes = [episodes]
+    if isinstance(episodes, str | bytes) or not hasattr(episodes, "__iter__"):
+        _as_episode(episodes, "fit")
+    if isinstance(episodes, np.ndarray) and episodes.dtype != object:
+        _as_episode(episodes, "fit")  # measurements, not episodes: say how to wrap them
+    episodes = [_as_episode(ep, "fit") for ep in episodes]
+    if y is None:
+        return episodes
+    check_episode_labels(episodes, y)
+    if isolates:
+        return episodes
+    healthy = [ep for ep in episodes if ep.fault_onset is None]
+    if episodes and not healthy:
+        raise ValueError(
+            f"fit(X, y): y marks none of the {len(episodes)} episodes healthy (0); a detector "
+            "trains on healthy episodes"
+        )
+    return healthy
 
 
 class NotFittedError(RuntimeError):
@@ -174,19 +198,41 @@ class DiagnoserContract(ABC):
         args = ", ".join(f"{k}={v!r}" for k, v in self.get_params().items())
         return f"{type(self).__name__}({args})"
 
+    def __sklearn_tags__(self) -> Any:
+        """scikit-learn's estimator tags (``GridSearchCV`` reads them, scikit-learn >= 1.6): no
+        estimator type (neither classifier nor regressor), ``y`` optional, and an input of
+        episodes that :meth:`fit` checks itself."""
+        from sklearn.utils import InputTags, Tags, TargetTags
+
+        return Tags(
+            estimator_type=None,
+            target_tags=TargetTags(required=False),
+            input_tags=InputTags(two_d_array=False),
+            no_validation=True,
+        )
+
+    def score(self, episodes: Sequence[Episode], y: Any = None) -> float:
+        """scikit-learn's ``score``: the fitted diagnoser's detection score on labelled
+        ``episodes``, healthy and faulty (:class:`diagnosers.tuning.DetectionScorer` at its
+        defaults; higher is better). ``GridSearchCV`` uses it when given no ``scoring``."""
+        return make_scorer()(self, episodes, y)
+
     # ---- public API ----------------------------------------------------------------------------
-    def fit(self, episodes: Sequence[Episode]) -> Self:
+    def fit(self, episodes: Sequence[Episode], y: Any = None) -> Self:
         """Learn from healthy episodes and return ``self``.
 
         An isolating diagnoser (:attr:`isolates`) also receives labelled faulty episodes
         (``fault_onset`` set, ``scenario`` the fault class), and so may one that learns from
         faults (:attr:`learns_from_faults`); both need at least one healthy one.
+
+        ``y`` is for scikit-learn (``GridSearchCV(...).fit(X, y)`` passes each split's part
+        on): ``None``, or :func:`diagnosers.episode_labels` of ``episodes`` (1 faulty, 0
+        healthy; one that disagrees is refused). Given, a detector trains on the episodes it
+        marks healthy and leaves the faulty ones, which are there to be scored, out; an
+        isolating diagnoser (or one that learns from faults) trains on all. Without it every
+        episode is training data.
         """
-        if isinstance(episodes, Episode):
-            episodes = [episodes]
-        if isinstance(episodes, np.ndarray | str | bytes) or not hasattr(episodes, "__iter__"):
-            _as_episode(episodes, "fit")
-        episodes = [_as_episode(ep, "fit") for ep in episodes]
+        episodes = _training_episodes(episodes, y, self.isolates or self.learns_from_faults)
         if not episodes:
             raise ValueError("fit needs at least one healthy episode, got none")
         if self.isolates or self.learns_from_faults:

@@ -7,10 +7,11 @@ validation episodes are a held-out set, and the best candidate, already fitted o
 ``train``, is returned as it is (no refit). scikit-learn is needed only when
 :func:`grid_search` runs (``pip install scikit-learn``, or the package's ``test`` extra).
 
-The default scorer, :class:`DetectionScorer`, is a small, self-contained version of the
-benchmark's detection metrics (``evaluation`` holds the full ones; ``diagnosers`` does not
-import it): the share of faulty episodes detected, less a penalty for healthy episodes with
-any alarm beyond a target share, less a small term for late detection.
+The default scorer is :class:`diagnosers.tuning.DetectionScorer` (the share of faulty episodes
+detected, less penalties for false detections and late detection). scikit-learn's own
+``GridSearchCV`` works on a diagnoser too, with cross-validation: ``scoring=``
+:func:`diagnosers.tuning.make_scorer` and ``y=`` :func:`diagnosers.tuning.episode_labels`
+(the protocol is in :mod:`diagnosers.tuning`).
 """
 
 from __future__ import annotations
@@ -24,6 +25,7 @@ import numpy as np
 
 from diagnosers.contract import DiagnoserContract
 from diagnosers.episode.record import Episode
+from diagnosers.tuning import DetectionScorer
 
 __all__ = ["DetectionScorer", "Scorer", "SearchResult", "grid_search"]
 
@@ -44,80 +46,6 @@ def _sklearn() -> tuple[Any, Any]:
             "pip install 'fcc-fault-diagnosis[test]')"
         ) from e
     return clone, ParameterGrid
-
-
-@dataclass(frozen=True)
-class DetectionScorer:
-    """Episode-level detection score of a fitted diagnoser on validation episodes.
-
-    A faulty episode (``fault_onset`` set) is *detected* when some alarm falls at or after
-    its onset; its delay is the samples from the onset to that first alarm, as a share of the
-    samples from the onset to the end (1 when missed). A healthy episode (``fault_onset``
-    ``None``) is a *false detection* when it has any alarm. The score is::
-
-        true_detection_rate
-        − false_alarm_penalty · max(0, false_detection_rate − false_detection_target)
-        − delay_weight · mean_delay_share
-
-    with ``true_detection_rate`` over the faulty episodes (0 when there are none) and
-    ``false_detection_rate`` over the healthy ones (0 when there are none). The best score
-    is 1 (every fault detected at its onset, few enough healthy episodes alarmed).
-
-    Args:
-        false_detection_target: the share of healthy episodes with an alarm that costs
-            nothing, in [0, 1]; default 0.1.
-        false_alarm_penalty: score lost per unit of false-detection rate above the target,
-            ≥ 0; default 5.0 (one healthy episode in ten over the target costs half of the
-            true-detection rate's range).
-        delay_weight: score lost at the largest mean delay share (1), ≥ 0; default 0.1, so
-            that it breaks ties between settings that detect alike.
-
-    Calling it returns ``{"score", "true_detection_rate", "false_detection_rate",
-    "mean_delay_share"}``.
-    """
-
-    false_detection_target: float = 0.1
-    false_alarm_penalty: float = 5.0
-    delay_weight: float = 0.1
-
-    def __post_init__(self) -> None:
-        if not 0.0 <= self.false_detection_target <= 1.0:
-            raise ValueError(
-                f"false_detection_target={self.false_detection_target!r} is outside the "
-                "allowed range [0, 1]"
-            )
-        for name in ("false_alarm_penalty", "delay_weight"):
-            value = getattr(self, name)
-            if not (np.isfinite(value) and value >= 0.0):
-                raise ValueError(f"{name}={value!r} is outside the allowed range [0, inf)")
-
-    def __call__(
-        self, diagnoser: DiagnoserContract, episodes: Sequence[Episode]
-    ) -> dict[str, float]:
-        """Detect every episode with the fitted ``diagnoser`` and score (see the class)."""
-        detected: list[bool] = []
-        delays: list[float] = []
-        false_alarms: list[bool] = []
-        for ep in episodes:
-            alarm = diagnoser.detect(ep).alarm
-            if ep.fault_onset is None:
-                false_alarms.append(bool(alarm.any()))
-                continue
-            after = np.flatnonzero(alarm[ep.fault_onset :])
-            detected.append(after.size > 0)
-            span = max(ep.n_samples - ep.fault_onset, 1)
-            delays.append(float(after[0]) / span if after.size else 1.0)
-        tdr = float(np.mean(detected)) if detected else 0.0
-        fdr = float(np.mean(false_alarms)) if false_alarms else 0.0
-        delay = float(np.mean(delays)) if delays else 1.0
-        excess = max(0.0, fdr - self.false_detection_target)
-        score = tdr - self.false_alarm_penalty * excess - self.delay_weight * delay
-        return {
-            "score": score,
-            "true_detection_rate": tdr,
-            "false_detection_rate": fdr,
-            "mean_delay_share": delay,
-        }
 
 
 @dataclass(frozen=True)

@@ -21,6 +21,25 @@ The statistic (Page, 1954) on the standardised channel ``z = (y - mean_) / std_`
 with slack ``k`` and limit ``h`` in units of the healthy standard deviation. It is a teaching
 example: on FCC-v0 the operating program moves T_rx by several σ, so a CUSUM on the raw
 measurement false-alarms often; a useful detector runs it on a model residual instead.
+
+What ``diagnosers.check_diagnoser`` requires, and where this class does it (the full table is in
+docs/diagnosers.md, *Your own diagnoser*):
+
+* registered with a name: ``@diagnosers.register`` (step 0);
+* keyword-only hyperparameters stored verbatim, nothing else in ``__init__`` (step 1);
+  validation in ``_validate_params`` (step 2);
+* ``channels_`` and ``sample_time_s_``: set by the base class's ``fit`` and ``load``;
+* ``signal_names_`` (a non-empty tuple of str, one per signal) and the other learned attributes
+  ending in ``_``: set in ``_fit`` and again in ``_set_state``, through ``_finish`` (steps 3, 4);
+* ``_get_state`` / ``_set_state``: every learned number as plain arrays (step 4);
+* ``_reset`` / ``_update``: streaming, a ``Decision`` per sample whose alarm means a signal is
+  outside ``[lower, upper]`` (step 5); ``_detect`` equal to it (step 6);
+* not isolating (``isolates`` stays False): no diagnosis (an isolating diagnoser also sets
+  ``classes_``, its fault labels, in ``_fit`` and ``_set_state``).
+
+It is a scikit-learn estimator as it is: ``GridSearchCV(diagnosers.make("cusum-example"),
+{"h": [4, 8, 16]}, scoring=diagnosers.make_scorer(), cv=StratifiedKFold(3)).fit(X,
+diagnosers.episode_labels(X))`` (docs: *Tuning with scikit-learn*).
 """
 
 from __future__ import annotations
@@ -34,6 +53,7 @@ from diagnosers import Decision, Detection, Diagnoser, Episode
 from fcc_common.validation import Real, check
 
 
+# 0. Registered by name: the leaderboard's --diagnosers and Diagnoser.load find it by it.
 @diagnosers.register("cusum-example")
 class CUSUMDiagnoser(Diagnoser):
     """Two-sided CUSUM on one channel, standardised by its healthy mean and deviation.
@@ -71,6 +91,8 @@ class CUSUMDiagnoser(Diagnoser):
         self._finish()
 
     def _finish(self) -> None:
+        # what _fit and _set_state both need: a loaded model never runs _fit, and
+        # check_diagnoser requires signal_names_ on either (one name per signal column)
         self.index_ = self.channels_.index(self.channel)
         self.signal_names_ = (f"{self.channel} cusum+", f"{self.channel} cusum-")
 

@@ -54,6 +54,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections import deque
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from enum import StrEnum
@@ -63,14 +64,16 @@ import gymnasium as gym
 import numpy as np
 
 from fcc_common.validation import Real, check_params, from_fields, invalid
-from fcc_env.env import FCCEnv, closed_loop_keyword
+from fcc_env.env import FCCEnv, closed_loop_keyword, env_id, trend_frame
 from fcc_env.plant import AFTERBURN_WARNING_C, afterburn_delta_C
+from fcc_env.render import WINDOW_SAMPLES
 
 __all__ = [
     "CONSTRAINT_TERMS",
     "CONTROL_ENV_ID",
     "REWARD_TABLE",
     "REWARD_TERMS",
+    "REWARD_UNIT",
     "EconomicReward",
     "FCCControlEnv",
     "RewardTerm",
@@ -84,6 +87,8 @@ __all__ = [
 
 #: The control task's registered id.
 CONTROL_ENV_ID = "FCC-control-v0"
+#: The unit of the reward and of its terms (over one sample) and of their sums.
+REWARD_UNIT = "USD"
 
 
 class TermKind(StrEnum):
@@ -260,7 +265,9 @@ class FCCControlEnv(gym.Env):
     fault per episode; ``regulatory`` to ``True``, and ``False`` or ``None`` are refused as there)
     plus ``economics`` (an :class:`EconomicReward` or a mapping of its
     fields). ``info["reward_terms"]`` holds the terms of the step's reward. The plant is an
-    ``FCCEnv`` inside (``plant``); spaces, seeding and rendering are its own.
+    ``FCCEnv`` inside (``plant``); spaces and seeding are its own. ``render_mode="rgb_array"``
+    draws the plant's closed-loop frame titled ``FCC-control-v0`` with two panels more: the
+    reward of each sample and its cumulative sum since ``reset`` (USD).
     """
 
     metadata = FCCEnv.metadata
@@ -280,6 +287,9 @@ class FCCControlEnv(gym.Env):
         self.action_space = self.plant.action_space
         self.render_mode = self.plant.render_mode
         self._dt_s = float(self.plant.config.sample_time_s)
+        # the frame's reward channels: one value a sample (0 at the reset sample), the last 500
+        self._rewards: deque[float] = deque([0.0], maxlen=WINDOW_SAMPLES)
+        self._returns: deque[float] = deque([0.0], maxlen=WINDOW_SAMPLES)
 
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
@@ -287,16 +297,29 @@ class FCCControlEnv(gym.Env):
         super().reset(seed=seed)
         obs, info = self.plant.reset(seed=seed, options=options)
         info["reward_terms"] = dict.fromkeys(REWARD_TERMS, 0.0)
+        self._rewards = deque([0.0], maxlen=WINDOW_SAMPLES)
+        self._returns = deque([0.0], maxlen=WINDOW_SAMPLES)
         return obs, info
 
     def step(self, action: Any) -> tuple[np.ndarray, SupportsFloat, bool, bool, dict[str, Any]]:
         obs, _, terminated, truncated, info = self.plant.step(action)
         terms = reward_terms(info, terminated, self.economics, self._dt_s)
         info["reward_terms"] = terms
-        return obs, float(total_reward(terms)), terminated, truncated, info
+        reward = float(total_reward(terms))
+        self._rewards.append(reward)
+        self._returns.append(self._returns[-1] + reward)
+        return obs, reward, terminated, truncated, info
 
     def render(self) -> np.ndarray | None:
-        return self.plant.render()
+        """The plant's closed-loop frame titled with this env's id, plus the reward of each
+        sample and its cumulative sum (``None`` without ``render_mode``)."""
+        if self.render_mode != "rgb_array":
+            return None
+        extra = {
+            "reward": (REWARD_UNIT, self._rewards),
+            "cumulative reward": (REWARD_UNIT, self._returns),
+        }
+        return trend_frame(self.plant, env_id(self, CONTROL_ENV_ID), extra)
 
     def close(self) -> None:
         self.plant.close()

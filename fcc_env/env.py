@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import warnings
 from collections import deque
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import gymnasium as gym
@@ -14,7 +14,7 @@ from gymnasium import spaces
 
 from fcc_common.validation import Integer, check, invalid
 from fcc_env import effects as fx
-from fcc_env.closed_loop import ControlSystem
+from fcc_env.closed_loop import CHANNEL_UNITS, ControlSystem, observation_channels
 from fcc_env.episode_setup import EpisodeStream, add_noise, setup_episode
 from fcc_env.params import NOMINAL_INPUTS
 from fcc_env.physics import AUX_NAMES
@@ -144,8 +144,10 @@ class FCCEnv(gym.Env):
     | horizon | 4000 | samples the scenario is laid out on: onsets must fall inside it and random |
     |  |  | onsets are drawn from its middle half. ``max_episode_steps`` (``horizon − 1``) truncates; |
     |  |  | the env cannot see that wrapper, so pass both when you change the length. |
-    | render_mode | None | "rgb_array": a trend frame of the last 500 samples with the scenario, |
-    |  |  | the time (sample and hours) and, once passed, the fault onset |
+    | render_mode | None | "rgb_array": a trend frame of the last 500 samples, titled with the |
+    |  |  | env id, the scenario, the time (sample and hours) and, once passed, the fault |
+    |  |  | onset; every axis in its unit. Closed loop: T_rx and T_rg1 against their set |
+    |  |  | points, the valve command u_F and the air R_ar under them |
 
     ## Closed loop (``FCC-closedloop-v0``, or ``regulatory=``)
     The plant runs under :class:`fcc_env.RegulatoryLayer` (T_rx on the valve, T_rg1 on the air).
@@ -306,6 +308,7 @@ class FCCEnv(gym.Env):
         if reason == "numerical_failure":
             # Keep the last finite sample: observations are never NaN.
             self._terminated_reason = reason
+            self._history.append(self._obs)  # the frame's sample k + 1 holds the last one
             return self._obs, 0.0, True, False, self._get_info()
         self._x = x_next
         self._u = self._inputs(self._k)
@@ -319,7 +322,11 @@ class FCCEnv(gym.Env):
         return self._obs, 0.0, reason is not None, False, self._get_info()
 
     def render(self) -> np.ndarray | None:
-        return _trend_frame(self) if self.render_mode == "rgb_array" else None
+        """The ``rgb_array`` frame (``render_mode="rgb_array"``; ``None`` without a render mode):
+        :func:`trend_frame` titled with the env's id."""
+        if self.render_mode != "rgb_array":
+            return None
+        return trend_frame(self, env_id(self, CLOSED_LOOP_ENV_ID if self.closed_loop else ENV_ID))
 
     def close(self) -> None:
         self._renderer.close()  # frees the render figure; a later render() builds a new one
@@ -368,15 +375,35 @@ class FCCEnv(gym.Env):
         return self._control.observe(self._k, self._y_clean, self._u[0])
 
 
-def _trend_frame(env: FCCEnv) -> np.ndarray:
-    """The ``rgb_array`` frame: the Table 1 trends of the last 500 samples (H, W, 3) uint8."""
+def env_id(env: gym.Env, default: str) -> str:
+    """The id ``env`` was made as (its spec's, set by ``gym.make``), else ``default``."""
+    return default if env.spec is None else env.spec.id
+
+
+def trend_frame(
+    env: FCCEnv,
+    title_id: str,
+    extra: Mapping[str, tuple[str, Sequence[float]]] | None = None,
+) -> np.ndarray:
+    """The ``rgb_array`` frame (H, W, 3) uint8 of ``env``'s last 500 samples, titled
+    ``title_id``: its observation channels in their units (:data:`fcc_env.closed_loop.
+    CHANNEL_UNITS`) and the ``extra`` channels, name → (unit, one value a sample ending at the
+    env's current sample), e.g. the control task's reward."""
     if not hasattr(env, "_x"):
         raise gym.error.ResetNeeded("call reset() before render()")
+    data = np.array(env._history)
+    channels = {c: CHANNEL_UNITS[c] for c in observation_channels(env.config)}
+    if extra:
+        n = len(data)
+        data = np.column_stack([data, *(np.asarray(v, float)[-n:] for _, v in extra.values())])
+        channels |= {name: unit for name, (unit, _) in extra.items()}
     nominal = env.fault.nominal
     return env._renderer.frame(
-        np.array(env._history)[:, :8],
+        data,
         env._k,
         env.config.sample_time_s,
+        channels=channels,
+        env_id=title_id,
         scenario=env.fault.scenario,
         fault_onset=None if nominal else env.fault.onset,
     )
@@ -530,5 +557,7 @@ __all__ = [
     "actuator_inputs",
     "check_action",
     "closed_loop_keyword",
+    "env_id",
     "episode_request",
+    "trend_frame",
 ]

@@ -40,6 +40,7 @@ from fcc_common.io import (
     read_columns,
     require_pyarrow,
 )
+from fcc_common.progress import add_progress_flag, auto_progress, progress_bar
 from fcc_common.validation import Real, check, invalid
 from fcc_env import CLOSED_LOOP_ENV_ID, ENV_ID, MODEL_VERSION
 from fcc_env import effects as fx
@@ -65,6 +66,7 @@ from fcc_env.scenarios import (
 from fcc_env.simulation import (
     DEFAULT_MEMORY_BUDGET_BYTES,
     SEEDS_RANGE,
+    BatchResult,
     check_memory,
     simulate_episodes,
 )
@@ -214,10 +216,14 @@ def write_dataset(
     plant_effects: Sequence[Any] = (),
     scenario: str | None = None,
     memory_budget_bytes: float = DEFAULT_MEMORY_BUDGET_BYTES,
+    progress: bool | None = False,
     **env_kwargs: Any,
 ) -> Path:
     """Simulate ``seeds`` and write ``path`` (``.csv``, or ``.parquet``/``.pq`` with ``pyarrow``)
     plus ``path.with_suffix('.json')``.
+
+    ``progress``: bars over the episodes simulated and written, on standard error (``None``:
+    when it is a terminal; :mod:`fcc_common.progress`); the files are the same bytes either way.
 
     ``fault`` and ``plant`` as for :func:`fcc_env.simulate_episodes`, or the env's keywords
     ``scenario`` and ``env_kwargs`` (``fault_time``, ``valve_beta``, ``noise_scale``...);
@@ -242,9 +248,10 @@ def write_dataset(
         )
     config = plant_from_request(plant, env_kwargs)
     effects = fx.resolve(plant_effects)
-    batch = simulate_episodes(
+    batch = simulate_in_chunks(
         seeds,
         n_samples,
+        progress=progress,
         fault=spec,
         plant=config,
         plant_effects=effects,
@@ -322,9 +329,52 @@ def write_dataset(
         fmt = ["%d", "%d", "%d", "%.1f"] + ["%.10g"] * (len(names) - 4)
         fmt[names.index("fault_active")] = "%d"
         with atomic_open(out, "w") as fh:
-            np.savetxt(fh, data, delimiter=",", header=",".join(names), comments="", fmt=fmt)
+            fh.write(",".join(names) + "\n")  # np.savetxt's header line
+            bar = progress_bar(
+                range(B), desc=f"writing {out.name}", unit="episode", progress=progress
+            )
+            for b in bar:  # an episode's rows at a time: the same text as all rows at once
+                np.savetxt(fh, data[b * T : (b + 1) * T], delimiter=",", fmt=fmt)
     atomic_write_json(out.with_suffix(".json"), meta)
     return out
+
+
+#: Episodes simulated at a time under a progress bar (the bar moves by as many).
+PROGRESS_CHUNK = 16
+#: The fields of :class:`~fcc_env.simulation.BatchResult` that hold one entry per episode.
+_PER_EPISODE = ("seeds", "scenarios", "fault_onsets", "fault_magnitudes", "termination_reasons")
+
+
+def simulate_in_chunks(
+    seeds: Sequence[int], n_samples: int, *, progress: bool | None, **kwargs: Any
+) -> BatchResult:
+    """:func:`fcc_env.simulate_episodes` (``kwargs`` as there), with a bar over the episodes
+    when ``progress`` asks for one: then :data:`PROGRESS_CHUNK` seeds at a time, joined. An
+    episode depends on its seed only, not on the others of its batch, so the result is the same
+    (tested); without a bar it is one call."""
+    if not auto_progress(progress):
+        return simulate_episodes(seeds, n_samples, **kwargs)
+    seeds = list(check("seeds", seeds, SEEDS_RANGE))
+    budget = kwargs.get("memory_budget_bytes", DEFAULT_MEMORY_BUDGET_BYTES)
+    check_memory(len(seeds), n_samples, budget)  # the whole request, before a first chunk
+    fault = kwargs.pop("fault", None)  # one for all, or one per seed (then cut as the seeds)
+    parts = []
+    with progress_bar(total=len(seeds), desc="simulating", unit="episode", progress=True) as bar:
+        for i in range(0, len(seeds), PROGRESS_CHUNK):
+            cut = slice(i, i + PROGRESS_CHUNK)
+            mine = fault[cut] if isinstance(fault, list | tuple) else fault
+            parts.append(simulate_episodes(seeds[cut], n_samples, fault=mine, **kwargs))
+            bar.update(len(parts[-1].seeds))
+    joined: dict[str, Any] = {}
+    for f in dataclasses.fields(BatchResult):
+        values = [getattr(part, f.name) for part in parts]
+        if f.name in _PER_EPISODE:
+            joined[f.name] = tuple(v for value in values for v in value)
+        elif isinstance(values[0], np.ndarray):
+            joined[f.name] = np.concatenate(values)
+        else:  # the same in every chunk: channels, names, the sample time
+            joined[f.name] = values[0]
+    return BatchResult(**joined)
 
 
 def read_sidecar(path: str | os.PathLike) -> dict[str, Any]:
@@ -426,6 +476,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="undeclared plant effect (repeatable), e.g. heat_loss:stage1,extra_ua_kw_per_k=6; "
         "ids: python -c 'import fcc_env.effects as e; print(list(e.available()))'",
     )
+    add_progress_flag(parser)
     return run_command(parser, _generate, argv)
 
 
@@ -459,6 +510,7 @@ def _generate(args: argparse.Namespace) -> int:
         memory_budget_bytes=budget,
         include_states=args.states,
         plant_effects=[fx.parse(t) for t in args.plant_effect],
+        progress=args.progress,
     )
     print(f"wrote {path} and {path.with_suffix('.json')}")
     return 0

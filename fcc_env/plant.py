@@ -143,10 +143,11 @@ class PlantConfig:
         """Everything that defines the plant, as JSON values (what result stores hash: two
         plants with equal dicts simulate equal episodes for equal seeds and faults).
 
-        >>> PlantConfig().to_json()["regulatory"] is None
-        True
-        >>> PlantConfig.build(regulatory=True).to_json()["regulatory"]["loops"]
-        ['T_rx', 'T_rg1']
+        Examples:
+            >>> PlantConfig().to_json()["regulatory"] is None
+            True
+            >>> PlantConfig.build(regulatory=True).to_json()["regulatory"]["loops"]
+            ['T_rx', 'T_rg1']
         """
         return _json_value(dataclasses.asdict(self))
 

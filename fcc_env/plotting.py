@@ -2,12 +2,16 @@
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
+from fcc_env.closed_loop import CLOSED_LOOP_CHANNELS
 from fcc_env.params import MEASUREMENTS
+from fcc_env.regulatory import SETPOINT_NAMES
 
 _ONSET_STYLE = {"color": "tab:red", "linestyle": "--", "linewidth": 1.0}
 
@@ -22,12 +26,63 @@ def _figure(width_in: float, height_in: float):
     return fig
 
 
+#: The closed-loop frame, row by row: the two loops' held temperatures, each with its set point
+#: (dashed); under each its manipulated input (the slide-valve command u_F, the air R_ar) and the
+#: measured disturbance that reaches it first (feed and air temperature); the third column the
+#: regenerator's other temperatures. Channels a closed-loop env adds (the control task's reward)
+#: follow on a row of their own.
+CLOSED_LOOP_ROWS: tuple[tuple[tuple[str, ...], ...], ...] = (
+    (("T_rx", "T_rx_sp"), ("T_rg1", "T_rg1_sp"), ("T_rg2",)),
+    (("u_F",), ("R_ar",), ("T_d1",)),
+    (("T_fp",), ("T_ar",), ("T_dg",)),
+)
+#: Column headings of the closed-loop frame.
+CLOSED_LOOP_HEADINGS = (
+    "riser loop: T_rx held by the valve command u_F",
+    "regenerator loop: T_rg1 held by the air R_ar",
+    "regenerator",
+)
+_SETPOINT_STYLE = {"color": "0.35", "linestyle": (0, (4, 2)), "linewidth": 0.9}
+#: The open-loop frame's channels (the columns of its data) and their units: Table 1.
+TABLE1_CHANNELS: dict[str, str] = {m.name: m.unit for m in MEASUREMENTS}
+
+#: One panel of a frame: the channels it draws (the first solid, a set point dashed), or None for
+#: an empty slot.
+Panel = tuple[str, ...] | None
+
+
+def trend_layout(channels: Sequence[str]) -> list[list[Panel]]:
+    """The frame's grid, row by row, for the columns ``channels`` of the data.
+
+    With the closed loop's channels (:data:`fcc_env.closed_loop.CLOSED_LOOP_CHANNELS`):
+    :data:`CLOSED_LOOP_ROWS`, then one row for the channels beyond them. Otherwise (Table 1) a
+    panel per channel, two columns, filled column by column.
+    """
+    names = list(channels)
+    if set(CLOSED_LOOP_CHANNELS) <= set(names):
+        rows = [list(r) for r in CLOSED_LOOP_ROWS]
+        width = len(rows[0])
+        extra = [(c,) for c in names if c not in CLOSED_LOOP_CHANNELS]
+        for i in range(0, len(extra), width):
+            rows.append(extra[i : i + width] + [None] * (width - len(extra[i : i + width])))
+        return rows
+    n_rows = math.ceil(len(names) / 2)
+    cols = [[(c,) for c in names[j * n_rows : (j + 1) * n_rows]] for j in range(2)]
+    return [[col[i] if i < len(col) else None for col in cols] for i in range(n_rows)]
+
+
 def trend_title(
-    k_now: int, sample_time_s: float, scenario: str | None, fault_onset: int | None
+    k_now: int,
+    sample_time_s: float,
+    scenario: str | None,
+    fault_onset: int | None,
+    env_id: str | None = None,
 ) -> str:
-    """The title of the trend frame at sample ``k_now`` : the time and, for a scenario, whether and since when the fault is on."""
+    """The title of the trend frame at sample ``k_now``: the env id (if given), the time and,
+    for a scenario, whether and since when the fault is on."""
     hours = sample_time_s / 3600.0
-    title = f"FCC-v0, sample {k_now}, t = {k_now * hours:.2f} h"
+    title = f"sample {k_now}, t = {k_now * hours:.2f} h"
+    title = title if env_id is None else f"{env_id}, {title}"
     if scenario is None:
         return title
     if fault_onset is not None and k_now >= fault_onset:
@@ -46,37 +101,73 @@ def trend_figure(
     k_now: int,
     sample_time_s: float,
     *,
+    channels: Mapping[str, str] | None = None,
+    env_id: str | None = None,
     scenario: str | None = None,
     fault_onset: int | None = None,
 ):
-    """The env's trend frame as a matplotlib Figure: the recent measurements ``y`` (n, 8).
+    """The env's trend frame as a matplotlib Figure: the recent data ``y`` (n, c).
 
-    ``y`` ends at sample ``k_now``. The title names the scenario and the time (sample and
-    hours); the fault onset is a dashed line once it has happened (``k_now >= fault_onset``),
+    ``channels`` names the columns of ``y`` with their units, in order (``None``: the eight
+    Table 1 measurements, :data:`fcc_env.params.MEASUREMENTS`); the panels are
+    :func:`trend_layout`'s, each value axis labelled ``name [unit]`` (a held temperature and its
+    set point share one). Every line carries its channel's name as its ``gid``. ``y`` ends at
+    sample ``k_now``. The title names the env (``env_id``), the scenario and the time (sample
+    and hours); the fault onset is a dashed line once it has happened (``k_now >= fault_onset``),
     and the title says since when. ``fault_onset=None``: no fault (or none known).
     """
-    fig = _figure(8, 6)
+    units = dict(TABLE1_CHANNELS if channels is None else channels)
+    if y.ndim != 2 or y.shape[1] != len(units):
+        raise ValueError(f"y has shape {y.shape}; its columns are the {len(units)} {list(units)}")
+    column = {c: i for i, c in enumerate(units)}
+    rows = trend_layout(list(units))
+    closed = set(CLOSED_LOOP_CHANNELS) <= set(units)
+    n_cols = len(rows[0])
+    fig = _figure(8.0 if n_cols == 2 else 10.5, 6.0 + 1.5 * max(0, len(rows) - 4))
     fig.set_layout_engine("constrained")
-    axes = fig.subplots(4, 2, sharex=True)
+    grid = fig.add_gridspec(len(rows), n_cols)
     n = y.shape[0]
     hours = sample_time_s / 3600.0
     t_h = (np.arange(k_now - n + 1, k_now + 1)) * hours
     onset_seen = fault_onset is not None and k_now >= fault_onset
-    for i, ax in enumerate(axes.T.ravel()):
-        m = MEASUREMENTS[i]
-        ax.plot(t_h, y[:, i], lw=0.8, label="measurement")
-        ax.set_ylabel(f"{m.name} [{m.unit}]", fontsize=7)
-        ax.tick_params(labelsize=6)
-        if onset_seen and fault_onset >= k_now - n + 1:  # the onset lies in the window
-            ax.axvline(fault_onset * hours, **_ONSET_STYLE, label="fault onset")
-    for ax in axes[-1]:
-        ax.set_xlabel("time [h]", fontsize=7)
-    fig.suptitle(trend_title(k_now, sample_time_s, scenario, fault_onset), fontsize=9)
-    if onset_seen:
-        handles, labels = axes[0, 0].get_legend_handles_labels()
-        if "fault onset" in labels:
-            i = labels.index("fault onset")
-            fig.legend([handles[i]], [labels[i]], loc="outside lower center", fontsize=7)
+    onset_in_window = onset_seen and fault_onset >= k_now - n + 1
+    first = None
+    bottom = {j: max(i for i, row in enumerate(rows) if row[j]) for j in range(n_cols)}
+    for i, row in enumerate(rows):  # row by row: fig.axes lists the panels in this order
+        for j, panel in enumerate(row):
+            if panel is None:
+                continue
+            ax = fig.add_subplot(grid[i, j], sharex=first)
+            first = first or ax
+            for c in panel:
+                setpoint = c in SETPOINT_NAMES
+                style = _SETPOINT_STYLE if setpoint else {"lw": 0.8}
+                label = "set point" if setpoint else c
+                ax.plot(t_h, y[:, column[c]], **style, label=label, gid=c)
+            ax.set_ylabel(f"{panel[0]} [{units[panel[0]]}]", fontsize=7)
+            ax.tick_params(labelsize=6)
+            if i == 0 and closed:
+                ax.set_title(CLOSED_LOOP_HEADINGS[j], fontsize=7)
+            if onset_in_window:
+                ax.axvline(fault_onset * hours, **_ONSET_STYLE, label="fault onset")
+            if i == bottom[j]:
+                ax.set_xlabel("time [h]", fontsize=7)
+            else:
+                ax.tick_params(labelbottom=False)
+    fig.suptitle(trend_title(k_now, sample_time_s, scenario, fault_onset, env_id), fontsize=9)
+    entries = {}
+    for ax in fig.axes:
+        for handle, label in zip(*ax.get_legend_handles_labels(), strict=True):
+            if label in ("set point", "fault onset"):
+                entries.setdefault(label, handle)
+    if entries:
+        fig.legend(
+            list(entries.values()),
+            list(entries),
+            loc="outside lower center",
+            ncol=len(entries),
+            fontsize=7,
+        )
     return fig
 
 
@@ -84,12 +175,10 @@ def trend_image(
     y: np.ndarray,
     k_now: int,
     sample_time_s: float,
-    *,
-    scenario: str | None = None,
-    fault_onset: int | None = None,
+    **keywords: Any,
 ) -> np.ndarray:
     """RGB array (H, W, 3) uint8 of :func:`trend_figure` (same arguments)."""
-    fig = trend_figure(y, k_now, sample_time_s, scenario=scenario, fault_onset=fault_onset)
+    fig = trend_figure(y, k_now, sample_time_s, **keywords)
     fig.canvas.draw()
     return np.asarray(fig.canvas.buffer_rgba())[..., :3].copy()
 

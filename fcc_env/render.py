@@ -1,11 +1,11 @@
 """The env's ``rgb_array`` frames, drawn fast enough for ``render_fps``.
 
 A fresh matplotlib figure per frame (:func:`fcc_env.plotting.trend_image`) costs a few hundred
-milliseconds: eight axes lay out, tick and draw their text anew. :class:`TrendRenderer` keeps one
-figure per env and redraws only what a new sample changes. The axes (spines, ticks, labels, units,
-the onset marker, the legend) are drawn once into a cached background; a frame restores it and
-draws the eight measurement lines and the title over it (matplotlib's blitting). The background is
-redrawn only when a limit moves:
+milliseconds: eight to eleven axes lay out, tick and draw their text anew. :class:`TrendRenderer`
+keeps one figure per env and redraws only what a new sample changes. The axes (spines, ticks,
+labels, units, the onset marker, the legend) are drawn once into a cached background; a frame
+restores it and draws the data lines (measurements, valve command, set points, reward) and the
+title over it (matplotlib's blitting). The background is redrawn only when a limit moves:
 
 * the time axis pages: it spans :data:`WINDOW_SAMPLES` + :data:`PAGE_SAMPLES` samples and moves
   by :data:`PAGE_SAMPLES` once the newest sample reaches its right edge, so the last
@@ -14,17 +14,21 @@ redrawn only when a limit moves:
   and is then set with :data:`Y_MARGIN` of the data range above and below.
 
 The panels, their labels and units, the onset marker and the legend come from
-:func:`fcc_env.plotting.trend_figure` itself, rebuilt when the onset enters or leaves the window.
+:func:`fcc_env.plotting.trend_figure` itself (its layout, :func:`fcc_env.plotting.trend_layout`:
+Table 1 for ``FCC-v0``; the two loops with their set points and the valve command on the
+closed-loop ids; the reward and its cumulative sum on ``FCC-control-v0``), rebuilt when the
+onset enters or leaves the window.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 
-from fcc_env.plotting import trend_title
+from fcc_env.plotting import TABLE1_CHANNELS, trend_title
 
 #: Samples of history a frame shows (the newest last).
 WINDOW_SAMPLES = 500
@@ -72,10 +76,11 @@ class TrendRenderer:
         """Drop the figure and the cached background (the next frame builds them anew)."""
         self._fig: Any = None
         self._axes: list[Any] = []
-        self._lines: list[Any] = []
+        self._lines: list[tuple[Any, int]] = []
+        self._panels: list[list[int]] = []
+        self._key: Any = None
         self._title: Any = None
         self._background: Any = None
-        self._onset_shown: int | None = None
         self._xlim: tuple[int, int] | None = None
         self._ylim: list[tuple[float, float]] = []
 
@@ -90,29 +95,36 @@ class TrendRenderer:
         k_now: int,
         sample_time_s: float,
         *,
+        channels: Mapping[str, str] | None = None,
+        env_id: str | None = None,
         scenario: str | None = None,
         fault_onset: int | None = None,
     ) -> np.ndarray:
-        """RGB frame (H, W, 3) uint8 of the measurements ``y`` (n, 8), which end at sample
-        ``k_now``; arguments as :func:`fcc_env.plotting.trend_figure`."""
+        """RGB frame (H, W, 3) uint8 of the data ``y`` (n, c), which end at sample ``k_now``;
+        arguments as :func:`fcc_env.plotting.trend_figure` (``channels`` names the columns of
+        ``y`` and their units; the figure's size, hence the frame's shape, follows from them)."""
+        channels = TABLE1_CHANNELS if channels is None else channels
         y = y[-WINDOW_SAMPLES:]
         n = y.shape[0]
         # The onset marker is drawn while the onset is inside the shown samples (as trend_figure).
         in_window = fault_onset is not None and k_now - n + 1 <= fault_onset <= k_now
         onset_shown = fault_onset if in_window else None
-        if self._fig is None or onset_shown != self._onset_shown:
-            self._build(y, k_now, sample_time_s, scenario, onset_shown)
+        key = (tuple(channels.items()), onset_shown)
+        if self._fig is None or key != self._key:
+            self._build(y, k_now, sample_time_s, channels, env_id, scenario, onset_shown)
+            self._key = key
         hours = sample_time_s / 3600.0
         t_h = np.arange(k_now - n + 1, k_now + 1) * hours
-        for line, col in zip(self._lines, y.T, strict=True):
-            line.set_data(t_h, col)
-        self._title.set_text(trend_title(k_now, sample_time_s, scenario, fault_onset))
+        for line, col in self._lines:
+            line.set_data(t_h, y[:, col])
+        title = trend_title(k_now, sample_time_s, scenario, fault_onset, env_id)
+        self._title.set_text(title)
         if self._limits_moved(y, k_now, hours) or self._background is None:
             self._redraw_background()
         canvas = self._fig.canvas
         canvas.restore_region(self._background)
         for ax in self._axes:
-            for line in ax.get_lines():  # the measurement, then the onset marker over it
+            for line in ax.get_lines():  # the data, then the onset marker over them
                 ax.draw_artist(line)
         self._fig.draw_artist(self._title)
         return np.asarray(canvas.buffer_rgba())[..., :3].copy()
@@ -123,6 +135,8 @@ class TrendRenderer:
         y: np.ndarray,
         k_now: int,
         sample_time_s: float,
+        channels: Mapping[str, str],
+        env_id: str | None,
         scenario: str | None,
         onset_shown: int | None,
     ) -> None:
@@ -131,17 +145,35 @@ class TrendRenderer:
         from fcc_env.plotting import trend_figure  # the one definition of the panels
 
         self.close()
-        fig = trend_figure(y, k_now, sample_time_s, scenario=scenario, fault_onset=onset_shown)
+        fig = trend_figure(
+            y,
+            k_now,
+            sample_time_s,
+            channels=channels,
+            env_id=env_id,
+            scenario=scenario,
+            fault_onset=onset_shown,
+        )
         title = fig.get_suptitle()
         self._title = next(t for t in fig.findobj(Text) if t.get_text() == title)
-        # panel order of trend_figure: column by column, measurement i in panel i
-        self._axes = list(np.asarray(fig.axes).reshape(4, 2).T.ravel())
-        self._lines = [ax.get_lines()[0] for ax in self._axes]
+        self._axes = list(fig.axes)
+        # every data line names its channel (gid); the columns of y are the channels in order
+        column = {name: i for i, name in enumerate(channels)}
+        self._lines = [
+            (ln, column[ln.get_gid()])
+            for ax in self._axes
+            for ln in ax.get_lines()
+            if ln.get_gid() is not None
+        ]
+        self._panels = [
+            [column[ln.get_gid()] for ln in ax.get_lines() if ln.get_gid() is not None]
+            for ax in self._axes
+        ]
         # animated artists are left out of canvas.draw(): they are what a frame redraws (every
-        # line of a panel, so the onset marker stays drawn over the measurement)
+        # line of a panel, so the onset marker stays drawn over the data)
         for artist in (*(ln for ax in self._axes for ln in ax.get_lines()), self._title):
             artist.set_animated(True)
-        self._fig, self._onset_shown = fig, onset_shown
+        self._fig = fig
 
     def _limits_moved(self, y: np.ndarray, k_now: int, hours: float) -> bool:
         moved = False
@@ -151,13 +183,13 @@ class TrendRenderer:
             self._axes[0].set_xlim(xlim[0] * hours, xlim[1] * hours)  # shared by all panels
             self._ylim = []  # a new page also re-fits the value axes
             moved = True
-        lo, hi = y.min(axis=0), y.max(axis=0)
         if not self._ylim:
             self._ylim = [(math.nan, math.nan)] * len(self._axes)
-        for i, ax in enumerate(self._axes):
+        for i, (ax, cols) in enumerate(zip(self._axes, self._panels, strict=True)):
+            lo, hi = float(y[:, cols].min()), float(y[:, cols].max())
             a, b = self._ylim[i]
-            fits = a <= lo[i] and hi[i] <= b and hi[i] - lo[i] >= MIN_FILL * (b - a)
-            if not fits and (new := _value_limits(float(lo[i]), float(hi[i]))) != (a, b):
+            fits = a <= lo and hi <= b and hi - lo >= MIN_FILL * (b - a)
+            if not fits and (new := _value_limits(lo, hi)) != (a, b):
                 self._ylim[i] = new
                 ax.set_ylim(*new)
                 moved = True

@@ -112,3 +112,29 @@ def test_leaderboard_cli_in_spawn_workers(tmp_path) -> None:
     )  # fmt: skip
     assert proc.returncode == 0, proc.stderr
     assert "| cusum-example |" in proc.stdout
+
+
+def test_grid_search_cv_runs_on_the_example(cusum) -> None:
+    # issue 45 item 6: a diagnoser of one's own is a scikit-learn estimator as it is
+    from sklearn.model_selection import GridSearchCV, StratifiedKFold
+
+    f1 = fcc_env.FaultSpec(scenario="f1", onset=200)
+    X = Episode.from_batch(fcc_env.simulate_episodes(range(5000, 5004), 400)) + Episode.from_batch(
+        fcc_env.simulate_episodes([5004, 5005], 400, fault=f1)
+    )
+    y = diagnosers.episode_labels(X)
+    search = GridSearchCV(
+        diagnosers.make("cusum-example", channel="T_rg1"),
+        {"h": [4.0, 8.0, 16.0]},
+        scoring=diagnosers.make_scorer(),
+        cv=StratifiedKFold(n_splits=2),
+        error_score="raise",
+    )
+    search.fit(X, y)
+    assert [p["h"] for p in search.cv_results_["params"]] == [4.0, 8.0, 16.0]
+    assert np.isfinite(search.cv_results_["mean_test_score"]).all()
+    best = search.best_estimator_
+    assert isinstance(best, cusum.CUSUMDiagnoser) and best.h == search.best_params_["h"]
+    # refitted on the healthy episodes only
+    healthy = cusum.CUSUMDiagnoser(channel="T_rg1", h=best.h).fit(X[:4])
+    assert (best.mean_, best.std_) == (healthy.mean_, healthy.std_)

@@ -9,8 +9,6 @@ call (one thread by default: the networks are tiny and thread hand-offs cost mor
 from __future__ import annotations
 
 import math
-import multiprocessing
-import sys
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -20,6 +18,8 @@ import numpy as np
 import torch
 from torch import nn
 from tqdm.auto import tqdm
+
+from fcc_common.progress import auto_progress  # re-exported: the trainers' progress option
 
 __all__ = [
     "EarlyStopping",
@@ -37,22 +37,6 @@ __all__ = [
 #: a closure that runs the model on the training data: (training loss with its graph, validation
 #: loss; NaN without validation data)
 LossFn = Callable[[], tuple[torch.Tensor, float]]
-
-
-def auto_progress(progress: bool | None) -> bool:
-    """Resolve a ``progress`` option: ``None`` means "auto", a bar only when run interactively.
-
-    Interactive: standard error is a terminal and this is the main process (a sweep's worker
-    processes share the terminal, and their bars would garble the sweep's own).
-
-    >>> auto_progress(True), auto_progress(False)
-    (True, False)
-    """
-    if progress is not None:
-        return bool(progress)
-    isatty = getattr(sys.stderr, "isatty", None)
-    interactive = bool(isatty and isatty())
-    return interactive and multiprocessing.parent_process() is None
 
 
 class Method(StrEnum):

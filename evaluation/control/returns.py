@@ -33,6 +33,7 @@ from evaluation.control.policies import (
     fixed_setpoints,
 )
 from evaluation.metrics.intervals import Interval, bootstrap_ci
+from fcc_common.progress import progress_bar
 from fcc_env.closed_loop import CLOSED_LOOP_CHANNELS
 from fcc_env.control_task import CONSTRAINT_TERMS, CONTROL_ENV_ID
 from fcc_env.plant import PlantConfig
@@ -151,12 +152,25 @@ def summarise(scores: Sequence[EpisodeScore], reference: str) -> list[PolicySumm
 
 
 def run_study(
-    policies: Sequence[Policy], seeds: Sequence[int], n_steps: int, scenarios: Sequence[str]
+    policies: Sequence[Policy],
+    seeds: Sequence[int],
+    n_steps: int,
+    scenarios: Sequence[str],
+    *,
+    progress: bool | None = False,
 ) -> list[EpisodeScore]:
-    """Every policy on every scenario and seed, in that order."""
-    return [
-        run_episode(p, sc, seed, n_steps) for p in policies for sc in scenarios for seed in seeds
-    ]
+    """Every policy on every scenario and seed, in that order. ``progress``: a bar over the
+    episodes on standard error (``None``: when it is a terminal; :mod:`fcc_common.progress`)."""
+    runs = [(p, sc, seed) for p in policies for sc in scenarios for seed in seeds]
+    scores = []
+    with progress_bar(
+        total=len(runs), desc="control study", unit="episode", progress=progress
+    ) as bar:
+        for p, sc, seed in runs:
+            bar.set_postfix_str(f"{p.name}, {sc}", refresh=False)
+            scores.append(run_episode(p, sc, seed, n_steps))
+            bar.update()
+    return scores
 
 
 def study(
@@ -164,11 +178,14 @@ def study(
     seeds: Sequence[int],
     n_steps: int,
     scenarios: Sequence[str] | None = None,
+    *,
+    progress: bool | None = False,
 ) -> StudyResults:
-    """:func:`run_study` and :func:`summarise`, against the last policy (the oracle, in the
-    command: the reference sits last in the table)."""
+    """:func:`run_study` (``progress`` as there) and :func:`summarise`, against the last policy
+    (the oracle, in the command: the reference sits last in the table); ``scenarios`` default
+    to every registered one."""
     scenarios = scenario_names() if scenarios is None else scenarios  # the registry, now
-    scores = run_study(policies, seeds, n_steps, scenarios)
+    scores = run_study(policies, seeds, n_steps, scenarios, progress=progress)
     reference = policies[-1].name
     return StudyResults(
         tuple(scores),
@@ -181,26 +198,38 @@ def study(
 
 
 def fault_traces(
-    policies: Sequence[Policy], n_steps: int, seed: int = 0
+    policies: Sequence[Policy], n_steps: int, seed: int = 0, *, progress: bool | None = False
 ) -> dict[str, dict[str, dict[str, list[Any]]]]:
     """Per fault (at the paper's size and onset), per policy, the ``trace`` of
-    :func:`run_episode` on seed ``seed``: what each policy did, for a figure."""
+    :func:`run_episode` on seed ``seed``: what each policy did, for a figure. ``progress`` as
+    :func:`run_study`'s."""
     out: dict[str, dict[str, dict[str, list[Any]]]] = {}
-    for scenario in fault_names():
-        out[scenario] = {}
-        for p in policies:
-            out[scenario][p.name] = {}
-            run_episode(p, scenario, seed, n_steps, trace=out[scenario][p.name])
+    faults = fault_names()
+    total = len(faults) * len(policies)
+    with progress_bar(total=total, desc="fault traces", unit="episode", progress=progress) as bar:
+        for scenario in faults:
+            out[scenario] = {}
+            for p in policies:
+                out[scenario][p.name] = {}
+                run_episode(p, scenario, seed, n_steps, trace=out[scenario][p.name])
+                bar.update()
     return out
 
 
 def operated_episodes(
-    policy: Policy, scenario: str, seeds: Sequence[int], n_steps: int
+    policy: Policy,
+    scenario: str,
+    seeds: Sequence[int],
+    n_steps: int,
+    *,
+    progress: bool | None = False,
 ) -> list[Episode]:
     """``FCC-control-v0`` episodes run by ``policy``, as the diagnoser of a supervisor sees them
-    (its training data must come from the operation it will monitor)."""
+    (its training data must come from the operation it will monitor). ``progress`` as
+    :func:`run_study`'s."""
     out = []
-    for seed in seeds:
+    desc = f"training episodes ({scenario})"
+    for seed in progress_bar(seeds, desc=desc, unit="episode", progress=progress):
         env = gym.make(CONTROL_ENV_ID, scenario=scenario)
         obs, info = env.reset(seed=seed)
         policy.reset(info)
@@ -229,22 +258,27 @@ def operated_episodes(
 
 
 def supervisor(
-    name: str, n_steps: int = 3999, params: dict[str, Any] | None = None
+    name: str,
+    n_steps: int = 3999,
+    params: dict[str, Any] | None = None,
+    *,
+    progress: bool | None = False,
 ) -> DiagnosisSupervisor:
     """A :class:`DiagnosisSupervisor` around registered diagnoser ``name``, trained on episodes
     of :data:`TRAIN_SEEDS` run at the supervisor's healthy set points (healthy ones, and for an
     isolator or a detector that learns from faults each fault at its default size too, on the
     same seeds: each faulty episode's healthy twin is there). Trained on the operating program instead, a
     detector alarms as soon as the supervisor moves the set points to their optimum: the unit
-    has left the region it learned (every episode, pca and lrgf-glr-closed alike, measured)."""
+    has left the region it learned (every episode, pca and lrgf-glr-closed alike, measured).
+    ``progress``: a bar over the training episodes (as :func:`run_study`'s)."""
     from diagnosers import diagnoser_class, make
 
     fixed = fixed_setpoints()
-    train = operated_episodes(fixed, "nominal", TRAIN_SEEDS, n_steps)
+    train = operated_episodes(fixed, "nominal", TRAIN_SEEDS, n_steps, progress=progress)
     cls = diagnoser_class(name)
     if cls.isolates or cls.learns_from_faults:
         for fault in fault_names():
-            train += operated_episodes(fixed, fault, TRAIN_SEEDS, n_steps)
+            train += operated_episodes(fixed, fault, TRAIN_SEEDS, n_steps, progress=progress)
     label = name + "".join(f" {k}={v}" for k, v in (params or {}).items())
     return DiagnosisSupervisor(
         f"supervisor on {label}",

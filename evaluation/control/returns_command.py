@@ -7,7 +7,9 @@ steady-state search). Per policy: the mean return per episode (USD) with its 95 
 interval, trips per 100 episodes, the share of samples inside a constraint region (any
 constraint term of the reward below zero: fcc_env.control_task.CONSTRAINT_TERMS), and the loss
 against the oracle (its return minus the policy's, paired by episode, with its interval).
-Written to ``--out`` as ``control.csv`` and ``control.json``; the table is printed.
+Written to ``--out`` as ``control.csv`` and ``control.json``; the table is printed. Progress
+bars (episodes run, the supervisors' training episodes) go to standard error when it is a
+terminal, or with ``--progress``; ``--no-progress`` turns them off.
 
 ``--policies`` (default ``program,fixed``) names the registered policies that run first
 (:mod:`evaluation.control.policy_registry`; one of your own joins with ``--import MODULE``); the
@@ -42,6 +44,7 @@ from fcc_common.invocation import (
     run_command,
     user_modules,
 )
+from fcc_common.progress import add_progress_flag
 
 if TYPE_CHECKING:
     from evaluation.control.policies import Policy
@@ -117,6 +120,7 @@ def build_parser() -> argparse.ArgumentParser:
         "(@diagnosers.register, named in --diagnosers). Imported (not run), from the current "
         "directory or the installed packages",
     )
+    add_progress_flag(parser)
     return parser
 
 
@@ -186,7 +190,10 @@ def _study(args: argparse.Namespace, extra_policies: Sequence[Policy] = ()) -> i
     # supervisors on the same relations (lrgf-iso around lrgf-glr-closed and lrgf-glr-closed)
     # train them once
     with shared_relations(args.out / "relations"):
-        policies += [make_policy("supervisor", name=n, params=params.get(n)) for n in names]
+        policies += [
+            make_policy("supervisor", name=n, params=params.get(n), progress=args.progress)
+            for n in names
+        ]
     policies += list(extra_policies)
     policies.append(make_policy(REFERENCE_POLICY))
     shown = [p.name for p in policies]
@@ -194,8 +201,10 @@ def _study(args: argparse.Namespace, extra_policies: Sequence[Policy] = ()) -> i
         raise ValueError(
             f"two policies share a name in the table: {shown}; give each policy its own name"
         )
-    results = returns.study(policies, range(args.seeds), args.steps, scenarios)
-    traces = returns.fault_traces(policies, args.steps, seed=0)
+    results = returns.study(
+        policies, range(args.seeds), args.steps, scenarios, progress=args.progress
+    )
+    traces = returns.fault_traces(policies, args.steps, seed=0, progress=args.progress)
     figures = returns_report.write_study(results, traces, args.out, trace_seed=0)
     print(returns_report.summary_table(results.summaries), end="")
     print(

@@ -13,7 +13,9 @@ when saved) and the reward divided by
 :data:`~evaluation.control.rl_train.REWARD_SCALE_USD`. The saved policy is ``policy.npz`` (the
 actor's weights, no pickle) and ``policy.json`` (architecture, scaling, action bounds, the
 training settings): loading runs no code from the files and needs neither SB3 nor torch.
-Stable-Baselines3 is an optional extra: ``pip install -e ".[rl]"``.
+Stable-Baselines3 is an optional extra: ``pip install -e ".[rl]"``. Progress bars (``train``:
+env steps and the mean return of the last episodes; the validation and study episodes) go to
+standard error when it is a terminal, or with ``--progress``; ``--no-progress`` turns them off.
 """
 
 from __future__ import annotations
@@ -30,6 +32,7 @@ from evaluation.control.rl_train import PPOSettings, train, validate
 from evaluation.control.rl_vec_env import require_sb3
 from fcc_common.invocation import check_out_path, command_parser, out_path, run_command
 from fcc_common.io import atomic_write_json
+from fcc_common.progress import add_progress_flag
 from fcc_common.validation import invalid
 
 __all__ = ["main"]
@@ -61,6 +64,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     t.add_argument("--torch-threads", type=int, default=d.torch_threads)
     t.add_argument("--val-seeds", type=int, default=2, help="validation seeds per scenario")
     t.add_argument("--out", type=out_path, required=True)
+    add_progress_flag(t)
     e = sub.add_parser("evaluate", help="the saved agent in the control study (test seeds)")
     e.add_argument("--policy", type=Path, required=True, help="a train --out directory")
     e.add_argument("--seeds", type=int, default=20)
@@ -70,6 +74,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         "--diagnoser-params", default="{}", metavar="JSON", help="as evaluation.control's"
     )
     e.add_argument("--out", type=out_path, default=Path("results/control_rl"))
+    add_progress_flag(e)
     return run_command(parser, _run, argv)
 
 
@@ -78,6 +83,8 @@ def _run(args: argparse.Namespace) -> int:
         policy = make_policy("ppo", directory=args.policy)
         study = ["--seeds", str(args.seeds), "--steps", str(args.steps), "--out", str(args.out)]
         study += ["--diagnosers", args.diagnosers, "--diagnoser-params", args.diagnoser_params]
+        if args.progress is not None:
+            study.append("--progress" if args.progress else "--no-progress")
         return returns_command.main(study, extra_policies=[policy])
     try:
         hidden = tuple(int(h) for h in args.hidden.split(","))
@@ -101,10 +108,10 @@ def _run(args: argparse.Namespace) -> int:
     )
     check_out_path("--out", args.out)
     require_sb3()
-    policy, log = train(settings)
+    policy, log = train(settings, progress=args.progress)
     save_policy(args.out, policy)
     if args.val_seeds:
-        log["validation"] = validate(policy, args.val_seeds)
+        log["validation"] = validate(policy, args.val_seeds, progress=args.progress)
     atomic_write_json(args.out / "training.json", log)
     print(
         f"{log['env_steps']:,} env steps in {log['seconds']:.0f} s "

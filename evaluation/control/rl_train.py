@@ -29,6 +29,7 @@ from evaluation.control import returns
 from evaluation.control.policies import fixed_setpoints
 from evaluation.control.rl_policy import FORMAT, MLPPolicy
 from evaluation.control.rl_vec_env import require_sb3, sb3_vec_env
+from fcc_common.progress import progress_bar
 from fcc_common.validation import invalid
 from fcc_env.control_task import CONTROL_ENV_ID
 from fcc_env.scenarios import scenario_names
@@ -143,9 +144,16 @@ def _global_state_kept() -> Iterator[None]:
         numba.set_num_threads(threads[1])
 
 
-def train(settings: PPOSettings) -> tuple[MLPPolicy, dict[str, Any]]:
+def train(
+    settings: PPOSettings, *, progress: bool | None = False
+) -> tuple[MLPPolicy, dict[str, Any]]:
     """PPO on ``settings.envs`` native vector envs until the wall-clock budget (or
-    ``max_env_steps``) is spent. Returns the policy and a log (env steps, speed, returns)."""
+    ``max_env_steps``) is spent. Returns the policy and a log (env steps, speed, returns).
+
+    ``progress``: a bar on standard error (``None``: when it is a terminal;
+    :mod:`fcc_common.progress`) counting env steps (out of ``max_env_steps`` when set) with the
+    mean return of the last 20 finished episodes (USD); it reads the training, never steers it.
+    """
     require_sb3()
     import numba
     import torch
@@ -154,25 +162,29 @@ def train(settings: PPOSettings) -> tuple[MLPPolicy, dict[str, Any]]:
     from stable_baselines3.common.vec_env import VecNormalize
 
     class Budget(BaseCallback):
-        def __init__(self, seconds: float) -> None:
+        def __init__(self, seconds: float, bar: Any) -> None:
             super().__init__()
-            self.seconds, self.rollouts = seconds, []
+            self.seconds, self.rollouts, self.bar = seconds, [], bar
 
         def _on_training_start(self) -> None:
             self.t0 = time.perf_counter()
 
         def _on_step(self) -> bool:
+            self.bar.update(self.num_timesteps - self.bar.n)
             return time.perf_counter() - self.t0 < self.seconds
 
         def _on_rollout_end(self) -> None:
             ended = self.training_env.venv.episode_returns
+            mean = float(np.mean(ended[-20:])) if ended else None
             self.rollouts.append(
                 {
                     "env_steps": int(self.num_timesteps),
                     "seconds": round(time.perf_counter() - self.t0, 1),
-                    "mean_return_usd_last_episodes": float(np.mean(ended[-20:])) if ended else None,
+                    "mean_return_usd_last_episodes": mean,
                 }
             )
+            if mean is not None:
+                self.bar.set_postfix_str(f"return {mean:,.0f} USD ({len(ended)} episodes)")
 
     s = settings
     with _global_state_kept():
@@ -195,10 +207,12 @@ def train(settings: PPOSettings) -> tuple[MLPPolicy, dict[str, Any]]:
             device="cpu",
             verbose=0,
         )
-        budget = Budget(60.0 * s.minutes)
-        t0 = time.perf_counter()
-        model.learn(s.max_env_steps or 10**12, callback=budget)
-        seconds = time.perf_counter() - t0
+        desc = f"PPO ({s.minutes:g} min budget)"
+        with progress_bar(total=s.max_env_steps, desc=desc, unit="step", progress=progress) as bar:
+            budget = Budget(60.0 * s.minutes, bar)
+            t0 = time.perf_counter()
+            model.learn(s.max_env_steps or 10**12, callback=budget)
+            seconds = time.perf_counter() - t0
         policy = export_policy(model, env, s)
         env.close()
     log = {
@@ -210,12 +224,16 @@ def train(settings: PPOSettings) -> tuple[MLPPolicy, dict[str, Any]]:
     return policy, log
 
 
-def validate(policy: Any, n_seeds: int, n_steps: int = 3999) -> dict[str, Any]:
+def validate(
+    policy: Any, n_seeds: int, n_steps: int = 3999, *, progress: bool | None = False
+) -> dict[str, Any]:
     """``policy`` and the best fixed set points on validation seeds 5000.. (each scenario at the
-    paper's size and onset), with the control study's harness: mean returns and the gap."""
+    paper's size and onset), with the control study's harness: mean returns and the gap.
+    ``progress`` as :func:`evaluation.control.returns.run_study`'s."""
     seeds = range(VALIDATION_SEED, VALIDATION_SEED + n_seeds)
     scenarios = scenario_names()
-    scores = returns.run_study([fixed_setpoints(), policy], seeds, n_steps, scenarios)
+    policies = [fixed_setpoints(), policy]
+    scores = returns.run_study(policies, seeds, n_steps, scenarios, progress=progress)
     out: dict[str, Any] = {"seeds": list(seeds), "policies": {}}
     for s in returns.summarise(scores, reference=policy.name):
         by = {

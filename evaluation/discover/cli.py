@@ -1,6 +1,6 @@
 """Command line: ``python -m evaluation.discover (--data PATH.csv | --external DIR | --manifest
 DIR/dataset.json) --out DIR [--candidates id,id] [--train-fraction 0.6] [--max-effects 3]
-[--alpha 0.01] [--no-plots]``.
+[--alpha 0.01] [--no-plots] [--progress | --no-progress]``.
 
 ``--data`` reads a dataset with this project's JSON sidecar (CSV or Parquet). ``--external`` and
 ``--manifest`` read a user's directory through its manifest
@@ -9,6 +9,8 @@ DIR/dataset.json) --out DIR [--candidates id,id] [--train-fraction 0.6] [--max-e
 (:class:`~evaluation.discover.physics_model.PhysicsModel`) it is used; otherwise the declared model is
 a linear ARX model of each output from the manifest's inputs
 (:class:`~evaluation.discover.arx.ARXModel`), whose candidates are missing measured inputs.
+A progress bar per round (the candidates fitted) goes to standard error when it is a terminal,
+or with ``--progress``; ``--no-progress`` turns it off.
 """
 
 from __future__ import annotations
@@ -25,6 +27,7 @@ from evaluation.discover.physics_model import PHYSICS_INPUT_CHANNELS, PHYSICS_OU
 from evaluation.discover.report import REPORT_FILE
 from evaluation.sweep.dataset_loaders import load_manifest
 from fcc_common.invocation import check_out_path, command_parser, run_command
+from fcc_common.progress import add_progress_flag
 
 __all__ = ["main"]
 
@@ -72,6 +75,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--max-effects", type=int, default=3, help="0-10; 3")
     parser.add_argument("--alpha", type=float, default=0.01, help="family-wise level per round")
     parser.add_argument("--no-plots", action="store_true")
+    add_progress_flag(parser)
     return run_command(parser, _discover, argv)
 
 
@@ -91,6 +95,7 @@ def _discover(args: argparse.Namespace) -> int:
         alpha=args.alpha,
         out_dir=args.out,
         plots=not args.no_plots,
+        progress=args.progress,
     )
     for e in report.effects:
         print(f"effect {e.id}: {dict(e.params)} (95% CI {dict(e.ci95)})")

@@ -55,6 +55,7 @@ from evaluation.discover.scoring import (
     noise_levels,
     structure_statistics,
 )
+from fcc_common.progress import progress_bar
 from fcc_common.validation import Integer, Real, check
 
 __all__ = [
@@ -95,6 +96,7 @@ def discover(
     out_dir: str | os.PathLike | None = None,
     plots: bool = True,
     max_lag: int = 20,
+    progress: bool | None = False,
 ) -> DiscoveryReport:
     """Run the residual → missing-effect loop and return the report (also written to ``out_dir``).
 
@@ -109,6 +111,8 @@ def discover(
         min_rel_reduction: minimum relative held-out weighted-SSE reduction to accept.
         block_len: block length of the held-out test (default max(25, N_held // 32)).
         out_dir: where ``report.json`` and the plots go (None: nothing written).
+        progress: a bar per round over the candidates fitted, on standard error (``None``:
+            when it is a terminal; :mod:`fcc_common.progress`); the report is the same.
 
     Returns:
         A frozen :class:`~evaluation.discover.report.DiscoveryReport`. Until the previous
@@ -162,7 +166,8 @@ def discover(
         th_acc = np.concatenate([a.theta for a in accepted]) if accepted else np.zeros(0)
         e0 = Y - model.predict(data, effs, th_acc[None], T)[0]
         rows = []
-        for cid, cand in pool.items():
+        desc = f"round {rnd}/{max_effects}"
+        for cid, cand in progress_bar(pool.items(), desc=desc, unit="candidate", progress=progress):
             if cid in excluded or any(a.cand.id == cid for a in accepted):
                 continue
             th0 = np.concatenate([th_acc, [p.typical for p in cand.params]])

@@ -209,7 +209,8 @@ def test_the_package_imports_without_scikit_learn() -> None:
 
 def test_the_documented_tuning_example_runs() -> None:
     text = (ROOT / "docs" / "diagnosers.md").read_text()
-    section = text.split("## Tuning with scikit-learn", 1)[1].split("\n## ", 1)[0]
+    section = text.split("### A held-out validation set: `grid_search`", 1)[1]
+    section = section.split("\n## ", 1)[0]
     [code] = re.findall(r"```python\n(.*?)```", section, flags=re.S)
     # the example's own switches: fast training, short episodes
     for line in ("N = 4000", "FAST = False"):

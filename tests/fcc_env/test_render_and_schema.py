@@ -32,7 +32,10 @@ def _steps(env: gym.Env, n: int) -> None:
 
 
 # ---- rgb_array ---------------------------------------------------------------------------------
-@pytest.mark.parametrize("env_id", [fcc_env.ENV_ID, fcc_env.CLOSED_LOOP_ENV_ID])
+ALL_IDS = [fcc_env.ENV_ID, fcc_env.CLOSED_LOOP_ENV_ID, fcc_env.CONTROL_ENV_ID]
+
+
+@pytest.mark.parametrize("env_id", ALL_IDS)
 def test_frame_is_uint8_rgb_and_changes_between_steps(env_id):
     env = gym.make(env_id, scenario="f1", fault_time=8, render_mode="rgb_array")
     env.reset(seed=0)
@@ -140,7 +143,7 @@ def test_blitted_frame_matches_a_full_redraw_of_its_figure():
     assert (full != frame).any(axis=2).mean() < 0.03
 
 
-@pytest.mark.parametrize("env_id", [fcc_env.ENV_ID, fcc_env.CLOSED_LOOP_ENV_ID])
+@pytest.mark.parametrize("env_id", ALL_IDS)
 def test_check_env_with_rgb_array_is_clean(env_id):
     env = gym.make(env_id, scenario="f2", fault_time=5, render_mode="rgb_array")
     with warnings.catch_warnings(record=True) as caught:

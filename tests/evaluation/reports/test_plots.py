@@ -173,10 +173,11 @@ def test_band_figure_strip_shows_the_detector_alarms_and_band_exits_apart() -> N
 
 def test_env_trend_frame_names_scenario_time_and_onset() -> None:
     y = 500.0 + np.random.default_rng(5).normal(size=(200, 8))
-    before = trend_figure(y, 199, 10.0, scenario="f1", fault_onset=250)
+    before = trend_figure(y, 199, 10.0, env_id="FCC-v0", scenario="f1", fault_onset=250)
     after = trend_figure(y, 299, 10.0, scenario="f1", fault_onset=250)
     healthy = trend_figure(y, 299, 10.0, scenario="nominal")
     assert before.get_suptitle() == "FCC-v0, sample 199, t = 0.55 h\nscenario f1, no fault yet"
+    assert after.get_suptitle().startswith("sample 299, t = 0.83 h\n")  # data without an env
     assert after.get_suptitle().endswith("scenario f1, fault since sample 250 (0.69 h)")
     assert healthy.get_suptitle().endswith("scenario nominal, no fault")
     axes = after.get_axes()
