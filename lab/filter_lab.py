@@ -14,7 +14,9 @@ the steps declared per 1000 samples.
 ``faults``: per fault f1-f4 at the paper's sizes and onsets, the mean standardised innovation
 per channel over the ``--window`` samples after onset, and its signal-to-noise: that shift over
 the standard deviation of the same window's mean in the healthy episodes of the same seeds.
-``--set name=value`` changes a :class:`diagnosers.filters.UKFConfig` field (repeatable).
+``--set name=value`` changes a :class:`diagnosers.filters.UKFConfig` field (repeatable;
+``parameters=A_cr,k_cb``); ``--uncertain`` draws each episode's plant as the ``uncertain``
+track does (the filter keeps the nominal parameters it is given).
 """
 
 from __future__ import annotations
@@ -26,6 +28,7 @@ import numpy as np
 
 import fcc_env
 from diagnosers.filters import FCCStateEstimator, UKFConfig
+from fcc_env.uncertainty import PlantUncertainty
 
 INPUT_COLUMNS = {"R_ar": 1, "T_ar": 2, "T_fp": 3}
 
@@ -42,8 +45,17 @@ def config_of(a: argparse.Namespace, plant: fcc_env.PlantConfig) -> UKFConfig:
     changes = {}
     for item in a.set:
         name, _, value = item.partition("=")
-        changes[name] = None if value == "None" else float(value)
+        if name == "parameters":
+            changes[name] = tuple(v for v in value.split(",") if v)
+        else:
+            words = {"None": None, "True": True, "False": False}
+            changes[name] = words[value] if value in words else float(value)
     return UKFConfig.matching(plant, **changes)
+
+
+def simulate(a: argparse.Namespace, plant: fcc_env.PlantConfig, **kw) -> fcc_env.BatchResult:
+    draw = PlantUncertainty() if a.uncertain else None
+    return fcc_env.simulate_episodes(a.seeds, a.samples, plant=plant, plant_uncertainty=draw, **kw)
 
 
 def lag1(x: np.ndarray) -> np.ndarray:
@@ -54,7 +66,7 @@ def lag1(x: np.ndarray) -> np.ndarray:
 
 def whiteness(a: argparse.Namespace) -> None:
     plant = fcc_env.PlantConfig.build(regulatory=True if a.closed else None)
-    b = fcc_env.simulate_episodes(a.seeds, a.samples, plant=plant)
+    b = simulate(a, plant)
     est = FCCStateEstimator(fcc_env.FCCParams(), config_of(a, plant))
     t0 = time.perf_counter()
     out = est.filter(b.observations)
@@ -73,6 +85,16 @@ def whiteness(a: argparse.Namespace) -> None:
             f"{name}: RMSE estimate {np.sqrt(np.mean(err_est**2)):.4f}, "
             f"reading {np.sqrt(np.mean(err_read**2)):.4f}"
         )
+    if a.uncertain:
+        drawn = [PlantUncertainty().draw(s).params for s in a.seeds]
+        for name in est.config.parameters:
+            true = np.array([getattr(p, name) for p in drawn])
+            nominal = getattr(fcc_env.FCCParams(), name)
+            last = out.state(name)[:, -1]
+            print(
+                f"{name}: drawn/nominal − 1 RMS {np.sqrt(np.mean((true / nominal - 1) ** 2)):.4f}, "
+                f"estimate/drawn − 1 at the end RMS {np.sqrt(np.mean((last / true - 1) ** 2)):.4f}"
+            )
     if "f_coke" in out.state_names:
         true = b.inputs[:, a.skip :, 5]
         err = out.state("f_coke")[:, a.skip :] - true
@@ -85,7 +107,7 @@ def whiteness(a: argparse.Namespace) -> None:
 def faults(a: argparse.Namespace) -> None:
     plant = fcc_env.PlantConfig.build(regulatory=True if a.closed else None)
     est = FCCStateEstimator(fcc_env.FCCParams(), config_of(a, plant))
-    healthy = est.filter(fcc_env.simulate_episodes(a.seeds, a.samples, plant=plant).observations)
+    healthy = est.filter(simulate(a, plant).observations)
     chans = healthy.channels
     print(f"{len(a.seeds)} episodes x {a.samples} per fault; window {a.window} samples after onset")
     print("healthy whole-episode standardised innovations (from sample 100):")
@@ -96,7 +118,7 @@ def faults(a: argparse.Namespace) -> None:
     head = " ".join(f"{c:>7}" for c in chans)
     for name in ("f1", "f2", "f3", "f4"):
         spec = fcc_env.FaultSpec(scenario=name)
-        b = fcc_env.simulate_episodes(a.seeds, a.samples, fault=spec, plant=plant)
+        b = simulate(a, plant, fault=spec)
         onset = b.fault_onsets[0]
         win = slice(onset, onset + a.window)
         out = est.filter(b.observations)
@@ -121,6 +143,7 @@ def main() -> None:
     ap.add_argument("--skip", type=int, default=100, help="samples left out (whiteness)")
     ap.add_argument("--window", type=int, default=300, help="samples after onset (faults)")
     ap.add_argument("--closed", action="store_true", help="the closed-loop plant")
+    ap.add_argument("--uncertain", action="store_true", help="each episode's plant drawn")
     ap.add_argument("--set", action="append", default=[], help="UKFConfig field=value")
     a = ap.parse_args()
     whiteness(a) if a.what == "whiteness" else faults(a)

@@ -40,8 +40,9 @@ __all__ = [
 #: misses.
 OPEN_LOOP_AIR_WALK_STD_REL = 5e-4
 #: ... in closed loop: the air is the T_rg1 loop's output, which moves every sample with the
-#: controller's gain on the noisy T_rg1 (0.89 t/h per °C × 0.3 °C × √2 ≈ 0.38 t/h, 0.25 % of
-#: the flow, on each sample's change); the walk carries that jitter.
+#: controller's gain on the noisy T_rg1 (0.89 t/h per °C × 0.3 °C ≈ 0.27 t/h, 0.18 % of the
+#: flow): a white jitter around a slow level, which a walk fits only roughly; this value was the
+#: best compromise (R_ar's innovations: variance 1.02, lag-1 autocorrelation −0.08).
 CLOSED_LOOP_AIR_WALK_STD_REL = 1.5e-3
 
 #: Allowed values of the :class:`UKFConfig` fields (the plant's own ranges for the plant side).

@@ -62,9 +62,9 @@ __all__ = [
     "work_vectors",
 ]
 
-#: The inputs estimated behind their readings, in Table 1's channel order (channels 0-2).
+#: The inputs estimated behind their readings (Table 1's channels 0-2 read them).
 ESTIMATED_INPUTS: tuple[str, ...] = ("R_ar", "T_ar", "T_fp")
-_INPUT_COLUMNS = tuple(INPUT_NAMES.index(n) for n in ESTIMATED_INPUTS)  # (1, 2, 3)
+_INPUT_COLUMNS = tuple(INPUT_NAMES.index(n) for n in ESTIMATED_INPUTS)
 _COKE_COLUMN = INPUT_NAMES.index("f_coke")
 #: Filter units of the 11 model states: 10³ kg, 10⁻⁵ kg/kg (0.001 wt%), °C.
 STATE_SCALES: tuple[float, ...] = (1e3, 1e-5, 1e3, 1e-5, 1.0, 1e3, 1e-5, 1.0, 1e3, 1.0, 1.0)
@@ -88,9 +88,9 @@ def _physical(z, obs, model, x, u, p) -> None:
         u[i] = u_nom[i]
     if ints[_I_CLOSED] != 0:
         u[0] = obs[_VALVE_CHANNEL]
-    for j in range(3):
+    for j in range(len(_INPUT_COLUMNS)):
         s = N_STATES + j
-        u[j + 1] = ref[s] + scale[s] * z[s]  # R_ar, T_ar, T_fp are input columns 1, 2, 3
+        u[_INPUT_COLUMNS[j]] = ref[s] + scale[s] * z[s]
     c = ints[_I_COKE]
     if c >= 0:
         u[_COKE_COLUMN] = ref[c] + scale[c] * z[c]
@@ -117,7 +117,7 @@ def fcc_transition(z, obs, model, x, u, p, out) -> None:
     """The filter point of the next sample: one RK4 sample of the model states under the
     inputs held over this one; the random walks' states unchanged (their noise is ``Q``).
     ``x``, ``u``, ``p`` are work vectors, ``p`` holding the given parameters
-    (:func:`_parameters`)."""
+    (:func:`work_vectors`)."""
     scale, ref, _, _, _, _, ints, reals = model
     _physical(z, obs, model, x, u, p)
     step_kernel(x, u, p, NO_FAULT, _NO_MULT, reals[0], ints[_I_SUBSTEPS])
@@ -165,15 +165,17 @@ def fcc_filter_batch(
 ) -> None:  # fmt: skip
     """Every sample of B episodes ``Y`` (B, T, n_obs), episodes in parallel threads; ``M``
     (B, n), ``P`` (B, n, n) start at the priors and end at the priors after the last sample.
-    Outputs (B, T, ...) as :func:`fcc_sample`'s."""
+    Outputs (B, T, ...) as :func:`fcc_sample`'s; ``S`` may be (B, 1, n_y, n_y), where each
+    sample's innovation covariance overwrites the last (kept only for the whitening)."""
     n, ny = M.shape[1], r_abs.shape[0]
+    keep_s = S.shape[1] == Y.shape[1]
     for b in numba.prange(Y.shape[0]):
         ws = workspace(n, ny, n_scratch)
         for k in range(Y.shape[1]):
             STATUS[b, k] = fcc_sample(
                 model, M[b], P[b], Y[b, k], q, r_abs, r_rel, gate_idx, gate_lin, gate, w, ws,
-                INNOV[b, k], STDZ[b, k], WHITE[b, k], S[b, k], POST[b, k], POST_SD[b, k],
-                JUMPS[b, k],
+                INNOV[b, k], STDZ[b, k], WHITE[b, k], S[b, k if keep_s else 0], POST[b, k],
+                POST_SD[b, k], JUMPS[b, k],
             )  # fmt: skip
 
 
@@ -256,7 +258,8 @@ class FCCFilterModel:
             np.array(pindex, dtype=np.int64), ints, reals,
         )  # fmt: skip
         steps = (config.air_step_std_rel * u_read[0], config.step_std_C, config.step_std_C)
-        gate_idx = np.array([[N_STATES + j, j] for j in range(3)], dtype=np.int64)
+        reads = [MEASUREMENT_NAMES.index(name) for name in ESTIMATED_INPUTS]  # their channels
+        gate_idx = np.array([[N_STATES + j, ch] for j, ch in enumerate(reads)], dtype=np.int64)
         gate_lin = np.array([[ref_a[N_STATES + j], 1.0, steps[j] ** 2] for j in range(3)])
         return cls(
             names=tuple(names),

@@ -146,6 +146,10 @@ def test_streaming_update_equals_the_batch_bit_for_bit(healthy) -> None:
         step = est.update(Y[:, k])
         for e in range(2):
             _assert_same(step, out, e, k)
+    lean = est.filter(Y, innovation_cov=False)
+    assert lean.innovation_cov is None
+    np.testing.assert_array_equal(lean.whitened, out.whitened)
+    np.testing.assert_array_equal(lean.states, out.states)
 
 
 def test_closed_loop_with_coking_and_parameters() -> None:
