@@ -7,5 +7,7 @@
                        held-out fit and streaming throughput
 ``sweep_speed``        ``python -m bench.sweep_speed``: wall time of the sweep harness
 ``loop_speed``         ``python -m bench.loop_speed``: wall time of the modelling loop
+``filter_speed``       ``python -m bench.filter_speed``: the FCC state estimator, batched and
+                       streaming (and filterpy's UKF beside it, if installed)
 =====================  ===========================================================================
 """

@@ -20,6 +20,8 @@ The rooms (the contract, the registry and the presets at the top; the parts belo
 ``stages/``            alarm stages: filters, statistics, limits, the paper's band
 ``lrgf/``              the LRGF detectors (``lrgf-mem``, ``lrgf-glr`` and their presets)
 ``isolation/``         the isolators ``lrgf-iso`` and ``lrgf-lda``
+``filters/``           state estimators of the FCC model: the unscented Kalman filter's
+                       innovations, state and disturbance estimates
 =====================  ===========================================================================
 
 >>> import diagnosers

@@ -63,6 +63,7 @@ def copy_repository_pages() -> None:
         "changelog.md": ROOT / "CHANGELOG.md",
         "lab/index.md": ROOT / "lab" / "README.md",
         "lab/detector-lab.md": ROOT / "lab" / "detector-lab.md",
+        "lab/filter-lab.md": ROOT / "lab" / "filter-lab.md",
         "lab/results-history.md": ROOT / "lab" / "results-history.md",
         "lab/changelog-record.md": ROOT / "lab" / "changelog-record.md",
     }

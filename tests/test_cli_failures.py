@@ -382,6 +382,7 @@ COMMAND_MODULES = (
     "fcc_env.closed_loop_report",
     "fcc_env.closed_loop_analysis",
     "bench.detector_speed",
+    "bench.filter_speed",
     "bench.loop_speed",
     "bench.simulator_speed",
     "bench.sweep_speed",

@@ -30,6 +30,7 @@ COMMANDS = (
     "fcc_env.closed_loop_analysis",
     "bench.simulator_speed",
     "bench.detector_speed",
+    "bench.filter_speed",
     "bench.sweep_speed",
     "bench.vector_speed",
 )

@@ -1,0 +1,23 @@
+"""State estimators of the FCC model: innovations instead of simulation errors (issue 42).
+
+The rooms:
+
+=====================  ===========================================================================
+``state_estimator``    :class:`FCCStateEstimator`, the unscented Kalman filter of the FCC model
+                       (``filter`` a batch of episodes, ``reset`` / ``update`` a stream), and
+                       its :class:`FilterResult`
+``ukf_config``         :class:`UKFConfig`: the plant side, what is estimated, the tuning constants
+``ukf_model``          the augmented state, its filter units, the compiled transition and
+                       measurement of the FCC model, its sample function over a batch of
+                       episodes or a sample of many streams
+``ukf_kernels``        the filter's algebra, compiled, for any model: one sample in phases
+                       around the model's transition and measurement
+``ukf_linear``         the same algebra on a linear-Gaussian model: the exact Kalman filter's
+                       oracle
+=====================  ===========================================================================
+"""
+
+from diagnosers.filters.state_estimator import FCCStateEstimator, FilterResult, FilterStep
+from diagnosers.filters.ukf_config import UKFConfig
+
+__all__ = ["FCCStateEstimator", "FilterResult", "FilterStep", "UKFConfig"]
