@@ -10,9 +10,8 @@ The rooms (the contract, the registry and the presets at the top; the parts belo
 ``registry``           :func:`make`, :func:`available`, :func:`register`, ``--import`` modules
 ``presets``            hyperparameters declared once; registered variants that differ in defaults
 ``conformance``        :func:`check_diagnoser`: the contract as a public test suite
-``search``             :func:`grid_search` of hyperparameters on validation episodes
-``tuning``             the detection score of labelled episodes; :func:`make_scorer` and
-                       :func:`episode_labels` for scikit-learn's ``GridSearchCV``
+``tuning/``            tuning on labelled episodes: :func:`grid_search`, :func:`make_scorer` for
+                       scikit-learn's ``GridSearchCV``
 ``episode/``           :class:`Episode`, the input, with its checks and units
 ``classical/``         the baselines: ``limits``, ``pca``, ``arx-band``
 ``networks/``          the LRGF network, the NNARX model-error model and their training
@@ -35,8 +34,8 @@ from diagnosers.detection import SCORE_THRESHOLD, UNKNOWN, Decision, Detection
 from diagnosers.diagnoser import Diagnoser
 from diagnosers.episode import Episode
 from diagnosers.registry import available, diagnoser_class, import_modules, make, register
-from diagnosers.search import grid_search  # scikit-learn is imported when it runs
-from diagnosers.tuning import episode_labels, make_scorer
+from diagnosers.tuning.grid_search import grid_search  # scikit-learn is imported when it runs
+from diagnosers.tuning.scorer import episode_labels, make_scorer
 from fcc_env import __version__  # the project's one version
 
 # isort: split

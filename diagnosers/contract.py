@@ -24,7 +24,7 @@ import numpy as np
 
 from diagnosers.detection import NO_DIAGNOSIS, UNKNOWN, Decision, Detection
 from diagnosers.episode.record import Episode
-from diagnosers.tuning import check_episode_labels, make_scorer
+from diagnosers.tuning.scorer import check_episode_labels, make_scorer
 
 __all__ = ["DiagnoserContract", "NotFittedError", "check_labelled", "require_varying"]
 
@@ -213,7 +213,7 @@ class DiagnoserContract(ABC):
 
     def score(self, episodes: Sequence[Episode], y: Any = None) -> float:
         """scikit-learn's ``score``: the fitted diagnoser's detection score on labelled
-        ``episodes``, healthy and faulty (:class:`diagnosers.tuning.DetectionScorer` at its
+        ``episodes``, healthy and faulty (:class:`diagnosers.tuning.scorer.DetectionScorer` at its
         defaults; higher is better). ``GridSearchCV`` uses it when given no ``scoring``."""
         return make_scorer()(self, episodes, y)
 

@@ -196,9 +196,15 @@ class FCCStateEstimator:
         fcc_filter_streams(m.model, self._M, self._P, Yk, *self._args(), *out)
         r = self._result(out)
         step = FilterStep(
-            r.innovations, r.standardized, r.whitened, r.innovation_cov, r.states, r.state_std,
-            r.steps, r.status,
-        )  # fmt: skip
+            r.innovations,
+            r.standardized,
+            r.whitened,
+            r.innovation_cov,
+            r.states,
+            r.state_std,
+            r.steps,
+            r.status,
+        )
         if self._single:
             step = FilterStep(*(getattr(step, f.name)[0] for f in fields(FilterStep)))
         return step

@@ -94,8 +94,15 @@ def linear_filter(
         "status": np.empty(T, dtype=np.int8),
     }
     _linear_run(
-        A, C, np.asarray(q, float), np.asarray(r_abs, float), np.asarray(r_rel, float),
-        sigma_weights(n, alpha, beta, kappa), np.array(m0, dtype=float),
-        np.array(P0, dtype=float), Y, *out.values(),
-    )  # fmt: skip
+        A,
+        C,
+        np.asarray(q, float),
+        np.asarray(r_abs, float),
+        np.asarray(r_rel, float),
+        sigma_weights(n, alpha, beta, kappa),
+        np.array(m0, dtype=float),
+        np.array(P0, dtype=float),
+        Y,
+        *out.values(),
+    )
     return out

@@ -137,8 +137,27 @@ def fcc_measure(z, obs, model, x, u, p, out) -> None:
 
 
 @njit_kernel
-def fcc_sample(model, m, P, y, q, r_abs, r_rel, gate_idx, gate_lin, gate, w, ws, innov, stdz,
-               white, S, post, post_sd, jumps) -> int:  # fmt: skip
+def fcc_sample(
+    model,
+    m,
+    P,
+    y,
+    q,
+    r_abs,
+    r_rel,
+    gate_idx,
+    gate_lin,
+    gate,
+    w,
+    ws,
+    innov,
+    stdz,
+    white,
+    S,
+    post,
+    post_sd,
+    jumps,
+) -> int:
     """One sample of one episode (:mod:`diagnosers.filters.ukf_kernels`' order): ``m``, ``P``
     go from this sample's prior to the next one's; returns the status bits."""
     X, FX, HY = ws[1], ws[2], ws[3]
@@ -160,9 +179,27 @@ def fcc_sample(model, m, P, y, q, r_abs, r_rel, gate_idx, gate_lin, gate, w, ws,
 
 @numba.njit(cache=True, nogil=True, parallel=True, error_model="numpy")
 def fcc_filter_batch(
-    model, M, P, Y, q, r_abs, r_rel, gate_idx, gate_lin, gate, w, n_scratch,
-    INNOV, STDZ, WHITE, S, POST, POST_SD, JUMPS, STATUS,
-) -> None:  # fmt: skip
+    model,
+    M,
+    P,
+    Y,
+    q,
+    r_abs,
+    r_rel,
+    gate_idx,
+    gate_lin,
+    gate,
+    w,
+    n_scratch,
+    INNOV,
+    STDZ,
+    WHITE,
+    S,
+    POST,
+    POST_SD,
+    JUMPS,
+    STATUS,
+) -> None:
     """Every sample of B episodes ``Y`` (B, T, n_obs), episodes in parallel threads; ``M``
     (B, n), ``P`` (B, n, n) start at the priors and end at the priors after the last sample.
     Outputs (B, T, ...) as :func:`fcc_sample`'s; ``S`` may be (B, 1, n_y, n_y), where each
@@ -173,26 +210,77 @@ def fcc_filter_batch(
         ws = workspace(n, ny, n_scratch)
         for k in range(Y.shape[1]):
             STATUS[b, k] = fcc_sample(
-                model, M[b], P[b], Y[b, k], q, r_abs, r_rel, gate_idx, gate_lin, gate, w, ws,
-                INNOV[b, k], STDZ[b, k], WHITE[b, k], S[b, k if keep_s else 0], POST[b, k],
-                POST_SD[b, k], JUMPS[b, k],
-            )  # fmt: skip
+                model,
+                M[b],
+                P[b],
+                Y[b, k],
+                q,
+                r_abs,
+                r_rel,
+                gate_idx,
+                gate_lin,
+                gate,
+                w,
+                ws,
+                INNOV[b, k],
+                STDZ[b, k],
+                WHITE[b, k],
+                S[b, k if keep_s else 0],
+                POST[b, k],
+                POST_SD[b, k],
+                JUMPS[b, k],
+            )
 
 
 @njit_kernel
 def fcc_filter_streams(
-    model, M, P, Y, q, r_abs, r_rel, gate_idx, gate_lin, gate, w, n_scratch,
-    INNOV, STDZ, WHITE, S, POST, POST_SD, JUMPS, STATUS,
-) -> None:  # fmt: skip
+    model,
+    M,
+    P,
+    Y,
+    q,
+    r_abs,
+    r_rel,
+    gate_idx,
+    gate_lin,
+    gate,
+    w,
+    n_scratch,
+    INNOV,
+    STDZ,
+    WHITE,
+    S,
+    POST,
+    POST_SD,
+    JUMPS,
+    STATUS,
+) -> None:
     """One sample ``Y`` (B, n_obs) of B streams, in one thread (a parallel region per sample
     costs more than it saves: its threads' barrier, on a busy machine, milliseconds)."""
     n, ny = M.shape[1], r_abs.shape[0]
     ws = workspace(n, ny, n_scratch)
     for b in range(Y.shape[0]):
         STATUS[b] = fcc_sample(
-            model, M[b], P[b], Y[b], q, r_abs, r_rel, gate_idx, gate_lin, gate, w, ws,
-            INNOV[b], STDZ[b], WHITE[b], S[b], POST[b], POST_SD[b], JUMPS[b],
-        )  # fmt: skip
+            model,
+            M[b],
+            P[b],
+            Y[b],
+            q,
+            r_abs,
+            r_rel,
+            gate_idx,
+            gate_lin,
+            gate,
+            w,
+            ws,
+            INNOV[b],
+            STDZ[b],
+            WHITE[b],
+            S[b],
+            POST[b],
+            POST_SD[b],
+            JUMPS[b],
+        )
 
 
 @dataclass(frozen=True)
@@ -254,9 +342,15 @@ class FCCFilterModel:
         ints = np.array([coke, config.rk4_substeps, int(config.closed_loop)], dtype=np.int64)
         reals = np.array([config.sample_time_s / config.rk4_substeps])
         model = (
-            scale_a, ref_a, p_base, NOMINAL_INPUTS.copy(), np.array(pslot, dtype=np.int64),
-            np.array(pindex, dtype=np.int64), ints, reals,
-        )  # fmt: skip
+            scale_a,
+            ref_a,
+            p_base,
+            NOMINAL_INPUTS.copy(),
+            np.array(pslot, dtype=np.int64),
+            np.array(pindex, dtype=np.int64),
+            ints,
+            reals,
+        )
         steps = (config.air_step_std_rel * u_read[0], config.step_std_C, config.step_std_C)
         reads = [MEASUREMENT_NAMES.index(name) for name in ESTIMATED_INPUTS]  # their channels
         gate_idx = np.array([[N_STATES + j, ch] for j, ch in enumerate(reads)], dtype=np.int64)

@@ -1,6 +1,6 @@
 """Issue 45 item 6: scikit-learn's ``GridSearchCV`` on a diagnoser.
 
-The protocol (``diagnosers.tuning``): ``X`` a list of episodes, ``y = episode_labels(X)``;
+The protocol (``diagnosers.tuning.scorer``): ``X`` a list of episodes, ``y = episode_labels(X)``;
 ``fit(X, y)`` trains a detector on the healthy episodes only; ``StratifiedKFold`` deals both
 kinds over the folds; ``scoring=make_scorer(...)`` is :class:`DetectionScorer` on each fold.
 """
@@ -19,7 +19,7 @@ from sklearn.utils import get_tags
 import diagnosers
 import fcc_env
 from diagnosers import Episode
-from diagnosers.tuning import SCORER_METRICS, DetectionScorer, EpisodeScorer
+from diagnosers.tuning.scorer import SCORER_METRICS, DetectionScorer, EpisodeScorer
 
 ROOT = Path(__file__).resolve().parents[2]
 N = 900

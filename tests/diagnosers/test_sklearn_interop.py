@@ -1,5 +1,5 @@
 """scikit-learn habits: ``clone`` of every registered diagnoser, the normalised
-``Detection.score``, :func:`diagnosers.search.grid_search`, and hyperparameters documented on
+``Detection.score``, :func:`diagnosers.tuning.grid_search.grid_search`, and hyperparameters documented on
 every registered class."""
 
 from __future__ import annotations
@@ -19,7 +19,7 @@ from diagnosers import Decision, Detection, Diagnoser, Episode, NotFittedError
 from diagnosers.bank.relations import read_channels
 from diagnosers.conformance import default_episodes
 from diagnosers.detection import SCORE_THRESHOLD, exceedance, normalised_score
-from diagnosers.search import DetectionScorer, grid_search
+from diagnosers.tuning.grid_search import DetectionScorer, grid_search
 
 ROOT = Path(__file__).resolve().parents[2]
 NAMES = diagnosers.available()
@@ -198,7 +198,7 @@ def test_grid_search_without_scikit_learn_names_the_extra(
 def test_the_package_imports_without_scikit_learn() -> None:
     code = (
         "import sys; sys.modules['sklearn'] = None\n"
-        "import diagnosers, diagnosers.search\n"
+        "import diagnosers, diagnosers.tuning.grid_search\n"
         "d = diagnosers.make('lrgf-glr'); print(len(diagnosers.available()))"
     )
     out = subprocess.run(

@@ -7,11 +7,11 @@ validation episodes are a held-out set, and the best candidate, already fitted o
 ``train``, is returned as it is (no refit). scikit-learn is needed only when
 :func:`grid_search` runs (``pip install scikit-learn``, or the package's ``test`` extra).
 
-The default scorer is :class:`diagnosers.tuning.DetectionScorer` (the share of faulty episodes
+The default scorer is :class:`diagnosers.tuning.scorer.DetectionScorer` (the share of faulty episodes
 detected, less penalties for false detections and late detection). scikit-learn's own
 ``GridSearchCV`` works on a diagnoser too, with cross-validation: ``scoring=``
-:func:`diagnosers.tuning.make_scorer` and ``y=`` :func:`diagnosers.tuning.episode_labels`
-(the protocol is in :mod:`diagnosers.tuning`).
+:func:`diagnosers.tuning.scorer.make_scorer` and ``y=`` :func:`diagnosers.tuning.scorer.episode_labels`
+(the protocol is in :mod:`diagnosers.tuning.scorer`).
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ import numpy as np
 
 from diagnosers.contract import DiagnoserContract
 from diagnosers.episode.record import Episode
-from diagnosers.tuning import DetectionScorer
+from diagnosers.tuning.scorer import DetectionScorer
 
 __all__ = ["DetectionScorer", "Scorer", "SearchResult", "grid_search"]
 
@@ -41,7 +41,7 @@ def _sklearn() -> tuple[Any, Any]:
         from sklearn.model_selection import ParameterGrid
     except ImportError as e:
         raise ImportError(
-            "diagnosers.search.grid_search needs scikit-learn (>= 1.4), which is not "
+            "diagnosers.tuning.grid_search.grid_search needs scikit-learn (>= 1.4), which is not "
             "installed: pip install scikit-learn (or the package's 'test' extra, "
             "pip install 'fcc-fault-diagnosis[test]')"
         ) from e

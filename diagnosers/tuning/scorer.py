@@ -3,7 +3,7 @@
 :class:`DetectionScorer` is a small, self-contained version of the benchmark's detection metrics
 (``evaluation`` holds the full ones; ``diagnosers`` does not import it): the share of faulty
 episodes detected, less a penalty for healthy episodes with any alarm beyond a target share, less
-a small term for late detection. :func:`diagnosers.search.grid_search` uses it by default.
+a small term for late detection. :func:`diagnosers.tuning.grid_search.grid_search` uses it by default.
 
 For scikit-learn (``GridSearchCV``, ``cross_val_score``) the same score is a scorer,
 :func:`make_scorer` (``scoring=diagnosers.make_scorer()``), and every diagnoser's ``score``
