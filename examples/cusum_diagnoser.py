@@ -35,7 +35,9 @@ docs/diagnosers.md, *Your own diagnoser*):
 * ``_reset`` / ``_update``: streaming, a ``Decision`` per sample whose alarm means a signal is
   outside ``[lower, upper]`` (step 5); ``_detect`` equal to it (step 6);
 * not isolating (``isolates`` stays False): no diagnosis (an isolating diagnoser also sets
-  ``classes_``, its fault labels, in ``_fit`` and ``_set_state``).
+  ``classes_``, its fault labels, in ``_fit`` and ``_set_state``);
+* it learns from healthy episodes only (``learns_from_faults`` stays False: a detector that sets
+  it is also handed labelled faulty episodes, each with its healthy twin of the same seed).
 
 It is a scikit-learn estimator as it is: ``GridSearchCV(diagnosers.make("cusum-example"),
 {"h": [4, 8, 16]}, scoring=diagnosers.make_scorer(), cv=StratifiedKFold(3)).fit(X,
