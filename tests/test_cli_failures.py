@@ -375,6 +375,8 @@ def test_a_closed_ray_backend_stops_its_watchdog() -> None:
 COMMAND_MODULES = (
     "evaluation.leaderboard.command",
     "evaluation.discover.cli",
+    "evaluation.control.returns_command",
+    "evaluation.control.rl_command",
     "evaluation.isolation.study",
     "evaluation.isolation.isolability",
     "fcc_env.generate",

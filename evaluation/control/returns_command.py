@@ -162,9 +162,11 @@ def _study(args: argparse.Namespace, extra_policies: Sequence[Policy] = ()) -> i
 
     scenarios = scenario_names()
 
-    if args.seeds < 1 or not 1 <= args.steps <= 3999:
+    most = returns.TRAIN_SEEDS.start  # test seeds 0.. stay below the training seeds
+    if not 1 <= args.seeds <= most or not 1 <= args.steps <= 3999:
         raise ValueError(
-            f"--seeds {args.seeds} / --steps {args.steps}: allowed --seeds >= 1, --steps 1..3999"
+            f"--seeds {args.seeds} / --steps {args.steps}: allowed --seeds 1..{most} (test seeds "
+            f"0..{most - 1}, below the training seeds {most}..), --steps 1..3999"
         )
     check_out_path("--out", args.out)
     try:  # before any name is resolved

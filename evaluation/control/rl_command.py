@@ -28,7 +28,7 @@ from pathlib import Path
 from evaluation.control import returns_command
 from evaluation.control.policy_registry import make_policy
 from evaluation.control.rl_policy import save_policy
-from evaluation.control.rl_train import PPOSettings, train, validate
+from evaluation.control.rl_train import PPOSettings, check_validation_seeds, train, validate
 from evaluation.control.rl_vec_env import require_sb3
 from fcc_common.invocation import check_out_path, command_parser, out_path, run_command
 from fcc_common.io import atomic_write_json
@@ -48,7 +48,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         ),
     )
     sub = parser.add_subparsers(dest="command", required=True)
-    t = sub.add_parser("train", help="train PPO on the native vector env")
+    # a subcommand's parser is argparse's own, which reads abbreviations unless told not to
+    t = sub.add_parser("train", help="train PPO on the native vector env", allow_abbrev=False)
     d = PPOSettings()
     t.add_argument("--minutes", type=float, default=d.minutes, help="wall-clock budget (30)")
     t.add_argument("--envs", type=int, default=d.envs, help=f"vector envs ({d.envs})")
@@ -65,7 +66,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     t.add_argument("--val-seeds", type=int, default=2, help="validation seeds per scenario")
     t.add_argument("--out", type=out_path, required=True)
     add_progress_flag(t)
-    e = sub.add_parser("evaluate", help="the saved agent in the control study (test seeds)")
+    e = sub.add_parser(
+        "evaluate", help="the saved agent in the control study (test seeds)", allow_abbrev=False
+    )
     e.add_argument("--policy", type=Path, required=True, help="a train --out directory")
     e.add_argument("--seeds", type=int, default=20)
     e.add_argument("--steps", type=int, default=3999)
@@ -90,8 +93,7 @@ def _run(args: argparse.Namespace) -> int:
         hidden = tuple(int(h) for h in args.hidden.split(","))
     except ValueError:
         raise invalid("--hidden", args.hidden, "comma-separated integers, e.g. 64,64") from None
-    if args.val_seeds < 0:
-        raise invalid("--val-seeds", args.val_seeds, ">= 0")
+    check_validation_seeds(args.val_seeds)
     settings = PPOSettings(
         minutes=args.minutes,
         envs=args.envs,

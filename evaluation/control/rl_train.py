@@ -16,6 +16,9 @@ optional extra: ``pip install -e ".[rl]"``.
 from __future__ import annotations
 
 import contextlib
+import itertools
+import math
+import os
 import random
 import time
 from collections.abc import Iterator
@@ -33,13 +36,17 @@ from fcc_common.progress import progress_bar
 from fcc_common.validation import invalid
 from fcc_env.control_task import CONTROL_ENV_ID
 from fcc_env.scenarios import scenario_names
+from fcc_env.simulation import DEFAULT_MEMORY_BUDGET_BYTES
 
 __all__ = [
     "REWARD_SCALE_USD",
     "TRAIN_SEED_MIN",
     "VALIDATION_SEED",
+    "VALIDATION_SEEDS_MAX",
     "PPOSettings",
+    "check_validation_seeds",
     "export_policy",
+    "ppo_nbytes",
     "train",
     "validate",
 ]
@@ -50,6 +57,27 @@ __all__ = [
 REWARD_SCALE_USD = 16.0
 #: Seeds: training from 1000, validation from 5000 (test seeds are 0..).
 TRAIN_SEED_MIN, VALIDATION_SEED = 1000, 5000
+#: Most validation seeds per scenario: as many as the test range (0..999) holds, so that
+#: validating never costs more than the largest study.
+VALIDATION_SEEDS_MAX = TRAIN_SEED_MIN
+#: An upper bound of the observation's length in :func:`ppo_nbytes` (``FCC-control-v0`` has 11):
+#: the check needs no env built.
+_OBS_DIM_BOUND = 64
+
+
+def check_validation_seeds(n_seeds: int) -> int:
+    """``n_seeds`` validation seeds per scenario if 0 <= n <= :data:`VALIDATION_SEEDS_MAX`."""
+    if isinstance(n_seeds, bool) or not isinstance(n_seeds, int):
+        raise invalid("--val-seeds", n_seeds, "an integer")
+    if not 0 <= n_seeds <= VALIDATION_SEEDS_MAX:
+        raise invalid(
+            "--val-seeds",
+            n_seeds,
+            f"0..{VALIDATION_SEEDS_MAX}",
+            f"validation seeds {VALIDATION_SEED}..{VALIDATION_SEED + VALIDATION_SEEDS_MAX - 1}, "
+            "as many as the test range holds",
+        )
+    return n_seeds
 
 
 @dataclass(frozen=True)
@@ -70,8 +98,8 @@ class PPOSettings:
     torch_threads: int = 1
 
     def __post_init__(self) -> None:
-        if not self.minutes > 0:
-            raise invalid("--minutes", self.minutes, "> 0")
+        if not 0 < self.minutes < math.inf:
+            raise invalid("--minutes", self.minutes, "> 0, finite")
         if self.envs < 1:
             raise invalid("--envs", self.envs, ">= 1")
         if not TRAIN_SEED_MIN <= self.seed <= VALIDATION_SEED - self.envs:
@@ -82,19 +110,65 @@ class PPOSettings:
                 f"training seeds: env i gets seed + i, below the validation seeds "
                 f"{VALIDATION_SEED}..; test seeds are 0..",
             )
-        for name in ("n_steps", "batch_size", "n_epochs", "torch_threads"):
+        for name in ("n_steps", "n_epochs", "torch_threads"):
             if getattr(self, name) < 1:
                 raise invalid(f"--{name.replace('_', '-')}", getattr(self, name), ">= 1")
+        self._check_sb3()
         if not (self.hidden and all(h >= 1 for h in self.hidden)):
             raise invalid("--hidden", self.hidden, "one or more layer widths >= 1")
-        if not (0 < self.learning_rate < 1 and 0 < self.gamma <= 1 and self.reward_scale_usd > 0):
+        if not (0 < self.learning_rate < 1 and 0 < self.gamma <= 1):
             raise invalid(
-                "--lr/--gamma/--reward-scale",
-                (self.learning_rate, self.gamma, self.reward_scale_usd),
-                "0 < lr < 1, 0 < gamma <= 1, reward scale > 0",
+                "--lr/--gamma", (self.learning_rate, self.gamma), "0 < lr < 1, 0 < gamma <= 1"
             )
+        if not 0 < self.reward_scale_usd < math.inf:
+            raise invalid("--reward-scale", self.reward_scale_usd, "> 0, finite (USD)")
         if self.max_env_steps is not None and self.max_env_steps < 1:
             raise invalid("--max-env-steps", self.max_env_steps, ">= 1 or None")
+        need = ppo_nbytes(self)
+        if need > DEFAULT_MEMORY_BUDGET_BYTES:
+            raise ValueError(
+                f"--hidden {','.join(map(str, self.hidden))} with --batch-size {self.batch_size} "
+                f"and --n-steps {self.n_steps} x --envs {self.envs} needs about "
+                f"{need / 2**30:.3g} GiB (parameters with their gradients and Adam's moments, "
+                f"activations, the rollout buffer), more than the memory budget of "
+                f"{DEFAULT_MEMORY_BUDGET_BYTES / 2**30:g} GiB: choose narrower layers or smaller "
+                "batches"
+            )
+
+    def _check_sb3(self) -> None:
+        """Stable-Baselines3's PPO asserts these (``ppo.py``): refuse them by name first."""
+        buffer = self.n_steps * self.envs
+        if buffer < 2:
+            raise invalid(
+                "--n-steps x --envs",
+                buffer,
+                ">= 2",
+                "PPO normalises advantages over one rollout: it needs two samples",
+            )
+        if not 2 <= self.batch_size <= buffer:
+            raise invalid(
+                "--batch-size",
+                self.batch_size,
+                f"2..{buffer} (--n-steps {self.n_steps} x --envs {self.envs})",
+                "a minibatch of the rollout, of two samples at least",
+            )
+        cores = os.cpu_count() or 1
+        if self.torch_threads > cores:
+            raise invalid("--torch-threads", self.torch_threads, f"1..{cores} (the CPU cores)")
+
+
+def ppo_nbytes(settings: PPOSettings) -> int:
+    """Bytes PPO's training holds for ``settings`` (float32), an upper estimate: the actor's
+    and critic's parameters four times (values, gradients, Adam's two moments), their
+    activations over a minibatch three times (values, gradients, saved outputs), and the
+    rollout buffer (observation, action and six scalars per env step)."""
+    s = settings
+    widths = [_OBS_DIM_BOUND, *s.hidden]
+    params = sum((a + 1) * b for a, b in itertools.pairwise(widths))
+    params = 2 * params + (s.hidden[-1] + 1) * 3  # both nets, the action (2) and value (1) heads
+    activations = 3 * 2 * s.batch_size * sum(s.hidden)
+    buffer = s.n_steps * s.envs * (_OBS_DIM_BOUND + 2 + 6)
+    return 4 * (4 * params + activations + buffer)
 
 
 def export_policy(model: Any, vecnorm: Any, settings: PPOSettings) -> MLPPolicy:
@@ -229,7 +303,9 @@ def validate(
 ) -> dict[str, Any]:
     """``policy`` and the best fixed set points on validation seeds 5000.. (each scenario at the
     paper's size and onset), with the control study's harness: mean returns and the gap.
-    ``progress`` as :func:`evaluation.control.returns.run_study`'s."""
+    ``n_seeds``: at most :data:`VALIDATION_SEEDS_MAX`. ``progress`` as
+    :func:`evaluation.control.returns.run_study`'s."""
+    check_validation_seeds(n_seeds)
     seeds = range(VALIDATION_SEED, VALIDATION_SEED + n_seeds)
     scenarios = scenario_names()
     policies = [fixed_setpoints(), policy]
