@@ -435,7 +435,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="output .csv or .parquet (needs pyarrow) path (sidecar: same stem .json)",
     )
     parser.add_argument(
-        "--scenario", default="nominal", help=f"one of {list(scenario_names())} or 'random'"
+        "--scenario",
+        default="nominal",
+        help=f"one of {list(scenario_names(with_channel=True))} or 'random'",
     )
     parser.add_argument("--seeds", default="0", help="seeds, e.g. '0-9,20' (default 0)")
     parser.add_argument(
@@ -448,6 +450,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--fault-magnitude", type=float, default=None, help="relative size")
     parser.add_argument("--fault-profile", default=None, help="abrupt (default) or incipient")
     parser.add_argument("--ramp-samples", type=int, default=None, help="incipient ramp length")
+    parser.add_argument(
+        "--fault-channel", default=None, help="a sensor fault's measured channel (T_rx)"
+    )
     parser.add_argument(
         "--valve-beta", type=float, default=None, help=f"0 = flow mode ({DEFAULT_VALVE_BETA})"
     )
@@ -493,6 +498,7 @@ def _generate(args: argparse.Namespace) -> int:
             "fault_magnitude": args.fault_magnitude,
             "fault_profile": args.fault_profile,
             "ramp_samples": args.ramp_samples,
+            "fault_channel": args.fault_channel,
         },
     )
     plant = PlantConfig.build(

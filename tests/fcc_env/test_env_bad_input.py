@@ -26,7 +26,15 @@ def test_simulate_refuses_a_request_over_the_memory_budget() -> None:
         simulate_episodes([0, 1], 5, memory_budget_bytes=2**30 * 1e-6)
     assert DEFAULT_MEMORY_BUDGET_BYTES == 4 * 2**30
     b = simulate_episodes([0], 3)
-    arrays = (b.observations, b.y_clean, b.fault_active, b.inputs, b.states, b.aux)
+    arrays = (
+        b.observations,
+        b.y_clean,
+        b.fault_active,
+        b.inputs,
+        b.states,
+        b.aux,
+        b.sensor_dropout,
+    )
     assert sum(a.nbytes for a in arrays) == batch_nbytes(1, 3)
 
 
