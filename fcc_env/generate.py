@@ -115,6 +115,8 @@ def column_metadata(names: Sequence[str]) -> dict[str, dict[str, str]]:
         "cmd_u_F": ("kg/s", "commanded " + _INPUT_DESCRIPTIONS["u_F"], "commanded"),
         "cmd_R_ar": ("t/h", "commanded " + _INPUT_DESCRIPTIONS["R_ar"], "commanded"),
         "fault_active": ("-", "1 while the fault is applied, else 0", "truth"),
+        # a sensor fault's dropouts (fcc_env.sensor_faults): what the DCS flags beside the value
+        "sensor_dropout": ("-", "1 where the faulty channel holds its last good value", "status"),
         # closed loop (FCC-closedloop-v0): what the control system records besides Table 1
         "u_F": (
             CLOSED_LOOP_UNITS["u_F"],
@@ -276,6 +278,9 @@ def write_dataset(
     for i, name in enumerate(MEASUREMENT_NAMES):
         cols[f"clean_{name}"] = batch.y_clean[:, :, i].ravel()
     cols["fault_active"] = batch.fault_active.astype(np.int8).ravel()
+    channel_fault = any(c is not None for c in batch.fault_channels)
+    if channel_fault:  # only then: the paper's datasets keep their columns
+        cols["sensor_dropout"] = batch.sensor_dropout.astype(np.int8).ravel()
     if include_states:
         for i, name in enumerate(STATE_NAMES):
             cols[f"x_{name}"] = batch.states[:, :, i].ravel()
@@ -291,6 +296,7 @@ def write_dataset(
         "seeds": list(batch.seeds),
         "scenarios": list(batch.scenarios),
         "fault_onsets": list(batch.fault_onsets),
+        **({"fault_channels": list(batch.fault_channels)} if channel_fault else {}),
         # None (JSON null) for an episode without a fault, as its onset
         "fault_magnitudes": [
             None if onset is None else float(m)
@@ -313,6 +319,7 @@ def write_dataset(
                 else {}
             ),
             "commanded": ["cmd_u_F", "cmd_R_ar"],
+            **({"status": ["sensor_dropout"]} if channel_fault else {}),
             "truth": [n for n in names if n.startswith(("in_", "clean_", "x_"))] + ["fault_active"],
         },
         "columns": column_metadata(names),
@@ -328,6 +335,8 @@ def write_dataset(
         data = np.column_stack([cols[n] for n in names])
         fmt = ["%d", "%d", "%d", "%.1f"] + ["%.10g"] * (len(names) - 4)
         fmt[names.index("fault_active")] = "%d"
+        if channel_fault:
+            fmt[names.index("sensor_dropout")] = "%d"
         with atomic_open(out, "w") as fh:
             fh.write(",".join(names) + "\n")  # np.savetxt's header line
             bar = progress_bar(

@@ -170,3 +170,17 @@ def test_the_request_round_trips_through_json_with_its_channel() -> None:
     assert data["channel"] == "T_rg1" and FaultSpec.from_json(data) == spec
     assert "channel" not in FaultSpec(scenario="f2").to_json()  # the paper's store keys stay
     assert FaultSpec.from_json(FaultSpec(scenario="f2").to_json()) == FaultSpec(scenario="f2")
+
+
+def test_a_dataset_carries_the_dropout_flag_and_the_channel(tmp_path) -> None:
+    from fcc_env.generate import main
+
+    out = tmp_path / "d.csv"
+    argv = ["--scenario", "sensor-dropout", "--fault-channel", "T_rg1", "--seeds", "3"]
+    main([*argv, "--samples", str(N), "--fault-time", str(ONSET), "--out", str(out)])
+    meta = json.loads(out.with_suffix(".json").read_text())
+    assert meta["fault"]["channel"] == "T_rg1" and meta["fault_channels"] == ["T_rg1"]
+    table = np.genfromtxt(out, delimiter=",", names=True)
+    spec = FaultSpec(scenario="sensor-dropout", channel="T_rg1", onset=ONSET)
+    lost = simulate_episodes([3], N, fault=spec).sensor_dropout[0]
+    np.testing.assert_array_equal(table["sensor_dropout"], lost.astype(float))
