@@ -351,7 +351,14 @@ def write_dataset(
 #: Episodes simulated at a time under a progress bar (the bar moves by as many).
 PROGRESS_CHUNK = 16
 #: The fields of :class:`~fcc_env.simulation.BatchResult` that hold one entry per episode.
-_PER_EPISODE = ("seeds", "scenarios", "fault_onsets", "fault_magnitudes", "termination_reasons")
+_PER_EPISODE = (
+    "seeds",
+    "scenarios",
+    "fault_onsets",
+    "fault_magnitudes",
+    "termination_reasons",
+    "fault_channels",
+)
 
 
 def simulate_in_chunks(

@@ -184,3 +184,10 @@ def test_a_dataset_carries_the_dropout_flag_and_the_channel(tmp_path) -> None:
     spec = FaultSpec(scenario="sensor-dropout", channel="T_rg1", onset=ONSET)
     lost = simulate_episodes([3], N, fault=spec).sensor_dropout[0]
     np.testing.assert_array_equal(table["sensor_dropout"], lost.astype(float))
+    # the command's chunked simulation joins the channels per episode
+    from fcc_env.generate import PROGRESS_CHUNK, simulate_in_chunks
+
+    seeds = list(range(PROGRESS_CHUNK + 1))
+    joined = simulate_in_chunks(seeds, 120, progress=False, fault=_spec("dropout"))
+    assert joined.fault_channels == ("T_rg2",) * len(seeds)
+    assert joined.sensor_dropout.shape == (len(seeds), 120) and joined.sensor_dropout.any()
