@@ -6,6 +6,8 @@ The modules, by job:
 - :mod:`~fcc_env.params`, :mod:`~fcc_env.physics`: the frozen parameters; the pure right-hand
   side, the measurement map and the steady state; :mod:`~fcc_env.integrator`: RK4 stepping;
 - :mod:`~fcc_env.faults`: the fault registry (:data:`FAULTS`, :func:`register_fault`);
+  :mod:`~fcc_env.sensor_faults`: the sensor faults on a chosen measured channel (bias, drift,
+  stuck, noise, dropout), registered on import;
   :mod:`~fcc_env.scenarios`: :class:`FaultSpec`, the one typed fault request;
   :mod:`~fcc_env.excitation`: the operating program; :mod:`~fcc_env.plant`: :class:`PlantConfig`,
   the noise and the envelope; :mod:`~fcc_env.effects`, :mod:`~fcc_env.uncertainty`: undeclared
@@ -68,6 +70,7 @@ from fcc_env.physics import measure, rhs, steady_state
 from fcc_env.plant import PlantConfig
 from fcc_env.regulatory import RegulatoryLayer, SetpointProgram
 from fcc_env.scenarios import DEFAULT_N_SAMPLES, FaultProfile, FaultSpec
+from fcc_env.sensor_faults import SENSOR_FAULTS  # registers the sensor faults
 from fcc_env.simulation import BatchResult, simulate_episodes
 
 #: 3999 steps = 4000 samples including the reset observation (the paper's horizon).
@@ -121,6 +124,7 @@ __all__ = [
     "MODEL_VERSION",
     "NOMINAL_INPUTS",
     "PAPER_FAULTS",
+    "SENSOR_FAULTS",
     "STATE_NAMES",
     "BatchResult",
     "EconomicReward",

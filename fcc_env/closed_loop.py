@@ -15,7 +15,6 @@ import numpy as np
 from fcc_common.validation import invalid
 from fcc_env.episode_setup import (
     BatchSchedule,
-    PlantSchedule,
     apply_multipliers,
     generic_sample,
 )
@@ -160,8 +159,9 @@ def simulate_closed_per_sample(
     pidx: np.ndarray,
     PM: np.ndarray,
     Z: np.ndarray,
-    schedule: PlantSchedule | BatchSchedule,
+    schedule: BatchSchedule,
     config: PlantConfig,
+    lost: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """Closed-loop episodes with measurement or ``d_state`` effects (or a fault's measure hook),
     sample by sample.
@@ -172,7 +172,8 @@ def simulate_closed_per_sample(
     does), so batch = env bit for bit here too. ``U`` is written in place (applied inputs).
 
     Returns (Y, OBS, X, AUX, SAT) as :func:`fcc_env.simulate_episodes` returns them (Y and
-    OBS with the closed-loop channels).
+    OBS with the closed-loop channels); each sample's dropout flags are written into ``lost``
+    ``(B, T)``.
     """
     B, T = U.shape[:2]
     Y = np.empty((B, T, N_MEASUREMENTS))
@@ -210,7 +211,8 @@ def simulate_closed_per_sample(
                         x_next[b], u[b], p_base[b], pidx[b], PM[b, k], h, config.rk4_substeps
                     )
         Y[:, k], A[:, k], X[:, k] = y, aux, x
-        Y[:, k] = schedule.measure(k, Y[:, k]) if schedule.measures else Y[:, k]
+        if schedule.measures:  # the transmitters, before the controllers read them
+            Y[:, k], Z[:, k] = schedule.sense(k, Y[:, k], Z[:, k], lost[:, k])
         noisy_batch_kernel(
             Y[:, k : k + 1],
             Z[:, k : k + 1],

@@ -125,13 +125,16 @@ class FCCEnv(gym.Env):
     ## Arguments
     | kwarg / reset option | default | meaning |
     |---|---|---|
-    | fault | None | a :class:`fcc_env.FaultSpec` instead of the five options below (not both); |
+    | fault | None | a :class:`fcc_env.FaultSpec` instead of the six options below (not both); |
     |  |  | as a reset option it replaces the make fault |
     | scenario | "nominal" | nominal, a registered fault (f1–f4 and added ones) or random |
     | fault_time | paper's | onset sample (int, inside the horizon) |
     | fault_magnitude | paper's | relative change ≥ 0 (direction fixed by the fault) |
     | fault_profile | "abrupt" | or "incipient" |
     | ramp_samples | 500 | incipient ramp length (samples, ``DEFAULT_RAMP_SAMPLES``) |
+    | fault_channel | None | a sensor fault's measured channel (``sensor-bias`` and the others of |
+    |  |  | :mod:`fcc_env.sensor_faults`; None: ``T_rx``); other faults refuse one. Info adds |
+    |  |  | ``fault_channel`` and ``sensor_dropout`` (the channel held its last good value) |
     | plant | None | a :class:`fcc_env.PlantConfig` instead of the six options below (not both) |
     | valve_beta | 0.3 | slide-valve head share; 0 = flow mode, 0.15 = harder |
     | sample_time_s | 10.0 | sample period (s) |
@@ -180,6 +183,7 @@ class FCCEnv(gym.Env):
         fault_magnitude: float | None = None,
         fault_profile: str | None = None,
         ramp_samples: int | None = None,
+        fault_channel: str | None = None,
         valve_beta: float | None = None,
         sample_time_s: float | None = None,
         rk4_substeps: int | None = None,
@@ -213,6 +217,7 @@ class FCCEnv(gym.Env):
                 "fault_magnitude": fault_magnitude,
                 "fault_profile": fault_profile,
                 "ramp_samples": ramp_samples,
+                "fault_channel": fault_channel,
             },
         )
         self._plant_effects = fx.resolve(plant_effects)
@@ -358,6 +363,11 @@ class FCCEnv(gym.Env):
             "fault_active": self.fault.active(self._k),
             **({} if self.fault.nominal else {"fault_time": self.fault.onset}),
             "fault_magnitude": self.fault.magnitude,
+            **(
+                {}
+                if self.fault.channel is None
+                else {"fault_channel": self.fault.channel, "sensor_dropout": self._episode.dropped}
+            ),
             "y_clean": self._clean_observation(),
             "state": self._x.copy(),
             "inputs": self._u.copy(),

@@ -15,6 +15,7 @@ import numpy as np
 
 from fcc_env import effects as fx
 from fcc_env.excitation import ProgramGenerator, episode_generators
+from fcc_env.faults import SensorPath
 from fcc_env.integrator import (
     aux_kernel,
     measure_kernel,
@@ -41,11 +42,17 @@ class PlantSchedule:
     fault's ``measure`` hook (:mod:`fcc_env.faults`), transform the noise-free measurements;
     ``d_state`` effects need the generic (Python-level RK4) path. Every method is elementwise in
     the sample index, so the env (chunk by chunk) and batch simulation (whole episodes) compute
-    the same numbers.
+    the same numbers. A channel fault's transmitter (``sensor``, one per episode) comes last, in
+    :meth:`sense`, which both paths call once per sample, in order.
     """
 
     def __init__(
-        self, fault: EpisodeFault, effects: list[Any], params: FCCParams, sample_time_s: float
+        self,
+        fault: EpisodeFault,
+        effects: list[Any],
+        params: FCCParams,
+        sample_time_s: float,
+        sensor: SensorPath | None = None,
     ):
         self.fault = fault
         self.params = params
@@ -57,6 +64,7 @@ class PlantSchedule:
         d = fault.definition
         self.fault_measure = None if d is None else d.measure
         self.fault_inputs = None if d is None else d.transform_inputs
+        self.sensor = sensor
         names: list[str] = []
         for e in self.param_effects:
             names.extend(e.param_multipliers(np.zeros(1), params))
@@ -73,7 +81,12 @@ class PlantSchedule:
     def measures(self) -> bool:
         """True when something acts on the measurements (an effect or the fault's hook), which
         the compiled kernels cannot call."""
-        return bool(self.measure_effects) or self.fault_measure is not None
+        return bool(self.measure_effects) or self.fault_measure is not None or self.python_fault
+
+    @property
+    def python_fault(self) -> bool:
+        """True when the fault acts on the measurements in Python (a hook or a transmitter)."""
+        return self.fault_measure is not None or self.sensor is not None
 
     def multipliers(self, k: np.ndarray) -> np.ndarray:
         """Parameter multipliers over samples ``k``: shape (n, len(pidx))."""
@@ -110,6 +123,15 @@ class PlantSchedule:
         is last: a sensor fault sits at its output)."""
         return self.measure_fault(k, self.measure_effects_only(k, y))
 
+    def sense(self, k: int, y: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
+        """Sample ``k`` as the transmitters deliver it: the noise-free measurement ``y``
+        ``(8,)`` after :meth:`measure`, then the channel fault's transmitter on ``y`` and the
+        noise draws ``z``; returns ``(y', z', dropped)``."""
+        y = self.measure(k, y)
+        if self.sensor is None:
+            return y, z, False
+        return self.sensor.read(k, y, z)
+
     def d_state(self, t: float, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         total = np.zeros_like(x)
         for e in self.state_effects:
@@ -127,7 +149,7 @@ class BatchSchedule:
 
     def __init__(self, schedules: list[PlantSchedule]) -> None:
         self.shared = schedules[-1]
-        self.faulty_rows = [(b, s) for b, s in enumerate(schedules) if s.fault_measure is not None]
+        self.faulty_rows = [(b, s) for b, s in enumerate(schedules) if s.python_fault]
 
     @property
     def generic(self) -> bool:
@@ -148,6 +170,18 @@ class BatchSchedule:
             for b, s in self.faulty_rows:
                 y[b] = s.measure_fault(k, y[b])
         return y
+
+    def sense(
+        self, k: int, y: np.ndarray, z: np.ndarray, lost: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Sample ``k`` of every episode as :meth:`PlantSchedule.sense` delivers it: ``y`` and
+        ``z`` ``(B, 8)``; each episode's dropout flag written into ``lost`` ``(B,)``."""
+        y = self.measure(k, y)
+        z = np.array(z, dtype=np.float64, copy=True)
+        for b, s in self.faulty_rows:
+            if s.sensor is not None:
+                y[b], z[b], lost[b] = s.sensor.read(k, y[b], z[b])
+        return y, z
 
 
 def apply_multipliers(p_base: np.ndarray, pidx: np.ndarray, mult: np.ndarray) -> np.ndarray:
@@ -248,7 +282,11 @@ def setup_episode(
     resolved = fault.resolve(horizon, gens["fault"])
     effects = plant_effects or []
     fx.reset_all(effects)
-    schedule = PlantSchedule(resolved, effects, config.params, config.sample_time_s)
+    d = resolved.definition
+    sensor = None
+    if d is not None and d.sensor is not None:  # after the draws of resolve: they stay as they were
+        sensor = d.sensor(resolved, gens["fault"], horizon, config.sample_time_s)
+    schedule = PlantSchedule(resolved, effects, config.params, config.sample_time_s, sensor)
     setpoints = None
     if config.regulatory is not None:
         setpoints = SetpointStream(
@@ -293,6 +331,8 @@ class EpisodeStream:
         self._sp = np.empty((0, 2))
         self._z = np.empty((0, N_MEASUREMENTS))
         self._pm = np.empty((0, self._pidx.shape[0]))
+        #: whether the last measured sample was a dropout (the value held)
+        self.dropped = False
 
     def _ensure(self, k: int) -> None:
         while self._u_prog.shape[0] <= k:
@@ -354,7 +394,9 @@ class EpisodeStream:
         return x_next
 
     def measure(self, x: np.ndarray, u: np.ndarray, k: int) -> np.ndarray:
-        """Noise-free measurement of sample ``k`` (state, held input, plant effects)."""
+        """Noise-free measurement of sample ``k`` (state, held input, plant effects, the
+        fault's transmitter: which may change the stream's noise draws of ``k``; call once per
+        sample, in order)."""
         if self.schedule.generic:
             y, _, _ = generic_sample(
                 x[None],
@@ -369,7 +411,10 @@ class EpisodeStream:
             y = y[0]
         else:
             y = measure_kernel(x, u, self._p_base, self._pidx, self.multipliers(k))
-        return self.schedule.measure(k, y) if self.schedule.measures else y
+        if not self.schedule.measures:
+            return y
+        y, self._z[k], self.dropped = self.schedule.sense(k, y, self.noise(k))
+        return y
 
     def aux(self, x: np.ndarray, u: np.ndarray, k: int) -> np.ndarray:
         """The auxiliary variables (:data:`fcc_env.physics.AUX_NAMES`) at sample ``k``."""

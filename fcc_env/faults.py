@@ -40,6 +40,19 @@ path through hooks that mirror the plant effects' (:mod:`fcc_env.effects`):
   ``(n, 6)`` (:data:`fcc_env.INPUT_NAMES`) the process sees, after the input effects. In closed
   loop the controllers' outputs replace the valve and air columns afterwards.
 
+**Channel faults** (:mod:`fcc_env.sensor_faults`: ``sensor-bias``, ``sensor-drift``,
+``sensor-stuck``, ``sensor-noise``, ``sensor-dropout``) act on one measured channel that the
+request names (:attr:`~fcc_env.scenarios.FaultSpec.channel`, among the definition's
+``channels``). Their ``sensor`` factory builds one :class:`SensorPath` per episode, so a held
+value (stuck, dropout) lives with its episode, never in a shared hook; its ``read(k, y, z)``
+takes the sample's noise-free measurements and the noise's standard-normal draws and returns
+both as the transmitter delivers them, with the dropout flag. Their magnitudes are in the
+kind's own unit (°C, °C per hour, a multiple of the noise std, a probability), so their
+``max_magnitude`` is not bound by :data:`MAX_FAULT_MAGNITUDE`. The catalogue-wide lists
+(:func:`fault_names`, :func:`scenario_names`, ``scenario="random"``'s draw, the tracks'
+defaults, the control study, the closed-loop report) leave them out until the study that
+covers them (issue 43 items 4, 5 and 7): ``fault_names(with_channel=True)`` lists them too.
+
 A worker process sees the faults registered by the modules it imports: register a fault at the
 import of a module and name it with ``--import`` (as for diagnosers).
 """
@@ -50,12 +63,12 @@ import re
 from collections.abc import Callable
 from dataclasses import dataclass
 from enum import StrEnum
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
 from fcc_common.validation import Integer, Options, Real, check, invalid
-from fcc_env.params import PARAM_INDEX
+from fcc_env.params import MEASUREMENT_NAMES, PARAM_INDEX
 
 __all__ = [
     "FAULTS",
@@ -67,9 +80,12 @@ __all__ = [
     "InputHook",
     "MeasureHook",
     "Scenario",
+    "SensorFactory",
+    "SensorPath",
     "fault_definition",
     "fault_names",
     "fault_width",
+    "is_channel_fault",
     "register_fault",
     "scenario_names",
     "unregister_fault",
@@ -102,6 +118,24 @@ MeasureHook = Callable[[Any, int, np.ndarray], np.ndarray]
 InputHook = Callable[[Any, np.ndarray, np.ndarray], np.ndarray]
 
 
+class SensorPath(Protocol):
+    """One episode's faulty transmitter (a channel fault's per-episode object).
+
+    ``read`` is called once per sample, in order: ``y`` the noise-free measurements ``(8,)``
+    after the effects, ``z`` the noise's standard-normal draws ``(8,)``; it returns both as the
+    transmitter delivers them (the noise is added afterwards, so a reading that repeats ``y``
+    and ``z`` repeats the observation bit for bit) and whether the sample was a dropout."""
+
+    def read(self, k: int, y: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
+        """Sample ``k``'s ``(y', z', dropped)``."""
+        ...
+
+
+#: ``sensor(fault, rng, horizon, sample_time_s) -> SensorPath``: one per episode; ``rng`` the
+#: episode's fault stream (after the scenario's draws), ``horizon`` its samples.
+SensorFactory = Callable[[Any, np.random.Generator, int, float], SensorPath]
+
+
 @dataclass(frozen=True)
 class FaultDefinition:
     """One fault: which parameters it scales (or which path its hooks act on), its paper size
@@ -119,6 +153,14 @@ class FaultDefinition:
     measure: MeasureHook | None = None
     #: the actuator path: ``transform_inputs(fault, k, u) -> u'``, or None
     transform_inputs: InputHook | None = None
+    #: a channel fault: the measured channels it may act on (empty: it takes no channel)
+    channels: tuple[str, ...] = ()
+    #: a channel fault's channel when the request names none
+    default_channel: str | None = None
+    #: a channel fault's transmitter, one per episode (module docstring), or None
+    sensor: SensorFactory | None = None
+    #: a channel fault's unit of ``magnitude`` (the others: a relative change)
+    magnitude_unit: str = "relative change"
 
 
 #: The registry: every fault by name, in registration order (:func:`register_fault`).
@@ -139,18 +181,26 @@ def _check_definition(name: str, d: FaultDefinition) -> None:
     if len(set(params)) != len(params):
         raise invalid(f"{name}.parameters", params, "distinct FCCParams field names")
     check(f"{name}.direction", d.direction, Options([1, -1]))
-    for hook in ("measure", "transform_inputs"):
+    for hook in ("measure", "transform_inputs", "sensor"):
         fn = getattr(d, hook)
         if fn is not None and not callable(fn):
             raise invalid(f"{name}.{hook}", fn, "a callable or None")
-    if not params and d.measure is None and d.transform_inputs is None:
+    if not params and d.measure is None and d.transform_inputs is None and d.sensor is None:
         raise invalid(
             f"{name}.parameters",
             params,
-            "at least one parameter, or a measure or transform_inputs hook",
+            "at least one parameter, or a measure, transform_inputs or sensor hook",
             "a fault must act on the plant somewhere",
         )
-    top = check(f"{name}.max_magnitude", d.max_magnitude, Real(0.0, MAX_FAULT_MAGNITUDE))
+    if (d.sensor is None) != (not d.channels):
+        raise invalid(f"{name}.channels", d.channels, "channels exactly when a sensor is given")
+    for c in d.channels:
+        check(f"{name}.channels", c, Options(MEASUREMENT_NAMES))
+    if d.channels:
+        check(f"{name}.default_channel", d.default_channel, Options(d.channels))
+    # a channel fault's size is in its own unit (module docstring), not a relative change
+    top_range = Real(0.0) if d.channels else Real(0.0, MAX_FAULT_MAGNITUDE)
+    top = check(f"{name}.max_magnitude", d.max_magnitude, top_range)
     check(f"{name}.default_magnitude", d.default_magnitude, Real(0.0, top))
     check(f"{name}.default_onset", d.default_onset, Integer(0))
     for text in ("description", "max_reason"):
@@ -201,14 +251,23 @@ def unregister_fault(name: str) -> None:
     del FAULTS[name]
 
 
-def fault_names() -> tuple[str, ...]:
-    """The registered faults' names, in registration order (the paper's first)."""
-    return tuple(FAULTS)
+def is_channel_fault(name: str) -> bool:
+    """True for a registered fault that acts on a measured channel the request names."""
+    d = FAULTS.get(name)
+    return d is not None and bool(d.channels)
 
 
-def scenario_names() -> tuple[str, ...]:
-    """``nominal`` and every registered fault: the scenarios an episode can have."""
-    return (NOMINAL, *FAULTS)
+def fault_names(with_channel: bool = False) -> tuple[str, ...]:
+    """The registered faults' names, in registration order (the paper's first): the lists
+    every catalogue-wide loop reads, without the channel faults unless ``with_channel``
+    (module docstring)."""
+    return tuple(n for n in FAULTS if with_channel or not is_channel_fault(n))
+
+
+def scenario_names(with_channel: bool = False) -> tuple[str, ...]:
+    """``nominal`` and the registered faults of :func:`fault_names`: the scenarios an episode
+    can have (``scenario="random"`` draws among those without ``with_channel``)."""
+    return (NOMINAL, *fault_names(with_channel))
 
 
 def fault_definition(name: str) -> FaultDefinition:

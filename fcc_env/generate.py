@@ -115,6 +115,8 @@ def column_metadata(names: Sequence[str]) -> dict[str, dict[str, str]]:
         "cmd_u_F": ("kg/s", "commanded " + _INPUT_DESCRIPTIONS["u_F"], "commanded"),
         "cmd_R_ar": ("t/h", "commanded " + _INPUT_DESCRIPTIONS["R_ar"], "commanded"),
         "fault_active": ("-", "1 while the fault is applied, else 0", "truth"),
+        # a sensor fault's dropouts (fcc_env.sensor_faults): what the DCS flags beside the value
+        "sensor_dropout": ("-", "1 where the faulty channel holds its last good value", "status"),
         # closed loop (FCC-closedloop-v0): what the control system records besides Table 1
         "u_F": (
             CLOSED_LOOP_UNITS["u_F"],
@@ -276,6 +278,9 @@ def write_dataset(
     for i, name in enumerate(MEASUREMENT_NAMES):
         cols[f"clean_{name}"] = batch.y_clean[:, :, i].ravel()
     cols["fault_active"] = batch.fault_active.astype(np.int8).ravel()
+    channel_fault = any(c is not None for c in batch.fault_channels)
+    if channel_fault:  # only then: the paper's datasets keep their columns
+        cols["sensor_dropout"] = batch.sensor_dropout.astype(np.int8).ravel()
     if include_states:
         for i, name in enumerate(STATE_NAMES):
             cols[f"x_{name}"] = batch.states[:, :, i].ravel()
@@ -291,6 +296,7 @@ def write_dataset(
         "seeds": list(batch.seeds),
         "scenarios": list(batch.scenarios),
         "fault_onsets": list(batch.fault_onsets),
+        **({"fault_channels": list(batch.fault_channels)} if channel_fault else {}),
         # None (JSON null) for an episode without a fault, as its onset
         "fault_magnitudes": [
             None if onset is None else float(m)
@@ -313,6 +319,7 @@ def write_dataset(
                 else {}
             ),
             "commanded": ["cmd_u_F", "cmd_R_ar"],
+            **({"status": ["sensor_dropout"]} if channel_fault else {}),
             "truth": [n for n in names if n.startswith(("in_", "clean_", "x_"))] + ["fault_active"],
         },
         "columns": column_metadata(names),
@@ -328,6 +335,8 @@ def write_dataset(
         data = np.column_stack([cols[n] for n in names])
         fmt = ["%d", "%d", "%d", "%.1f"] + ["%.10g"] * (len(names) - 4)
         fmt[names.index("fault_active")] = "%d"
+        if channel_fault:
+            fmt[names.index("sensor_dropout")] = "%d"
         with atomic_open(out, "w") as fh:
             fh.write(",".join(names) + "\n")  # np.savetxt's header line
             bar = progress_bar(
@@ -342,7 +351,14 @@ def write_dataset(
 #: Episodes simulated at a time under a progress bar (the bar moves by as many).
 PROGRESS_CHUNK = 16
 #: The fields of :class:`~fcc_env.simulation.BatchResult` that hold one entry per episode.
-_PER_EPISODE = ("seeds", "scenarios", "fault_onsets", "fault_magnitudes", "termination_reasons")
+_PER_EPISODE = (
+    "seeds",
+    "scenarios",
+    "fault_onsets",
+    "fault_magnitudes",
+    "termination_reasons",
+    "fault_channels",
+)
 
 
 def simulate_in_chunks(
@@ -435,7 +451,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="output .csv or .parquet (needs pyarrow) path (sidecar: same stem .json)",
     )
     parser.add_argument(
-        "--scenario", default="nominal", help=f"one of {list(scenario_names())} or 'random'"
+        "--scenario",
+        default="nominal",
+        help=f"one of {list(scenario_names(with_channel=True))} or 'random'",
     )
     parser.add_argument("--seeds", default="0", help="seeds, e.g. '0-9,20' (default 0)")
     parser.add_argument(
@@ -448,6 +466,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--fault-magnitude", type=float, default=None, help="relative size")
     parser.add_argument("--fault-profile", default=None, help="abrupt (default) or incipient")
     parser.add_argument("--ramp-samples", type=int, default=None, help="incipient ramp length")
+    parser.add_argument(
+        "--fault-channel", default=None, help="a sensor fault's measured channel (T_rx)"
+    )
     parser.add_argument(
         "--valve-beta", type=float, default=None, help=f"0 = flow mode ({DEFAULT_VALVE_BETA})"
     )
@@ -493,6 +514,7 @@ def _generate(args: argparse.Namespace) -> int:
             "fault_magnitude": args.fault_magnitude,
             "fault_profile": args.fault_profile,
             "ramp_samples": args.ramp_samples,
+            "fault_channel": args.fault_channel,
         },
     )
     plant = PlantConfig.build(

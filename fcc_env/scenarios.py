@@ -30,11 +30,12 @@ from fcc_env.faults import (
     fault_definition,
     fault_names,
     fault_width,
+    is_channel_fault,
     register_fault,
     scenario_names,
     unregister_fault,
 )
-from fcc_env.params import PARAM_INDEX, FCCParams
+from fcc_env.params import MEASUREMENT_NAMES, PARAM_INDEX, FCCParams
 
 __all__ = [
     "DEFAULT_N_SAMPLES",
@@ -53,6 +54,7 @@ __all__ = [
     "FaultProfile",
     "FaultSpec",
     "Scenario",
+    "fault_channel_options",
     "fault_definition",
     "fault_from_request",
     "fault_names",
@@ -89,7 +91,30 @@ RAMP_SAMPLES_RANGE = Integer(1, why="samples an incipient fault takes to reach i
 def scenario_options() -> Options:
     """Allowed scenario names now: every registered one, and ``"random"`` (draws one per
     episode)."""
-    return Options([*scenario_names(), RANDOM_SCENARIO])
+    return Options([*scenario_names(with_channel=True), RANDOM_SCENARIO])
+
+
+def fault_channel_options(scenario: str) -> Options:
+    """Allowed ``fault_channel`` of channel fault ``scenario``: its channels (the plant's
+    measured ones, :data:`fcc_env.MEASUREMENT_NAMES`)."""
+    return Options(FAULTS[scenario].channels, why=f"the measured channels {scenario} acts on")
+
+
+def _checked_channel(scenario: str, channel: Any) -> str | None:
+    """``channel`` of a request for ``scenario``: a channel fault's (``None``: its default),
+    refused for any other scenario (the one check)."""
+    if is_channel_fault(scenario):
+        return check("fault_channel", channel, fault_channel_options(scenario), None)
+    if channel is not None:
+        channel_faults = [n for n in FAULTS if is_channel_fault(n)]
+        raise invalid(
+            "fault_channel",
+            channel,
+            "None",
+            f"scenario {scenario!r} acts on no chosen channel; the faults that take one: "
+            f"{channel_faults}",
+        )
+    return None
 
 
 def fault_time_range(horizon: int | None) -> Integer:
@@ -112,6 +137,12 @@ class EpisodeFault:
     magnitude: float = 0.0  # relative change, ≥ 0
     profile: FaultProfile = FaultProfile.ABRUPT
     ramp_samples: int = 0  # incipient: samples to reach the full magnitude
+    channel: str | None = None  # a channel fault's measured channel (MEASUREMENT_NAMES)
+
+    @property
+    def channel_index(self) -> int:
+        """The position of :attr:`channel` in the Table 1 measurements (a channel fault)."""
+        return MEASUREMENT_NAMES.index(str(self.channel))
 
     @property
     def nominal(self) -> bool:
@@ -185,13 +216,15 @@ ENV_FAULT_KEYWORDS: dict[str, str] = {
     "fault_magnitude": "magnitude",
     "fault_profile": "profile",
     "ramp_samples": "ramp_samples",
+    "fault_channel": "channel",
 }
 
 
 def _checked_magnitude(scenario: str, magnitude: float) -> float:
     """``magnitude`` of fault ``scenario``, within what the plant carries (the one check)."""
     d = fault_definition(scenario)
-    why = f"for {scenario}: {d.max_reason}"
+    unit = "" if not d.channels else f" ({d.magnitude_unit})"
+    why = f"for {scenario}{unit}: {d.max_reason}"
     return check("fault_magnitude", magnitude, Real(0.0, d.max_magnitude, why=why))
 
 
@@ -220,6 +253,12 @@ class FaultSpec:
             (default :data:`DEFAULT_RAMP_SAMPLES`); only with ``profile="incipient"``.
         magnitude_scale: multiplies the magnitude (given or default) of any fault, e.g. 0.7 for
             the validation protocol's smaller faults.
+        channel: the measured channel a channel fault acts on (``sensor-bias`` and the other
+            sensor faults of :mod:`fcc_env.sensor_faults`: one of
+            :data:`fcc_env.MEASUREMENT_NAMES`; ``None``: the fault's default, ``T_rx``); the
+            env keyword is ``fault_channel``. Other faults refuse a channel. A channel fault's
+            ``magnitude`` is in its own unit (°C for a bias; the definition's
+            ``magnitude_unit``).
 
     >>> FaultSpec(scenario="f1").resolve(horizon=4000).magnitude
     0.1
@@ -237,16 +276,16 @@ class FaultSpec:
     profile: FaultProfile = FaultProfile.ABRUPT
     ramp_samples: int | None = None
     magnitude_scale: float = 1.0
+    channel: str | None = None
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__
         set_(self, "scenario", str(check("scenario", self.scenario, scenario_options())))
         set_(self, "onset", check("fault_time", self.onset, fault_time_range(None), None))
-        set_(
-            self,
-            "magnitude",
-            check("fault_magnitude", self.magnitude, FAULT_MAGNITUDE_RANGE, None),
-        )
+        # a channel fault's magnitude has its own unit and range (checked below)
+        size_range = Real(0.0) if is_channel_fault(self.scenario) else FAULT_MAGNITUDE_RANGE
+        set_(self, "magnitude", check("fault_magnitude", self.magnitude, size_range, None))
+        set_(self, "channel", _checked_channel(self.scenario, self.channel))
         set_(self, "profile", check("fault_profile", self.profile, Options(FaultProfile)))
         set_(
             self, "ramp_samples", check("ramp_samples", self.ramp_samples, RAMP_SAMPLES_RANGE, None)
@@ -284,13 +323,15 @@ class FaultSpec:
         for opt, value in options.items():
             name = ENV_FAULT_KEYWORDS[opt]
             changes[name] = defaults[name] if value is None else value
+        if not is_channel_fault(changes.get("scenario", self.scenario)):
+            changes["channel"] = None  # a channel stays with the channel fault it was given for
         return self.replace(**changes)
 
     def replace(self, **changes: Any) -> FaultSpec:
         return dataclasses.replace(self, **changes)
 
     def to_json(self) -> dict[str, Any]:
-        return {
+        out = {
             "scenario": self.scenario,
             "onset": self.onset,
             "magnitude": self.magnitude,
@@ -298,6 +339,14 @@ class FaultSpec:
             "ramp_samples": self.ramp_samples,
             "magnitude_scale": self.magnitude_scale,
         }
+        if self.channel is not None:  # only then: the store keys of the other faults stay
+            out["channel"] = self.channel
+        return out
+
+    @classmethod
+    def from_json(cls, data: Mapping[str, Any]) -> FaultSpec:
+        """The spec :meth:`to_json` wrote."""
+        return cls(**{**data, "profile": FaultProfile(data.get("profile", "abrupt"))})
 
     def _scaled(self, scenario: str, magnitude: float | None) -> float:
         """The magnitude of fault ``scenario`` (``None``: its default) × ``magnitude_scale``."""
@@ -337,7 +386,10 @@ class FaultSpec:
         ramp = 0
         if self.profile is FaultProfile.INCIPIENT:
             ramp = DEFAULT_RAMP_SAMPLES if self.ramp_samples is None else self.ramp_samples
-        return EpisodeFault(sc, onset, magnitude, self.profile, ramp)
+        channel = None
+        if is_channel_fault(sc):
+            channel = self.channel or fault_definition(sc).default_channel
+        return EpisodeFault(sc, onset, magnitude, self.profile, ramp, channel)
 
 
 def fault_from_request(fault: FaultSpec | None, keywords: Mapping[str, Any]) -> FaultSpec:

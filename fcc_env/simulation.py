@@ -65,8 +65,8 @@ SEEDS_RANGE = IntegerSequence(0, unique=False, why="one episode per seed")
 DEFAULT_MEMORY_BUDGET_BYTES: int = 4 * 2**30
 
 #: Bytes per (episode, sample) of a :class:`BatchResult`: float32 observations, float64 y_clean,
-#: inputs, states and aux, bool fault_active.
-_BYTES_PER_SAMPLE = 8 * 4 + (8 + 6 + 11 + len(AUX_NAMES)) * 8 + 1
+#: inputs, states and aux, bool fault_active and sensor_dropout.
+_BYTES_PER_SAMPLE = 8 * 4 + (8 + 6 + 11 + len(AUX_NAMES)) * 8 + 2
 
 
 def batch_nbytes(n_episodes: int, n_samples: int) -> int:
@@ -139,6 +139,11 @@ class BatchResult:
     #: (B, T) bool, closed loop: the controller output in force over sample k was clamped at an
     #: actuator limit (the env's ``info["controller_saturated"]`` of sample k)
     controller_saturated: np.ndarray | None = None
+    #: (B, T) bool: the sample was a sensor dropout, its channel holding the last good value
+    #: (the env's ``info["sensor_dropout"]``; :mod:`fcc_env.sensor_faults`)
+    sensor_dropout: np.ndarray | None = None
+    #: each episode's faulty channel (a channel fault's, :mod:`fcc_env.sensor_faults`), else None
+    fault_channels: tuple[str | None, ...] = ()
 
 
 def _episode_faults(fault: FaultSpec | Sequence[FaultSpec] | None, n: int) -> list[FaultSpec]:
@@ -243,6 +248,7 @@ def simulate_episodes(
     X = np.empty((B, T, N_STATES))
     A = np.empty((B, T, N_AUX))
     SAT = None
+    LOST = np.zeros((B, T), dtype=np.bool_)  # a channel fault's dropouts (fcc_env.sensor_faults)
 
     def run_kernel(noise: np.ndarray, add_noise: bool, *controller: np.ndarray) -> None:
         """The compiled batch kernel on this batch with the standard-normal draws ``noise``; ``controller``: the loops' state, set
@@ -274,7 +280,7 @@ def simulate_episodes(
         gains = config.regulatory.gains(config.sample_time_s)
         if schedule.generic or schedule.measures:
             Y, obs, X, A, SAT = simulate_closed_per_sample(
-                x0, U, SP, C, gains, p_base, pidx, PM, Z, schedule, config
+                x0, U, SP, C, gains, p_base, pidx, PM, Z, schedule, config, LOST
             )
         else:
             SAT = np.zeros((B, T), dtype=np.bool_)
@@ -299,7 +305,7 @@ def simulate_episodes(
         run_kernel(Z, not schedule.measures, *open_loop_controller_args(B, T))
     if config.regulatory is None and (schedule.generic or schedule.measures):
         for kk in range(T):
-            Y[:, kk] = schedule.measure(kk, Y[:, kk])
+            Y[:, kk], Z[:, kk] = schedule.sense(kk, Y[:, kk], Z[:, kk], LOST[:, kk])
         noisy_batch_kernel(Y, Z, NOISE_STD_ABS, NOISE_STD_REL, config.noise_scale, obs)
     del Z
     active = np.stack([(k >= f.onset) if not f.nominal else np.zeros(T, bool) for f in faults])
@@ -326,6 +332,8 @@ def simulate_episodes(
         channels=observation_channels(config),
         setpoints=SP,
         controller_saturated=SAT,
+        sensor_dropout=LOST,
+        fault_channels=tuple(f.channel for f in faults),
     )
 
 

@@ -379,12 +379,13 @@ class FCCVectorEnv(VectorEnv):
                 "effects acting through parameters or inputs",
                 "measure/d_state effects need Python per sample: use vectorization_mode='sync'",
             )
-        if setup.schedule.fault_measure is not None:
+        if setup.schedule.python_fault:
             raise invalid(
                 "scenario",
                 setup.fault.scenario,
                 "a fault acting through parameters or inputs",
-                "a fault's measure hook needs Python per sample: use vectorization_mode='sync'",
+                "a fault's measure hook or sensor needs Python per sample: use "
+                "vectorization_mode='sync'",
             )
         self._setups[b] = setup
         fault = setup.fault

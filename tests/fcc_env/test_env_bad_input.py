@@ -21,12 +21,20 @@ def test_simulate_refuses_a_request_over_the_memory_budget() -> None:
     with pytest.raises(ValueError) as e:
         simulate_episodes(range(10**9), 2)
     msg = str(e.value)
-    assert "1000000000 episodes x 2 samples" in msg and "643 GiB" in msg and "4 GiB" in msg
+    assert "1000000000 episodes x 2 samples" in msg and "644 GiB" in msg and "4 GiB" in msg
     with pytest.raises(ValueError, match=r"2 episodes x 5 samples .* budget of 1e-06 GiB"):
         simulate_episodes([0, 1], 5, memory_budget_bytes=2**30 * 1e-6)
     assert DEFAULT_MEMORY_BUDGET_BYTES == 4 * 2**30
     b = simulate_episodes([0], 3)
-    arrays = (b.observations, b.y_clean, b.fault_active, b.inputs, b.states, b.aux)
+    arrays = (
+        b.observations,
+        b.y_clean,
+        b.fault_active,
+        b.inputs,
+        b.states,
+        b.aux,
+        b.sensor_dropout,
+    )
     assert sum(a.nbytes for a in arrays) == batch_nbytes(1, 3)
 
 
