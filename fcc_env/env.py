@@ -258,7 +258,8 @@ class FCCEnv(gym.Env):
                 * ``scenario`` (``"nominal"``, a registered fault or ``"random"``),
                   ``fault_time`` (onset sample), ``fault_magnitude`` (relative size),
                   ``fault_profile`` (``"abrupt"`` or ``"incipient"``), ``ramp_samples``
-                  (incipient ramp length): change single fields of the ``make`` fault;
+                  (incipient ramp length), ``fault_channel`` (the measured channel of a
+                  sensor fault): change single fields of the ``make`` fault;
                 * ``plant_effects``: undeclared plant effects for this episode
                   (:mod:`fcc_env.effects`), replacing those given to ``make``.
 

@@ -131,7 +131,7 @@ def test_a_supervisor_switches_on_the_first_alarm_to_the_diagnosed_faults_set_po
     ("argv", "message"),
     [
         (["--out", ""], "is empty"),
-        (["--seeds", "0"], "allowed --seeds >= 1"),
+        (["--seeds", "0"], r"allowed --seeds 1\.\.1000"),
         (["--diagnosers", "nope"], "unknown \\['nope'\\]"),
     ],
 )
