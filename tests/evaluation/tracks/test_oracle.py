@@ -16,6 +16,7 @@ from evaluation.sweep.sources import simulate_loaded
 from evaluation.tracks import TRACKS
 from evaluation.tracks.board import run_track
 from evaluation.tracks.board_tables import track_table, write_track
+from evaluation.tracks.filter_bound import FILTER_LABEL
 from evaluation.tracks.optimal import CUSUM_LABEL, GLR_LABEL
 from evaluation.tracks.oracle import (
     DIRECTIONAL_CALIBRATION,
@@ -208,6 +209,7 @@ def test_run_track_end_to_end(tmp_path) -> None:
         ORACLE_LABEL,
         MEASURED_INPUTS_LABEL,
         STAGE_LABEL,
+        FILTER_LABEL,
         CUSUM_LABEL,
         GLR_LABEL,
     ]
