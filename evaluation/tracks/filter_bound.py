@@ -15,8 +15,8 @@ the two rows is the price of input noise and of an unknown fault path.
 The statistic, on the filter's whitened innovations e_t (standard normal and white while the
 plant is healthy, ``lab/filter-lab.md``):
 
-1. per fault g, a window-limited GLR over the fault's size along its innovation signature
-   d_g (:func:`evaluation.tracks.optimal.window_glr` with a_t = d_gᵀe_t, b_t = |d_g|²): the
+1. per fault g and signature window, a window-limited GLR over the fault's size along its
+   innovation signature d_g (:func:`evaluation.tracks.optimal.window_glr` with a_t = d_gᵀe_t, b_t = |d_g|²): the
    fault's size and onset unknown, its direction known;
 2. an omnibus for any other departure: Page's CUSUM of the log-likelihood ratio of a doubled
    innovation variance, ``NIS_t / 4 − 4 ln 2`` per sample (8 channels), which a mean shift of
@@ -28,7 +28,7 @@ plant is healthy, ``lab/filter-lab.md``):
 
 Decision, the signatures: *learned from the track's labelled training faults*
 (:meth:`TrackData.train_fault_episodes`, training seeds only, the track's size and onset
-distributions) as the mean over :data:`SIGNATURE_WINDOW` samples after onset of the whitened
+distributions) as the mean over each of :data:`SIGNATURE_WINDOWS` samples after onset of the whitened
 innovations of the faulty episode less those of its healthy twin (the same seed, no fault),
 averaged over the first :data:`SIGNATURE_SEEDS` training fault seeds and normalised. The twin shares the episode's noise, so the
 difference is nearly noise-free; learned this way a signature covers the track's own sizes,
@@ -59,7 +59,7 @@ __all__ = [
     "FILTER_LABEL",
     "OMNIBUS_VARIANCE",
     "SIGNATURE_SEEDS",
-    "SIGNATURE_WINDOW",
+    "SIGNATURE_WINDOWS",
     "FilterBound",
     "union_limits",
 ]
@@ -68,7 +68,7 @@ __all__ = [
 FILTER_LABEL = "optimal filter (exact model, measured channels)"
 #: Samples after onset over which a training fault's innovation signature is averaged (the
 #: window of the lab notes' signal-to-noise table).
-SIGNATURE_WINDOW = 300
+SIGNATURE_WINDOWS = (30, 300)
 #: Training fault seeds per fault the signatures are averaged over (the first of the track's):
 #: a difference to the twin is nearly noise-free, so a few suffice, and each costs a filter run.
 SIGNATURE_SEEDS = 5
@@ -106,7 +106,8 @@ class FilterBound:
         data: the track.
         false_alarm_target: the union's share of healthy calibration samples in alarm.
         window: the GLR's window [samples].
-        signature_window: samples after onset a signature is averaged over.
+        signature_windows: the windows after onset a fault's signatures are averaged over,
+            samples (one direction, and one GLR, per fault and window).
         signature_seeds: training fault seeds per fault the signatures are averaged over.
     """
 
@@ -118,7 +119,7 @@ class FilterBound:
         *,
         false_alarm_target: float,
         window: int = GLR_WINDOW,
-        signature_window: int = SIGNATURE_WINDOW,
+        signature_windows: tuple[int, ...] = SIGNATURE_WINDOWS,
         signature_seeds: int = SIGNATURE_SEEDS,
     ) -> None:
         self.data = data
@@ -126,14 +127,17 @@ class FilterBound:
             "false_alarm_target", false_alarm_target, Real(0.0, 0.5, closed="neither")
         )
         self.window = check("window", window, Integer(1))
-        self.signature_window = check("signature_window", signature_window, Integer(1))
+        self.signature_windows = tuple(
+            check("signature_windows", w, Integer(1)) for w in signature_windows
+        )
         self.signature_seeds = check("signature_seeds", signature_seeds, Integer(1))
         track = data.track
         # a drawn plant's feed-quality drift is the coking factor's: estimate it there
         coking = True if track.plant_variation else None
         self.config = UKFConfig.matching(track.plant, estimate_coking=coking)
         self._shared = FCCStateEstimator(track.plant.params, self.config)
-        self.signal_names = (*(f"glr[{f}]" for f in track.faults), "cusum[nis]")
+        pairs = [(f, w) for f in track.faults for w in self.signature_windows]
+        self.signal_names = (*(f"glr[{f},{w}]" for f, w in pairs), "cusum[nis]")
 
     @property
     def faults(self) -> tuple[str, ...]:
@@ -159,8 +163,9 @@ class FilterBound:
         return est.filter(y, innovation_cov=False).whitened[0]
 
     def _learn_signatures(self) -> np.ndarray:
-        """Unit directions ``(n_faults, 8)``: the training faults' mean whitened-innovation
-        difference to their healthy twins over the window after onset (module docstring)."""
+        """Unit directions ``(n_faults · n_windows, 8)`` (fault-major): the training faults'
+        mean whitened-innovation difference to their healthy twins over each window after onset
+        (module docstring)."""
         faulty = self.data.train_fault_episodes(
             self.data.track.train_fault_seeds[: self.signature_seeds]
         )
@@ -169,19 +174,19 @@ class FilterBound:
             s: self.whitened(le.episode)
             for s, le in zip(seeds, self.data.simulate(seeds, FaultSpec()), strict=True)
         }
-        sums = {f: np.zeros(len(MEASUREMENT_NAMES)) for f in self.faults}
+        wins = self.signature_windows
+        sums = {f: np.zeros((len(wins), len(MEASUREMENT_NAMES))) for f in self.faults}
         for ep in faulty:
             assert ep.seed is not None and ep.fault_onset is not None
             e, h = self.whitened(ep), twins[ep.seed]
             k0 = ep.fault_onset
-            k1 = min(k0 + self.signature_window, e.shape[0], h.shape[0])
-            if k1 > k0:
-                sums[ep.scenario] += np.mean(e[k0:k1] - h[k0:k1], axis=0)
-        out = np.zeros((len(self.faults), len(MEASUREMENT_NAMES)))
-        for i, f in enumerate(self.faults):
-            norm = float(np.linalg.norm(sums[f]))
-            out[i] = sums[f] / norm if norm > 0 else 0.0
-        return out
+            for j, w in enumerate(wins):
+                k1 = min(k0 + w, e.shape[0], h.shape[0])
+                if k1 > k0:
+                    sums[ep.scenario][j] += np.mean(e[k0:k1] - h[k0:k1], axis=0)
+        out = np.concatenate([sums[f] for f in self.faults])
+        norm = np.linalg.norm(out, axis=1, keepdims=True)
+        return np.divide(out, norm, out=np.zeros_like(out), where=norm > 0)
 
     def statistics(self, episode: Episode) -> tuple[np.ndarray, np.ndarray]:
         """(the statistics ``(T, n_faults + 1)``: the GLR per fault, the omnibus last; the

@@ -25,9 +25,11 @@ end exceeds :data:`GOAL_R_FD` is marked and no detector is scored against it.
 
 Two more reference rows (:data:`DEFAULT_REFERENCES`, each an :class:`OracleConfig`, which says
 what each is for): the same observer driven by the *measured* inputs, and that perfect model
-evaluated by ``lrgf-glr``'s alarm stage. None of these is a bound; the optimal-detector rows of
-:mod:`evaluation.tracks.optimal` (a CUSUM bank on the known fault trajectories and a GLR over
-the fault's size) close the list.
+evaluated by ``lrgf-glr``'s alarm stage. None of these is a bound. Then the reachable bound,
+:mod:`evaluation.tracks.filter_bound` (``OracleConfig(inputs="measured", stage="filter")``: a
+filter of the exact model on the measured channels, a GLR along each fault's innovation
+direction); the optimal-detector rows of :mod:`evaluation.tracks.optimal` (a CUSUM bank on the
+known fault trajectories and a GLR over the fault's size) close the list.
 
 >>> OracleConfig().channels
 ('T_rx', 'T_rg1', 'T_rg2', 'T_d1', 'T_dg')
@@ -184,6 +186,10 @@ class OracleConfig:
       them, an omnibus T². It is what a detector of that family would reach with a perfect
       model, from what a detector can read: where it misses the physical-limit row's bounds, no
       model improvement can close the gap with that stage.
+    * ``OracleConfig(inputs="measured", stage="filter")``, ``optimal filter (exact model,
+      measured channels)``: the reachable bound (:mod:`evaluation.tracks.filter_bound`), from
+      the observations and the true model only, calibrated on :data:`DIRECTIONAL_CALIBRATION`
+      validation episodes.
     * ``OracleConfig(stage="cusum")`` and ``OracleConfig(stage="glr")``, the optimal-detector
       rows (:mod:`evaluation.tracks.optimal`): true inputs only, calibrated like the physical
       limit (validation seeds, :data:`REFERENCE_TARGET`).
@@ -198,7 +204,8 @@ class OracleConfig:
         inputs: what drives the reference (:class:`OracleInputs`): ``"true"`` (default) or
             ``"measured"``.
         stage: the alarm stage (:class:`OracleStage`): ``"t2"`` (default),
-            ``"directional"``, ``"cusum"`` or ``"glr"`` (the last two with ``inputs="true"``).
+            ``"directional"``, ``"filter"`` (with ``inputs="measured"``), ``"cusum"`` or
+            ``"glr"`` (the last two with ``inputs="true"``).
         n_calibration: healthy calibration episodes from the track's first validation seed,
             an integer ≥ 1 that stays clear of the test and training seeds; ``None`` (default):
             the track's validation seeds for the T², CUSUM and GLR,

@@ -48,8 +48,8 @@ def test_detects_a_paper_size_f1_at_once_without_the_clean_output(bound: FilterB
 def test_signatures_are_unit_directions_that_tell_f3_from_f1(bound: FilterBound) -> None:
     d = bound.directions_
     assert np.allclose(np.linalg.norm(d, axis=1), 1.0)
-    f1, f3 = bound.faults.index("f1"), bound.faults.index("f3")
-    assert d[f1] @ d[f3] < 0.5  # f3 heats the dilute phases, f1 cools the riser
+    f1, f3 = bound.faults.index("f1"), bound.faults.index("f3")  # windows (30, 300)
+    assert d[2 * f1 + 1] @ d[2 * f3 + 1] < 0.5  # f3 heats the dilute phases, f1 cools the riser
 
 
 def test_union_limits_hold_the_share() -> None:
