@@ -49,6 +49,7 @@ import numpy as np
 from diagnosers.detection import Detection
 from diagnosers.episode.record import Episode
 from diagnosers.filters import FCCStateEstimator, UKFConfig
+from evaluation.sweep.store import canonical_hash
 from evaluation.tracks.optimal import GLR_WINDOW, cusum, window_glr
 from evaluation.tracks.track_data import TrackData
 from fcc_common.validation import Integer, Real, check
@@ -74,6 +75,11 @@ SIGNATURE_WINDOWS = (30, 300)
 SIGNATURE_SEEDS = 5
 #: The omnibus CUSUM's alternative: the innovations' variance times this.
 OMNIBUS_VARIANCE = 2.0
+
+
+#: Fits of this process by :meth:`FilterBound._fit_key`: a track's row is fitted once however
+#: often its table is built (each fit filters about 125 episodes).
+_FITTED: dict[str, tuple[np.ndarray, np.ndarray]] = {}
 
 
 def union_limits(stats: np.ndarray, target: float, *, iterations: int = 40) -> np.ndarray:
@@ -207,10 +213,28 @@ class FilterBound:
         (validation) episodes."""
         if not healthy:
             raise ValueError("healthy is empty; allowed: at least one healthy episode")
+        key = self._fit_key(healthy)
+        if key in _FITTED:
+            self.directions_, self.limits_ = _FITTED[key]
+            return self
         self.directions_ = self._learn_signatures()
         stats = np.concatenate([self.statistics(ep)[0] for ep in healthy])
         self.limits_ = union_limits(stats, self.false_alarm_target)
+        _FITTED[key] = (self.directions_, self.limits_)
         return self
+
+    def _fit_key(self, healthy: Sequence[Episode]) -> str:
+        """What a fit depends on: the track without its test episodes (its plant, faults,
+        training seeds), the settings and the calibration episodes' seeds and lengths (the
+        episodes are the seeds' simulations)."""
+        key = {
+            "track": self.data.fault_training_key(),
+            "plant": self.data.track.plant.to_json(),
+            "settings": [self.false_alarm_target, self.window, self.signature_windows],
+            "signature_seeds": self.signature_seeds,
+            "healthy": [[ep.seed, ep.scenario, ep.n_samples] for ep in healthy],
+        }
+        return canonical_hash(key)
 
     def detect(self, episode: Episode) -> Detection:
         stat, matched = self.statistics(episode)

@@ -95,7 +95,7 @@ def test_oracle_config_rejects_bad_values() -> None:
     with pytest.raises(ValueError, match=r"target=0.7 is outside the allowed range"):
         OracleConfig(target=0.7)
     with pytest.raises(
-        ValueError, match=r"stage='bogus'.*one of \['t2', 'directional', 'cusum', 'glr'\]"
+        ValueError, match=r"stage='bogus'.*one of \['t2', 'directional', 'cusum', 'glr', 'filter'\]"
     ):
         OracleConfig(stage="bogus")
     with pytest.raises(ValueError, match=r"n_calibration=0 is outside the allowed range"):
