@@ -7,6 +7,7 @@
 ``track_data``     :class:`TrackData`: a track's episodes as a sweep's data source
 ``oracle``         the reference rows: physical-limit observers that read the noise-free plant
 ``optimal``        the optimal-detector rows: a CUSUM and a GLR on each fault's exact signature
+``filter_bound``   the reachable bound: a GLR on the innovations of a filter of the exact model
 ``rows``           the rows of a track table: per diagnoser, intervals over the seeds (pure)
 ``goal``           the goal table: how far each detector is from its reference row
 ``board``          running a track (:func:`run_track`) into a :class:`TrackRun`

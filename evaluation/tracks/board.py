@@ -5,10 +5,11 @@ track of :mod:`evaluation.tracks`, a sweep of the chosen diagnosers over the tra
 (:class:`evaluation.tracks.track_data.TrackData`), scores the physical-limit observer
 (:mod:`evaluation.tracks.oracle`) on the same cells, and writes into ``<out>/<track>/``:
 
-* ``leaderboard.md`` / ``.csv`` / ``.json`` — one row per diagnoser plus five reference rows
+* ``leaderboard.md`` / ``.csv`` / ``.json`` — one row per diagnoser plus six reference rows
   (:data:`evaluation.tracks.oracle.DEFAULT_REFERENCES`), the ``oracle`` (physical limit), the
   ``perfect model (measured inputs)``, the ``perfect model + lrgf-glr stage (measured
-  inputs)`` and the optimal-detector rows ``optimal CUSUM (known fault)`` (the bound at the
+  inputs)``, the reachable bound ``optimal filter (exact model, measured channels)``
+  (:mod:`evaluation.tracks.filter_bound`) and the optimal-detector rows ``optimal CUSUM (known fault)`` (the bound at the
   same false-alarm rate) and ``GLR (known type, unknown size)``
   (:mod:`evaluation.tracks.optimal`):
   r_fd with its 95 % bootstrap interval over healthy episodes, the share of healthy episodes

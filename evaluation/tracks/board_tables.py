@@ -22,6 +22,7 @@ from evaluation.reports.outputs import write_csv
 from evaluation.reports.plots import confusion_figure
 from evaluation.reports.tables import R_FD_TEXT, R_TD_TEXT, t_dt_text
 from evaluation.sweep.records import CellResult
+from evaluation.tracks.filter_bound import FILTER_LABEL
 from evaluation.tracks.goal import (
     GOAL_R_FD,
     GOAL_R_TD_MARGIN,
@@ -77,14 +78,16 @@ def _references_line(run: TrackRun) -> str:
     refs = [r for r in run.rows if r.reference]
     if not refs:
         return "No reference rows."
-    limit, optimal = run.limit_row, run.optimal_row
+    limit, optimal, bound = run.limit_row, run.optimal_row, run.filter_row
     parts = [f"{r.label}: {REFERENCE_NOTES.get(r.label, 'a reference row')}" for r in refs]
     return (
         "Reference rows (read what no detector may; never ranked): "
         + "; ".join(parts)
         + f". t_dt/oracle is against `{limit.label if limit else 'none'}`, t_dt/optimal "
-        f"against `{optimal.label if optimal else 'none'}` (the first reference row from "
-        f"`{ORACLE_LABEL}`, resp. `{CUSUM_LABEL}`, on that meets the r_fd goal)."
+        f"against `{optimal.label if optimal else 'none'}`, t_dt/filter against "
+        f"`{bound.label if bound else 'none'}` (the first reference row from "
+        f"`{ORACLE_LABEL}`, resp. `{CUSUM_LABEL}`, resp. `{FILTER_LABEL}`, on that meets the "
+        "r_fd goal)."
     )
 
 
@@ -110,7 +113,8 @@ def track_legend(sample_time_s: float | None = None) -> str:
         f"{t_dt_text(sample_time_s)}; {_delay_text()}; t_dt/oracle: (t_dt + 1) / (oracle t_dt + "
         "1) [-] over the seeds both detected, 1 = as fast as the physical limit (where that row "
         "misses the r_fd goal, the reference row named under the table); t_dt/optimal: the same "
-        "against the optimal CUSUM row; missed/ended: faulty episodes "
+        "against the optimal CUSUM row (the filter row's own: the price of input noise); "
+        "t_dt/filter: the same against the optimal filter row, the reachable bound; missed/ended: faulty episodes "
         "never alarmed after the onset / episodes the plant ended early, with the reasons "
         "(well_empty, afterburn, extinguished; scored on their samples before the end). "
         "a [lo, hi]: estimate and 95 % BCa bootstrap interval over the seeds; –: no value."
@@ -172,7 +176,7 @@ def track_wide_table(run: TrackRun) -> str:
     head = ["diagnoser", "r_fd [95 % CI]", "healthy eps. alarmed", "worst r_fd (seed)"]
     for f in faults:
         head += [f"{f} r_td (rank)", f"{f} t_dt", f"{f} delay", f"{f} t_dt/oracle"]
-        head += [f"{f} t_dt/optimal", f"{f} missed/ended"]
+        head += [f"{f} t_dt/optimal", f"{f} t_dt/filter", f"{f} missed/ended"]
     lines = [
         f"### Track `{run.track.name}`, every column",
         "",
@@ -196,6 +200,7 @@ def track_wide_table(run: TrackRun) -> str:
                 _ci(c.delay, 0),
                 _ci(c.ratio, 2),
                 _ci(c.ratio_optimal, 2),
+                _ci(c.ratio_filter, 2),
                 f"{c.misses}/{c.terminated}"
                 + "".join(f" {reason}×{n}" for reason, n in c.ended_reasons),
             ]
@@ -205,7 +210,7 @@ def track_wide_table(run: TrackRun) -> str:
 
 
 def _flat(row: TrackRow, track: str, run: TrackRun) -> dict[str, Any]:
-    limit, optimal = run.limit_row, run.optimal_row
+    limit, optimal, bound = run.limit_row, run.optimal_row, run.filter_row
     d: dict[str, Any] = {
         "track": track,
         "diagnoser": row.label,
@@ -213,6 +218,7 @@ def _flat(row: TrackRow, track: str, run: TrackRun) -> dict[str, Any]:
         "r_fd_meets_goal": row.meets_r_fd_goal,
         "limit_reference": limit.label if limit else "",
         "optimal_reference": optimal.label if optimal else "",
+        "filter_reference": bound.label if bound else "",
         "r_fd": row.r_fd.estimate,
         "r_fd_low": row.r_fd.low,
         "r_fd_high": row.r_fd.high,
@@ -227,6 +233,7 @@ def _flat(row: TrackRow, track: str, run: TrackRun) -> dict[str, Any]:
             ("t_dt_over_oracle", c.ratio),
             ("delay_censored", c.delay),
             ("t_dt_over_optimal", c.ratio_optimal),
+            ("t_dt_over_filter", c.ratio_filter),
         ):
             d[f"{f}_{name}"], d[f"{f}_{name}_low"], d[f"{f}_{name}_high"] = (
                 iv.estimate,

@@ -1,8 +1,8 @@
 """The rows of a track table: per diagnoser, intervals over the track's seeds (pure).
 
 :func:`track_rows` turns per-seed records into :class:`TrackRow` objects (r_fd with its 95 %
-interval, per fault r_td, t_dt, the delay with misses counted and the ratios to two reference
-rows); a :class:`TrackRun` holds a finished track run. Presentation is in
+interval, per fault r_td, t_dt, the delay with misses counted and the ratios to three
+reference rows); a :class:`TrackRun` holds a finished track run. Presentation is in
 :mod:`evaluation.tracks.board_tables`.
 
 Matched false-alarm rates. A row *meets the r_fd goal* when the upper end of its r_fd interval on
@@ -10,7 +10,8 @@ the test episodes is at most :data:`~evaluation.tracks.oracle.GOAL_R_FD`
 (:func:`meets_r_fd_goal`). Only registered detectors that meet it are ranked
 (:func:`rank_rows`); reference rows are never ranked. A ratio is taken against a *yardstick*
 (:func:`yardstick`): the physical-limit row for ``t_dt/oracle`` and the goal, the optimal CUSUM
-row for ``t_dt/optimal``, or, where that row misses the goal on the test episodes, the next
+row for ``t_dt/optimal``, the optimal filter row (the reachable bound) for ``t_dt/filter``,
+or, where that row misses the goal on the test episodes, the next
 reference row in :data:`~evaluation.tracks.oracle.REFERENCE_LABELS` order that meets it (none
 when no reference row does: the ratio is then undefined).
 """
@@ -35,6 +36,7 @@ from evaluation.metrics.intervals import (
     worst,
 )
 from evaluation.sweep.records import CellResult
+from evaluation.tracks.filter_bound import FILTER_LABEL
 from evaluation.tracks.optimal import CUSUM_LABEL
 from evaluation.tracks.oracle import GOAL_R_FD, ORACLE_LABEL, REFERENCE_LABELS
 from evaluation.tracks.track import Track
@@ -102,6 +104,9 @@ class FaultCell:
     delay: Interval = _NO_VALUE
     #: (t_dt + 1) / (yardstick t_dt + 1) against the optimal CUSUM row (or its stand-in)
     ratio_optimal: Interval = _NO_VALUE
+    #: the same against the reachable bound, the optimal filter row (or its stand-in): a
+    #: detector's gap to the best test of the exact model on the same readings
+    ratio_filter: Interval = _NO_VALUE
 
 
 @dataclass(frozen=True)
@@ -184,6 +189,12 @@ class TrackRun:
         (:func:`yardstick`); None when no reference row of the run meets the r_fd goal."""
         return self._row(yardstick({r.label: r.r_fd for r in self.rows}, CUSUM_LABEL))
 
+    @property
+    def filter_row(self) -> TrackRow | None:
+        """The yardstick of ``t_dt/filter``: the reachable-bound row or its stand-in
+        (:func:`yardstick`); None when no reference row of the run meets the r_fd goal."""
+        return self._row(yardstick({r.label: r.r_fd for r in self.rows}, FILTER_LABEL))
+
     def _row(self, label: str | None) -> TrackRow | None:
         return next((r for r in self.rows if r.label == label), None)
 
@@ -217,6 +228,7 @@ def track_rows(
         for label in [*labels, *refs]
     }
     limit, optimal = yardstick(r_fd, ORACLE_LABEL), yardstick(r_fd, CUSUM_LABEL)
+    bound = yardstick(r_fd, FILTER_LABEL)
     for label in [*labels, *refs]:
         healthy = records_of(records, label, "nominal")
         w = worst(healthy)
@@ -233,6 +245,7 @@ def track_rows(
                 ended_reasons=_reasons(records_of(records, label, f)),
                 delay=bootstrap_ci([censored_delay(r.t_dt, r.n_fault_samples) for r in recs]),
                 ratio_optimal=_ratio(recs, records, optimal, f),
+                ratio_filter=_ratio(recs, records, bound, f),
             )
         rows.append(
             TrackRow(

@@ -16,6 +16,7 @@ from evaluation.sweep.sources import simulate_loaded
 from evaluation.tracks import TRACKS
 from evaluation.tracks.board import run_track
 from evaluation.tracks.board_tables import track_table, write_track
+from evaluation.tracks.filter_bound import FILTER_LABEL
 from evaluation.tracks.optimal import CUSUM_LABEL, GLR_LABEL
 from evaluation.tracks.oracle import (
     DIRECTIONAL_CALIBRATION,
@@ -94,7 +95,7 @@ def test_oracle_config_rejects_bad_values() -> None:
     with pytest.raises(ValueError, match=r"target=0.7 is outside the allowed range"):
         OracleConfig(target=0.7)
     with pytest.raises(
-        ValueError, match=r"stage='bogus'.*one of \['t2', 'directional', 'cusum', 'glr'\]"
+        ValueError, match=r"stage='bogus'.*one of \['t2', 'directional', 'cusum', 'glr', 'filter'\]"
     ):
         OracleConfig(stage="bogus")
     with pytest.raises(ValueError, match=r"n_calibration=0 is outside the allowed range"):
@@ -208,6 +209,7 @@ def test_run_track_end_to_end(tmp_path) -> None:
         ORACLE_LABEL,
         MEASURED_INPUTS_LABEL,
         STAGE_LABEL,
+        FILTER_LABEL,
         CUSUM_LABEL,
         GLR_LABEL,
     ]
