@@ -168,3 +168,34 @@ def test_a_string_for_a_mapping_of_fields_is_refused_not_split() -> None:
         from_fields(fcc_env.RegulatoryLayer, "loops", "regulatory")
     with pytest.raises(ValueError, match=r"program='ab' is outside the allowed range"):
         gym.make(fcc_env.CLOSED_LOOP_ENV_ID, regulatory={"program": "ab"}).reset(seed=0)
+
+
+def test_batch_simulation_refuses_loose_or_mistyped_requests_by_name() -> None:
+    # the plant and the fault travel whole: anything else is refused naming what it got
+    with pytest.raises(
+        ValueError, match=r"fault='f1' is outside the allowed range: a FaultSpec \(one per seed\)"
+    ):
+        simulate_episodes([0], 5, fault=[fcc_env.FaultSpec(), "f1"][1:])
+    with pytest.raises(
+        ValueError, match=r"got 3 faults for 2 seeds; allowed: one, or one per seed"
+    ):
+        simulate_episodes([0, 1], 5, fault=[fcc_env.FaultSpec()] * 3)
+    with pytest.raises(ValueError, match=r"plant=0\.5 is outside the allowed range: a PlantConfig"):
+        simulate_episodes([0], 5, plant=0.5)
+    with pytest.raises(
+        TypeError, match=r"unknown env keyword\(s\) \['noise'\]; allowed: .*noise_scale"
+    ):
+        fcc_env.env_request(noise=2.0)
+    with pytest.raises(ValueError, match=r"noise_scale=-1 is outside the allowed range"):
+        fcc_env.env_request(noise_scale=-1)
+    fault, plant = fcc_env.env_request(scenario="f2", fault_time=10, noise_scale=0.5)
+    assert (fault.scenario, fault.onset, plant.noise_scale) == ("f2", 10, 0.5)
+
+
+def test_simulated_data_refuses_a_plant_that_is_not_one() -> None:
+    from evaluation.sweep.sources import SimulatedData
+
+    with pytest.raises(
+        ValueError, match=r"plant=\{'noise_scale': 2\.0\} is outside the allowed range"
+    ):
+        SimulatedData(plant={"noise_scale": 2.0}).validate()  # type: ignore[arg-type]
