@@ -81,7 +81,7 @@ class PlantSchedule:
     def measures(self) -> bool:
         """True when something acts on the measurements (an effect or the fault's hook), which
         the compiled kernels cannot call."""
-        return bool(self.measure_effects) or self.fault_measure is not None or self.python_fault
+        return bool(self.measure_effects) or self.python_fault
 
     @property
     def python_fault(self) -> bool:
