@@ -384,8 +384,8 @@ class FCCVectorEnv(VectorEnv):
                 "scenario",
                 setup.fault.scenario,
                 "a fault acting through parameters or inputs",
-                "a fault's measure hook or sensor needs Python per sample: use "
-                "vectorization_mode='sync'",
+                "a fault's measure hook, sensor or actuator device needs Python per sample: "
+                "use vectorization_mode='sync'",
             )
         self._setups[b] = setup
         fault = setup.fault
