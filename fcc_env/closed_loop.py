@@ -18,7 +18,7 @@ from fcc_env.episode_setup import (
     apply_multipliers,
     generic_sample,
 )
-from fcc_env.integrator import aux_kernel, measure_kernel, noisy_batch_kernel, step_kernel
+from fcc_env.integrator import aux_kernel, measure_kernel, noisy_kernel, step_kernel
 from fcc_env.params import (
     INPUT_NAMES,
     MEASUREMENT_NAMES,
@@ -218,14 +218,11 @@ def simulate_closed_per_sample(
         Y[:, k], A[:, k], X[:, k] = y, aux, x
         if schedule.measures:  # the transmitters, before the controllers read them
             Y[:, k], Z[:, k] = schedule.sense(k, Y[:, k], Z[:, k], lost[:, k])
-        noisy_batch_kernel(
-            Y[:, k : k + 1],
-            Z[:, k : k + 1],
-            NOISE_STD_ABS,
-            NOISE_STD_REL,
-            config.noise_scale,
-            OBS[:, k : k + 1],
-        )
+        for b in range(B):
+            # the serial kernel: the parallel batch one costs a thread-pool start per sample
+            OBS[b, k] = noisy_kernel(
+                Y[b, k], Z[b, k], NOISE_STD_ABS, NOISE_STD_REL, config.noise_scale
+            )
         for b in range(B):
             saturated = controller_update(C[b], SP[b, k], OBS[b, k], gains)
             if k + 1 < T:  # the flag of the output in force over the next sample

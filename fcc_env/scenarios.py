@@ -245,7 +245,7 @@ ENV_FAULT_KEYWORDS: dict[str, str] = {
 def _checked_magnitude(scenario: str, magnitude: float) -> float:
     """``magnitude`` of fault ``scenario``, within what the plant carries (the one check)."""
     d = fault_definition(scenario)
-    unit = "" if not d.channels else f" ({d.magnitude_unit})"
+    unit = f" ({d.magnitude_unit})" if has_own_unit(scenario) else ""
     why = f"for {scenario}{unit}: {d.max_reason}"
     return check("fault_magnitude", magnitude, Real(0.0, d.max_magnitude, why=why))
 
