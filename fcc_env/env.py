@@ -109,6 +109,13 @@ class FCCEnv(gym.Env):
     ``f3`` CO2/CO ratio constant −10 % (2020); ``f4`` reactor holdup +5 % (2000); any added by
     :func:`fcc_env.register_fault`. ``"random"`` draws scenario, onset and magnitude. Profiles:
     ``"abrupt"`` or ``"incipient"`` (ramp over ``ramp_samples``). Label: ``info["fault_active"]``.
+    Sensor faults on a chosen channel (:mod:`fcc_env.sensor_faults`); actuator faults
+    (:mod:`fcc_env.actuator_faults`: ``valve-stiction``, ``valve-bias``, ``valve-stuck``,
+    ``blower-capacity``), acting between the command and the process (``info["inputs"]`` the
+    inputs received; in closed loop the observation's ``u_F`` stays the command; a stuck or
+    sticking valve needs the T_rx loop and is refused in open loop); ``"concurrent"``: two
+    faults with their own onsets, ``fault=FaultSpec(scenario="concurrent", parts=(...))``,
+    whose info adds ``fault_labels`` and ``fault_times``.
 
     ## Starting State
     The hot steady state at nominal inputs, found by a root solver (:func:`fcc_env.steady_state`).

@@ -38,7 +38,8 @@ path through hooks that mirror the plant effects' (:mod:`fcc_env.effects`):
   controllers of a closed-loop plant read its output.
 * ``transform_inputs(fault, k, u) -> u'``: samples ``k`` ``(n,)`` and the program's inputs
   ``(n, 6)`` (:data:`fcc_env.INPUT_NAMES`) the process sees, after the input effects. In closed
-  loop the controllers' outputs replace the valve and air columns afterwards.
+  loop the controllers' outputs replace the valve and air columns afterwards (an actuator
+  fault acts after them: below).
 
 **Channel faults** (:mod:`fcc_env.sensor_faults`: ``sensor-bias``, ``sensor-drift``,
 ``sensor-stuck``, ``sensor-noise``, ``sensor-dropout``) act on one measured channel that the
@@ -52,6 +53,28 @@ kind's own unit (°C, °C per hour, a multiple of the noise std, a probability),
 (:func:`fault_names`, :func:`scenario_names`, ``scenario="random"``'s draw, the tracks'
 defaults, the control study, the closed-loop report) leave them out until the study that
 covers them (issue 43 items 4, 5 and 7): ``fault_names(with_channel=True)`` lists them too.
+
+**Actuator faults** (:mod:`fcc_env.actuator_faults`: ``valve-stiction``, ``valve-bias``,
+``valve-stuck``, ``blower-capacity``) act on one input, their ``actuator_input`` (``u_F`` or
+``R_ar``), between the command and the process. Their ``actuator`` factory builds one
+:class:`ActuatorPath` per episode (a sticking valve's state lives with its episode); its
+``move(k, u)`` takes the inputs as commanded (the controllers', or the program's and the
+action's in open loop) and returns those the process receives. ``needs_loop`` marks a fault
+that only shows while a controller moves the actuator (a stuck or sticking valve): a plant
+whose regulatory layer leaves that loop open refuses it by name. Their magnitudes are in
+their own unit too (``magnitude_unit``), and the catalogue-wide lists leave them out like the
+channel faults (``fault_names(with_channel=True)`` lists every registered fault).
+
+**Concurrent faults** (``concurrent``, a reserved scenario name like ``random``, not a
+registry entry): two registered faults, each a whole
+:class:`~fcc_env.scenarios.FaultSpec` with its own onset, in
+:attr:`~fcc_env.scenarios.FaultSpec.parts`. The episode's fault has both, in onset order, and
+each acts through its own definition (parameter slots side by side, hooks one after the
+other). Labels: the scenario is ``concurrent`` and its onset the first part's, so detection
+scores against the first fault; for isolation the episode carries both names
+(:attr:`~fcc_env.scenarios.EpisodeFault.labels`, ``info["fault_labels"]``,
+:attr:`fcc_env.BatchResult.fault_labels`), and an isolator must name both or say
+``"unknown"`` (:func:`isolation_outcome`: one name of the two is a wrong isolation).
 
 A worker process sees the faults registered by the modules it imports: register a fault at the
 import of a module and name it with ``--import`` (as for diagnosers).
