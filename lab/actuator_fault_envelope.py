@@ -14,6 +14,7 @@ steps' brief transients stay above it).
     PYTHONPATH=$PWD python lab/actuator_fault_envelope.py --cases closed:valve-stiction:0.05
     PYTHONPATH=$PWD python lab/actuator_fault_envelope.py --cases closed:sensor-bias+valve-stiction:1
     PYTHONPATH=$PWD python lab/actuator_fault_envelope.py --figure /tmp/stiction.png
+    PYTHONPATH=$PWD python lab/actuator_fault_envelope.py --signatures --seeds 10
 """
 
 from __future__ import annotations
@@ -116,6 +117,29 @@ def figure(path: str, size: float, seed: int = 1000) -> None:
     fig.savefig(path, dpi=110)
 
 
+def signatures(seeds: list[int]) -> None:
+    """Each actuator fault at its default: the mean faulty − healthy difference of each
+    noise-free observation channel over samples 2500–4000 / its standard deviation over time
+    (mean over episodes), in closed and open loop."""
+    for mode, plant in (
+        ("closed", fcc_env.PlantConfig.build(regulatory=True)),
+        ("open", fcc_env.PlantConfig()),
+    ):
+        h = simulate_episodes(seeds, 4000, plant=plant)
+        for name, d in fcc_env.ACTUATOR_FAULTS.items():
+            if mode == "open" and d.needs_loop:
+                continue  # refused in open loop
+            b = simulate_episodes(seeds, 4000, fault=FaultSpec(scenario=name), plant=plant)
+            diff = (b.y_clean - h.y_clean)[:, 2500:]
+            mean, sd = diff.mean(axis=(0, 1)), diff.std(axis=1).mean(axis=0)
+            cells = [
+                f"{c} {m:+.2f} / {v:.2f}"
+                for c, m, v in zip(b.channels, mean, sd, strict=True)
+                if not c.endswith("_sp")
+            ]
+            print(f"{mode:6s} {name:15s} " + ", ".join(cells), flush=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--seeds", type=int, default=10)
@@ -129,7 +153,11 @@ def main() -> None:
     )
     ap.add_argument("--figure", default=None, help="PATH: draw the stiction limit cycle, then stop")
     ap.add_argument("--figure-size", type=float, default=0.05, help="the figure's S")
+    ap.add_argument("--signatures", action="store_true", help="the defaults' signatures, then stop")
     args = ap.parse_args()
+    if args.signatures:
+        signatures(list(range(1000, 1000 + args.seeds)))
+        return
     if args.figure:
         figure(args.figure, args.figure_size)
         return
