@@ -53,8 +53,9 @@ class StictionValve:
     """One sticking valve's state machine (Choudhury et al. 2005, module docstring).
 
     ``x0``: the command the valve rests at when the model starts (its position too: a valve
-    that starts to stick where it stands). :meth:`move` takes the next command and returns
-    the position; ``S`` and ``J`` may change between calls (an incipient fault grows them).
+    that starts to stick where it stands, so its first breakaway needs the whole band ``S``
+    in either direction). :meth:`move` takes the next command and returns the position; ``S``
+    and ``J`` may change between calls (an incipient fault grows them).
 
     >>> v = StictionValve(0.0)
     >>> [v.move(x, S=2.0, J=1.0) for x in (1.0, 2.0, 3.0, 4.0, 3.5, 1.0)]

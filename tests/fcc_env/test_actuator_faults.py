@@ -136,3 +136,14 @@ def test_same_seed_same_episode_and_the_vector_env_refuses_them() -> None:
     )
     with pytest.raises(ValueError, match="actuator device needs Python per sample"):
         envs.reset(seed=0)
+
+
+def test_an_incipient_fault_grows_over_its_ramp() -> None:
+    spec = FaultSpec(
+        scenario="valve-bias", onset=ONSET, magnitude=0.1, profile="incipient", ramp_samples=100
+    )
+    b = simulate_episodes([3], N, fault=spec, plant=CLOSED)
+    gap = b.inputs[0, :, 0] - b.y_clean[0, :, U_F]
+    k = np.arange(N)
+    frac = np.clip((k - ONSET + 1) / 100, 0, 1) * (k >= ONSET)
+    np.testing.assert_allclose(gap, 0.1 * NOMINAL_INPUTS[0] * frac, atol=1e-9)
