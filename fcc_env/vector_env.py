@@ -294,6 +294,9 @@ class FCCVectorEnv(VectorEnv):
         self._onset = np.zeros(n, np.int64)
         self._magnitude = np.zeros(n)
         self._scenario = np.full(n, None, dtype=object)
+        # a concurrent episode's labels and onsets (FCCEnv's info keys), else None
+        self._labels = np.full(n, None, dtype=object)
+        self._times = np.full(n, None, dtype=object)
 
     @staticmethod
     def _streams(n: int, n_mult: int) -> Streams:
@@ -392,6 +395,8 @@ class FCCVectorEnv(VectorEnv):
         self._faulty[b] = not fault.nominal
         self._onset[b], self._magnitude[b] = fault.onset, fault.magnitude
         self._scenario[b] = fault.scenario
+        self._labels[b] = fault.labels if fault.parts else None
+        self._times[b] = tuple(p.onset for p in fault.parts) if fault.parts else None
         n_mult = setup.schedule.pidx.shape[0]
         if n_mult > self._s.pidx.shape[1]:  # more multiplied parameters than any episode yet
             grown = self._streams(self.num_envs, n_mult)
@@ -466,6 +471,8 @@ class FCCVectorEnv(VectorEnv):
             "fault_active": self._faulty & (onset >= 0) & (onset <= e.k),
             "fault_time": np.where(self._faulty, onset, 0),
             "fault_magnitude": self._magnitude.copy(),
+            "fault_labels": self._labels.copy(),
+            "fault_times": self._times.copy(),
             "y_clean": e.y_clean.copy(),
             "state": e.x.copy(),
             "inputs": e.u.copy(),
@@ -485,8 +492,10 @@ class FCCVectorEnv(VectorEnv):
             reported = np.ones(self.num_envs, np.bool_) if full else mask.copy()
             if key == "fault_time":  # a healthy episode's info has none (FCCEnv._get_info)
                 reported &= self._faulty
-                if not reported.any():
-                    continue
+            elif key in ("fault_labels", "fault_times"):  # a concurrent episode's only
+                reported &= self._labels != None  # noqa: E711 (elementwise on an object array)
+            if key in ("fault_time", "fault_labels", "fault_times") and not reported.any():
+                continue
             # envs without the key or left alone: zeros or None, as sync leaves them
             value[~reported] = None if value.dtype == object else 0
             infos[key] = value

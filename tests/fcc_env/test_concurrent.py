@@ -136,3 +136,15 @@ def test_isolation_names_both_or_abstains() -> None:
     assert isolation_outcome(["f1", "f3"], labels) == "wrong"
     assert isolation_outcome("unknown", labels) == "unknown"
     assert isolation_outcome("concurrent", labels) == "wrong"
+
+
+def test_the_vector_env_reports_the_labels_as_sync_does() -> None:
+    kw = {"num_envs": 2, "fault": F1_F2, "max_episode_steps": N - 1}
+    native = gym.make_vec("FCC-v0", vectorization_mode="vector_entry_point", **kw)
+    sync = gym.make_vec("FCC-v0", vectorization_mode="sync", **kw)
+    for envs in (native, sync):
+        _, info = envs.reset(seed=3)
+        assert list(info["fault_labels"]) == [("f1", "f2")] * 2 and info["_fault_labels"].all()
+        assert list(info["fault_times"]) == [(100, 200)] * 2
+    _, info = native.reset(seed=3, options={"scenario": "f1", "fault_time": 100})
+    assert "fault_labels" not in info
