@@ -14,6 +14,7 @@ from fcc_env import FaultSpec, simulate_episodes
 from fcc_env.actuator_faults import BLOWER_CAPACITY, VALVE_RANGE
 from fcc_env.closed_loop import CLOSED_LOOP_CHANNELS
 from fcc_env.params import NOMINAL_INPUTS
+from fcc_env.physics import AUX_NAMES
 
 N, ONSET = 300, 100
 CLOSED = fcc_env.PlantConfig.build(regulatory=True)
@@ -147,3 +148,28 @@ def test_an_incipient_fault_grows_over_its_ramp() -> None:
     k = np.arange(N)
     frac = np.clip((k - ONSET + 1) / 100, 0, 1) * (k >= ONSET)
     np.testing.assert_allclose(gap, 0.1 * NOMINAL_INPUTS[0] * frac, atol=1e-9)
+
+
+def _crossings(e: np.ndarray, band: float = 0.2) -> int:
+    """Sign changes of ``e`` past ``±band`` (a Schmitt trigger: noise inside does not count)."""
+    state, n = 0, 0
+    for v in e:
+        new = 1 if v > band else -1 if v < -band else state
+        n += bool(state and new != state)
+        state = new
+    return n
+
+
+def test_a_sticking_valve_makes_the_t_rx_loop_cycle() -> None:
+    n, seeds = 1300, (3, 4)
+    sticky = _closed("valve-stiction", seeds=seeds, n=n, magnitude=0.05)
+    healthy = simulate_episodes(list(seeds), n, plant=CLOSED)
+
+    def cycling(r) -> list[int]:  # the true riser outlet about its set point, after the onset
+        e = r.aux[:, 300:, AUX_NAMES.index("T_rx")] - r.setpoints[:, 300:, 0]
+        return [_crossings(row) for row in e]
+
+    # lab/actuator-faults.md: a period of about 10 min (60 samples); here 34 and 36 crossings
+    # against the healthy loop's 7 and 7 (its set-point steps)
+    for stuck, free in zip(cycling(sticky), cycling(healthy), strict=True):
+        assert stuck > max(3 * free, 20), (stuck, free)
