@@ -30,6 +30,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from fcc_common.validation import Integer, check, invalid
+from fcc_common.workers import cpu_count
 from fcc_env import effects as fx
 from fcc_env.env import (
     ACTION_SCALE,
@@ -77,6 +78,29 @@ _NUMERICAL_FAILURE = 1
 _SKIP, _STEP, _START = 0, 1, 2
 #: Actuator limits as [low, high] rows over (u_F, R_ar): the numbers of ``actuator_inputs``.
 _SP_LIMITS = np.array([[SETPOINT_RANGES[n].low, SETPOINT_RANGES[n].high] for n in SETPOINT_NAMES]).T
+
+
+#: Envs per numba thread below which a step runs serially (``threads=None``; lab/vector-threads.md).
+MIN_ENVS_PER_THREAD = 128
+
+
+def check_threads(threads: Any) -> int | None:
+    """``threads`` as the native vector envs take it: ``None`` (:func:`vector_threads` picks) or
+    1 up to numba's pool size (``NUMBA_NUM_THREADS``)."""
+    pool = numba.config.NUMBA_NUM_THREADS
+    why = f"numba's thread pool holds {pool} (NUMBA_NUM_THREADS)"
+    return check("threads", threads, Integer(1, pool, why=why), None)
+
+
+def vector_threads(num_envs: int, threads: int | None = None) -> int:
+    """The numba threads a step of ``num_envs`` envs runs on: ``threads`` when given, else one
+    per :data:`MIN_ENVS_PER_THREAD` envs, at most ``numba.get_num_threads()`` (which a user or a
+    pool worker may have lowered) and the cores this process may use; 1 means the serial
+    kernel, without a parallel region."""
+    if threads is not None:
+        return threads
+    cap = min(numba.get_num_threads(), cpu_count())
+    return max(1, min(cap, num_envs // MIN_ENVS_PER_THREAD))
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
@@ -221,6 +245,14 @@ def _batch_step(mode: np.ndarray, actions: np.ndarray, e: Episodes, s: Streams, 
         _step_env(b, mode[b], actions[b], e, s, pl)
 
 
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _serial_step(mode: np.ndarray, actions: np.ndarray, e: Episodes, s: Streams, pl: Plant) -> None:
+    """:func:`_batch_step` on the calling thread alone: no parallel region, so no barrier and
+    no pool threads left spinning after it (one env's numbers do not depend on the loop)."""
+    for b in range(mode.shape[0]):
+        _step_env(b, mode[b], actions[b], e, s, pl)
+
+
 class FCCVectorEnv(VectorEnv):
     """``num_envs`` FCC episodes (``FCC-v0`` or, with ``regulatory``, ``FCC-closedloop-v0``)
     stepped together; Gymnasium 1.x vector semantics (NEXT_STEP autoreset, dict-of-array infos
@@ -239,9 +271,12 @@ class FCCVectorEnv(VectorEnv):
         *,
         max_episode_steps: int | None = DEFAULT_N_SAMPLES - 1,
         render_mode: str | None = None,
+        threads: int | None = None,
         **env_kwargs: Any,
     ) -> None:
         self.num_envs = check("num_envs", num_envs, Integer(1))
+        #: numba threads of a step (``None``: :func:`vector_threads` picks them at each step)
+        self.threads = check_threads(threads)
         self.max_episode_steps = check("max_episode_steps", max_episode_steps, Integer(1), None)
         if render_mode is not None:
             raise invalid("render_mode", render_mode, "None", "render through SyncVectorEnv")
@@ -423,7 +458,16 @@ class FCCVectorEnv(VectorEnv):
         self._drawn[b] += 1
 
     def _run(self, mode: np.ndarray, actions: np.ndarray) -> None:
-        _batch_step(mode, actions, self._e, self._s, self._plant)
+        threads = vector_threads(self.num_envs, self.threads)
+        if threads == 1:
+            _serial_step(mode, actions, self._e, self._s, self._plant)
+            return
+        before = numba.get_num_threads()
+        numba.set_num_threads(threads)
+        try:
+            _batch_step(mode, actions, self._e, self._s, self._plant)
+        finally:
+            numba.set_num_threads(before)
 
     def _check_actions(self, actions: Any) -> np.ndarray:
         raw = np.asarray(actions)
