@@ -11,6 +11,29 @@ vector env seeded as ``SyncVectorEnv`` seeds its sub-envs gives their numbers bi
 (``tests/fcc_env/test_vector_env.py``). Through Gymnasium:
 ``gym.make_vec("FCC-v0", 1024, vectorization_mode="vector_entry_point", ...)``.
 
+Threads (``threads=``): a step runs the envs on that many numba threads; the default
+(:func:`vector_threads`) is one per :data:`MIN_ENVS_PER_THREAD` envs, at most
+``numba.get_num_threads()`` and the cores this process may use, and one thread is a serial
+compiled loop with no parallel region. The numbers do not depend on it: each env reads and
+writes its own rows only (``tests/fcc_env/test_vector_threads.py``). A parallel step ends at a
+barrier where the threads that finished wait for the others, and how they wait is the numba
+threading layer's (``NUMBA_THREADING_LAYER``; numba picks ``tbb``, then ``omp``, then
+``workqueue``, whichever is installed):
+
+- ``omp`` (libgomp, numba's choice on Linux without tbb): ``OMP_WAIT_POLICY=ACTIVE`` spins
+  (``GOMP_SPINCOUNT`` iterations), which on a busy machine takes the cores from the threads
+  still working (two threads at 1024 envs ran at half the speed of one); ``PASSIVE`` sleeps.
+  Importing :mod:`fcc_env` sets ``PASSIVE`` unless the environment sets the variable; libgomp
+  reads it once, when numba's pool starts, so code that ran a parallel numba kernel before
+  importing :mod:`fcc_env` must set it in the environment. Intel's runtime (libiomp5, conda's
+  ``intel-openmp``) reads ``KMP_BLOCKTIME`` (ms of spinning; ``0`` is passive) as well.
+- ``workqueue`` (numba's own): waits on condition variables (passive); it refuses kernels
+  launched from several Python threads at once.
+- ``tbb`` (the ``tbb`` package): work stealing; its idle workers also spin briefly.
+
+The figures (1 and 2 threads at 16 to 1024 envs) are in ``lab/env-speed.md``;
+``python -m bench.vector_speed --envs 16,1024 --threads 1,2,auto`` measures them.
+
 >>> envs = FCCVectorEnv(4, scenario="f1", fault_time=50)
 >>> obs, info = envs.reset(seed=0)
 >>> obs.shape, info["fault_time"].tolist()
@@ -80,7 +103,7 @@ _SKIP, _STEP, _START = 0, 1, 2
 _SP_LIMITS = np.array([[SETPOINT_RANGES[n].low, SETPOINT_RANGES[n].high] for n in SETPOINT_NAMES]).T
 
 
-#: Envs per numba thread below which a step runs serially (``threads=None``; lab/vector-threads.md).
+#: Envs per numba thread below which a step runs serially (``threads=None``; lab/env-speed.md).
 MIN_ENVS_PER_THREAD = 128
 
 
@@ -259,7 +282,9 @@ class FCCVectorEnv(VectorEnv):
     with ``_key`` masks, the ``TimeLimit`` of ``max_episode_steps`` inside).
 
     Keywords are ``FCCEnv``'s (validated by it, with its messages) plus ``max_episode_steps``
-    (``None``: no truncation). Plant effects that act through ``measure`` or ``d_state`` need
+    (``None``: no truncation) and ``threads`` (numba threads of a step, 1 to
+    ``NUMBA_NUM_THREADS``; ``None``: :func:`vector_threads` picks them at each step; the module
+    doc says why and how the threads wait). Plant effects that act through ``measure`` or ``d_state`` need
     Python per sample and are refused: run them with ``vectorization_mode="sync"``.
     """
 
