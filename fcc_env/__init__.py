@@ -79,7 +79,8 @@ from fcc_env.simulation import BatchResult, simulate_episodes
 # starts (the first parallel kernel): PASSIVE makes the threads that wait at a kernel's barrier
 # sleep instead of spinning, which on a busy machine took the cores from the threads still
 # working (the native vector env at 1024 envs on two threads: 2x slower than one thread spinning,
-# 1.3x faster passive; lab/env-speed.md). A value set in the environment is kept.
+# 1.3x faster passive; lab/env-speed.md). A value set in the environment is kept; the value
+# also reaches OpenMP runtimes loaded later (torch's), as docs/environment.md says.
 os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 #: 3999 steps = 4000 samples including the reset observation (the paper's horizon).
