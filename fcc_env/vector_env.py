@@ -87,7 +87,14 @@ from fcc_env.regulatory import (
 )
 from fcc_env.scenarios import DEFAULT_N_SAMPLES
 
-__all__ = ["VECTOR_ENTRY_POINT", "FCCClosedLoopVectorEnv", "FCCVectorEnv"]
+__all__ = [
+    "MIN_ENVS_PER_THREAD",
+    "VECTOR_ENTRY_POINT",
+    "FCCClosedLoopVectorEnv",
+    "FCCVectorEnv",
+    "check_threads",
+    "vector_threads",
+]
 
 VECTOR_ENTRY_POINT = "fcc_env.vector_env:FCCVectorEnv"
 #: Samples of program/noise/multipliers held per env: two chunks, sample k at row k % RING, so
@@ -284,8 +291,9 @@ class FCCVectorEnv(VectorEnv):
     Keywords are ``FCCEnv``'s (validated by it, with its messages) plus ``max_episode_steps``
     (``None``: no truncation) and ``threads`` (numba threads of a step, 1 to
     ``NUMBA_NUM_THREADS``; ``None``: :func:`vector_threads` picks them at each step; the module
-    doc says why and how the threads wait). Plant effects that act through ``measure`` or ``d_state`` need
-    Python per sample and are refused: run them with ``vectorization_mode="sync"``.
+    doc says why and how the threads wait). Plant effects that act through ``measure`` or
+    ``d_state`` need Python per sample and are refused: run them with
+    ``vectorization_mode="sync"``.
     """
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}  # noqa: RUF012
