@@ -42,6 +42,8 @@ Importing the package registers ``FCC-v0``:
 (8,)
 """
 
+import os
+
 from gymnasium.envs.registration import register, registry
 
 from fcc_env.actuator_faults import ACTUATOR_FAULTS  # registers the actuator faults
@@ -75,6 +77,14 @@ from fcc_env.regulatory import RegulatoryLayer, SetpointProgram
 from fcc_env.scenarios import DEFAULT_N_SAMPLES, FaultProfile, FaultSpec
 from fcc_env.sensor_faults import SENSOR_FAULTS  # registers the sensor faults
 from fcc_env.simulation import BatchResult, simulate_episodes
+
+# numba's OpenMP threading layer (libgomp) reads OMP_WAIT_POLICY once, when its thread pool
+# starts (the first parallel kernel): PASSIVE makes the threads that wait at a kernel's barrier
+# sleep instead of spinning, which on a busy machine took the cores from the threads still
+# working (the native vector env at 1024 envs on two threads: 2x slower than one thread spinning,
+# 1.3x faster passive; lab/env-speed.md). A value set in the environment is kept; the value
+# also reaches OpenMP runtimes loaded later (torch's), as docs/environment.md says.
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 #: 3999 steps = 4000 samples including the reset observation (the paper's horizon).
 MAX_EPISODE_STEPS = DEFAULT_N_SAMPLES - 1

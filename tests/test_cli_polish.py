@@ -29,6 +29,7 @@ COMMANDS = (
     "fcc_env.closed_loop_report",
     "fcc_env.closed_loop_analysis",
     "bench.simulator_speed",
+    "bench.control_speed",
     "bench.detector_speed",
     "bench.filter_speed",
     "bench.sweep_speed",
