@@ -109,16 +109,18 @@ class ActuatorDevice:
         frac = float(self.fault.fraction(np.asarray(k)))
         m = self.fault.magnitude * frac
         held, valve = self.state
+        if not np.isfinite(held):  # a fault from the first sample: the valve stands as commanded
+            held = command
         position = command
         if frac and self.kind == "bias":
             position = command + m * float(NOMINAL_INPUTS[self.j])
         elif frac and self.kind == "capacity":
             position = min(command, (1.0 - m) * BLOWER_CAPACITY)
-        elif frac and self.kind == "stuck" and np.isfinite(held):
+        elif frac and self.kind == "stuck":
             position = held + (1.0 - m) * (command - held)
         elif frac and self.kind == "stiction":
             if valve is None:  # the valve comes to rest where it stands at the onset
-                valve = StictionValve(held if np.isfinite(held) else command)
+                valve = StictionValve(held)
             s = m * VALVE_RANGE
             position = valve.move(command, s, self.jump_ratio * s)
         position = min(max(position, self.low), self.high)  # within the valve's travel

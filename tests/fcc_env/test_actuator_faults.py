@@ -173,3 +173,10 @@ def test_a_sticking_valve_makes_the_t_rx_loop_cycle() -> None:
     # against the healthy loop's 7 and 7 (its set-point steps)
     for stuck, free in zip(cycling(sticky), cycling(healthy), strict=True):
         assert stuck > max(3 * free, 20), (stuck, free)
+
+
+@pytest.mark.parametrize("name", ["valve-stuck", "valve-stiction"])
+def test_a_valve_fault_from_the_first_sample_holds_the_valve_where_commanded(name: str) -> None:
+    b = simulate_episodes([3], N, fault=FaultSpec(scenario=name, onset=0), plant=CLOSED)
+    u = b.inputs[0, :, 0]
+    assert u[0] == pytest.approx(NOMINAL_INPUTS[0]) and np.count_nonzero(np.diff(u)) < N / 10
