@@ -1,8 +1,9 @@
 """Execution backends of a sweep: local processes (default), Ray, or this process.
 
 ``"local"`` runs tasks in a :class:`~concurrent.futures.ProcessPoolExecutor` with the ``spawn``
-start method (numba and torch thread pools do not survive ``fork`` reliably); each worker limits
-numba and torch to one thread, since parallelism comes from the processes. ``"ray"`` runs the
+start method (numba and torch thread pools do not survive ``fork`` reliably), one worker per
+core by default; each worker limits numba, torch and BLAS to one thread, since parallelism comes
+from the processes (:mod:`fcc_common.workers`). ``"ray"`` runs the
 same task functions as Ray tasks (``ray.init(address=...)`` when an address is given, else a
 local instance with one CPU per worker). ``n_workers=0`` runs every task in the calling process
 (:class:`SerialBackend`), for debugging and fast tests. Results always travel back to the driver,
@@ -20,7 +21,7 @@ from pathlib import Path
 from typing import Any, Protocol
 
 # the worker set-up is shared with diagnosers.bank.parallel (fcc_common.workers)
-from fcc_common.workers import cpu_count, init_worker, spawn_context
+from fcc_common.workers import THREAD_ENV_VARS, cpu_count, init_worker, spawn_context
 
 #: Execution backends accepted by :func:`evaluation.sweep.run_sweep`.
 BACKENDS: tuple[str, ...] = ("local", "ray")
@@ -70,7 +71,8 @@ def ray_runtime_env() -> dict[str, Any]:
     """Runtime environment that lets local Ray workers import this repository's packages."""
     root = str(Path(__file__).resolve().parents[1])
     path = os.pathsep.join([root, *filter(None, [os.environ.get("PYTHONPATH", "")])])
-    return {"env_vars": {"PYTHONPATH": path, "OMP_NUM_THREADS": "1"}}
+    # one thread per task for the native libraries a worker loads (see fcc_common.workers)
+    return {"env_vars": {"PYTHONPATH": path, **dict.fromkeys(THREAD_ENV_VARS, "1")}}
 
 
 def start_watchdog() -> subprocess.Popen[bytes] | None:
