@@ -96,6 +96,12 @@ def _fast(name: str, **extra: Any) -> DiagnoserSpec:
 
 #: The workloads of ``--workload``.
 WORKLOADS: dict[str, Workload] = {
+    "tiny": Workload(
+        about="a smoke run for busy machines and tests: 2 healthy and 1 faulty episode per fault "
+        "of the small track, limits and a bank detector with a few epochs (the sweep)",
+        sizes=(2, 1, 3),
+        diagnosers=(DiagnoserSpec("limits"), _fast("lrgf-mem", max_epochs=5, mem_max_epochs=2)),
+    ),
     "baselines": Workload(about="the baselines on the small track's --quick sizes (the sweep)"),
     "banks": Workload(
         about="baselines and two bank detectors (short trainings) on the small track's --quick "

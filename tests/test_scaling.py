@@ -7,15 +7,13 @@ import numpy as np
 import pytest
 
 from bench.scaling import (
-    Workload,
+    WORKLOADS,
     amdahl_fit,
     amdahl_speedup,
     default_workers,
     main,
     measure,
 )
-from diagnosers.lrgf.lrgf_mem import LRGFMEM
-from evaluation.sweep import DiagnoserSpec
 
 N = np.array([1, 2, 4, 8, 16])
 
@@ -48,15 +46,8 @@ def test_worker_counts(capsys) -> None:
         assert f"--workers={bad!r}" in err and why in err
 
 
-#: a small workload with every kind of task: scoring, a diagnoser training, relation trainings
-TINY = Workload(
-    about="tests",
-    sizes=(2, 1, 3),
-    diagnosers=(
-        DiagnoserSpec("limits"),
-        DiagnoserSpec("lrgf-mem", {**LRGFMEM.fast_params(), "max_epochs": 5, "mem_max_epochs": 2}),
-    ),
-)
+#: a small workload with every kind of task: scoring, diagnoser trainings, relation trainings
+TINY = WORKLOADS["tiny"]
 
 
 def node_and_threads(_serial: bool = False) -> tuple[str, dict[str, int]]:
