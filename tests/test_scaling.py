@@ -50,27 +50,27 @@ def test_worker_counts(capsys) -> None:
 TINY = WORKLOADS["tiny"]
 
 
-def node_and_threads(_serial: bool = False) -> tuple[str, dict[str, int]]:
-    """Which node a Ray task ran on, and its thread counts."""
-    import time
-
-    import numba  # noqa: F401  (as a task loads them)
-    import ray
-    import torch  # noqa: F401
-
-    from fcc_common.workers import limit_threads, thread_counts
-
-    limit_threads()  # what every sweep task does first
-    time.sleep(1.0)  # long enough that two tasks run at once, one per node
-    return ray.get_runtime_context().get_node_id(), thread_counts()
-
-
 @pytest.mark.slow  # starts a two-node Ray cluster: about a minute on a busy machine
 def test_a_two_node_ray_cluster_gives_the_local_table(tmp_path) -> None:
     ray = pytest.importorskip("ray", reason="ray is not installed (pip install '.[ray]')")
     from ray.cluster_utils import Cluster
 
     from evaluation.sweep.backends import RayBackend, ray_runtime_env
+
+    # nested, so that Ray ships it by value (the test module is not importable on a node)
+    def node_and_threads(_serial: bool = False) -> tuple[str, dict[str, int]]:
+        """Which node a Ray task ran on, and its thread counts."""
+        import time
+
+        import numba  # noqa: F401  (as a task loads them)
+        import ray
+        import torch  # noqa: F401
+
+        from fcc_common.workers import limit_threads, thread_counts
+
+        limit_threads()  # what every sweep task does first
+        time.sleep(1.0)  # long enough that two tasks run at once, one per node
+        return ray.get_runtime_context().get_node_id(), thread_counts()
 
     local = measure(TINY, [1, 2], "local")
     cluster = Cluster(initialize_head=True, head_node_args={"num_cpus": 1})
