@@ -184,7 +184,7 @@ class RelationCache:
     def get(self, key: str) -> tuple[Any, ...] | None:
         """The sound entry of ``key``, or ``None`` (missing, or not trusted: a warning names the
         file). No lock: for a scheduler that trains the missing jobs itself
-        (:mod:`evaluation.sweep.training`)."""
+        (:mod:`evaluation.sweep.training_stage`)."""
         target = self.path(key)
         try:
             _confined_shard(self.root, target.parent)

@@ -2,9 +2,9 @@
 trains them, and the fit runs again with them known.
 
 A sweep trains every relation of every bank as a task of its own pool or Ray cluster
-(:mod:`evaluation.sweep.training`), not a few at a time inside one diagnoser's training. Inside
-a :func:`planned_relations` block, :func:`diagnosers.bank.parallel.train_banks` trains nothing:
-it takes each job's result from the block's ``known`` results, by
+(:mod:`evaluation.sweep.training_stage`), not a few at a time inside one diagnoser's training.
+Inside a :func:`planned_relations` block, :func:`diagnosers.bank.parallel.train_banks` trains
+nothing: it takes each job's result from the block's ``known`` results, by
 :func:`~diagnosers.bank.relation_cache.job_key`, and when some are missing it raises
 :class:`RelationsNeeded` with those jobs (key → job). The caller trains them anywhere
 (:func:`diagnosers.bank.parallel.train_relation`) and fits again with them known. A fit that

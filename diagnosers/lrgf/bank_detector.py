@@ -189,7 +189,7 @@ class BankDetector(Diagnoser):
             meaning 1, as in scikit-learn). Each relation trains with its own seed and one
             thread, so the models are the same bits for every ``n_jobs``. The default is 1
             because the leaderboard's sweep runs every relation job as a task of its own
-            pool (:mod:`evaluation.sweep.training`; ``n_jobs`` is not used there);
+            pool (:mod:`evaluation.sweep.training_stage`; ``n_jobs`` is not used there);
             ``python -m bench.detector_speed --bank`` uses 2.
 
     ``progress`` and ``n_jobs`` say how to compute, never what

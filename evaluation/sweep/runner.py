@@ -6,8 +6,9 @@ start-up time ``t_on``. :func:`run_sweep` does three things, keeping recording, 
 presentation apart:
 
 1. **Train** every diagnoser once per sweep on the healthy training episodes (one parallel task per
-   diagnoser, and one per relation of its banks: :mod:`evaluation.sweep.training`). The fitted diagnoser is stored with :meth:`Diagnoser.save` under the store's
-   ``models/<label>`` directory, so workers load it and a resumed sweep reuses it.
+   diagnoser, and one per relation of its banks: :mod:`evaluation.sweep.training_stage`). The
+   fitted diagnoser is stored with :meth:`Diagnoser.save` under the store's ``models/<label>``
+   directory, so workers load it and a resumed sweep reuses it.
 2. **Score** every test episode: one parallel task per ``(scenario, seed)`` episode runs every
    diagnoser whose cell is missing on it. One task per episode, not per cell, because simulating
    the episode costs far more than a baseline's ``detect`` (≈ 45 ms versus < 1 ms for 4000
@@ -44,7 +45,7 @@ from evaluation.sweep.records import (
 from evaluation.sweep.sources import LoadedEpisode
 from evaluation.sweep.store import ResultStore
 from evaluation.sweep.tasks import EpisodeTask, dir_files, episode_task
-from evaluation.sweep.training import train_all
+from evaluation.sweep.training_stage import train_all
 
 __all__ = ["detect_episode", "load_cell", "run_sweep"]
 

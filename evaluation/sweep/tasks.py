@@ -98,8 +98,9 @@ def train_task(
     (:func:`training_episodes`). Its banks train nothing here
     (:func:`diagnosers.bank.relation_plan.planned_relations`): their relation jobs come from
     ``relations`` (job key → trained relation), and when some are missing the task returns
-    them in :attr:`TrainOutcome.needed` for the scheduler (:mod:`evaluation.sweep.training`) to
-    train as tasks of their own, and is run again with them.
+    them in :attr:`TrainOutcome.needed` for the scheduler
+    (:mod:`evaluation.sweep.training_stage`) to train as tasks of their own, and is run again
+    with them.
     """
     if not _serial:
         limit_threads()
