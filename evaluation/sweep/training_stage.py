@@ -116,6 +116,8 @@ def train_all(
             continue
         outcome = TrainOutcome(*result)
         if outcome.needed:
+            if set(outcome.needed) <= needs[key]:  # it was given them: never ask in circles
+                raise RuntimeError(f"training {key}: it asks again for relations it was given")
             ask(key, outcome.needed)
             continue
         relation_s = sum(trained_s.get(r, 0.0) for r in needs[key])
