@@ -46,6 +46,7 @@ from evaluation.sweep.sources import LoadedEpisode
 from evaluation.sweep.store import ResultStore
 from evaluation.sweep.tasks import EpisodeTask, dir_files, episode_task
 from evaluation.sweep.training_stage import train_all
+from fcc_common.workers import cpu_count
 
 __all__ = ["detect_episode", "load_cell", "run_sweep"]
 
@@ -143,7 +144,10 @@ def run_sweep(
     )
 
     if to_train or missing:
-        runner = make_backend(backend, n_workers, max(len(to_train), len(missing)), ray_address)
+        # a training may add relation tasks, unknown before it runs: then no cap below the
+        # workers (a local pool starts its workers on demand)
+        n_tasks = max(len(to_train), len(missing), (n_workers or cpu_count()) if to_train else 0)
+        runner = make_backend(backend, n_workers, n_tasks, ray_address)
         cancel = True
         try:
             cache = None if relation_cache is None else str(relation_cache)
