@@ -8,9 +8,9 @@ watchdog that ends the worker when the process that started it dies.
 
 **Threads.** One worker per core (:func:`cpu_count`, the pools' default), and one compute
 thread per worker: numba's thread pool, torch's intra-op pool and the BLAS/OpenMP pools of
-NumPy and SciPy (OpenBLAS, MKL, BLIS, libgomp, through ``threadpoolctl``) are set to one
-thread, and the ``*_NUM_THREADS`` variables (:data:`THREAD_ENV_VARS`) to ``1`` for libraries
-loaded later. A task that wants more threads (a large matrix product, say) asks for them with
+NumPy and SciPy (OpenBLAS, MKL, BLIS, libgomp, through ``threadpoolctl``, which scikit-learn
+installs) are set to one thread, and the ``*_NUM_THREADS`` variables (:data:`THREAD_ENV_VARS`)
+to ``1`` for libraries loaded later. A task that wants more threads (a large matrix product, say) asks for them with
 :func:`task_threads`; on the local pool it then shares its core with others, so size the pool
 to match (``n_workers`` times threads at most the cores). Ray workers get the same limits from
 :func:`limit_threads`, which every task of the sweep calls first. The native vector env's

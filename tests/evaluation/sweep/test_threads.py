@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from evaluation.sweep.backends import LocalBackend
-from fcc_common.workers import task_threads, thread_counts
+from fcc_common.workers import cpu_count, task_threads, thread_counts
 
 
 def counts_in_worker(n: int | None) -> dict[str, int]:
@@ -33,7 +33,8 @@ def test_a_worker_computes_with_one_thread() -> None:
     # a task that asks for two threads gets them for torch and BLAS (numba: up to its pool's
     # size, the cores), and the worker is back at one thread after it
     got = results[asked]
-    assert got["in_torch"] == 2 and got["in_blas"] == 2
+    if cpu_count() >= 2:  # a library may cap its pool at the cores
+        assert got["in_torch"] == 2 and got["in_blas"] == 2
     assert {k: got[k] for k in ("torch", "numba", "blas")} == {"torch": 1, "numba": 1, "blas": 1}
 
 
