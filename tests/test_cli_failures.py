@@ -390,6 +390,7 @@ COMMAND_MODULES = (
     "bench.simulator_speed",
     "bench.sweep_speed",
     "bench.vector_speed",
+    "bench.scaling",
 )
 
 

@@ -34,6 +34,7 @@ COMMANDS = (
     "bench.filter_speed",
     "bench.sweep_speed",
     "bench.vector_speed",
+    "bench.scaling",
 )
 
 
