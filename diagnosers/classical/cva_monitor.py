@@ -3,17 +3,31 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
+from enum import StrEnum
 from typing import Any, ClassVar
 
 import numpy as np
 
 from diagnosers.classical.lagged_monitor import LaggedMonitor
-from diagnosers.classical.subspace import aic_order, canonical_variates, past_future
+from diagnosers.classical.subspace import (
+    aic_order,
+    canonical_variates,
+    inverse_sqrt,
+    lagged,
+    past_future,
+)
 from diagnosers.presets import keyword_init
 from diagnosers.registry import register
-from fcc_common.validation import Integer, check_params, invalid
+from fcc_common.validation import Integer, Options, check_params, invalid
 
-__all__ = ["CVADetector"]
+__all__ = ["CVADetector", "Residual"]
+
+
+class Residual(StrEnum):
+    """What :class:`CVADetector`'s second statistic measures."""
+
+    PAST = "past"
+    PREDICTION = "prediction"
 
 
 @register("cva")
@@ -33,6 +47,12 @@ class CVADetector(LaggedMonitor):
     ``|(I − V_k V_kᵀ) Σ_pp^{-1/2} p|²``. Limits and warm-up as in
     :mod:`diagnosers.classical.lagged_monitor` (empirical quantiles).
 
+    ``residual="prediction"`` replaces ``T²_r`` by the T² of the states' one-step prediction
+    error, ``ε_t = y_t − C x_t`` with ``x_t = J_k p_t`` and ``C`` the least-squares output
+    map, whitened by its healthy covariance (the residual of the CVA state-space model, as in
+    Negiz & Çinar 1997): the residual space of the past mixes the process's whole variation
+    into ``T²_r``, the prediction error keeps only what the past cannot explain.
+
     Args:
         false_alarm_target: share of healthy training samples allowed in alarm, in (0, 0.5),
             split equally between the two statistics; default 0.01.
@@ -42,10 +62,13 @@ class CVADetector(LaggedMonitor):
             Larimore's AIC (:func:`~diagnosers.classical.subspace.aic_order`), capped at
             ``max_states``.
         max_states: the largest order the AIC may choose, in [1, 500]; default 30.
-        ewma_lambda: weight of an EWMA of both statistics, in (0, 1]; default 1 (none).
+        residual: ``"past"`` (default, Russell et al.'s ``T²_r``) or ``"prediction"`` (above).
+        ewma_lambda: weight of an EWMA of the projections before their squares are summed,
+            in (0, 1]; default 1 (none, the classical per-sample statistics).
         channels: monitored channel names, or None (default) for all.
 
-    Decision arrays, names ``("T2s", "T2r")``: signal = residual = the (filtered)
+    Decision arrays, names ``("T2s", "T2r")`` (``("T2s", "T2e")`` for the prediction error):
+    signal = residual = the (filtered)
     statistics, upper = their limits (infinite in the first ``past − 1`` samples).
 
     Attributes: besides :class:`~diagnosers.classical.lagged_monitor.LaggedMonitor`'s,
@@ -59,6 +82,7 @@ class CVADetector(LaggedMonitor):
         "future": None,
         "n_states": None,
         "max_states": 30,
+        "residual": "past",
         "ewma_lambda": 1.0,
         "channels": None,
     }
@@ -67,6 +91,7 @@ class CVADetector(LaggedMonitor):
     future: int | None
     n_states: int | None
     max_states: int
+    residual: str
     channels: Sequence[str] | None
 
     @classmethod
@@ -81,11 +106,12 @@ class CVADetector(LaggedMonitor):
                 "future": (Integer(1, 50), None),
                 "n_states": (Integer(1, 10_000), None),
                 "max_states": Integer(1, 500),
+                "residual": Options(Residual),
             },
         )
 
     def window(self) -> int:
-        return int(self.past)
+        return int(self.past) + (self.residual == Residual.PREDICTION)
 
     def _maps(self, z: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         past = int(self.past)
@@ -110,7 +136,9 @@ class CVADetector(LaggedMonitor):
                     "n_states", k, Integer(1, dp - 1).describe(), f"a past vector of size {dp}"
                 )
         self.correlations_ = cv.correlations
-        return cv.mean, cv.past_weights[:k], cv.past_weights[k:]
+        if self.residual == Residual.PAST:
+            return cv.mean, cv.past_weights[:k], cv.past_weights[k:]
+        return prediction_maps([lagged(zi, past + 1) for zi in z], cv.past_weights[:k])
 
     def _get_state(self) -> dict[str, np.ndarray]:
         return super()._get_state() | {"correlations": self.correlations_}
@@ -121,4 +149,29 @@ class CVADetector(LaggedMonitor):
 
     def _finish(self) -> None:
         super()._finish()
-        self.n_states_ = int(self.state_map_.shape[0])
+        if self.residual == Residual.PREDICTION:
+            self.signal_names_ = ("T2s", "T2e")
+            self.n_states_ = int(np.count_nonzero(np.any(self.state_map_ != 0, axis=1)))
+        else:
+            self.n_states_ = int(self.state_map_.shape[0])
+
+
+def prediction_maps(
+    lagged_records: list[np.ndarray], states: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """``(centre, W_s, W_r)`` on the vectors ``[y_t; p_t]`` (``lagged_records``, ``(N_i, m +
+    dp)`` each) of the CVA ``states`` ``J_k`` ``(k, dp)``: ``W_s = [J_k, 0]`` the states of
+    ``p_{t+1}`` (the newest ``dp`` entries), ``W_r = Σ_ε^{-1/2} [I, −Cᵀ J_k]`` the whitened
+    one-step prediction error ``ε_t = y_t − Cᵀ x_t`` of ``x_t = J_k p_t``, ``C`` by least
+    squares."""
+    v = np.concatenate(lagged_records)
+    centre = v.mean(axis=0)
+    c = v - centre
+    k, dp = states.shape
+    m = v.shape[1] - dp
+    x = c[:, m:] @ states.T
+    cmat = np.linalg.lstsq(x, c[:, :m], rcond=None)[0]  # (k, m)
+    eps = c[:, :m] - x @ cmat
+    pred = np.concatenate([np.eye(m), -cmat.T @ states], axis=1)
+    state_map = np.concatenate([states, np.zeros((k, m))], axis=1)
+    return centre, state_map, inverse_sqrt(np.atleast_2d(np.cov(eps.T))) @ pred

@@ -60,8 +60,8 @@ class DPCADetector(LaggedMonitor):
             components when ``n_components`` is None, in (0, 1]; default 0.95.
         n_components: retained components, in [1, d − 1] (``d`` the lagged vector's size), or
             None (default).
-        ewma_lambda: weight of an EWMA of both statistics, in (0, 1]; default 1 (none, the
-            classical per-sample statistics).
+        ewma_lambda: weight of an EWMA of the projections before their squares are summed,
+            in (0, 1]; default 1 (none, the classical per-sample statistics).
         channels: monitored channel names, or None (default) for all.
 
     Decision arrays, names ``("T2", "Q")``: signal = residual = the (filtered) statistics,

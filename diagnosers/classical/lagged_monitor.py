@@ -7,8 +7,10 @@ horizon for CVA, whose past vector of ``t + 1`` is exactly what is known at ``t`
 learns two linear maps of the centred ``z_t`` on healthy data, ``W_s`` (the retained
 variates, whitened, so ``T² = |W_s z|²``) and ``W_r`` (the residual, ``Q = |W_r z|²``), in
 :meth:`LaggedMonitor._maps`; everything else is here: the warm-up (the first ``L − 1``
-samples carry no full vector: no statistic, no alarm), an optional EWMA of the two
-statistics, the limits and the streaming buffer.
+samples carry no full vector: no statistic, no alarm), an optional EWMA of the projections
+``W_s z`` and ``W_r z`` before their squares are summed (a multivariate EWMA, Lowry et al.
+1992: a small persistent shift builds up in it, where it drowns in a single sample's T²), the
+limits and the streaming buffer.
 
 **Limits**: each statistic's empirical ``1 − false_alarm_target/2`` quantile on the healthy
 training samples (after their warm-up), so the union alarms on at most ``false_alarm_target``
@@ -102,6 +104,7 @@ class LaggedMonitor(Diagnoser):
         self.scale_ = np.where(scale > 1e-9 * np.abs(mean), scale, 1.0)
         z = [self._standardise(ep.y) for ep in episodes]
         self.centre_, self.state_map_, self.resid_map_ = self._maps(z)
+        self._finish()
         stats = np.concatenate([self._statistics(zi)[L - 1 :] for zi in z])
         self.limits_ = calibrate_limit(stats, 0.5 * self.false_alarm_target, method="empirical")
         self._finish()
@@ -111,24 +114,28 @@ class LaggedMonitor(Diagnoser):
 
     def _finish(self) -> None:
         self.signal_names_ = self.SIGNALS
+        self._maps_t = np.ascontiguousarray(np.concatenate([self.state_map_, self.resid_map_]).T)
         self._lower = np.full(2, -np.inf)
         self._no_limit = np.full(2, np.inf)
 
     # ---- statistics ----------------------------------------------------------------------------
-    def _raw(self, v: np.ndarray) -> np.ndarray:
-        """``[T², Q]`` of lagged vectors ``v`` ``(N, d) -> (N, 2)``."""
-        c = v - self.centre_
-        return np.column_stack(
-            [np.sum((c @ self.state_map_.T) ** 2, axis=1), np.sum((c @ self.resid_map_.T) ** 2, 1)]
-        )
+    def _projected(self, v: np.ndarray) -> np.ndarray:
+        """``[W_s c, W_r c]`` of lagged vectors ``v`` ``(N, d) -> (N, k + r)``, ``c = v − centre``."""
+        return (v - self.centre_) @ self._maps_t
+
+    def _squares(self, w: np.ndarray) -> np.ndarray:
+        """``[T², Q]`` ``(N, 2)`` of (filtered) projections ``w`` ``(N, k + r)``."""
+        k = self.state_map_.shape[0]
+        return np.column_stack([np.sum(w[:, :k] ** 2, axis=1), np.sum(w[:, k:] ** 2, axis=1)])
 
     def _statistics(self, z: np.ndarray) -> np.ndarray:
-        """The (EWMA-filtered) statistics ``(T, 2)`` of a standardised record ``z``; zero in
-        the warm-up, the EWMA starting at the first full vector."""
+        """The statistics ``(T, 2)`` of a standardised record ``z``; zero in the warm-up, the
+        EWMA of the projections starting at the first full vector."""
         L = self.window()
         out = np.zeros((z.shape[0], 2))
         if z.shape[0] >= L:
-            out[L - 1 :] = EWMA(self.ewma_lambda).filter(self._raw(lagged(z, L)))
+            w = EWMA(self.ewma_lambda).filter(self._projected(lagged(z, L)))
+            out[L - 1 :] = self._squares(w)
         return out
 
     def statistics(self, y: np.ndarray) -> np.ndarray:
@@ -150,7 +157,8 @@ class LaggedMonitor(Diagnoser):
         if self._t < self.window():
             st = np.zeros(2)
             return Decision(False, st, self._lower.copy(), self._no_limit.copy(), st.copy())
-        st = self._ewma.update(self._raw(self._buf.reshape(1, -1))[0])
+        w = self._ewma.update(self._projected(self._buf.reshape(1, -1))[0])
+        st = self._squares(w[None])[0]
         alarm = bool(np.any(st > self.limits_))
         return Decision(alarm, st, self._lower.copy(), self.limits_.copy(), st.copy())
 
