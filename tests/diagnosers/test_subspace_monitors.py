@@ -86,7 +86,8 @@ def _episodes(y: np.ndarray, n: int) -> list[Episode]:
 
 
 def test_cva_state_t2_is_chi2_on_a_gaussian_process() -> None:
-    det = diagnosers.make("cva", past=2, n_states=3).fit(_episodes(var1(30_000, 2), 3))
+    det = diagnosers.make("cva", past=2, n_states=3, residual="past", ewma_lambda=1.0)
+    det.fit(_episodes(var1(30_000, 2), 3))
     t2 = det.statistics(var1(30_000, 3))[det.window() - 1 :, 0]
     k = det.n_states_
     assert k == 3
@@ -94,6 +95,18 @@ def test_cva_state_t2_is_chi2_on_a_gaussian_process() -> None:
     # the share over the χ²_k 99 % point is 1 % (binomial 4-sigma band over 30,000 samples)
     share = float(np.mean(t2 > stats.chi2.ppf(0.99, k)))
     assert abs(share - 0.01) < 4 * np.sqrt(0.01 * 0.99 / 30_000)
+
+
+def test_cva_prediction_error_is_the_var_innovation() -> None:
+    # past = 1 and three states span the whole past: the states' one-step prediction of a VAR(1)
+    # is Φ y_{t-1}, so T²_e is the squared norm of its standard normal innovation
+    det = diagnosers.make("cva", past=1, n_states=3, ewma_lambda=1.0)
+    det.fit(_episodes(var1(30_000, 8), 3))
+    y = var1(3000, 9)
+    t2e = det.statistics(y)[1:, 1]
+    exact = np.sum((y[1:] - y[:-1] @ PHI.T) ** 2, axis=1)
+    assert np.mean(np.abs(t2e - exact)) < 0.03 * np.mean(exact)
+    assert det.signal_names_ == ("T2s", "T2e")
 
 
 def test_dpca_maps_equal_the_covariance_eigendecomposition() -> None:
@@ -115,7 +128,7 @@ def test_dpca_q_sees_a_broken_dynamic_relation_that_static_limits_miss() -> None
     # channel c is nearly a function of the others' past (small noise of its own)
     noise = (1.0, 1.0, 0.02)
     train = _episodes(var1(20_000, 5, noise), 2)
-    det = diagnosers.make("dpca", lags=2, n_components=4).fit(train)
+    det = diagnosers.make("dpca", lags=2, n_components=4, ewma_lambda=1.0).fit(train)
     y = var1(4000, 6, noise)
     # from sample 2000 channel c follows another law with the same marginal variance: each
     # sample alone is as likely as before, the relation to the past is broken
