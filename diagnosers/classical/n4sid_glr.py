@@ -89,12 +89,16 @@ class N4SIDGLR(Diagnoser):
             False: the model run in simulation (``K = 0``, the output error of the inputs'
             response), which does not absorb a slow fault into its state but carries the
             inputs' noise through the model (``lab/monitors-lab.md``).
-        fault_scenarios, fault_seeds, direction_window: the fault directions' (as
-            ``lrgf-glr``'s: which labelled faults, on which seeds, averaged over how many
-            samples after the onset).
-        false_alarm_target ... on_delay: the alarm stage's hyperparameters
-            (:class:`~diagnosers.stages.directional_stage.DirectionalStage`), with
-            ``statistic="glr"`` by default.
+        statistic: the directional test, ``"glr"`` (default; a window-limited GLR of the
+            projection of the whitened innovations on each fault direction), ``"directional"``,
+            ``"cusum"`` or ``"t2"``.
+        ``ewma_lambda``, ``slow_ewma_lambda``, ``slow_share``, ``omnibus_share``,
+        ``glr_window``, ``cusum_drift``, ``limit_method``, ``threshold_margin``, ``on_delay``:
+            the alarm stage's, as on ``lrgf-glr``
+            (:class:`~diagnosers.stages.directional_stage.DirectionalStage`, same defaults).
+        ``fault_scenarios``, ``fault_seeds``, ``direction_window``: the fault directions', as
+            on ``lrgf-glr`` (which labelled faults, on which seeds, averaged over how many
+            samples after the onset; default every fault passed, seeds 1000-1002, 300).
 
     Decision arrays: signal ``[T²[ewma], glr[f1], ...]``, upper their limits, residual the
     innovations of the output channels (physical units).
