@@ -11,11 +11,14 @@ omnibus T² of an EWMA). The fault directions are learned from the labelled trai
 passed to ``fit`` against their healthy noise twins, exactly as ``lrgf-glr`` learns its own
 (:class:`diagnosers.lrgf.fault_directions.FaultDirections`; none passed: the T² alone).
 
-Why written here and not taken from a library: the identification libraries on PyPI either
-lack an innovation-form model with a Kalman gain from data (``SysIdentPy``: NARMAX models),
-are unmaintained research code (``sippy``, installed from its repository), or pull pandas and
-give no more than the thirty lines of :func:`~diagnosers.classical.subspace.n4sid`
-(``nfoursid``); the algorithm is checked against a known system (tests).
+Why written here and not taken from a library (PyPI, 2026-11): ``SysIdentPy`` (0.9) fits
+NARMAX models, not state-space models in innovation form; ``sippy`` on PyPI is a SIP telephony
+stack, the identification package is ``sippy-unipi`` (1.0.1), research code with a far larger
+surface than needed; ``nfoursid`` (1.0.2, MIT) fits in scope (N4SID with inputs) but works on
+pandas DataFrames and filters with a time-varying Kalman filter, one Python call per sample,
+from the identified noise covariance, where the detector needs the steady-state gain ``K`` of
+the innovation form. :func:`~diagnosers.classical.subspace.n4sid` gives that form directly in
+about forty lines of numpy and is checked against a known system's transfer functions (tests).
 """
 
 from __future__ import annotations
