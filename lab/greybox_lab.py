@@ -15,6 +15,7 @@ the CPU time of each fit method. Records in ``lab/greybox-lab.md``.
 from __future__ import annotations
 
 import argparse
+import json
 import time
 from typing import Any
 
@@ -44,7 +45,7 @@ def compare(args: argparse.Namespace) -> None:
     track = TRACKS[args.track].replace(n_healthy=args.healthy, n_faulty=args.faulty)
     data = TrackData(track=track.with_seeds(test=args.seed_start))
     params = dict(p.split("=", 1) for p in args.set)
-    det = diagnosers.make("ukf-glr", **{k: eval(v) for k, v in params.items()})  # noqa: S307
+    det = diagnosers.make("ukf-glr", **{k: json.loads(v) for k, v in params.items()})
     t0 = time.process_time()
     det.fit(data.train_episodes())
     fit_s = time.process_time() - t0
@@ -85,8 +86,10 @@ def fit(args: argparse.Namespace) -> None:
         print("homogeneity p", out.homogeneity_p, "varies", out.varies)
     else:
         out = fit_maximum_likelihood(prior, config, records[: args.records], names)
-    print(f"{args.method}: {dict(zip(names, out.values.round(4)))} "
-          f"({time.process_time() - t0:.1f} s CPU)")
+    print(
+        f"{args.method}: {dict(zip(names, out.values.round(4), strict=True))} "
+        f"({time.process_time() - t0:.1f} s CPU)"
+    )
     est = FCCStateEstimator(out.params, config)
     nis = np.mean(est.filter(np.stack(records), innovation_cov=False).nis[:, 100:])
     print(f"NIS on the fitted model {nis:.3f}")

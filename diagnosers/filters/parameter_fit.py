@@ -207,7 +207,9 @@ def fit_maximum_likelihood(
     x0 = np.array([float(getattr(base, n)) for n in names])
 
     def nll(log_mult: np.ndarray) -> float:
-        trial = params.replace(**{n: float(v) for n, v in zip(names, x0 * np.exp(log_mult))})
+        trial = params.replace(
+            **{n: float(v) for n, v in zip(names, x0 * np.exp(log_mult), strict=True)}
+        )
         est = FCCStateEstimator(trial, config)
         return negative_log_likelihood(filter_records(est, records, innovation_cov=True))
 

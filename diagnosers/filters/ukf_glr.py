@@ -52,8 +52,8 @@ from fcc_common.validation import (
     Boolean,
     Integer,
     IntegerSequence,
-    OptionSequence,
     Options,
+    OptionSequence,
     Real,
     check_params,
     invalid,
@@ -80,6 +80,7 @@ def _online_changes(names: tuple[str, ...]) -> dict[str, Any]:
         "estimate_coking": True,
         "initial_state_std": ONLINE_INITIAL_STATE_STD,
     }
+
 
 #: :class:`UKFGLR`'s hyperparameters and defaults, in signature order.
 UKF_GLR_DEFAULTS: dict[str, Any] = {
