@@ -1,0 +1,313 @@
+"""The reference rows of a track as tasks of the sweep's backend, stored like cells.
+
+:func:`run_references` gives the records of the reference rows
+(:data:`~evaluation.tracks.oracle.DEFAULT_REFERENCES`) on every test cell of a track, as
+:func:`~evaluation.tracks.oracle.reference_records` computes them, bit for bit, but:
+
+* **stored like cells.** Each record is a cell file of the track's result store
+  (:class:`~evaluation.sweep.store.ResultStore`, written atomically, never overwritten), filed
+  under a label that is the row's content address (:func:`reference_label`): the row, its
+  configuration (:class:`~evaluation.tracks.oracle.OracleConfig`), the track's data hash (its
+  definition with its plant and model version; the store's manifest), ``t_on``, the package
+  version and the source of every module the rows' numbers depend on (:data:`REFERENCE_CODE`,
+  :func:`code_version`). A re-run of a finished track reads them and computes nothing; a
+  change of any of those computes the row again into a new address, and the old files stay
+  (delete the store's ``cells/reference+*`` folders to reclaim them).
+* **tasks of the backend.** Each row's fit (its calibration on the track's validation seeds,
+  the directional row's fault directions, the filter row's signatures) is one task
+  (:func:`fit_task`), and the scoring of every test seed is one task (:func:`seed_task`):
+  a seed's healthy and faulty cells share the simulations the rows read (the healthy episode,
+  its references and, for the optimal rows, the faults' signatures on that seed, computed in
+  that task). The driver only schedules the tasks and writes what comes back, on the same
+  backends as the detector cells (:func:`evaluation.sweep.backends.make_backend`: local
+  processes, Ray, or this process).
+
+Why the label carries the hash rather than only the cell file: a detector's cell of other
+settings is an error (a label names one configuration), while a reference row changes with the
+code every time a reference module is edited, and a re-run should then recompute it, not ask
+for the store to be deleted.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import importlib
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from functools import cache
+from pathlib import Path
+from typing import Any
+
+from tqdm.auto import tqdm
+
+from evaluation.sweep.backends import BACKENDS, Backend, make_backend
+from evaluation.sweep.records import CellResult, score_episode
+from evaluation.sweep.store import ResultStore, canonical_hash
+from evaluation.tracks.oracle import OracleConfig, PhysicalLimit, Simulations
+from evaluation.tracks.track_data import TrackData
+from fcc_common.workers import limit_threads
+from fcc_env import MODEL_VERSION, __version__
+
+__all__ = [
+    "REFERENCE_CODE",
+    "REFERENCE_STORE_VERSION",
+    "ReferenceSeedTask",
+    "code_version",
+    "fit_task",
+    "reference_hash",
+    "reference_label",
+    "run_references",
+    "seed_task",
+]
+
+#: Bumped when the meaning of a stored reference record changes (part of every address).
+REFERENCE_STORE_VERSION = 1
+
+#: The modules whose source the reference rows' numbers depend on beyond the simulator (the
+#: simulator is named by the package and model versions, as for every detector cell): the rows,
+#: their track data, the stages and filter they run, and the scoring.
+REFERENCE_CODE: tuple[str, ...] = (
+    "evaluation.tracks.oracle",
+    "evaluation.tracks.optimal",
+    "evaluation.tracks.filter_bound",
+    "evaluation.tracks.track_data",
+    "evaluation.tracks.track",
+    "evaluation.tracks.distributions",
+    "evaluation.tracks.reference_runs",
+    "evaluation.sweep.records",
+    "evaluation.sweep.sources",
+    "evaluation.metrics.detection_metrics",
+    "evaluation.metrics.isolation_metrics",
+    "diagnosers.detection",
+    "diagnosers.episode.record",
+    "diagnosers.stages.alarm",
+    "diagnosers.stages.directional_stage",
+    "diagnosers.lrgf.fault_directions",
+    "diagnosers.lrgf.lrgf_glr",
+    "diagnosers.lrgf.lrgf_presets",
+    "diagnosers.filters.state_estimator",
+    "diagnosers.filters.ukf_config",
+    "diagnosers.filters.ukf_kernels",
+    "diagnosers.filters.ukf_linear",
+    "diagnosers.filters.ukf_model",
+)
+
+
+@cache
+def code_version(modules: tuple[str, ...] = REFERENCE_CODE) -> str:
+    """SHA-256 of the source files of ``modules`` (name and bytes of each, in order).
+
+    Any edit (a comment too) gives another version: a conservative address, which recomputes a
+    row rather than ever reading a stale one.
+    """
+    h = hashlib.sha256()
+    for name in modules:
+        module = importlib.import_module(name)
+        path = getattr(module, "__file__", None)
+        if path is None:
+            raise ValueError(f"module {name!r} has no source file; allowed: a module from a .py")
+        h.update(name.encode() + b"\0" + Path(path).read_bytes() + b"\0")
+    return h.hexdigest()
+
+
+def reference_hash(config: OracleConfig, data_hash: str, t_on: int = 0) -> str:
+    """The content address of a reference row's cells on a track (see the module docstring)."""
+    if not isinstance(config, OracleConfig):
+        raise ValueError(f"config={config!r}; allowed: an evaluation.tracks.oracle.OracleConfig")
+    return canonical_hash(
+        {
+            "v": REFERENCE_STORE_VERSION,
+            "package": f"{__version__} ({MODEL_VERSION})",
+            "code": code_version(),
+            "data": data_hash,
+            "row": dataclasses.asdict(config),
+            "t_on": t_on,
+        }
+    )
+
+
+def reference_label(config: OracleConfig, cell_hash: str) -> str:
+    """The store label of a reference row: ``reference+<inputs>+<stage>+<address>`` (a path
+    component of the store; the table label, :attr:`OracleConfig.label`, holds spaces)."""
+    return f"reference+{config.inputs}+{config.stage}+{cell_hash[:16]}"
+
+
+# ---- the tasks ---------------------------------------------------------------------------------
+def fit_task(data: TrackData, config: OracleConfig, _serial: bool = False) -> PhysicalLimit:
+    """Fit one reference row (:meth:`PhysicalLimit.fit`); it travels back without the
+    simulations it read (:meth:`PhysicalLimit.__getstate__`)."""
+    if not _serial:
+        limit_threads()
+    try:
+        return PhysicalLimit(data, config).fit()
+    except Exception as e:  # a worker's traceback does not reach the user: name the row
+        raise RuntimeError(f"fitting {config.label!r}: {type(e).__name__}: {e}") from e
+
+
+@dataclass(frozen=True)
+class ReferenceSeedTask:
+    """Score fitted reference rows on the test cells ``cells`` (one seed's) of ``data``."""
+
+    data: TrackData
+    cells: tuple[tuple[str, int], ...]
+    t_on: int = 0
+
+
+def seed_task(
+    task: ReferenceSeedTask, observers: Sequence[PhysicalLimit], _serial: bool = False
+) -> list[list[dict[str, Any]]]:
+    """Per cell of the task, per observer, the record (:meth:`CellResult.to_json`).
+
+    The observers share one :class:`~evaluation.tracks.oracle.Simulations` for the task: the
+    healthy episode, the references and the faults' signatures of its seed are simulated once.
+    """
+    if not _serial:
+        limit_threads()
+    sims = Simulations(task.data)
+    for obs in observers:
+        obs.share_simulations(sims)
+    out = []
+    for sc, seed in task.cells:
+        loaded = task.data.load_test(sc, seed)
+        row = []
+        for obs in observers:
+            try:
+                # score_episode only calls .detect and reads .name, which the observer has
+                rec = score_episode(obs, loaded, label=obs.name, t_on=task.t_on)  # type: ignore[arg-type]
+            except Exception as e:
+                raise RuntimeError(
+                    f"{obs.name!r} on {sc}, seed {seed}: {type(e).__name__}: {e}"
+                ) from e
+            row.append(rec.to_json())
+        out.append(row)
+    return out
+
+
+# ---- the driver --------------------------------------------------------------------------------
+def run_references(
+    data: TrackData,
+    configs: Sequence[OracleConfig],
+    store_dir: str | Path,
+    *,
+    backend: str = "local",
+    n_workers: int | None = None,
+    ray_address: str | None = None,
+    progress: bool = True,
+    t_on: int = 0,
+) -> tuple[list[CellResult], int]:
+    """The records of the reference rows ``configs`` on every test cell of ``data`` (cells in
+    :meth:`TrackData.cells` order, the rows in ``configs`` order within a cell, as
+    :func:`~evaluation.tracks.oracle.reference_records` returns them) and how many were
+    computed now; the others are read from the store at ``store_dir`` (the track's sweep
+    store).
+
+    ``backend``, ``n_workers``, ``ray_address``: as :func:`evaluation.sweep.run_sweep` (0
+    workers: this process). No backend is started when every record is stored.
+
+    Raises:
+        ValueError: an unknown backend, or a config that is not an :class:`OracleConfig`.
+        evaluation.sweep.store.StoreError: a stored file is corrupted or foreign.
+        RuntimeError: a fit or scoring task failed (records finished before stay stored).
+    """
+    if backend not in BACKENDS:
+        raise ValueError(f"backend={backend!r}; allowed: one of {list(BACKENDS)}")
+    configs = list(configs)
+    for c in configs:
+        c.calibration_seeds(data.track)  # seed clashes are refused before any work
+    store = ResultStore.open(store_dir, data.store_key())
+    hashes = [reference_hash(c, store.data_hash, t_on) for c in configs]
+    labels = [reference_label(c, h) for c, h in zip(configs, hashes, strict=True)]
+    cells = data.cells()
+    missing = {
+        i: [cell for cell in cells if store.read_cell(labels[i], *cell, hashes[i]) is None]
+        for i in range(len(configs))
+    }
+    todo = [i for i in range(len(configs)) if missing[i]]
+    n_missing = sum(len(missing[i]) for i in todo)
+    if todo:
+        by_seed: dict[int, list[tuple[str, int]]] = {}
+        for cell in cells:
+            if any(cell in missing[i] for i in todo):
+                by_seed.setdefault(cell[1], []).append(cell)
+        runner = make_backend(backend, n_workers, max(len(todo), len(by_seed)), ray_address)
+        cancel = True
+        try:
+            fitted = _fit_all(runner, data, [configs[i] for i in todo], progress)
+            groups = [(tuple(c), fitted) for c in by_seed.values()]
+            written = {i: set(missing[i]) for i in todo}
+            _score_all(runner, store, data, groups, todo, labels, hashes, written, t_on, progress)
+            cancel = False
+        finally:
+            runner.close(cancel=cancel)
+    records = []
+    for sc, seed in cells:
+        for c, label, h in zip(configs, labels, hashes, strict=True):
+            rec = store.read_cell(label, sc, seed, h)
+            if rec is None:  # only if a file vanished while we ran
+                raise RuntimeError(f"reference cell {label}/{sc}/seed {seed} is missing")
+            try:
+                result = CellResult.from_json(rec)
+            except (ValueError, TypeError) as e:
+                path = store.cell_path(label, sc, seed)
+                raise ValueError(f"{path}: {e}; delete it to recompute this cell") from e
+            records.append(dataclasses.replace(result, diagnoser=c.label))
+    return records, n_missing
+
+
+def _bar(total: int, desc: str, enabled: bool) -> Any:
+    return tqdm(total=total, desc=desc, unit="task", disable=not enabled or total == 0, leave=False)
+
+
+def _fit_all(
+    runner: Backend, data: TrackData, configs: Sequence[OracleConfig], progress: bool
+) -> tuple[PhysicalLimit, ...]:
+    """Every row of ``configs`` fitted, one task each, in ``configs`` order."""
+    handles = {runner.submit(fit_task, data, c): i for i, c in enumerate(configs)}
+    out: dict[int, PhysicalLimit] = {}
+    with _bar(len(handles), "reference fits", progress) as bar:
+        for handle, observer in _completed(runner, list(handles), "fitting a reference row"):
+            out[handles[handle]] = observer
+            bar.update(1)
+    return tuple(out[i] for i in range(len(configs)))
+
+
+def _score_all(
+    runner: Backend,
+    store: ResultStore,
+    data: TrackData,
+    groups: Sequence[tuple[tuple[tuple[str, int], ...], tuple[PhysicalLimit, ...]]],
+    todo: Sequence[int],
+    labels: Sequence[str],
+    hashes: Sequence[str],
+    written: Mapping[int, set[tuple[str, int]]],
+    t_on: int,
+    progress: bool,
+) -> None:
+    """Score each group (one seed's cells) in one task; write the missing cells it returns."""
+    shipped: dict[int, Any] = {}  # the fitted rows, put once (Ray's object store)
+    handles = {}
+    for cells, observers in groups:
+        if id(observers) not in shipped:
+            shipped[id(observers)] = runner.put(observers)
+        task = ReferenceSeedTask(data=data, cells=cells, t_on=t_on)
+        handles[runner.submit(seed_task, task, shipped[id(observers)])] = cells
+    with _bar(len(handles), "reference seeds", progress) as bar:
+        for handle, rows in _completed(runner, list(handles), "scoring the reference rows"):
+            for cell, recs in zip(handles[handle], rows, strict=True):
+                for i, rec in zip(todo, recs, strict=True):
+                    if cell in written[i]:
+                        rec = {**rec, "diagnoser": labels[i]}  # the record names its folder
+                        store.write_cell(labels[i], cell[0], cell[1], hashes[i], rec)
+            bar.update(1)
+
+
+def _completed(runner: Backend, handles: list[Any], what: str) -> Any:
+    it = runner.completed(handles)
+    while True:
+        try:
+            yield next(it)
+        except StopIteration:
+            return
+        except Exception as e:  # a worker's exception, named
+            raise RuntimeError(f"{what} failed: {type(e).__name__}: {e}") from e
