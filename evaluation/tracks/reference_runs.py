@@ -15,12 +15,13 @@
   (delete the store's ``cells/reference+*`` folders to reclaim them).
 * **tasks of the backend.** Each row's fit (its calibration on the track's validation seeds,
   the directional row's fault directions, the filter row's signatures) is one task
-  (:func:`fit_task`), and the scoring of every test seed is one task (:func:`seed_task`):
-  a seed's healthy and faulty cells share the simulations the rows read (the healthy episode,
-  its references and, for the optimal rows, the faults' signatures on that seed, computed in
-  that task). The driver only schedules the tasks and writes what comes back, on the same
-  backends as the detector cells (:func:`evaluation.sweep.backends.make_backend`: local
-  processes, Ray, or this process).
+  (:func:`fit_task`), and the scoring of every test seed is one task per group of rows
+  (:func:`seed_task`, :func:`sharing_groups`), submitted as soon as the group's rows are
+  fitted: a seed's healthy and faulty cells share the simulations the rows read (the healthy
+  episode, its references and, for the optimal rows, the faults' signatures on that seed,
+  computed in that task). The driver only schedules the tasks and writes what comes back, on
+  the same backends as the detector cells (:func:`evaluation.sweep.backends.make_backend`:
+  local processes, Ray, or this process).
 
 Why the label carries the hash rather than only the cell file: a detector's cell of other
 settings is an error (a label names one configuration), while a reference row changes with the
@@ -44,7 +45,12 @@ from tqdm.auto import tqdm
 from evaluation.sweep.backends import BACKENDS, Backend, make_backend
 from evaluation.sweep.records import CellResult, score_episode
 from evaluation.sweep.store import ResultStore, canonical_hash
-from evaluation.tracks.oracle import OracleConfig, PhysicalLimit, Simulations
+from evaluation.tracks.oracle import (
+    OracleConfig,
+    OracleStage,
+    PhysicalLimit,
+    Simulations,
+)
 from evaluation.tracks.track_data import TrackData
 from fcc_common.workers import limit_threads
 from fcc_env import MODEL_VERSION, __version__
@@ -59,6 +65,7 @@ __all__ = [
     "reference_label",
     "run_references",
     "seed_task",
+    "sharing_groups",
 ]
 
 #: Bumped when the meaning of a stored reference record changes (part of every address).
@@ -226,17 +233,20 @@ def run_references(
     todo = [i for i in range(len(configs)) if missing[i]]
     n_missing = sum(len(missing[i]) for i in todo)
     if todo:
-        by_seed: dict[int, list[tuple[str, int]]] = {}
-        for cell in cells:
-            if any(cell in missing[i] for i in todo):
-                by_seed.setdefault(cell[1], []).append(cell)
-        runner = make_backend(backend, n_workers, max(len(todo), len(by_seed)), ray_address)
+        groups = sharing_groups([configs[i] for i in todo])
+        plan = [
+            (
+                [todo[j] for j in group],
+                _seed_cells(cells, [missing[todo[j]] for j in group]),
+            )
+            for group in groups
+        ]
+        n_tasks = len(todo) + sum(len(seeds) for _, seeds in plan)
+        runner = make_backend(backend, n_workers, n_tasks, ray_address)
         cancel = True
         try:
-            fitted = _fit_all(runner, data, [configs[i] for i in todo], progress)
-            groups = [(tuple(c), fitted) for c in by_seed.values()]
-            written = {i: set(missing[i]) for i in todo}
-            _score_all(runner, store, data, groups, todo, labels, hashes, written, t_on, progress)
+            work = _Work(runner, store, data, configs, labels, hashes, missing, t_on)
+            work.run(plan, n_tasks, progress)
             cancel = False
         finally:
             runner.close(cancel=cancel)
@@ -255,59 +265,106 @@ def run_references(
     return records, n_missing
 
 
-def _bar(total: int, desc: str, enabled: bool) -> Any:
-    return tqdm(total=total, desc=desc, unit="task", disable=not enabled or total == 0, leave=False)
+def sharing_groups(configs: Sequence[OracleConfig]) -> list[list[int]]:
+    """The rows (indexes into ``configs``) that are scored by the same seed tasks.
+
+    Rows scored together share their simulations (the test episode, its healthy references,
+    the faults' signatures), so every row is in one group, but the filter row: it reads only
+    the episode's observations (its own task costs one more simulation of the episode, a tenth
+    of its filter) and its fit, about a hundred filter runs, is the longest; alone, it does not
+    hold back the scoring of the others.
+    """
+    rest = [i for i, c in enumerate(configs) if c.stage != OracleStage.FILTER]
+    alone = [[i] for i, c in enumerate(configs) if c.stage == OracleStage.FILTER]
+    return ([rest] if rest else []) + alone
 
 
-def _fit_all(
-    runner: Backend, data: TrackData, configs: Sequence[OracleConfig], progress: bool
-) -> tuple[PhysicalLimit, ...]:
-    """Every row of ``configs`` fitted, one task each, in ``configs`` order."""
-    handles = {runner.submit(fit_task, data, c): i for i, c in enumerate(configs)}
-    out: dict[int, PhysicalLimit] = {}
-    with _bar(len(handles), "reference fits", progress) as bar:
-        for handle, observer in _completed(runner, list(handles), "fitting a reference row"):
-            out[handles[handle]] = observer
-            bar.update(1)
-    return tuple(out[i] for i in range(len(configs)))
+def _seed_cells(
+    cells: Sequence[tuple[str, int]], missing: Sequence[Sequence[tuple[str, int]]]
+) -> list[tuple[tuple[str, int], ...]]:
+    """The cells that any of ``missing`` lacks, one tuple per seed (in ``cells`` order)."""
+    lacking = {cell for m in missing for cell in m}
+    by_seed: dict[int, list[tuple[str, int]]] = {}
+    for cell in cells:
+        if cell in lacking:
+            by_seed.setdefault(cell[1], []).append(cell)
+    return [tuple(v) for v in by_seed.values()]
 
 
-def _score_all(
-    runner: Backend,
-    store: ResultStore,
-    data: TrackData,
-    groups: Sequence[tuple[tuple[tuple[str, int], ...], tuple[PhysicalLimit, ...]]],
-    todo: Sequence[int],
-    labels: Sequence[str],
-    hashes: Sequence[str],
-    written: Mapping[int, set[tuple[str, int]]],
-    t_on: int,
-    progress: bool,
-) -> None:
-    """Score each group (one seed's cells) in one task; write the missing cells it returns."""
-    shipped: dict[int, Any] = {}  # the fitted rows, put once (Ray's object store)
-    handles = {}
-    for cells, observers in groups:
-        if id(observers) not in shipped:
-            shipped[id(observers)] = runner.put(observers)
-        task = ReferenceSeedTask(data=data, cells=cells, t_on=t_on)
-        handles[runner.submit(seed_task, task, shipped[id(observers)])] = cells
-    with _bar(len(handles), "reference seeds", progress) as bar:
-        for handle, rows in _completed(runner, list(handles), "scoring the reference rows"):
-            for cell, recs in zip(handles[handle], rows, strict=True):
-                for i, rec in zip(todo, recs, strict=True):
-                    if cell in written[i]:
-                        rec = {**rec, "diagnoser": labels[i]}  # the record names its folder
-                        store.write_cell(labels[i], cell[0], cell[1], hashes[i], rec)
-            bar.update(1)
+class _Work:
+    """One run's tasks: every row's fit, then, as soon as a group's rows are all fitted, one
+    scoring task per seed of that group; the records that come back are written at once."""
 
+    def __init__(
+        self,
+        runner: Backend,
+        store: ResultStore,
+        data: TrackData,
+        configs: Sequence[OracleConfig],
+        labels: Sequence[str],
+        hashes: Sequence[str],
+        missing: Mapping[int, Sequence[tuple[str, int]]],
+        t_on: int,
+    ) -> None:
+        self.runner, self.store, self.data = runner, store, data
+        self.configs, self.labels, self.hashes, self.t_on = (
+            configs,
+            labels,
+            hashes,
+            t_on,
+        )
+        self.missing = {i: set(m) for i, m in missing.items()}
 
-def _completed(runner: Backend, handles: list[Any], what: str) -> Any:
-    it = runner.completed(handles)
-    while True:
-        try:
-            yield next(it)
-        except StopIteration:
-            return
-        except Exception as e:  # a worker's exception, named
-            raise RuntimeError(f"{what} failed: {type(e).__name__}: {e}") from e
+    def run(
+        self,
+        plan: Sequence[tuple[list[int], list[tuple[tuple[str, int], ...]]]],
+        n_tasks: int,
+        progress: bool,
+    ) -> None:
+        fits = {
+            self.runner.submit(fit_task, self.data, self.configs[i]): i for g, _ in plan for i in g
+        }
+        fitted: dict[int, PhysicalLimit] = {}
+        scoring: dict[Any, tuple[list[int], tuple[tuple[str, int], ...]]] = {}
+        pending = list(fits)
+        with tqdm(
+            total=n_tasks,
+            desc="reference rows",
+            unit="task",
+            disable=not progress,
+            leave=False,
+        ) as bar:
+            while pending:
+                try:
+                    handle, result = next(self.runner.completed(pending))
+                except Exception as e:  # a worker's exception (it names the row and cell)
+                    raise RuntimeError(f"reference rows: {type(e).__name__}: {e}") from e
+                pending.remove(handle)
+                bar.update(1)
+                if handle in scoring:
+                    self._write(*scoring.pop(handle), result)
+                    continue
+                fitted[fits[handle]] = result
+                for rows, seeds in plan:
+                    if fits[handle] in rows and all(i in fitted for i in rows):
+                        shared = self.runner.put(tuple(fitted[i] for i in rows))
+                        for cells in seeds:
+                            task = ReferenceSeedTask(data=self.data, cells=cells, t_on=self.t_on)
+                            h = self.runner.submit(seed_task, task, shared)
+                            scoring[h] = (rows, cells)
+                            pending.append(h)
+
+    def _write(
+        self,
+        rows: Sequence[int],
+        cells: Sequence[tuple[str, int]],
+        records: Sequence[Sequence[dict[str, Any]]],
+    ) -> None:
+        for cell, recs in zip(cells, records, strict=True):
+            for i, rec in zip(rows, recs, strict=True):
+                if cell in self.missing[i]:
+                    rec = {
+                        **rec,
+                        "diagnoser": self.labels[i],
+                    }  # the record names its folder
+                    self.store.write_cell(self.labels[i], *cell, self.hashes[i], rec)

@@ -18,6 +18,7 @@ from evaluation.tracks.reference_runs import (
     reference_hash,
     reference_label,
     run_references,
+    sharing_groups,
 )
 from evaluation.tracks.track_data import TrackData
 
@@ -83,6 +84,13 @@ def test_an_edited_stored_record_is_refused(tmp_path) -> None:
     cell.write_text(json.dumps(obj))
     with pytest.raises(StoreError, match="r_fd"):
         run_references(data, FAST[:1], tmp_path, n_workers=0, progress=False)
+
+
+def test_the_filter_row_is_scored_apart() -> None:
+    # its fit is the longest; the others share their simulations seed by seed
+    assert [c.stage for c in DEFAULT_REFERENCES].index("filter") == 3
+    assert sharing_groups(DEFAULT_REFERENCES) == [[0, 1, 2, 4, 5], [3]]
+    assert sharing_groups(FAST) == [[0, 1, 2]]
 
 
 def test_unknown_backend_is_refused(tmp_path) -> None:
