@@ -73,7 +73,8 @@ REFERENCE_STORE_VERSION = 1
 
 #: The modules whose source the reference rows' numbers depend on beyond the simulator (the
 #: simulator is named by the package and model versions, as for every detector cell): the rows,
-#: their track data, the stages and filter they run, and the scoring.
+#: their track data, the stages and filter they run, and the scoring. Not this module: it
+#: schedules and stores, and computes no number (its tasks call the rows and the scoring).
 REFERENCE_CODE: tuple[str, ...] = (
     "evaluation.tracks.oracle",
     "evaluation.tracks.optimal",
@@ -81,7 +82,6 @@ REFERENCE_CODE: tuple[str, ...] = (
     "evaluation.tracks.track_data",
     "evaluation.tracks.track",
     "evaluation.tracks.distributions",
-    "evaluation.tracks.reference_runs",
     "evaluation.sweep.records",
     "evaluation.sweep.sources",
     "evaluation.metrics.detection_metrics",
@@ -226,10 +226,13 @@ def run_references(
     hashes = [reference_hash(c, store.data_hash, t_on) for c in configs]
     labels = [reference_label(c, h) for c, h in zip(configs, hashes, strict=True)]
     cells = data.cells()
-    missing = {
-        i: [cell for cell in cells if store.read_cell(labels[i], *cell, hashes[i]) is None]
+    # what is stored is read once (a fully stored track reads every file once, no more)
+    stored = {
+        (i, cell): store.read_cell(labels[i], *cell, hashes[i])
         for i in range(len(configs))
+        for cell in cells
     }
+    missing = {i: [cell for cell in cells if stored[i, cell] is None] for i in range(len(configs))}
     todo = [i for i in range(len(configs)) if missing[i]]
     n_missing = sum(len(missing[i]) for i in todo)
     if todo:
@@ -252,8 +255,8 @@ def run_references(
             runner.close(cancel=cancel)
     records = []
     for sc, seed in cells:
-        for c, label, h in zip(configs, labels, hashes, strict=True):
-            rec = store.read_cell(label, sc, seed, h)
+        for i, (c, label, h) in enumerate(zip(configs, labels, hashes, strict=True)):
+            rec = stored[i, (sc, seed)] or store.read_cell(label, sc, seed, h)
             if rec is None:  # only if a file vanished while we ran
                 raise RuntimeError(f"reference cell {label}/{sc}/seed {seed} is missing")
             try:
