@@ -221,6 +221,8 @@ def run_references(
         raise ValueError(f"backend={backend!r}; allowed: one of {list(BACKENDS)}")
     configs = list(configs)
     for c in configs:
+        if not isinstance(c, OracleConfig):
+            raise ValueError(f"configs holds {c!r}; allowed: evaluation.tracks.oracle.OracleConfig")
         c.calibration_seeds(data.track)  # seed clashes are refused before any work
     store = ResultStore.open(store_dir, data.store_key())
     hashes = [reference_hash(c, store.data_hash, t_on) for c in configs]

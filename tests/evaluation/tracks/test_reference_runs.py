@@ -96,6 +96,8 @@ def test_the_filter_row_is_scored_apart() -> None:
 def test_unknown_backend_is_refused(tmp_path) -> None:
     with pytest.raises(ValueError, match="backend='dask'"):
         run_references(TrackData(track=TINY), FAST, tmp_path, backend="dask")
+    with pytest.raises(ValueError, match=r"allowed: evaluation\.tracks\.oracle\.OracleConfig"):
+        run_references(TrackData(track=TINY), [{"stage": "t2"}], tmp_path)  # type: ignore[list-item]
 
 
 @pytest.mark.slow  # about 30 s, most of it Ray starting its workers
