@@ -128,7 +128,8 @@ def main_tracks(args: argparse.Namespace, parser: argparse.ArgumentParser) -> in
         print(trackboard_table(run_))
         print(
             f"track {track.name}: {run_.wall_s:.1f} s ({run_.n_computed} cells computed, "
-            f"{run_.n_reused} reused; {run_.n_trained} diagnosers trained, "
+            f"{run_.n_reused} reused; {run_.n_reference_computed} reference-row cells "
+            f"computed; {run_.n_trained} diagnosers trained, "
             f"{run_.n_reused_models} models reused from another track)",
             file=sys.stderr,
         )

@@ -121,12 +121,13 @@ def run_sweep(
     figures = set(map(tuple, figure_cells))
     # Per episode: (spec, cell missing?, detection missing?) for every diagnoser with work left.
     missing: dict[tuple[str, int], list[tuple[DiagnoserSpec, bool, bool]]] = {}
+    stored: dict[tuple[str, str, int], CellResult] = {}  # each stored file is read once
     for sc, seed in cells:
         for s in specs:
             rec = store.read_cell(s.key, sc, seed, chash[s.key])
             no_cell = rec is None
             if rec is not None:  # a bad stored record is reported before any work is done
-                _cell_result(store, rec, s.key, sc, seed)
+                stored[s.key, sc, seed] = _cell_result(store, rec, s.key, sc, seed)
             no_det = (sc, seed) in figures and (
                 store.read_detection(s.key, sc, seed, chash[s.key]) is None
             )
@@ -161,6 +162,9 @@ def run_sweep(
     records = []
     for s in specs:
         for sc, seed in cells:
+            if (s.key, sc, seed) in stored:
+                records.append(stored[s.key, sc, seed])
+                continue
             rec = store.read_cell(s.key, sc, seed, chash[s.key])
             if rec is None:  # only if a file vanished while we ran
                 raise RuntimeError(f"cell {s.key}/{sc}/seed {seed} is missing after the sweep")

@@ -44,7 +44,8 @@ from evaluation.sweep.config import DiagnoserSpec, SweepConfig, default_specs
 from evaluation.sweep.runner import run_sweep
 from evaluation.sweep.store import ResultStore, canonical_hash
 from evaluation.sweep.tasks import dir_files
-from evaluation.tracks.oracle import DEFAULT_REFERENCES, reference_records
+from evaluation.tracks.oracle import DEFAULT_REFERENCES
+from evaluation.tracks.reference_runs import run_references
 from evaluation.tracks.rows import TrackRun, track_rows
 from evaluation.tracks.track import Track
 from evaluation.tracks.track_data import TrackData
@@ -94,7 +95,9 @@ def run_track(
     imports: Sequence[str] = (),
     relation_cache: Path | None = None,
 ) -> TrackRun:
-    """Sweep ``diagnosers`` over ``track`` and add the physical-limit row (resumable).
+    """Sweep ``diagnosers`` over ``track`` and add the reference rows (resumable: the rows'
+    records are stored in the track's store too, :mod:`evaluation.tracks.reference_runs`, and
+    computed as tasks of the same ``backend``).
 
     ``model_cache``: a directory of trained models shared by tracks; a track whose training
     episodes equal another's (:meth:`TrackData.training_key`: same seeds, noise and plant
@@ -129,7 +132,16 @@ def run_track(
     )
     if model_cache is not None:
         _models_to_cache(config, store, model_cache)
-    records = (*results.records, *reference_records(data, DEFAULT_REFERENCES))
+    references, n_references = run_references(
+        data,
+        DEFAULT_REFERENCES,
+        store,
+        backend=backend,
+        n_workers=workers,
+        ray_address=ray_address,
+        progress=progress,
+    )
+    records = (*results.records, *references)
     tiers = {s.key: str(diagnoser_class(s.name).tier) for s in config.diagnosers}
     rows = track_rows(records, [s.key for s in config.diagnosers], track.faults, tiers)
     if figures:
@@ -143,6 +155,7 @@ def run_track(
         n_reused=results.n_reused,
         n_trained=results.n_trained,
         n_reused_models=n_reused_models,
+        n_reference_computed=n_references,
     )
 
 

@@ -170,6 +170,10 @@ class FaultSignatures:
         self.data = data
         self._cache: OrderedDict[int, list[np.ndarray]] = OrderedDict()
 
+    def __getstate__(self) -> dict[str, object]:
+        """Pickled without the kept signatures (a fitted row travels to workers light)."""
+        return {"data": self.data, "_cache": OrderedDict()}
+
     @property
     def faults(self) -> tuple[str, ...]:
         return self.data.track.faults

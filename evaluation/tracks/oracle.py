@@ -76,6 +76,7 @@ __all__ = [
     "OracleInputs",
     "OracleStage",
     "PhysicalLimit",
+    "Simulations",
     "oracle_records",
     "reference_over",
     "reference_records",
@@ -300,18 +301,37 @@ class PhysicalLimit:
         data: TrackData,
         config: OracleConfig | None = None,
         *,
-        simulations: _Simulations | None = None,
+        simulations: Simulations | None = None,
     ) -> None:
         self.data = data
         self.config = config or OracleConfig()
         # rows scored together share their simulations (healthy episodes and references)
-        self._sims = simulations or _Simulations(data)
+        self._sims = simulations or Simulations(data)
         self.name = self.config.label
         idx = [MEASUREMENT_NAMES.index(c) for c in self.config.channels]
         self._idx = np.array(idx)
         noise = np.array([MEASUREMENTS[i].noise_std for i in idx])
         #: noise std [channel unit] of each monitored channel on this track
         self.noise_std = noise * data.track.noise_scale
+
+    def share_simulations(self, simulations: Simulations) -> None:
+        """Read the healthy episodes, references and signatures from ``simulations`` (shared
+        with the other rows scored on the same cells; the optimal rows' bank reads the same
+        signatures)."""
+        self._sims = simulations
+        if isinstance(getattr(self, "stage_", None), KnownFaultBank):
+            self.stage_.signatures = simulations.signatures  # type: ignore[union-attr]
+
+    def __getstate__(self) -> dict[str, Any]:
+        """A fitted row travels to a worker (and back from its fit) without the simulations
+        it has read: they are its caches, megabytes of episodes, and are simulated again."""
+        state = dict(self.__dict__)
+        del state["_sims"]
+        return state
+
+    def __setstate__(self, state: dict[str, Any]) -> None:
+        self.__dict__.update(state)
+        self.share_simulations(Simulations(self.data))
 
     def _reference(self, episode: Episode) -> np.ndarray:
         assert episode.seed is not None, "the reference needs the episode's seed"
@@ -490,7 +510,7 @@ class _PerfectModelStage:
         )
 
 
-class _Simulations:
+class Simulations:
     """Healthy episodes and references of one track, each simulated once for every row that
     asks (the T² and directional rows calibrate on the same first validation episodes, and
     the two measured-input rows replay the same records)."""
@@ -526,7 +546,7 @@ def reference_records(
     data: TrackData, configs: Sequence[OracleConfig], *, t_on: int = 0
 ) -> list[CellResult]:
     """The records of several reference rows (one per config), each test cell simulated once."""
-    sims = _Simulations(data)
+    sims = Simulations(data)
     observers = [PhysicalLimit(data, c, simulations=sims).fit() for c in configs]
     out = []
     for sc, seed in data.cells():

@@ -185,6 +185,8 @@ class TrackRun:
     n_reused: int
     n_trained: int = 0
     n_reused_models: int = 0
+    #: reference-row records computed in this run (the others were read from the store)
+    n_reference_computed: int = 0
 
     @property
     def limit_row(self) -> TrackRow | None:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import math
 
 import numpy as np
@@ -227,6 +228,12 @@ def test_run_track_end_to_end(tmp_path) -> None:
     # a second run resumes: nothing computed again
     again = run_track(TINY, ["limits"], tmp_path / "paper", workers=0, progress=False)
     assert again.n_computed == 0 and again.n_reused == len(TINY.test_cells())
+    # and the reference rows were stored too (evaluation.tracks.reference_runs)
+    assert run.n_reference_computed == 6 * len(TINY.test_cells())
+    assert again.n_reference_computed == 0
+    assert [json.dumps(r.to_json()) for r in again.rows] == [
+        json.dumps(r.to_json()) for r in run.rows
+    ]
 
 
 def test_fault_spec_of_a_track_is_not_random_in_the_env() -> None:

@@ -1,0 +1,376 @@
+"""The reference rows of a track as tasks of the sweep's backend, stored like cells.
+
+:func:`run_references` gives the records of the reference rows
+(:data:`~evaluation.tracks.oracle.DEFAULT_REFERENCES`) on every test cell of a track, as
+:func:`~evaluation.tracks.oracle.reference_records` computes them, bit for bit, but:
+
+* **stored like cells.** Each record is a cell file of the track's result store
+  (:class:`~evaluation.sweep.store.ResultStore`, written atomically, never overwritten), filed
+  under a label that is the row's content address (:func:`reference_label`): the row, its
+  configuration (:class:`~evaluation.tracks.oracle.OracleConfig`), the track's data hash (its
+  definition with its plant and model version; the store's manifest), ``t_on``, the package
+  version and the source of every module the rows' numbers depend on (:data:`REFERENCE_CODE`,
+  :func:`code_version`). A re-run of a finished track reads them and computes nothing; a
+  change of any of those computes the row again into a new address, and the old files stay
+  (delete the store's ``cells/reference+*`` folders to reclaim them).
+* **tasks of the backend.** Each row's fit (its calibration on the track's validation seeds,
+  the directional row's fault directions, the filter row's signatures) is one task
+  (:func:`fit_task`), and the scoring of every test seed is one task per group of rows
+  (:func:`seed_task`, :func:`sharing_groups`), submitted as soon as the group's rows are
+  fitted: a seed's healthy and faulty cells share the simulations the rows read (the healthy
+  episode, its references and, for the optimal rows, the faults' signatures on that seed,
+  computed in that task). The driver only schedules the tasks and writes what comes back, on
+  the same backends as the detector cells (:func:`evaluation.sweep.backends.make_backend`:
+  local processes, Ray, or this process).
+
+Why the label carries the hash rather than only the cell file: a detector's cell of other
+settings is an error (a label names one configuration), while a reference row changes with the
+code every time a reference module is edited, and a re-run should then recompute it, not ask
+for the store to be deleted.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import importlib
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from functools import cache
+from pathlib import Path
+from typing import Any
+
+from tqdm.auto import tqdm
+
+from evaluation.sweep.backends import BACKENDS, Backend, make_backend
+from evaluation.sweep.records import CellResult, score_episode
+from evaluation.sweep.store import ResultStore, canonical_hash
+from evaluation.tracks.oracle import (
+    OracleConfig,
+    OracleStage,
+    PhysicalLimit,
+    Simulations,
+)
+from evaluation.tracks.track_data import TrackData
+from fcc_common.workers import limit_threads
+from fcc_env import MODEL_VERSION, __version__
+
+__all__ = [
+    "REFERENCE_CODE",
+    "REFERENCE_STORE_VERSION",
+    "ReferenceSeedTask",
+    "code_version",
+    "fit_task",
+    "reference_hash",
+    "reference_label",
+    "run_references",
+    "seed_task",
+    "sharing_groups",
+]
+
+#: Bumped when the meaning of a stored reference record changes (part of every address).
+REFERENCE_STORE_VERSION = 1
+
+#: The modules whose source the reference rows' numbers depend on beyond the simulator (the
+#: simulator is named by the package and model versions, as for every detector cell): the rows,
+#: their track data, the stages and filter they run, and the scoring. Not this module: it
+#: schedules and stores, and computes no number (its tasks call the rows and the scoring).
+REFERENCE_CODE: tuple[str, ...] = (
+    "evaluation.tracks.oracle",
+    "evaluation.tracks.optimal",
+    "evaluation.tracks.filter_bound",
+    "evaluation.tracks.track_data",
+    "evaluation.tracks.track",
+    "evaluation.tracks.distributions",
+    "evaluation.sweep.records",
+    "evaluation.sweep.sources",
+    "evaluation.metrics.detection_metrics",
+    "evaluation.metrics.isolation_metrics",
+    "diagnosers.detection",
+    "diagnosers.episode.record",
+    "diagnosers.stages.alarm",
+    "diagnosers.stages.directional_stage",
+    "diagnosers.stages.innovation_stage",
+    "diagnosers.lrgf.fault_directions",
+    "diagnosers.lrgf.lrgf_glr",
+    "diagnosers.lrgf.lrgf_presets",
+    "diagnosers.filters.state_estimator",
+    "diagnosers.filters.ukf_config",
+    "diagnosers.filters.ukf_kernels",
+    "diagnosers.filters.ukf_linear",
+    "diagnosers.filters.ukf_model",
+)
+
+
+@cache
+def code_version(modules: tuple[str, ...] = REFERENCE_CODE) -> str:
+    """SHA-256 of the source files of ``modules`` (name and bytes of each, in order).
+
+    Any edit (a comment too) gives another version: a conservative address, which recomputes a
+    row rather than ever reading a stale one.
+    """
+    h = hashlib.sha256()
+    for name in modules:
+        module = importlib.import_module(name)
+        path = getattr(module, "__file__", None)
+        if path is None:
+            raise ValueError(f"module {name!r} has no source file; allowed: a module from a .py")
+        h.update(name.encode() + b"\0" + Path(path).read_bytes() + b"\0")
+    return h.hexdigest()
+
+
+def reference_hash(config: OracleConfig, data_hash: str, t_on: int = 0) -> str:
+    """The content address of a reference row's cells on a track (see the module docstring)."""
+    if not isinstance(config, OracleConfig):
+        raise ValueError(f"config={config!r}; allowed: an evaluation.tracks.oracle.OracleConfig")
+    return canonical_hash(
+        {
+            "v": REFERENCE_STORE_VERSION,
+            "package": f"{__version__} ({MODEL_VERSION})",
+            "code": code_version(),
+            "data": data_hash,
+            "row": dataclasses.asdict(config),
+            "t_on": t_on,
+        }
+    )
+
+
+def reference_label(config: OracleConfig, cell_hash: str) -> str:
+    """The store label of a reference row: ``reference+<inputs>+<stage>+<address>`` (a path
+    component of the store; the table label, :attr:`OracleConfig.label`, holds spaces)."""
+    return f"reference+{config.inputs}+{config.stage}+{cell_hash[:16]}"
+
+
+# ---- the tasks ---------------------------------------------------------------------------------
+def fit_task(data: TrackData, config: OracleConfig, _serial: bool = False) -> PhysicalLimit:
+    """Fit one reference row (:meth:`PhysicalLimit.fit`); it travels back without the
+    simulations it read (:meth:`PhysicalLimit.__getstate__`)."""
+    if not _serial:
+        limit_threads()
+    try:
+        return PhysicalLimit(data, config).fit()
+    except Exception as e:  # a worker's traceback does not reach the user: name the row
+        raise RuntimeError(f"fitting {config.label!r}: {type(e).__name__}: {e}") from e
+
+
+@dataclass(frozen=True)
+class ReferenceSeedTask:
+    """Score fitted reference rows on the test cells ``cells`` (one seed's) of ``data``."""
+
+    data: TrackData
+    cells: tuple[tuple[str, int], ...]
+    t_on: int = 0
+
+
+def seed_task(
+    task: ReferenceSeedTask, observers: Sequence[PhysicalLimit], _serial: bool = False
+) -> list[list[dict[str, Any]]]:
+    """Per cell of the task, per observer, the record (:meth:`CellResult.to_json`).
+
+    The observers share one :class:`~evaluation.tracks.oracle.Simulations` for the task: the
+    healthy episode, the references and the faults' signatures of its seed are simulated once.
+    """
+    if not _serial:
+        limit_threads()
+    sims = Simulations(task.data)
+    for obs in observers:
+        obs.share_simulations(sims)
+    out = []
+    for sc, seed in task.cells:
+        loaded = task.data.load_test(sc, seed)
+        row = []
+        for obs in observers:
+            try:
+                # score_episode only calls .detect and reads .name, which the observer has
+                rec = score_episode(obs, loaded, label=obs.name, t_on=task.t_on)  # type: ignore[arg-type]
+            except Exception as e:
+                raise RuntimeError(
+                    f"{obs.name!r} on {sc}, seed {seed}: {type(e).__name__}: {e}"
+                ) from e
+            row.append(rec.to_json())
+        out.append(row)
+    return out
+
+
+# ---- the driver --------------------------------------------------------------------------------
+def run_references(
+    data: TrackData,
+    configs: Sequence[OracleConfig],
+    store_dir: str | Path,
+    *,
+    backend: str = "local",
+    n_workers: int | None = None,
+    ray_address: str | None = None,
+    progress: bool = True,
+    t_on: int = 0,
+) -> tuple[list[CellResult], int]:
+    """The records of the reference rows ``configs`` on every test cell of ``data`` (cells in
+    :meth:`TrackData.cells` order, the rows in ``configs`` order within a cell, as
+    :func:`~evaluation.tracks.oracle.reference_records` returns them) and how many were
+    computed now; the others are read from the store at ``store_dir`` (the track's sweep
+    store).
+
+    ``backend``, ``n_workers``, ``ray_address``: as :func:`evaluation.sweep.run_sweep` (0
+    workers: this process). No backend is started when every record is stored.
+
+    Raises:
+        ValueError: an unknown backend, or a config that is not an :class:`OracleConfig`.
+        evaluation.sweep.store.StoreError: a stored file is corrupted or foreign.
+        RuntimeError: a fit or scoring task failed (records finished before stay stored).
+    """
+    if backend not in BACKENDS:
+        raise ValueError(f"backend={backend!r}; allowed: one of {list(BACKENDS)}")
+    configs = list(configs)
+    for c in configs:
+        if not isinstance(c, OracleConfig):
+            raise ValueError(f"configs holds {c!r}; allowed: evaluation.tracks.oracle.OracleConfig")
+        c.calibration_seeds(data.track)  # seed clashes are refused before any work
+    store = ResultStore.open(store_dir, data.store_key())
+    hashes = [reference_hash(c, store.data_hash, t_on) for c in configs]
+    labels = [reference_label(c, h) for c, h in zip(configs, hashes, strict=True)]
+    cells = data.cells()
+    # what is stored is read once (a fully stored track reads every file once, no more)
+    stored = {
+        (i, cell): store.read_cell(labels[i], *cell, hashes[i])
+        for i in range(len(configs))
+        for cell in cells
+    }
+    missing = {i: [cell for cell in cells if stored[i, cell] is None] for i in range(len(configs))}
+    todo = [i for i in range(len(configs)) if missing[i]]
+    n_missing = sum(len(missing[i]) for i in todo)
+    if todo:
+        groups = sharing_groups([configs[i] for i in todo])
+        plan = [
+            (
+                [todo[j] for j in group],
+                _seed_cells(cells, [missing[todo[j]] for j in group]),
+            )
+            for group in groups
+        ]
+        n_tasks = len(todo) + sum(len(seeds) for _, seeds in plan)
+        runner = make_backend(backend, n_workers, n_tasks, ray_address)
+        cancel = True
+        try:
+            work = _Work(runner, store, data, configs, labels, hashes, missing, t_on)
+            work.run(plan, n_tasks, progress)
+            cancel = False
+        finally:
+            runner.close(cancel=cancel)
+    records = []
+    for sc, seed in cells:
+        for i, (c, label, h) in enumerate(zip(configs, labels, hashes, strict=True)):
+            rec = stored[i, (sc, seed)] or store.read_cell(label, sc, seed, h)
+            if rec is None:  # only if a file vanished while we ran
+                raise RuntimeError(f"reference cell {label}/{sc}/seed {seed} is missing")
+            try:
+                result = CellResult.from_json(rec)
+            except (ValueError, TypeError) as e:
+                path = store.cell_path(label, sc, seed)
+                raise ValueError(f"{path}: {e}; delete it to recompute this cell") from e
+            records.append(dataclasses.replace(result, diagnoser=c.label))
+    return records, n_missing
+
+
+def sharing_groups(configs: Sequence[OracleConfig]) -> list[list[int]]:
+    """The rows (indexes into ``configs``) that are scored by the same seed tasks.
+
+    Rows scored together share their simulations (the test episode, its healthy references,
+    the faults' signatures), so every row is in one group, but the filter row: it reads only
+    the episode's observations (its own task costs one more simulation of the episode, a tenth
+    of its filter) and its fit, about a hundred filter runs, is the longest; alone, it does not
+    hold back the scoring of the others.
+    """
+    rest = [i for i, c in enumerate(configs) if c.stage != OracleStage.FILTER]
+    alone = [[i] for i, c in enumerate(configs) if c.stage == OracleStage.FILTER]
+    return ([rest] if rest else []) + alone
+
+
+def _seed_cells(
+    cells: Sequence[tuple[str, int]], missing: Sequence[Sequence[tuple[str, int]]]
+) -> list[tuple[tuple[str, int], ...]]:
+    """The cells that any of ``missing`` lacks, one tuple per seed (in ``cells`` order)."""
+    lacking = {cell for m in missing for cell in m}
+    by_seed: dict[int, list[tuple[str, int]]] = {}
+    for cell in cells:
+        if cell in lacking:
+            by_seed.setdefault(cell[1], []).append(cell)
+    return [tuple(v) for v in by_seed.values()]
+
+
+class _Work:
+    """One run's tasks: every row's fit, then, as soon as a group's rows are all fitted, one
+    scoring task per seed of that group; the records that come back are written at once."""
+
+    def __init__(
+        self,
+        runner: Backend,
+        store: ResultStore,
+        data: TrackData,
+        configs: Sequence[OracleConfig],
+        labels: Sequence[str],
+        hashes: Sequence[str],
+        missing: Mapping[int, Sequence[tuple[str, int]]],
+        t_on: int,
+    ) -> None:
+        self.runner, self.store, self.data = runner, store, data
+        self.configs, self.labels, self.hashes, self.t_on = (
+            configs,
+            labels,
+            hashes,
+            t_on,
+        )
+        self.missing = {i: set(m) for i, m in missing.items()}
+
+    def run(
+        self,
+        plan: Sequence[tuple[list[int], list[tuple[tuple[str, int], ...]]]],
+        n_tasks: int,
+        progress: bool,
+    ) -> None:
+        fits = {
+            self.runner.submit(fit_task, self.data, self.configs[i]): i for g, _ in plan for i in g
+        }
+        fitted: dict[int, PhysicalLimit] = {}
+        scoring: dict[Any, tuple[list[int], tuple[tuple[str, int], ...]]] = {}
+        pending = list(fits)
+        with tqdm(
+            total=n_tasks,
+            desc="reference rows",
+            unit="task",
+            disable=not progress,
+            leave=False,
+        ) as bar:
+            while pending:
+                try:
+                    handle, result = next(self.runner.completed(pending))
+                except Exception as e:  # a worker's exception (it names the row and cell)
+                    raise RuntimeError(f"reference rows: {type(e).__name__}: {e}") from e
+                pending.remove(handle)
+                bar.update(1)
+                if handle in scoring:
+                    self._write(*scoring.pop(handle), result)
+                    continue
+                fitted[fits[handle]] = result
+                for rows, seeds in plan:
+                    if fits[handle] in rows and all(i in fitted for i in rows):
+                        shared = self.runner.put(tuple(fitted[i] for i in rows))
+                        for cells in seeds:
+                            task = ReferenceSeedTask(data=self.data, cells=cells, t_on=self.t_on)
+                            h = self.runner.submit(seed_task, task, shared)
+                            scoring[h] = (rows, cells)
+                            pending.append(h)
+
+    def _write(
+        self,
+        rows: Sequence[int],
+        cells: Sequence[tuple[str, int]],
+        records: Sequence[Sequence[dict[str, Any]]],
+    ) -> None:
+        for cell, recs in zip(cells, records, strict=True):
+            for i, rec in zip(rows, recs, strict=True):
+                if cell in self.missing[i]:
+                    rec = {
+                        **rec,
+                        "diagnoser": self.labels[i],
+                    }  # the record names its folder
+                    self.store.write_cell(self.labels[i], *cell, self.hashes[i], rec)
