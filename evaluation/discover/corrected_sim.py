@@ -21,12 +21,13 @@ from collections.abc import Sequence
 
 import numba
 import numpy as np
+from scipy import signal
 
 from evaluation.discover.terms import FUNCTIONS, N_BASE_SIGNALS, SIGNALS, STATE_TARGETS, Term
 from fcc_env.params import N_MEASUREMENTS, N_STATES
 from fcc_env.physics import N_AUX, measurements_into, njit_kernel, rhs_core
 
-__all__ = ["TermTable", "factor_value", "simulate_corrected", "term_values"]
+__all__ = ["TermTable", "factor_value", "simulate_corrected", "term_values", "with_lags"]
 
 
 @njit_kernel
@@ -241,3 +242,15 @@ def _np_fn(fn: int, v: np.ndarray) -> np.ndarray:
         lambda a: np.maximum(a, 0.0),
         np.abs,
     ][fn](v)
+
+
+def with_lags(table: TermTable, Z: np.ndarray, sample_time_s: float) -> np.ndarray:
+    """Base signals ``Z`` (..., T, n_base) extended by ``table``'s lagged signals, filtered as
+    the kernel filters them (lag[0] = z[0], lag[k] = a·lag[k−1] + (1 − a)·z[k])."""
+    out = [Z[..., :N_BASE_SIGNALS]]
+    for src, tau in zip(table.lag_src, table.lag_tau, strict=True):
+        a = math.exp(-sample_time_s / tau)
+        z = Z[..., int(src)]
+        lag, _ = signal.lfilter([1.0 - a], [1.0, -a], z, axis=-1, zi=a * z[..., :1])
+        out.append(lag[..., None])
+    return np.concatenate(out, axis=-1)

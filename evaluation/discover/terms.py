@@ -17,9 +17,11 @@ and a constant merged into ``θ·(z − z₀)``.
 
 from __future__ import annotations
 
+import dataclasses
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -38,6 +40,8 @@ __all__ = [
     "Term",
     "TermLibrary",
     "equation",
+    "form_from_json",
+    "form_to_json",
 ]
 
 #: Model signals a factor may use: the 11 states (measured temperatures under their Table 1
@@ -278,3 +282,23 @@ def equation(form: FormCandidate, theta: Sequence[float]) -> dict[str, object]:
             for c, txt, u in parts
         ],
     }
+
+
+def form_to_json(form: FormCandidate) -> dict[str, Any]:
+    """The form's definition (target, terms with their centres and scales), as JSON: what
+    :func:`form_from_json` reads back to accept it into the model."""
+    return {
+        "target": form.target,
+        "terms": [[dataclasses.asdict(f) for f in t.factors] for t in form.terms],
+    }
+
+
+def form_from_json(d: Mapping[str, Any], form_id: str = "") -> FormCandidate:
+    """A form from :func:`form_to_json`'s dict (bad fields are refused by name)."""
+    try:
+        terms = tuple(Term(tuple(Factor(**f) for f in t)) for t in d["terms"])
+        target = str(d["target"])
+    except (KeyError, TypeError) as e:
+        raise ValueError(f"not a form definition ({e}): {dict(d)!r}") from e
+    params = tuple(ParamInfo(f"c{i}", 1.0, -math.inf, math.inf) for i in range(len(terms)))
+    return FormCandidate(target, terms, params, form_id)
