@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from collections import OrderedDict
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -20,7 +20,7 @@ from scipy import signal
 from evaluation.discover.base import Candidate, ParamInfo
 from evaluation.discover.corrected_sim import TermTable, simulate_corrected, term_values
 from evaluation.discover.data import TABLE1, MeasuredData
-from evaluation.discover.terms import FormCandidate
+from evaluation.discover.terms import FormCandidate, form_from_json
 from fcc_env import effects as fx
 from fcc_env.params import NOMINAL_INPUTS, PARAM_INDEX, FCCParams
 from fcc_env.physics import steady_state
@@ -32,6 +32,7 @@ __all__ = [
     "PHYSICS_OUTPUT_CHANNELS",
     "PhysicsCandidate",
     "PhysicsModel",
+    "declared_from_report",
     "first_order_lag",
     "library_candidates",
 ]
@@ -391,3 +392,26 @@ class PhysicsModel:
         return Y
 
     _dt: float = DEFAULT_SAMPLE_TIME_S
+
+
+def declared_from_report(report: Mapping[str, Any]) -> list[tuple[Candidate, np.ndarray]]:
+    """The effects of a loop report (``report.json``'s dict), library ones and forms, with their
+    fitted values: what ``PhysicsModel(declared=...)`` takes to accept them into the model."""
+    lib, _ = library_candidates()
+    out: list[tuple[Candidate, np.ndarray]] = []
+    for e in report.get("effects", []):
+        if e.get("form") is not None:
+            cand: Candidate = form_from_json(e["form"], str(e["id"]))
+        elif e.get("id") in lib:
+            cand = lib[e["id"]]
+        else:
+            raise ValueError(
+                f"effect {e.get('id')!r} of the report is neither a form nor a library effect "
+                f"({sorted(lib)})"
+            )
+        try:
+            values = np.array([float(e["params"][p.name]) for p in cand.params])
+        except (KeyError, TypeError) as err:
+            raise ValueError(f"effect {e.get('id')!r} lacks parameter {err}") from err
+        out.append((cand, values))
+    return out
