@@ -24,6 +24,7 @@
 
 from __future__ import annotations
 
+import importlib.util
 import math
 import os
 import time
@@ -251,6 +252,13 @@ def discover(
         )
 
     can_form = forms != "never" and callable(getattr(model, "signals", None))
+    form_note = None
+    if can_form and importlib.util.find_spec("pysindy") is None:
+        if forms == "always":
+            raise ValueError(
+                "forms='always' needs PySINDy: pip install 'fcc-fault-diagnosis[forms]'"
+            )
+        can_form, form_note = False, "form search skipped: PySINDy is not installed ([forms])"
     for i in range(max_forms if can_form else 0):
         effs = [a.cand for a in accepted]
         th_acc = np.concatenate([a.theta for a in accepted]) if accepted else np.zeros(0)
@@ -345,6 +353,8 @@ def discover(
         )
     elif unexplained:
         note = "structure remains that no candidate explains"
+    if form_note is not None:
+        note = form_note if note is None else f"{note}; {form_note}"
     elapsed_s = time.perf_counter() - t_start
     plot_files = None
     if out_dir is not None:

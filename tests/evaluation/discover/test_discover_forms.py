@@ -193,6 +193,7 @@ def test_clean_data_gets_no_form_even_when_the_search_is_forced():
     assert [r["kind"] for r in rep.rounds] == ["form"]  # the search ran, and was refused
 
 
+@pytest.mark.slow
 def test_a_coupling_outside_the_library_is_found_as_a_form(tmp_path):
     """dT_rg1/dt += 2e-4·(T_rg2 − T_rg1): a form, at most 3 terms, error back to the floor;
     written to the report with its equation, and accepted through the CLI."""
