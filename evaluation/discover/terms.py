@@ -265,7 +265,9 @@ def equation(form: FormCandidate, theta: Sequence[float]) -> dict[str, object]:
             parts.append((coef[i], t.text(), t.unit()))
     lhs = f"{form.channel}" if form.is_measurement else f"d{form.channel}/dt"
     body = " ".join(
-        f"{'−' if c < 0 else '+'} {abs(c):.3g}·{txt}" if k else f"{c:.3g}·{txt}".replace("-", "−")
+        f"{'−' if c < 0 else '+'} {abs(c):.3g}·{txt}"
+        if k
+        else f"{'−' if c < 0 else ''}{abs(c):.3g}·{txt}"
         for k, (c, txt, _) in enumerate(parts)
     )
     unit = form.rate_unit
