@@ -264,12 +264,12 @@ def equation(form: FormCandidate, theta: Sequence[float]) -> dict[str, object]:
         if i not in used:
             parts.append((coef[i], t.text(), t.unit()))
     lhs = f"{form.channel}" if form.is_measurement else f"d{form.channel}/dt"
-    body = " ".join(
-        f"{'−' if c < 0 else '+'} {abs(c):.3g}·{txt}"
-        if k
-        else f"{'−' if c < 0 else ''}{abs(c):.3g}·{txt}"
-        for k, (c, txt, _) in enumerate(parts)
-    )
+
+    def part(k: int, c: float, txt: str) -> str:
+        sign = ("− " if c < 0 else "+ ") if k else ("−" if c < 0 else "")
+        return f"{sign}{abs(c):.3g}" + ("" if txt == "1" else f"·{txt}")
+
+    body = " ".join(part(k, c, txt) for k, (c, txt, _) in enumerate(parts))
     unit = form.rate_unit
     return {
         "text": f"{lhs} [{unit}] += {body}",
