@@ -271,6 +271,9 @@ def discover(
         # also searched on the declared model alone, and the better model (held-out, with a
         # ln N penalty per parameter) is kept
         bases = [list(accepted), []] if i == 0 and accepted else [list(accepted)]
+        pen = math.log(data.n_episodes * n_hold)
+        # a form must beat the model as it stands (on the declared model alone too)
+        crit_now = float(np.sum((e_now[:, n_train:] * sqrt_w) ** 2)) + th_acc.size * pen
         best: tuple[Any, ...] | None = None
         for base in bases:
             b_effs = [a.cand for a in base]
@@ -297,10 +300,8 @@ def discover(
                 continue
             form, fit = win
             e1 = Y - model.predict(data, [*b_effs, form], fit.theta[None], T)[0]
-            crit = float(np.sum((e1[:, n_train:] * sqrt_w) ** 2)) + fit.theta.size * math.log(
-                data.n_episodes * n_hold
-            )
-            if best is None or crit < best[0]:
+            crit = float(np.sum((e1[:, n_train:] * sqrt_w) ** 2)) + fit.theta.size * pen
+            if crit < (crit_now if best is None else best[0]):
                 best = (crit, base, form, fit, table, len(rounds))
         if best is None:
             break
