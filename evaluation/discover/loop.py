@@ -19,7 +19,12 @@
 5. *Unexplained structure*: ``unexplained`` is set when any channel's held-out residual exceeds
    the calibrated limits of :mod:`evaluation.discover.scoring`. Effects accepted while
    structure remains are flagged ``"explains_structure": false``.
-6. *Report*: a :class:`~evaluation.discover.report.DiscoveryReport`, written to ``out_dir``.
+6. *Form*: when structure remains (``forms="auto"``), a form round
+   (:func:`~evaluation.discover.form_search.form_round`) proposes a sparse correction of at most
+   ``FormSearch.max_terms`` terms to one equation, gated like a candidate; it is searched on top
+   of the accepted effects and on the declared model alone, and the better held-out model
+   (ln N per parameter) is kept, so library effects that only mimicked the structure are dropped.
+7. *Report*: a :class:`~evaluation.discover.report.DiscoveryReport`, written to ``out_dir``.
 """
 
 from __future__ import annotations
