@@ -52,17 +52,35 @@ class Saturation:
 
 
 DEV = [
-    StateTerm("coupling: dT_rg1/dt += 2e-4·(T_rg2 − T_rg1)", lambda x, u: (4, 2e-4 * (x[..., 7] - x[..., 4]))),
-    StateTerm("quadratic loss: dT_rg2/dt −= 1e-5·(T_rg2 − 700)²", lambda x, u: (7, -1e-5 * (x[..., 7] - 700.0) ** 2)),
+    StateTerm(
+        "coupling: dT_rg1/dt += 2e-4·(T_rg2 − T_rg1)",
+        lambda x, u: (4, 2e-4 * (x[..., 7] - x[..., 4])),
+    ),
+    StateTerm(
+        "quadratic loss: dT_rg2/dt −= 1e-5·(T_rg2 − 700)²",
+        lambda x, u: (7, -1e-5 * (x[..., 7] - 700.0) ** 2),
+    ),
     Saturation("saturation: T_d1 read as 698 + 8·tanh((T_d1 − 698)/8)", "T_d1", 698.0, 8.0),
-    StateTerm("product: dT_dg/dt += 2e-5·(R_ar − 148)·(T_dg − 700)", lambda x, u: (10, 2e-5 * (u[..., 1] - 148.0) * (x[..., 10] - 700.0))),
-]  # fmt: skip
+    StateTerm(
+        "product: dT_dg/dt += 2e-5·(R_ar − 148)·(T_dg − 700)",
+        lambda x, u: (10, 2e-5 * (u[..., 1] - 148.0) * (x[..., 10] - 700.0)),
+    ),
+]
 VAL = [
-    StateTerm("quadratic loss: dT_rg1/dt −= 2e-5·(T_rg1 − 660)²", lambda x, u: (4, -2e-5 * (x[..., 4] - 660.0) ** 2)),
-    StateTerm("cross-coupling: dT_d1/dt += 2e-4·(T_dg − T_d1)", lambda x, u: (9, 2e-4 * (x[..., 10] - x[..., 9]))),
+    StateTerm(
+        "quadratic loss: dT_rg1/dt −= 2e-5·(T_rg1 − 660)²",
+        lambda x, u: (4, -2e-5 * (x[..., 4] - 660.0) ** 2),
+    ),
+    StateTerm(
+        "cross-coupling: dT_d1/dt += 2e-4·(T_dg − T_d1)",
+        lambda x, u: (9, 2e-4 * (x[..., 10] - x[..., 9])),
+    ),
     Saturation("saturation: T_rg2 read as 716 + 10·tanh((T_rg2 − 716)/10)", "T_rg2", 716.0, 10.0),
-    StateTerm("product: dT_rg2/dt += 2e-5·(T_ar − 200)·(T_rg2 − 716)", lambda x, u: (7, 2e-5 * (u[..., 2] - 200.0) * (x[..., 7] - 716.0))),
-]  # fmt: skip
+    StateTerm(
+        "product: dT_rg2/dt += 2e-5·(T_ar − 200)·(T_rg2 − 716)",
+        lambda x, u: (7, 2e-5 * (u[..., 2] - 200.0) * (x[..., 7] - 716.0)),
+    ),
+]
 
 
 def run_effect(eff, seed: int) -> dict:
@@ -110,20 +128,35 @@ def main() -> None:
             rep = d.discover(data, max_effects=1, forms="always", plots=False).to_json()
             fr = [r for r in rep["rounds"] if r.get("kind") == "form"]
             best = fr[0]["candidates"][:1] if fr and fr[0]["candidates"] else []
-            print(json.dumps({
-                "seed": seed, "effects": [e["id"] for e in rep["effects"]],
-                "best_form_tested": best, "cpu_s": round(time.process_time() - t0, 1),
-            }, ensure_ascii=False), flush=True)  # fmt: skip
+            print(
+                json.dumps(
+                    {
+                        "seed": seed,
+                        "effects": [e["id"] for e in rep["effects"]],
+                        "best_form_tested": best,
+                        "cpu_s": round(time.process_time() - t0, 1),
+                    },
+                    ensure_ascii=False,
+                ),
+                flush=True,
+            )
     else:
         seeds = [int(s) for s in (a.seeds or "1000,1001,1002,1003").split(",")]
         data = d.from_batch(fcc_env.simulate_episodes(seeds, N, plant_effects=[DEV[0]]))
         t0, w0 = time.process_time(), time.perf_counter()
         rep = d.discover(data, max_effects=3, plots=False, progress=True)
-        print(json.dumps({
-            "episodes": len(seeds), "samples": N, "cpu_s": round(time.process_time() - t0, 1),
-            "wall_s": round(time.perf_counter() - w0, 1),
-            "effects": [e.equation["text"] if e.equation else e.id for e in rep.effects],
-        }, ensure_ascii=False))  # fmt: skip
+        print(
+            json.dumps(
+                {
+                    "episodes": len(seeds),
+                    "samples": N,
+                    "cpu_s": round(time.process_time() - t0, 1),
+                    "wall_s": round(time.perf_counter() - w0, 1),
+                    "effects": [e.equation["text"] if e.equation else e.id for e in rep.effects],
+                },
+                ensure_ascii=False,
+            )
+        )
 
 
 if __name__ == "__main__":
