@@ -16,12 +16,24 @@ The package, one room per concern:
 ``arx``                   :class:`ARXModel` and the :class:`MissingInput` candidates
 ``lrgf_model``            :class:`~evaluation.discover.lrgf_model.LRGFModel` (imported on demand: torch)
 ``fitting``               :func:`fit_effects`: bounded simulation-error least squares
+``terms``                 :class:`Term`, :class:`Factor`, :class:`TermLibrary` (user-extensible
+                          candidate terms), :class:`FormCandidate`, :func:`equation`
+``corrected_sim``         the declared model's simulator with a form added to its state equations
+``form_search``           :class:`FormSearch`, :func:`form_round`: a form when no library effect
+                          explains the residual (PySINDy's STLSQ over simulated sensitivities,
+                          the held-out gate, a stability check)
 ``scoring``               :func:`heldout_comparison`, :func:`structure_statistics`
 ``loop``                  :func:`discover`
 ``report``                :class:`DiscoveryReport`, residual tests and plots of the report
 ``residual_tests``        whiteness, bias, drift and correlation tests of a residual
 ``cli``                   ``python -m evaluation.discover`` (its wall time: ``python -m bench.loop_speed``)
 ========================  =========================================================================
+
+When structure remains that no library effect explains, the loop searches for a *form*: a
+sparse correction of at most three terms to one state equation or measurement, gated like a
+library effect and reported as an equation (``--forms``, :class:`FormSearch`); a report's
+effects and forms are accepted into the model with ``--accept DIR/report.json``
+(``PhysicsModel(declared=declared_from_report(...))``).
 
 Limitations (stated, not hidden): a first-order *sensor lag on a model input channel* (T_ar,
 T_fp) cannot be inverted without differentiating noise, so those candidates are not offered
@@ -48,12 +60,14 @@ from evaluation.discover.data import (
     load_measured,
 )
 from evaluation.discover.fitting import ar1_inflation, fit_effects
+from evaluation.discover.form_search import FormSearch, form_round, stability
 from evaluation.discover.loop import TRAIN_FRACTION_RANGE, discover, heldout_rmse
 from evaluation.discover.physics_model import (
     PHYSICS_INPUT_CHANNELS,
     PHYSICS_OUTPUT_CHANNELS,
     PhysicsCandidate,
     PhysicsModel,
+    declared_from_report,
     first_order_lag,
     library_candidates,
 )
@@ -65,6 +79,15 @@ from evaluation.discover.scoring import (
     heldout_comparison,
     noise_levels,
     structure_statistics,
+)
+from evaluation.discover.terms import (
+    Factor,
+    FormCandidate,
+    Term,
+    TermLibrary,
+    equation,
+    form_from_json,
+    form_to_json,
 )
 
 __all__ = [
@@ -81,7 +104,10 @@ __all__ = [
     "AcceptedEffect",
     "Candidate",
     "DiscoveryReport",
+    "Factor",
     "FitResult",
+    "FormCandidate",
+    "FormSearch",
     "MeasuredData",
     "MissingInput",
     "MissingInputAdapter",
@@ -89,10 +115,17 @@ __all__ = [
     "ParamInfo",
     "PhysicsCandidate",
     "PhysicsModel",
+    "Term",
+    "TermLibrary",
     "ar1_inflation",
+    "declared_from_report",
     "discover",
+    "equation",
     "first_order_lag",
     "fit_effects",
+    "form_from_json",
+    "form_round",
+    "form_to_json",
     "from_arrays",
     "from_batch",
     "from_external",
@@ -103,5 +136,6 @@ __all__ = [
     "main",
     "missing_input_candidates",
     "noise_levels",
+    "stability",
     "structure_statistics",
 ]

@@ -22,12 +22,19 @@ from typing import Any
 
 from evaluation.discover.arx import ARXModel
 from evaluation.discover.data import from_external
+from evaluation.discover.form_search import FormSearch
 from evaluation.discover.loop import discover
-from evaluation.discover.physics_model import PHYSICS_INPUT_CHANNELS, PHYSICS_OUTPUT_CHANNELS
+from evaluation.discover.physics_model import (
+    PHYSICS_INPUT_CHANNELS,
+    PHYSICS_OUTPUT_CHANNELS,
+    PhysicsModel,
+    declared_from_report,
+)
 from evaluation.discover.report import REPORT_FILE
 from evaluation.sweep.dataset_loaders import load_manifest
 from fcc_common.invocation import check_out_path, command_parser, run_command
 from fcc_common.progress import add_progress_flag
+from fcc_common.safe_files import read_json
 
 __all__ = ["main"]
 
@@ -75,6 +82,18 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument("--max-effects", type=int, default=3, help="0-10; 3")
     parser.add_argument("--alpha", type=float, default=0.01, help="family-wise level per round")
     parser.add_argument("--no-plots", action="store_true")
+    parser.add_argument(
+        "--accept",
+        metavar="REPORT",
+        help="a previous report.json: its effects and forms become part of the declared model",
+    )
+    parser.add_argument(
+        "--forms",
+        choices=("auto", "always", "never"),
+        default="auto",
+        help="search for a form when structure remains (auto), always, or never",
+    )
+    parser.add_argument("--max-terms", type=int, default=3, help="terms of a form, 1-5; 3")
     add_progress_flag(parser)
     return run_command(parser, _discover, argv)
 
@@ -86,6 +105,10 @@ def _discover(args: argparse.Namespace) -> int:
     if args.candidates:
         cands = [c.strip() for c in args.candidates.split(",") if c.strip()]
     data, model = _source(args)
+    if args.accept is not None:
+        if model is not None:
+            raise ValueError("--accept needs the FCC physics model (its channels in the data)")
+        model = PhysicsModel(declared=declared_from_report(read_json(args.accept)))
     report = discover(
         data,
         model=model,
@@ -96,9 +119,14 @@ def _discover(args: argparse.Namespace) -> int:
         out_dir=args.out,
         plots=not args.no_plots,
         progress=args.progress,
+        forms=args.forms,
+        form_search=FormSearch(max_terms=args.max_terms),
     )
     for e in report.effects:
-        print(f"effect {e.id}: {dict(e.params)} (95% CI {dict(e.ci95)})")
+        if e.equation is not None:
+            print(f"form {e.equation['text']}  (enters {e.equation['enters']})")
+        else:
+            print(f"effect {e.id}: {dict(e.params)} (95% CI {dict(e.ci95)})")
     if not report.effects:
         print("no significant effect found")
     for c in report.channels:

@@ -19,11 +19,17 @@
 5. *Unexplained structure*: ``unexplained`` is set when any channel's held-out residual exceeds
    the calibrated limits of :mod:`evaluation.discover.scoring`. Effects accepted while
    structure remains are flagged ``"explains_structure": false``.
-6. *Report*: a :class:`~evaluation.discover.report.DiscoveryReport`, written to ``out_dir``.
+6. *Form*: when structure remains (``forms="auto"``), a form round
+   (:func:`~evaluation.discover.form_search.form_round`) proposes a sparse correction of at most
+   ``FormSearch.max_terms`` terms to one equation, gated like a candidate; it is searched on top
+   of the accepted effects and on the declared model alone, and the better held-out model
+   (ln N per parameter) is kept, so library effects that only mimicked the structure are dropped.
+7. *Report*: a :class:`~evaluation.discover.report.DiscoveryReport`, written to ``out_dir``.
 """
 
 from __future__ import annotations
 
+import importlib.util
 import math
 import os
 import time
@@ -37,6 +43,7 @@ import numpy as np
 from evaluation.discover.base import Candidate, ModelAdapter
 from evaluation.discover.data import MeasuredData, load_measured
 from evaluation.discover.fitting import fit_effects
+from evaluation.discover.form_search import FormSearch, form_round
 from evaluation.discover.physics_model import PhysicsModel
 from evaluation.discover.report import (
     AcceptedEffect,
@@ -55,8 +62,9 @@ from evaluation.discover.scoring import (
     noise_levels,
     structure_statistics,
 )
+from evaluation.discover.terms import FormCandidate, equation, form_to_json
 from fcc_common.progress import progress_bar
-from fcc_common.validation import Integer, Real, check
+from fcc_common.validation import Integer, Options, Real, check
 
 __all__ = [
     "ALPHA",
@@ -70,6 +78,10 @@ __all__ = [
 TRAIN_FRACTION_RANGE = (0.2, 0.9)  # open interval
 TRAIN_FRACTION = Real(*TRAIN_FRACTION_RANGE, closed="neither")
 MAX_EFFECTS = Integer(0, 10)
+MAX_FORMS = Integer(0, 5)
+#: When the loop searches for a form: when structure remains after the library rounds, always
+#: (still gated: on clean data it proposes nothing), or never.
+FORM_MODES = ("auto", "always", "never")
 ALPHA = Real(0.0, 0.5, closed="neither")
 
 
@@ -97,6 +109,9 @@ def discover(
     plots: bool = True,
     max_lag: int = 20,
     progress: bool | None = False,
+    forms: str = "auto",
+    max_forms: int = 1,
+    form_search: FormSearch | None = None,
 ) -> DiscoveryReport:
     """Run the residual → missing-effect loop and return the report (also written to ``out_dir``).
 
@@ -113,6 +128,11 @@ def discover(
         out_dir: where ``report.json`` and the plots go (None: nothing written).
         progress: a bar per round over the candidates fitted, on standard error (``None``:
             when it is a terminal; :mod:`fcc_common.progress`); the report is the same.
+        forms: search for a form (:mod:`evaluation.discover.form_search`) after the library
+            rounds: ``"auto"`` when structure remains, ``"always"``, or ``"never"``. Only for
+            a model with a state simulator (:class:`PhysicsModel`).
+        max_forms: at most this many forms are added (0–5).
+        form_search: the search's settings (default :class:`FormSearch`: at most 3 terms).
 
     Returns:
         A frozen :class:`~evaluation.discover.report.DiscoveryReport`. Until the previous
@@ -123,6 +143,9 @@ def discover(
     train_fraction = check("train_fraction", train_fraction, TRAIN_FRACTION)
     max_effects = check("max_effects", max_effects, MAX_EFFECTS)
     alpha = check("alpha", alpha, ALPHA)
+    forms = check("forms", forms, Options(FORM_MODES))
+    max_forms = check("max_forms", max_forms, MAX_FORMS)
+    search = form_search if form_search is not None else FormSearch()
     if not isinstance(data, MeasuredData):
         data = load_measured(data)
     model = model if model is not None else PhysicsModel()
@@ -219,23 +242,105 @@ def discover(
                 {x: win[x] for x in ("score", "rel_reduction", "p_value")},
             )
         )
-        if len(accepted) > 1:  # joint re-fit of everything accepted so far
-            effs = [a.cand for a in accepted]
-            th = np.concatenate([a.theta for a in accepted])
-            fit = fit_effects(
-                model, data, effs, th, np.ones(th.size, bool), Y, n_train, sqrt_w, grid=False
+        _refit_all(
+            model,
+            data,
+            accepted,
+            Y,
+            n_train,
+            sqrt_w,
+            block_len,
+            alpha,
+            min_rel_reduction,
+            rounds[-1],
+            excluded,
+        )
+
+    can_form = forms != "never" and callable(getattr(model, "signals", None))
+    form_note = None
+    if can_form and importlib.util.find_spec("pysindy") is None:
+        if forms == "always":
+            raise ValueError(
+                "forms='always' needs PySINDy: pip install 'fcc-fault-diagnosis[forms]'"
             )
-            j = 0
-            for a in accepted:
-                n_p = len(a.cand.params)
-                a.theta, a.stderr = fit.theta[j : j + n_p], fit.stderr[j : j + n_p]
-                j += n_p
-            dropped = _backward_elimination(
-                model, data, accepted, Y, n_train, sqrt_w, block_len, alpha, min_rel_reduction
+        can_form, form_note = False, "form search skipped: PySINDy is not installed ([forms])"
+    for i in range(max_forms if can_form else 0):
+        effs = [a.cand for a in accepted]
+        th_acc = np.concatenate([a.theta for a in accepted]) if accepted else np.zeros(0)
+        e_now = Y - model.predict(data, effs, th_acc[None], T)[0]
+        s_now = structure_statistics(e_now[:, n_train:], sigma)
+        bad = (s_now["ratio"] > RATIO_LIMIT) | (s_now["lf"] > LF_LIMIT)
+        if forms == "auto" and not bad.any():
+            break
+        # library effects accepted while structure remains are provisional: the first form is
+        # also searched on the declared model alone, and the better model (held-out, with a
+        # ln N penalty per parameter) is kept
+        bases = [list(accepted), []] if i == 0 and accepted else [list(accepted)]
+        pen = math.log(data.n_episodes * n_hold)
+        # a form must beat the model as it stands (on the declared model alone too)
+        crit_now = float(np.sum((e_now[:, n_train:] * sqrt_w) ** 2)) + th_acc.size * pen
+        best: tuple[Any, ...] | None = None
+        for base in bases:
+            b_effs = [a.cand for a in base]
+            b_th = np.concatenate([a.theta for a in base]) if base else np.zeros(0)
+            table, win = form_round(
+                model,
+                data,
+                b_effs,
+                b_th,
+                Y,
+                n_train,
+                sqrt_w,
+                [c for c, b in zip(chans, bad, strict=True) if b] or list(chans),
+                search=search,
+                block_len=block_len,
+                alpha=alpha,
+                min_rel_reduction=min_rel_reduction,
+                progress=progress,
             )
-            if dropped:
-                rounds[-1]["dropped"] = dropped
-                excluded.update(dropped)
+            rounds.append(
+                {"round": len(rounds) + 1, "base": [e.id for e in b_effs], **_form_table(table)}
+            )
+            if win is None:
+                continue
+            form, fit = win
+            e1 = Y - model.predict(data, [*b_effs, form], fit.theta[None], T)[0]
+            crit = float(np.sum((e1[:, n_train:] * sqrt_w) ** 2)) + fit.theta.size * pen
+            if crit < (crit_now if best is None else best[0]):
+                best = (crit, base, form, fit, table, len(rounds))
+        if best is None:
+            break
+        _, base, form, fit, table, rnd = best
+        rounds[rnd - 1]["chosen"] = True
+        replaced = [a.cand.id for a in accepted if a not in base]
+        if replaced:
+            rounds[rnd - 1]["replaced"] = replaced
+            excluded.update(replaced)
+        accepted[:] = base
+        k = len(form.params)
+        row = next(r for r in table["candidates"] if r["form"] is form)
+        accepted.append(
+            _Accepted(
+                form,
+                fit.theta[-k:],
+                fit.stderr[-k:],
+                rnd,
+                {x: row[x] for x in ("score", "rel_reduction", "p_value")},
+            )
+        )
+        _refit_all(
+            model,
+            data,
+            accepted,
+            Y,
+            n_train,
+            sqrt_w,
+            block_len,
+            alpha,
+            min_rel_reduction,
+            rounds[-1],
+            excluded,
+        )
 
     effs = [a.cand for a in accepted]
     th_acc = np.concatenate([a.theta for a in accepted]) if accepted else np.zeros(0)
@@ -254,6 +359,8 @@ def discover(
         )
     elif unexplained:
         note = "structure remains that no candidate explains"
+    if form_note is not None:
+        note = form_note if note is None else f"{note}; {form_note}"
     elapsed_s = time.perf_counter() - t_start
     plot_files = None
     if out_dir is not None:
@@ -279,6 +386,8 @@ def discover(
                 round=a.round,
                 heldout={k: finite_or_none(v) for k, v in a.stats.items()},
                 explains_structure=not unexplained,
+                equation=equation(a.cand, a.theta) if isinstance(a.cand, FormCandidate) else None,
+                form=form_to_json(a.cand) if isinstance(a.cand, FormCandidate) else None,
             )
             for a in accepted
         ),
@@ -303,6 +412,9 @@ def discover(
             "min_rel_reduction": min_rel_reduction,
             "block_len": block_len,
             "n_candidates": len(pool),
+            "forms": forms,
+            "max_forms": max_forms,
+            "max_terms": search.max_terms,
         },
         note=note,
         elapsed_s=elapsed_s,
@@ -363,6 +475,59 @@ def _backward_elimination(
             x.theta, x.stderr = fit.theta[j : j + n_p], fit.stderr[j : j + n_p]
             j += n_p
     return dropped
+
+
+def _refit_all(
+    model: ModelAdapter,
+    data: MeasuredData,
+    accepted: list[_Accepted],
+    Y: np.ndarray,
+    n_train: int,
+    sqrt_w: np.ndarray,
+    block_len: int,
+    alpha: float,
+    min_rel: float,
+    round_table: dict[str, Any],
+    excluded: set[str],
+) -> None:
+    """Joint re-fit of everything accepted so far, then backward elimination (in place)."""
+    if len(accepted) < 2:
+        return
+    effs = [a.cand for a in accepted]
+    th = np.concatenate([a.theta for a in accepted])
+    fit = fit_effects(model, data, effs, th, np.ones(th.size, bool), Y, n_train, sqrt_w, grid=False)
+    j = 0
+    for a in accepted:
+        n_p = len(a.cand.params)
+        a.theta, a.stderr = fit.theta[j : j + n_p], fit.stderr[j : j + n_p]
+        j += n_p
+    dropped = _backward_elimination(
+        model, data, accepted, Y, n_train, sqrt_w, block_len, alpha, min_rel
+    )
+    if dropped:
+        round_table["dropped"] = dropped
+        excluded.update(dropped)
+
+
+def _form_table(table: dict[str, Any]) -> dict[str, Any]:
+    """A form round's table as JSON: each tested form's equation, scores and stability."""
+    rows = []
+    for r in table["candidates"]:
+        form = r["form"]
+        rows.append(
+            {
+                "id": form.id,
+                "equation": equation(form, r["fit"].theta[-len(form.params) :])["text"],
+                "n_terms": len(form.terms),
+                "score": finite_or_none(r["score"]),
+                "train_score": finite_or_none(r["train_score"]),
+                "rel_reduction": finite_or_none(r["rel_reduction"]),
+                "p_value": finite_or_none(r["p_value"]),
+                "significant": r["significant"],
+                **({"stability": r["stability"]} if "stability" in r else {}),
+            }
+        )
+    return {**{k: v for k, v in table.items() if k != "candidates"}, "candidates": rows}
 
 
 def heldout_rmse(

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from collections import OrderedDict
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -18,9 +18,11 @@ import numpy as np
 from scipy import signal
 
 from evaluation.discover.base import Candidate, ParamInfo
+from evaluation.discover.corrected_sim import TermTable, simulate_corrected, term_values
 from evaluation.discover.data import TABLE1, MeasuredData
+from evaluation.discover.terms import FormCandidate, form_from_json
 from fcc_env import effects as fx
-from fcc_env.params import NOMINAL_INPUTS, FCCParams
+from fcc_env.params import NOMINAL_INPUTS, PARAM_INDEX, FCCParams
 from fcc_env.physics import steady_state
 from fcc_env.plant import DEFAULT_SAMPLE_TIME_S
 from fcc_env.simulation import simulate_inputs
@@ -30,6 +32,7 @@ __all__ = [
     "PHYSICS_OUTPUT_CHANNELS",
     "PhysicsCandidate",
     "PhysicsModel",
+    "declared_from_report",
     "first_order_lag",
     "library_candidates",
 ]
@@ -138,10 +141,17 @@ class PhysicsModel:
     name = "fcc-physics"
     output_channels = PHYSICS_OUTPUT_CHANNELS
 
-    def __init__(self, init_samples: int = 20, cache_size: int = 8):
+    def __init__(
+        self,
+        init_samples: int = 20,
+        cache_size: int = 8,
+        declared: Sequence[tuple[Candidate, Sequence[float]]] = (),
+    ):
         self.init_samples = init_samples
         self.cache_size = cache_size
-        self._cache: OrderedDict[Any, np.ndarray] = OrderedDict()
+        #: accepted effects that are now part of the declared model: (candidate, values)
+        self.declared = tuple((c, np.asarray(v, np.float64)) for c, v in declared)
+        self._cache: OrderedDict[Any, tuple[np.ndarray, np.ndarray | None]] = OrderedDict()
         self._cands, self._skipped = library_candidates()
         self._U: np.ndarray | None = None
         self._data_id: int | None = None
@@ -175,10 +185,30 @@ class PhysicsModel:
     def _needs_sim(self, eff: Candidate) -> bool:
         if isinstance(eff, PhysicsCandidate):
             return eff.needs_simulation
+        if isinstance(eff, FormCandidate):
+            return not eff.is_measurement
         return True
 
-    def _simulate(self, settings: list[list[tuple[Candidate, np.ndarray]]], n: int) -> np.ndarray:
-        """Simulate each setting (a list of simulation effects with values): (R, E, n, 8)."""
+    def form_table(self, effects: Sequence[Candidate]) -> TermTable | None:
+        """The terms of every form among ``effects``, packed for the kernel (None: no form)."""
+        forms = [e for e in effects if isinstance(e, FormCandidate)]
+        if not forms:
+            return None
+        terms = [t for f in forms for t in f.terms]
+        targets = [None if f.is_measurement else f.target for f in forms for _ in f.terms]
+        return TermTable(terms, targets)
+
+    def _simulate(
+        self,
+        settings: list[list[tuple[Candidate, np.ndarray]]],
+        n: int,
+        table: TermTable | None = None,
+        forms: Sequence[FormCandidate] = (),
+        keep_signals: bool = False,
+        x0_shift: np.ndarray | None = None,
+    ) -> tuple[np.ndarray, np.ndarray | None]:
+        """Simulate each setting (a list of simulation effects with values): outputs
+        (R, E, n, 8) and, with forms, the signals their terms read (R, E, n, n_z)."""
         assert self._U is not None, "prepare() first"
         base = FCCParams()
         t = np.arange(n) * self._dt
@@ -188,6 +218,8 @@ class PhysicsModel:
             U = self._U[:, :n].copy()
             mult: dict[str, np.ndarray] = {}
             for eff, th in setting:
+                if isinstance(eff, FormCandidate):
+                    continue
                 values = {p.name: float(v) for p, v in zip(eff.params, th, strict=True)}
                 sensor = getattr(eff, "sensor", None)
                 if sensor is not None:
@@ -206,7 +238,8 @@ class PhysicsModel:
                         mult[f] = mult.get(f, 1.0) * np.broadcast_to(np.asarray(v, float), (n,))
             Us.append(U)
             m0 = min(self.init_samples, n)
-            x0s.append(np.stack([steady_state(base, U[e, :m0].mean(axis=0)) for e in range(E)]))
+            x0 = np.stack([steady_state(base, U[e, :m0].mean(axis=0)) for e in range(E)])
+            x0s.append(x0 if x0_shift is None else x0 + x0_shift)
             mults.append(mult)
         R = len(settings)
         fields_ = sorted({f for m in mults for f in m})
@@ -216,14 +249,69 @@ class PhysicsModel:
             )
             for f in fields_
         }
-        with np.errstate(all="ignore"):
-            sim = simulate_inputs(
-                np.concatenate(Us).reshape(R * E, n, 6),
-                param_multipliers=pm or None,
-                x0=np.concatenate(x0s),
-                sample_time_s=self._dt,
-            )
-        return sim.y_clean.reshape(R, E, n, -1)
+        if table is None and not keep_signals:
+            with np.errstate(all="ignore"):
+                sim = simulate_inputs(
+                    np.concatenate(Us).reshape(R * E, n, 6),
+                    param_multipliers=pm or None,
+                    x0=np.concatenate(x0s),
+                    sample_time_s=self._dt,
+                )
+            return sim.y_clean.reshape(R, E, n, -1), None
+        table = table if table is not None else TermTable([], [])
+        theta = np.zeros((R, table.target.size))
+        for r, setting in enumerate(settings):
+            values = {id(e): th for e, th in setting if isinstance(e, FormCandidate)}
+            k = 0
+            for f in forms:
+                if id(f) in values:
+                    theta[r, k : k + len(f.terms)] = values[id(f)]
+                k += len(f.terms)
+        names = sorted(pm)
+        pidx = np.array([[PARAM_INDEX[f] for f in names] or [-1]] * (R * E), np.int64)
+        PM = np.ones((R * E, n, max(1, len(names))))
+        for j, f in enumerate(names):
+            PM[:, :, j] = pm[f]
+        Y, Z = simulate_corrected(
+            np.concatenate(Us).reshape(R * E, n, 6),
+            np.concatenate(x0s),
+            np.tile(base.as_array(), (R * E, 1)),
+            table,
+            np.repeat(theta, E, axis=0),
+            sample_time_s=self._dt,
+            pidx=pidx,
+            PM=PM,
+            keep_signals=keep_signals or any(f.is_measurement for f in forms),
+        )
+        return Y.reshape(R, E, n, -1), None if Z is None else Z.reshape(R, E, n, -1)
+
+    def signals(
+        self,
+        data: MeasuredData,
+        effects: Sequence[Candidate],
+        theta: np.ndarray,
+        n_samples: int,
+        x0_shift: np.ndarray | None = None,
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Outputs (E, n, 8, Table 1 order) and signals (E, n, n_z) of one parameter row: what
+        a form's terms read (:data:`~evaluation.discover.terms.SIGNALS`), from the state
+        ``x0_shift`` away from the usual initial state (a stability probe)."""
+        if self._data_id != id(data):
+            self.prepare(data, n_samples)
+        self._dt = data.sample_time_s
+        if self.declared:
+            effects = [*(c for c, _ in self.declared), *effects]
+            theta = np.concatenate([*(v for _, v in self.declared), np.ravel(theta)])
+        forms = [e for e in effects if isinstance(e, FormCandidate)]
+        table = self.form_table(forms)
+        setting, k = [], 0
+        for e in effects:
+            setting.append((e, np.ravel(theta)[k : k + len(e.params)]))
+            k += len(e.params)
+        sim = [(e, th) for e, th in setting if self._needs_sim(e)]
+        Y, Z = self._simulate([sim], int(n_samples), table, forms, True, x0_shift)
+        assert Z is not None
+        return Y[0], Z[0]
 
     def predict(
         self, data: MeasuredData, effects: Sequence[Candidate], thetas: np.ndarray, n_samples: int
@@ -233,12 +321,18 @@ class PhysicsModel:
         self._dt = data.sample_time_s
         thetas = np.atleast_2d(np.asarray(thetas, np.float64))
         B = thetas.shape[0]
+        if self.declared:  # accepted effects: part of the model, ahead of the candidates
+            effects = [*(c for c, _ in self.declared), *effects]
+            fixed = np.concatenate([v for _, v in self.declared])
+            thetas = np.hstack([np.tile(fixed, (B, 1)), thetas])
         n = int(n_samples)
         slices, k = [], 0
         for e in effects:
             slices.append(slice(k, k + len(e.params)))
             k += len(e.params)
         sim_idx = [i for i, e in enumerate(effects) if self._needs_sim(e)]
+        forms = [e for e in effects if isinstance(e, FormCandidate)]
+        table = self.form_table(forms)
         keys = []
         for b in range(B):
             keys.append(
@@ -247,30 +341,39 @@ class PhysicsModel:
                     tuple(
                         (effects[i].id, tuple(np.round(thetas[b, slices[i]], 12))) for i in sim_idx
                     ),
+                    tuple(f.id for f in forms),
                 )
             )
-        sims: dict[Any, np.ndarray] = {k_: self._cache[k_] for k_ in keys if k_ in self._cache}
+        sims = {k_: self._cache[k_] for k_ in keys if k_ in self._cache}
         todo = list(dict.fromkeys(k_ for k_ in keys if k_ not in sims))
         if todo:
             key_to_row = {k_: keys.index(k_) for k_ in todo}
             settings = [
                 [(effects[i], thetas[key_to_row[k_], slices[i]]) for i in sim_idx] for k_ in todo
             ]
-            Y = self._simulate(settings, n)
+            Y, Z = self._simulate(settings, n, table, forms)
             for j, k_ in enumerate(todo):
-                sims[k_] = Y[j]
-                self._cache[k_] = Y[j]
+                sims[k_] = (Y[j], None if Z is None else Z[j])
+                self._cache[k_] = sims[k_]
                 while len(self._cache) > self.cache_size:
                     self._cache.popitem(last=False)
         out_idx = [TABLE1.index(c) for c in self.output_channels]
         t = np.arange(n) * self._dt
         result = np.empty((B, self._U.shape[0], n, len(out_idx)))
         for b in range(B):
-            Y = sims[keys[b]].copy()
+            Y, Z = sims[keys[b]]
+            Y = Y.copy()
+            col = 0
             for i, e in enumerate(effects):
-                if i in sim_idx:
-                    continue
-                Y = self._apply_output_effect(e, thetas[b, slices[i]], t, Y)
+                if isinstance(e, FormCandidate):
+                    if e.is_measurement:
+                        assert table is not None and Z is not None
+                        cols = slice(col, col + len(e.terms))
+                        vals = term_values(table, Z)[..., cols]
+                        Y[..., TABLE1.index(e.channel)] += vals @ thetas[b, slices[i]]
+                    col += len(e.terms)
+                elif i not in sim_idx:
+                    Y = self._apply_output_effect(e, thetas[b, slices[i]], t, Y)
             result[b] = Y[..., out_idx]
         return result
 
@@ -289,3 +392,26 @@ class PhysicsModel:
         return Y
 
     _dt: float = DEFAULT_SAMPLE_TIME_S
+
+
+def declared_from_report(report: Mapping[str, Any]) -> list[tuple[Candidate, np.ndarray]]:
+    """The effects of a loop report (``report.json``'s dict), library ones and forms, with their
+    fitted values: what ``PhysicsModel(declared=...)`` takes to accept them into the model."""
+    lib, _ = library_candidates()
+    out: list[tuple[Candidate, np.ndarray]] = []
+    for e in report.get("effects", []):
+        if e.get("form") is not None:
+            cand: Candidate = form_from_json(e["form"], str(e["id"]))
+        elif e.get("id") in lib:
+            cand = lib[e["id"]]
+        else:
+            raise ValueError(
+                f"effect {e.get('id')!r} of the report is neither a form nor a library effect "
+                f"({sorted(lib)})"
+            )
+        try:
+            values = np.array([float(e["params"][p.name]) for p in cand.params])
+        except (KeyError, TypeError) as err:
+            raise ValueError(f"effect {e.get('id')!r} lacks parameter {err}") from err
+        out.append((cand, values))
+    return out

@@ -66,8 +66,15 @@ class AcceptedEffect:
     round: int  # the round that added it
     heldout: Mapping[str, float | None]  # score, rel_reduction, p_value when it was added
     explains_structure: bool  # False when structure remains after the loop
+    #: a form's readable equation (``text``, ``enters``, ``unit``, ``terms``); None: library
+    equation: Mapping[str, Any] | None = None
+    #: a form's definition (:func:`evaluation.discover.terms.form_to_json`): what accepting reads
+    form: Mapping[str, Any] | None = None
 
     def to_json(self) -> dict[str, Any]:
+        extra: dict[str, Any] = {}
+        if self.equation is not None:
+            extra = {"equation": copy.deepcopy(dict(self.equation)), "form": dict(self.form or {})}
         return {
             "id": self.id,
             "params": dict(self.params),
@@ -76,6 +83,7 @@ class AcceptedEffect:
             "round": self.round,
             "heldout": dict(self.heldout),
             "explains_structure": self.explains_structure,
+            **extra,
         }
 
 
