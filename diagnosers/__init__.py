@@ -18,7 +18,7 @@ The rooms (the contract, the registry and the presets at the top; the parts belo
 ``bank/``              a bank of relations: their models, parallel training and cache
 ``stages/``            alarm stages: filters, statistics, limits, the paper's band
 ``lrgf/``              the LRGF detectors (``lrgf-mem``, ``lrgf-glr`` and their presets)
-``isolation/``         the isolators ``lrgf-iso`` and ``lrgf-lda``
+``isolation/``         the isolators ``lrgf-iso``, ``lrgf-lda`` and ``mmae``
 ``filters/``           state estimators of the FCC model: the unscented Kalman filter's
                        innovations, state and disturbance estimates
 =====================  ===========================================================================
@@ -42,7 +42,7 @@ from fcc_env import __version__  # the project's one version
 # Importing the model modules registers their diagnosers (after the registry exists).
 from diagnosers import (
     classical,  # noqa: F401  (registers limits, pca, arx-band)
-    isolation,  # noqa: F401  (registers lrgf-iso, lrgf-lda)
+    isolation,  # noqa: F401  (registers lrgf-iso, lrgf-lda, mmae)
     lrgf,  # noqa: F401  (registers lrgf-mem, lrgf-glr and their presets)
 )
 
