@@ -73,6 +73,9 @@ class MMAE(Diagnoser):
     """
 
     isolates: ClassVar[bool] = True
+    #: its classes are the registry's faults, each modelled by its parameters: labels that are
+    #: not registered faults (synthetic test data) mean nothing to it
+    physical_classes: ClassVar[bool] = True
     CONSTRAINTS: ClassVar[dict[str, Any]] = {
         "noise_scale": Real(0, 10, closed="right"),
         "switch_prob": Real(0, 0.5, closed="neither"),
@@ -212,12 +215,18 @@ class MMAE(Diagnoser):
         return super().save(path)
 
     def _get_state(self) -> dict[str, np.ndarray]:
-        return {"classes": np.array(self.classes_, dtype=str)}
+        # the parameters too: a saved bank says what model it ran, and a load checks it
+        return {
+            "classes": np.array(self.classes_, dtype=str),
+            "params": self.model_params().as_array(),
+        }
 
     def _set_state(self, state: dict[str, np.ndarray]) -> None:
         classes = tuple(str(c) for c in state["classes"])
         unknown = [c for c in classes if c not in FAULTS or not FAULTS[c].parameters]
         if unknown:
             raise ValueError(f"saved classes {unknown} are not registered faults with parameters")
+        if not np.array_equal(np.asarray(state["params"]), self.model_params().as_array()):
+            raise ValueError("the saved parameters differ from those of the saved params")
         self.classes_ = classes
         self._finish()
