@@ -24,7 +24,8 @@ independent, so they can run as one batched call.
 
 **Window NIS** (:func:`mmae_run`): the normalised innovation squared of each filter summed over
 the last ``window`` samples, χ²(8 · window) while that hypothesis is right; the bank reports the
-smallest over the hypotheses, so "no hypothesis explains the innovations" is one limit test.
+smallest over the hypotheses, least over the last ``window`` samples, so "no hypothesis has
+explained the innovations for a window" is one limit test.
 
 numba's cache checks only a compiled function's own file: after editing
 :mod:`diagnosers.filters`, delete this package's ``__pycache__`` too.
@@ -105,13 +106,16 @@ def bank_run(
 
 
 @njit_kernel
-def mmae_run(LOGLIK, NIS, p, ring, pos, eps, POST, WIN) -> int:
-    """The posterior and the smallest window NIS of samples ``LOGLIK``/``NIS`` (T, H).
+def mmae_run(LOGLIK, NIS, p, ring, best, pos, eps, POST, WIN) -> int:
+    """The posterior and the persistent window NIS of samples ``LOGLIK``/``NIS`` (T, H).
 
     State carried between calls (in place): ``p`` (H,) the posterior, ``ring`` (W, H) the last W
-    samples' NIS; ``pos`` the samples seen so far (returned, advanced). Out: ``POST`` (T, H),
-    ``WIN`` (T,) the smallest over hypotheses of the NIS summed over the last W samples (NaN
-    until W samples are seen).
+    samples' NIS, ``best`` (W,) the last W window values; ``pos`` the samples seen so far
+    (returned, advanced). Out: ``POST`` (T, H); ``WIN`` (T,): the smallest over the
+    hypotheses of the NIS summed over the last W samples, and of that the least over the last
+    W samples (NaN until 2W − 1 samples are seen): above a limit only when no hypothesis has
+    explained a window for W samples in a row, so a fault filter's transient while its
+    parameter converges is not taken for an unexplained fault.
     """
     H, W = p.shape[0], ring.shape[0]
     acc = np.empty(H)
@@ -130,18 +134,24 @@ def mmae_run(LOGLIK, NIS, p, ring, pos, eps, POST, WIN) -> int:
         for h in range(H):
             ring[slot, h] = NIS[k, h]
         pos += 1
+        WIN[k] = np.nan
         if pos < W:
-            WIN[k] = np.nan
             continue
         for h in range(H):
             acc[h] = 0.0
         for j in range(W):  # summed afresh: a running sum would drift from the batch's
             for h in range(H):
                 acc[h] += ring[j, h]
-        best = np.inf
+        smallest = np.inf
         for h in range(H):
-            best = min(best, acc[h])
-        WIN[k] = best
+            smallest = min(smallest, acc[h])
+        best[(pos - W) % W] = smallest
+        if pos - W + 1 < W:
+            continue
+        least = np.inf
+        for j in range(W):
+            least = min(least, best[j])
+        WIN[k] = least
     return pos
 
 

@@ -15,7 +15,9 @@ fault data: the labelled training faults only name the classes.
 ``alarm_level``, or when no hypothesis explains the innovations: the smallest window NIS over
 the hypotheses (each filter's normalised innovation squared summed over the last ``window``
 samples, χ²(8 · window) while that filter's hypothesis is right) beyond its χ² limit at tail
-``unknown_alpha``. An alarmed sample's diagnosis is ``"unknown"`` in the second case, else the
+``unknown_alpha`` for ``window`` samples in a row (a fault filter needs a while to find the
+fault's size, and its innovations are large meanwhile: without the persistence a known
+fault at the paper's size was "unknown" for its first 100-130 samples). An alarmed sample's diagnosis is ``"unknown"`` in the second case, else the
 most probable fault.
 """
 
@@ -155,7 +157,7 @@ class MMAE(Diagnoser):
         )
         self.hypotheses_ = self.bank_.hypotheses
         self.nis_limit_ = float(stats.chi2.isf(self.unknown_alpha, 8 * self.window))
-        self.signal_names_ = ("P(fault)", f"smallest NIS over {self.window} samples")
+        self.signal_names_ = ("P(fault)", f"persistent smallest NIS over {self.window} samples")
 
     # ---- detection -----------------------------------------------------------------------------
     def _reset(self) -> None:
@@ -165,15 +167,22 @@ class MMAE(Diagnoser):
         self._p = np.full(H, eps / H)
         self._p[0] += 1.0 - eps  # the prior: healthy, but for the switching term
         self._ring = np.zeros((self.window, H))
+        self._best = np.zeros(self.window)
         self._pos = 0
 
     def _run(self, Y: np.ndarray) -> Detection:
         white, loglik = self.bank_.run(self._M, self._P, Y)
-        nis = np.sum(white * white, axis=2)
+        return self.decide(loglik, np.sum(white * white, axis=2), white[:, 0, :])
+
+    def decide(self, loglik: np.ndarray, nis: np.ndarray, residual: np.ndarray) -> Detection:
+        """The posterior and the decisions of the bank's next samples: ``loglik`` and ``nis``
+        (T, H) each filter's innovation log-likelihood and NIS, ``residual`` (T, 8) the
+        healthy filter's whitened innovations (what :meth:`detect` computes after the bank;
+        lets a study score other decision settings on filter outputs it keeps)."""
         T, H = loglik.shape
         post, win = np.empty((T, H)), np.empty(T)
         self._pos = mmae_run(
-            loglik, nis, self._p, self._ring, self._pos, self.switch_prob, post, win
+            loglik, nis, self._p, self._ring, self._best, self._pos, self.switch_prob, post, win
         )
         p_fault = 1.0 - post[:, 0]
         warm = np.isnan(win)
@@ -190,7 +199,7 @@ class MMAE(Diagnoser):
             signal=signal,
             lower=np.full((T, 2), -np.inf),
             upper=upper,
-            residual=white[:, 0, :],
+            residual=residual,
             signal_names=self.signal_names_,
             diagnosis=diagnosis,
             class_scores=post[:, 1:],
