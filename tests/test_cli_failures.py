@@ -385,6 +385,7 @@ COMMAND_MODULES = (
     "fcc_env.closed_loop_analysis",
     "bench.detector_speed",
     "bench.filter_speed",
+    "bench.bank_speed",
     "bench.loop_speed",
     "bench.simulator_speed",
     "bench.sweep_speed",

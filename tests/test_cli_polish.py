@@ -31,6 +31,7 @@ COMMANDS = (
     "bench.simulator_speed",
     "bench.detector_speed",
     "bench.filter_speed",
+    "bench.bank_speed",
     "bench.sweep_speed",
     "bench.vector_speed",
 )
