@@ -23,8 +23,8 @@ scored.
 
 >>> import numpy as np
 >>> post = np.array([[0.9, 0.1], [0.2, 0.8], [0.5, 0.5]])
->>> brier_samples(post, ("nominal", "f1"), "f1", t_from=1).tolist()
-[0.08000000000000002, 0.5]
+>>> brier_samples(post, ("nominal", "f1"), "f1", t_from=1).round(4).tolist()
+[0.08, 0.5]
 >>> round(brier_score(post, ("nominal", "f1"), "nominal"), 4)
 0.4333
 """
@@ -136,7 +136,7 @@ def decision_posterior(
     odd = np.flatnonzero(post.sum(axis=1) == 0)
     if odd.size:
         raise ValueError(
-            f"diagnosis {d[odd[0]]!r} (sample {odd[0]}) is neither '', {unknown!r} nor one of "
+            f"diagnosis {str(d[odd[0]])!r} (sample {odd[0]}) is neither '', {unknown!r} nor one of "
             f"{tuple(class_names)}"
         )
     return post, names
