@@ -26,7 +26,7 @@ scored.
 >>> brier_samples(post, ("nominal", "f1"), "f1", t_from=1).round(4).tolist()
 [0.08, 0.5]
 >>> round(brier_score(post, ("nominal", "f1"), "nominal"), 4)
-0.4333
+0.6
 """
 
 from __future__ import annotations
