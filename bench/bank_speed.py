@@ -37,7 +37,7 @@ def _line(what: str, rates: list[tuple[float, ...]]) -> None:
 
 
 def bench(a: argparse.Namespace) -> None:
-    healthy = Episode.from_batch(fcc_env.simulate_episodes([1000], 40))
+    healthy = Episode.from_batch(fcc_env.simulate_episodes([1000], 400))
     faulty = [
         Episode.from_batch(
             fcc_env.simulate_episodes([1000], 40, fault=fcc_env.FaultSpec(scenario=f, onset=20))

@@ -3,12 +3,12 @@
 Record: ``lab/mmae-lab.md``. Two steps, so that the decision settings are swept without filtering
 again:
 
-``python lab/mmae_lab.py filter --track small --seeds 5000-5009 --walk 1e-3 --cache /tmp/mmae``
+``python lab/mmae_lab.py filter --track small --seeds 5000-5009 --rate 0.05 --cache /tmp/mmae``
     runs the 5-hypothesis bank on every fault of the track and on healthy episodes of the seeds
     and keeps each filter's innovation log-likelihood and NIS per sample (plus the healthy
-    filter's whitened innovations) in ``<cache>/<track>-<walk>-<initial>.npz``; prints CPU s.
+    filter's whitened innovations) in ``<cache>/<track>-<rate>-<initial>.npz``; prints CPU s.
 
-``python lab/mmae_lab.py score --cache /tmp/mmae/small-0.001-0.01.npz --set switch_prob=1e-3,3e-3``
+``python lab/mmae_lab.py score --cache /tmp/mmae/small-0.05-0.01.npz --set switch_prob=1e-3,3e-3``
     scores ``mmae``'s decisions for every combination of the ``--set`` values (comma lists):
     per fault CDR, t_dt, t_it (the study's indexes), the Brier score after onset and on the
     healthy episodes, and the false-alarm rate r_fd there.
@@ -43,7 +43,7 @@ def _seeds(text: str) -> list[int]:
 
 def _fitted(params: dict) -> diagnosers.Diagnoser:
     """An mmae fitted on tiny episodes: it learns nothing but its classes from them."""
-    healthy = Episode.from_batch(fcc_env.simulate_episodes([1000], 40))
+    healthy = Episode.from_batch(fcc_env.simulate_episodes([1000], 1500))
     faulty = [
         Episode.from_batch(
             fcc_env.simulate_episodes([1000], 40, fault=fcc_env.FaultSpec(scenario=f, onset=20))
@@ -59,7 +59,8 @@ def cmd_filter(a: argparse.Namespace) -> None:
     seeds = _seeds(a.seeds)
     eps = [data.simulate([s], tr.fault_spec(f, s))[0].episode for f in tr.faults for s in seeds]
     eps += [le.episode for le in data.simulate(seeds, fcc_env.FaultSpec())]
-    m = _fitted({"fault_walk_std": a.walk, "fault_initial_std": a.initial})
+    m = _fitted({"tracking_rate": a.rate, "fault_initial_std": a.initial})
+    print("walks", dict(zip(m.classes_, m.walks_, strict=True)))
     out: dict[str, np.ndarray] = {}
     cpu = 0.0
     n = 0
@@ -74,7 +75,7 @@ def cmd_filter(a: argparse.Namespace) -> None:
         out[f"res_{i}"] = white[:, 0, :]
         out[f"onset_{i}"] = np.array(-1 if ep.fault_onset is None else ep.fault_onset)
         out[f"scenario_{i}"] = np.array(ep.scenario)
-    path = Path(a.cache) / f"{a.track}-{a.walk:g}-{a.initial:g}.npz"
+    path = Path(a.cache) / f"{a.track}-{a.rate:g}-{a.initial:g}.npz"
     path.parent.mkdir(parents=True, exist_ok=True)
     np.savez(path, n=np.array(len(eps)), **out)
     print(f"{path}: {len(eps)} episodes, {n / cpu:,.0f} bank samples per CPU second")
@@ -132,7 +133,7 @@ def main() -> None:
     f = sub.add_parser("filter")
     f.add_argument("--track", default="small")
     f.add_argument("--seeds", default="5000-5009")
-    f.add_argument("--walk", type=float, default=1e-3)
+    f.add_argument("--rate", type=float, default=0.05)
     f.add_argument("--initial", type=float, default=0.01)
     f.add_argument("--cache", default="/tmp/mmae")
     s = sub.add_parser("score")

@@ -35,7 +35,7 @@ from diagnosers.detection import NO_DIAGNOSIS, UNKNOWN, Decision, Detection
 from diagnosers.diagnoser import Diagnoser
 from diagnosers.episode.record import Episode
 from diagnosers.filters import UKFConfig
-from diagnosers.isolation.filter_bank import FilterBank, mmae_run
+from diagnosers.isolation.filter_bank import FilterBank, calibrate_walks, mmae_run
 from diagnosers.presets import keyword_init
 from diagnosers.registry import register
 from fcc_common.validation import Integer, Real, check_params, invalid
@@ -43,7 +43,10 @@ from fcc_env.closed_loop import CLOSED_LOOP_CHANNELS
 from fcc_env.faults import FAULTS
 from fcc_env.params import MEASUREMENT_NAMES, PARAM_FIELDS, FCCParams
 
-__all__ = ["MMAE"]
+__all__ = ["CALIBRATION_SAMPLES", "MMAE"]
+
+#: samples of the healthy training episode the fault walks are calibrated on
+CALIBRATION_SAMPLES = 1500
 
 
 @register("mmae")
@@ -60,9 +63,12 @@ class MMAE(Diagnoser):
         switch_prob: ε, the probability per sample that the plant switches hypothesis (the
             posterior's floor, about ε/H), in (0, 0.5); default 1e-3. Larger: a faster move to
             a fault, and a posterior that believes the healthy hypothesis less.
-        fault_walk_std: the fault filters' random walk of their parameters per sample,
-            relative, in (0, 0.1]; default 1e-3. Larger: a fault's size is followed sooner, and
-            each fault filter explains more of the noise too.
+        tracking_rate: how fast a fault filter follows its fault's size, 1 / samples, in
+            (0, 1]; default 0.05 (about 20 samples). Each fault's parameter walk is set from it
+            in ``fit`` (:func:`~diagnosers.isolation.filter_bank.calibrate_walks`, on the first
+            healthy training episode), so that every fault filter tracks as fast and pays as
+            much for its freedom on healthy data. Larger: sooner, and a posterior that leans
+            less on the healthy hypothesis.
         fault_initial_std: the fault parameters' prior std, relative, in (0, 1]; default 0.01.
         alarm_level: alarm when ``1 − P(nominal)`` exceeds it, in (0, 1); default 0.5.
         window: samples of the window NIS, in [10, 10000]; default 100.
@@ -72,6 +78,8 @@ class MMAE(Diagnoser):
         classes_: the fault hypotheses (the labelled training faults the registry gives
             parameters for, registry order).
         hypotheses_: ``("nominal", *classes_)``, the columns of the posterior.
+        walks_: each fault filter's parameter walk per sample, relative (from
+            ``tracking_rate``).
     """
 
     isolates: ClassVar[bool] = True
@@ -81,7 +89,7 @@ class MMAE(Diagnoser):
     CONSTRAINTS: ClassVar[dict[str, Any]] = {
         "noise_scale": Real(0, 10, closed="right"),
         "switch_prob": Real(0, 0.5, closed="neither"),
-        "fault_walk_std": Real(0, 0.1, closed="right"),
+        "tracking_rate": Real(0, 1, closed="right"),
         "fault_initial_std": Real(0, 1, closed="right"),
         "alarm_level": Real(0, 1, closed="neither"),
         "window": Integer(10, 10_000),
@@ -91,7 +99,7 @@ class MMAE(Diagnoser):
         "params": None,
         "noise_scale": 1.0,
         "switch_prob": 1e-3,
-        "fault_walk_std": 1e-3,
+        "tracking_rate": 0.05,
         "fault_initial_std": 0.01,
         "alarm_level": 0.5,
         "window": 100,
@@ -102,7 +110,7 @@ class MMAE(Diagnoser):
     params: FCCParams | dict[str, float] | None
     noise_scale: float
     switch_prob: float
-    fault_walk_std: float
+    tracking_rate: float
     fault_initial_std: float
     alarm_level: float
     window: int
@@ -135,24 +143,41 @@ class MMAE(Diagnoser):
                 f"mmae needs labelled training faults that scale plant parameters (fcc_env.FAULTS "
                 f"with parameters); the training faults are {sorted(labels)}"
             )
+        healthy = max(
+            (ep for ep in episodes if ep.fault_onset is None), key=lambda ep: ep.n_samples
+        )
+        self._check_channels()
+        self.walks_ = calibrate_walks(
+            self.model_params(),
+            self._config(),
+            self.classes_,
+            healthy.y[:CALIBRATION_SAMPLES],
+            rate=self.tracking_rate,
+            initial_std_rel=self.fault_initial_std,
+        )
         self._finish()
 
-    def _finish(self) -> None:
+    def _check_channels(self) -> None:
         if self.channels_ not in (MEASUREMENT_NAMES, CLOSED_LOOP_CHANNELS):
             raise ValueError(
                 f"mmae reads the FCC's measured channels in order: {list(MEASUREMENT_NAMES)} (open "
                 f"loop) or {list(CLOSED_LOOP_CHANNELS)} (closed loop); got {list(self.channels_)}"
             )
-        config = UKFConfig(
+
+    def _config(self) -> UKFConfig:
+        return UKFConfig(
             noise_scale=self.noise_scale,
             sample_time_s=self.sample_time_s_,
             closed_loop=self.channels_ == CLOSED_LOOP_CHANNELS,
         )
+
+    def _finish(self) -> None:
+        self._check_channels()
         self.bank_ = FilterBank.build(
             self.model_params(),
-            config,
+            self._config(),
             self.classes_,
-            fault_walk_std_rel=self.fault_walk_std,
+            fault_walk_std_rel=self.walks_,
             fault_initial_std_rel=self.fault_initial_std,
         )
         self.hypotheses_ = self.bank_.hypotheses
@@ -228,6 +253,7 @@ class MMAE(Diagnoser):
         return {
             "classes": np.array(self.classes_, dtype=str),
             "params": self.model_params().as_array(),
+            "walks": np.array(self.walks_),
         }
 
     def _set_state(self, state: dict[str, np.ndarray]) -> None:
@@ -238,4 +264,7 @@ class MMAE(Diagnoser):
         if not np.array_equal(np.asarray(state["params"]), self.model_params().as_array()):
             raise ValueError("the saved parameters differ from those of the saved params")
         self.classes_ = classes
+        self.walks_ = tuple(float(w) for w in np.asarray(state["walks"]).reshape(-1))
+        if len(self.walks_) != len(classes) or not all(0 < w <= 0.1 for w in self.walks_):
+            raise ValueError(f"walks {self.walks_} do not fit the classes {classes}")
         self._finish()

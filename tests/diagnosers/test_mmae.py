@@ -29,7 +29,7 @@ def fault_episode() -> Episode:
 @pytest.fixture(scope="module")
 def fitted() -> diagnosers.Diagnoser:
     """mmae learns nothing but its classes from data: tiny labelled episodes do."""
-    healthy = Episode.from_batch(fcc_env.simulate_episodes([1000], 40))
+    healthy = Episode.from_batch(fcc_env.simulate_episodes([1000], 600))
     faulty = [
         Episode.from_batch(
             fcc_env.simulate_episodes([1000], 40, fault=fcc_env.FaultSpec(scenario=f, onset=20))
@@ -45,7 +45,7 @@ def test_bank_equals_its_filters_and_scipy_density() -> None:
         fcc_env.FCCParams(),
         UKFConfig(),
         ("f1", "f2"),
-        fault_walk_std_rel=WALK,
+        fault_walk_std_rel=(WALK, WALK),
         fault_initial_std_rel=INITIAL,
     )
     assert bank.hypotheses == ("nominal", "f1", "f2")
@@ -137,7 +137,7 @@ def test_params_and_their_errors(fitted: diagnosers.Diagnoser, tmp_path) -> None
     p = dataclasses.replace(fcc_env.FCCParams(), k_sigma=2.6)
     obj = diagnosers.make("mmae", params=p)
     assert obj.model_params() is p
-    healthy = Episode.from_batch(fcc_env.simulate_episodes([1000], 30))
+    healthy = Episode.from_batch(fcc_env.simulate_episodes([1000], 400))
     faulty = Episode.from_batch(
         fcc_env.simulate_episodes([1000], 30, fault=fcc_env.FaultSpec(scenario="f3", onset=10))
     )
