@@ -20,7 +20,8 @@ The rooms (the contract, the registry and the presets at the top; the parts belo
 ``lrgf/``              the LRGF detectors (``lrgf-mem``, ``lrgf-glr`` and their presets)
 ``isolation/``         the isolators ``lrgf-iso``, ``lrgf-lda`` and ``mmae``
 ``filters/``           state estimators of the FCC model: the unscented Kalman filter's
-                       innovations, state and disturbance estimates
+                       innovations, state and disturbance estimates, and the grey-box
+                       detector ``ukf-glr`` on them
 =====================  ===========================================================================
 
 >>> import diagnosers
@@ -29,7 +30,7 @@ True
 """
 
 from diagnosers.conformance import ConformanceError, check_diagnoser
-from diagnosers.contract import NotFittedError
+from diagnosers.contract import NotFittedError, Tier
 from diagnosers.detection import SCORE_THRESHOLD, UNKNOWN, Decision, Detection
 from diagnosers.diagnoser import Diagnoser
 from diagnosers.episode import Episode
@@ -42,6 +43,7 @@ from fcc_env import __version__  # the project's one version
 # Importing the model modules registers their diagnosers (after the registry exists).
 from diagnosers import (
     classical,  # noqa: F401  (registers limits, pca, arx-band)
+    filters,  # noqa: F401  (registers ukf-glr)
     isolation,  # noqa: F401  (registers lrgf-iso, lrgf-lda, mmae)
     lrgf,  # noqa: F401  (registers lrgf-mem, lrgf-glr and their presets)
 )
@@ -55,6 +57,7 @@ __all__ = [
     "Diagnoser",
     "Episode",
     "NotFittedError",
+    "Tier",
     "__version__",
     "available",
     "check_diagnoser",

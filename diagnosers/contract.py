@@ -18,6 +18,7 @@ import inspect
 import logging
 from abc import ABC, abstractmethod
 from collections.abc import Iterable, Sequence
+from enum import StrEnum
 from typing import Any, ClassVar, Self
 
 import numpy as np
@@ -26,7 +27,7 @@ from diagnosers.detection import NO_DIAGNOSIS, UNKNOWN, Decision, Detection
 from diagnosers.episode.record import Episode
 from diagnosers.tuning.scorer import check_episode_labels, make_scorer
 
-__all__ = ["DiagnoserContract", "NotFittedError", "check_labelled", "require_varying"]
+__all__ = ["DiagnoserContract", "NotFittedError", "Tier", "check_labelled", "require_varying"]
 
 logger = logging.getLogger(__name__)
 
@@ -84,6 +85,21 @@ def _training_episodes(episodes: Any, y: Any, isolates: bool) -> list[Episode]:
     return healthy
 
 
+class Tier(StrEnum):
+    """What a diagnoser may know of the plant (:attr:`DiagnoserContract.tier`; the tables rank
+    within each tier).
+
+    * ``black box``: the records alone (channels, sample time), whatever it learns from them;
+    * ``grey box``: also the published model's structure (the spec's equations, the nominal
+      parameters as a prior, the sensor noise model, the fault registry's parameter paths),
+      never a parameter value of the plant it is scored on: it fits those from its training
+      records (tested: ``tests/diagnosers/test_grey_box.py``).
+    """
+
+    BLACK_BOX = "black box"
+    GREY_BOX = "grey box"
+
+
 class NotFittedError(RuntimeError):
     """Raised when a diagnoser is used before :meth:`DiagnoserContract.fit`."""
 
@@ -115,6 +131,8 @@ class DiagnoserContract(ABC):
 
     #: registry name, set by :func:`diagnosers.register`.
     name: ClassVar[str] = ""
+    #: what the diagnoser may know of the plant (:class:`Tier`)
+    tier: ClassVar[Tier] = Tier.BLACK_BOX
     #: whether the diagnoser also isolates: it is then trained on healthy *and* labelled faulty
     #: episodes (``fault_onset`` and ``scenario`` set) and its decisions carry a diagnosis
     isolates: ClassVar[bool] = False

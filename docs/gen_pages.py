@@ -66,6 +66,7 @@ def copy_repository_pages() -> None:
         "lab/filter-lab.md": ROOT / "lab" / "filter-lab.md",
         "lab/results-history.md": ROOT / "lab" / "results-history.md",
         "lab/changelog-record.md": ROOT / "lab" / "changelog-record.md",
+        "lab/scale-lab.md": ROOT / "lab" / "scale-lab.md",
     }
     for page, source in pages.items():
         with mkdocs_gen_files.open(page, "w") as f:

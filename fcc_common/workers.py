@@ -6,6 +6,16 @@ of a diagnoser's models (:mod:`diagnosers.bank.parallel`). Both start workers wi
 each: one compute thread per worker, since the parallelism comes from the processes, and a
 watchdog that ends the worker when the process that started it dies.
 
+**Threads.** One worker per core (:func:`cpu_count`, the pools' default), and one compute
+thread per worker: numba's thread pool, torch's intra-op pool and the BLAS/OpenMP pools of
+NumPy and SciPy (OpenBLAS, MKL, BLIS, libgomp, through ``threadpoolctl``, which scikit-learn
+installs) are set to one thread, and the ``*_NUM_THREADS`` variables (:data:`THREAD_ENV_VARS`)
+to ``1`` for libraries loaded later. A task that wants more threads (a large matrix product, say) asks for them with
+:func:`task_threads`; on the local pool it then shares its core with others, so size the pool
+to match (``n_workers`` times threads at most the cores). Ray workers get the same limits from
+:func:`limit_threads`, which every task of the sweep calls first. The native vector env's
+OpenMP barrier settings are documented in the user guide (``docs/cluster.md``).
+
 A Ctrl-C reaches every process of the terminal's process group, the workers included. The
 driver reports it in one line (:func:`fcc_common.invocation.run_command`); a worker must not
 print a traceback of its own, wherever it is (starting the interpreter, importing, running a
@@ -27,23 +37,83 @@ from typing import Any
 
 __all__ = [
     "PARENT_POLL_S",
+    "THREAD_ENV_VARS",
     "cpu_count",
     "exit_with_parent",
     "init_worker",
     "limit_threads",
     "spawn_context",
+    "task_threads",
+    "thread_counts",
 ]
 
 #: Seconds between a worker's checks that the driver process is still alive.
 PARENT_POLL_S = 0.5
 
 
-def limit_threads() -> None:
-    """One compute thread per worker: the parallelism comes from the worker processes."""
+#: Environment variables that size the thread pools of native libraries when they load.
+THREAD_ENV_VARS: tuple[str, ...] = (
+    "OMP_NUM_THREADS",
+    "OPENBLAS_NUM_THREADS",
+    "MKL_NUM_THREADS",
+    "BLIS_NUM_THREADS",
+    "VECLIB_MAXIMUM_THREADS",
+    "NUMEXPR_NUM_THREADS",
+)
+
+
+def _set_native_threads(n: int) -> None:
+    """BLAS/OpenMP pools already loaded in this process, through ``threadpoolctl`` if installed."""
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:  # the environment variables (set before the libraries load) suffice
+        return
+    threadpool_limits(limits=n)
+
+
+def limit_threads(n: int = 1) -> None:
+    """``n`` compute threads per worker (one by default: the parallelism comes from the worker
+    processes) for torch, numba and the BLAS/OpenMP pools already loaded."""
     if "torch" in sys.modules:
-        sys.modules["torch"].set_num_threads(1)
+        sys.modules["torch"].set_num_threads(n)
     if "numba" in sys.modules:
-        sys.modules["numba"].set_num_threads(1)
+        numba = sys.modules["numba"]  # at most its pool's size (NUMBA_NUM_THREADS, the cores)
+        numba.set_num_threads(min(n, numba.config.NUMBA_NUM_THREADS))
+    _set_native_threads(n)
+
+
+def thread_counts() -> dict[str, int]:
+    """The compute threads this process would use: ``torch``, ``numba`` (of the modules
+    loaded) and ``blas`` (the largest pool ``threadpoolctl`` sees; absent without it)."""
+    out: dict[str, int] = {}
+    if "torch" in sys.modules:
+        out["torch"] = int(sys.modules["torch"].get_num_threads())
+    if "numba" in sys.modules:
+        out["numba"] = int(sys.modules["numba"].get_num_threads())
+    try:
+        from threadpoolctl import threadpool_info
+    except ImportError:
+        return out
+    pools = [int(p["num_threads"]) for p in threadpool_info()]
+    if pools:
+        out["blas"] = max(pools)
+    return out
+
+
+@contextlib.contextmanager
+def task_threads(n: int) -> Iterator[None]:
+    """Within the block, ``n`` compute threads for torch, numba and BLAS; one again after it.
+
+    For a task that asks for more than the worker's one thread (see the module doc). Worker
+    processes only: it leaves the limits at one thread, not at what they were before.
+    """
+    if isinstance(n, bool) or not isinstance(n, int) or n < 1:
+        raise ValueError(f"task_threads(n={n!r}): n must be an integer >= 1")
+    limit_threads(n)
+    try:
+        yield
+    finally:
+        limit_threads(1)
 
 
 def exit_with_parent(parent_pid: int, poll_s: float = PARENT_POLL_S) -> None:
@@ -123,11 +193,19 @@ def init_worker(parent_pid: int | None = None) -> None:
         signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
     if parent_pid is not None:
         exit_with_parent(parent_pid)
-    os.environ.setdefault("OMP_NUM_THREADS", "1")
+    for name in THREAD_ENV_VARS:  # for the native libraries this worker has not loaded yet
+        os.environ[name] = "1"
     import numba
+    import torch
 
-    numba.set_num_threads(1)
     limit_threads()
+    # the first parallel numba call starts its pool with this count; torch's inter-op pool
+    # too can only be sized before its first use
+    numba.set_num_threads(1)
+    try:
+        torch.set_num_interop_threads(1)
+    except RuntimeError:  # already used in this process (a fork): its pool stays as it is
+        pass
 
 
 def cpu_count() -> int:

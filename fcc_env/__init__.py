@@ -7,7 +7,9 @@ The modules, by job:
   side, the measurement map and the steady state; :mod:`~fcc_env.integrator`: RK4 stepping;
 - :mod:`~fcc_env.faults`: the fault registry (:data:`FAULTS`, :func:`register_fault`);
   :mod:`~fcc_env.sensor_faults`: the sensor faults on a chosen measured channel (bias, drift,
-  stuck, noise, dropout), registered on import;
+  stuck, noise, dropout), registered on import; :mod:`~fcc_env.actuator_faults`: the actuator
+  faults (valve stiction, bias, stuck; blower capacity), registered on import, with
+  :mod:`~fcc_env.stiction`, the valve-stiction model of Choudhury et al. 2005;
   :mod:`~fcc_env.scenarios`: :class:`FaultSpec`, the one typed fault request;
   :mod:`~fcc_env.excitation`: the operating program; :mod:`~fcc_env.plant`: :class:`PlantConfig`,
   the noise and the envelope; :mod:`~fcc_env.effects`, :mod:`~fcc_env.uncertainty`: undeclared
@@ -40,8 +42,11 @@ Importing the package registers ``FCC-v0``:
 (8,)
 """
 
+import os
+
 from gymnasium.envs.registration import register, registry
 
+from fcc_env.actuator_faults import ACTUATOR_FAULTS  # registers the actuator faults
 from fcc_env.control_task import CONTROL_ENV_ID, EconomicReward
 from fcc_env.env import CLOSED_LOOP_ENV_ID, ENV_ID
 from fcc_env.env_keywords import env_request
@@ -72,6 +77,14 @@ from fcc_env.regulatory import RegulatoryLayer, SetpointProgram
 from fcc_env.scenarios import DEFAULT_N_SAMPLES, FaultProfile, FaultSpec
 from fcc_env.sensor_faults import SENSOR_FAULTS  # registers the sensor faults
 from fcc_env.simulation import BatchResult, simulate_episodes
+
+# numba's OpenMP threading layer (libgomp) reads OMP_WAIT_POLICY once, when its thread pool
+# starts (the first parallel kernel): PASSIVE makes the threads that wait at a kernel's barrier
+# sleep instead of spinning, which on a busy machine took the cores from the threads still
+# working (the native vector env at 1024 envs on two threads: 2x slower than one thread spinning,
+# 1.3x faster passive; lab/env-speed.md). A value set in the environment is kept; the value
+# also reaches OpenMP runtimes loaded later (torch's), as docs/environment.md says.
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 #: 3999 steps = 4000 samples including the reset observation (the paper's horizon).
 MAX_EPISODE_STEPS = DEFAULT_N_SAMPLES - 1
@@ -112,6 +125,7 @@ __version__ = "0.1.0"
 MODEL_VERSION = "fcc-model-2026.1"
 
 __all__ = [
+    "ACTUATOR_FAULTS",
     "CLOSED_LOOP_ENV_ID",
     "CONTROL_ENV_ID",
     "DEFAULT_N_SAMPLES",

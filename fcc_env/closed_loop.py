@@ -18,7 +18,7 @@ from fcc_env.episode_setup import (
     apply_multipliers,
     generic_sample,
 )
-from fcc_env.integrator import aux_kernel, measure_kernel, noisy_batch_kernel, step_kernel
+from fcc_env.integrator import aux_kernel, measure_kernel, noisy_kernel, step_kernel
 from fcc_env.params import (
     INPUT_NAMES,
     MEASUREMENT_NAMES,
@@ -163,19 +163,21 @@ def simulate_closed_per_sample(
     config: PlantConfig,
     lost: np.ndarray,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Closed-loop episodes with measurement or ``d_state`` effects (or a fault's measure hook),
-    sample by sample.
+    """Closed-loop episodes with measurement or ``d_state`` effects (or a fault's measure hook,
+    transmitter or actuator device), sample by sample.
 
     The controllers must read each sample's observation after the effects, which the compiled
     batch kernel cannot call; this loop calls the env's own kernels per episode (or the numpy
     RK4 of :func:`fcc_env.episode_setup.generic_sample` with ``d_state`` effects, as the env
-    does), so batch = env bit for bit here too. ``U`` is written in place (applied inputs).
+    does), so batch = env bit for bit here too. ``U`` is written in place (applied inputs:
+    after an actuator fault's device; the observation's ``u_F`` is the controller's command).
 
     Returns (Y, OBS, X, AUX, SAT) as :func:`fcc_env.simulate_episodes` returns them (Y and
     OBS with the closed-loop channels); each sample's dropout flags are written into ``lost``
     ``(B, T)``.
     """
     B, T = U.shape[:2]
+    command = np.empty((B, T))  # the valve command the control system records
     Y = np.empty((B, T, N_MEASUREMENTS))
     OBS = np.empty((B, T, N_MEASUREMENTS), dtype=np.float32)
     X = np.empty((B, T, N_STATES))
@@ -186,6 +188,9 @@ def simulate_closed_per_sample(
     for k in range(T):
         for b in range(B):
             apply_controller_outputs(U[b, k], C[b], gains)
+        command[:, k] = U[:, k, 0]
+        if schedule.actuates:  # the actuators deliver what the process receives
+            U[:, k] = schedule.actuate(k, U[:, k])
         u = np.ascontiguousarray(U[:, k])
         if schedule.generic:
             p = apply_multipliers(p_base, pidx, PM[:, k])
@@ -213,18 +218,20 @@ def simulate_closed_per_sample(
         Y[:, k], A[:, k], X[:, k] = y, aux, x
         if schedule.measures:  # the transmitters, before the controllers read them
             Y[:, k], Z[:, k] = schedule.sense(k, Y[:, k], Z[:, k], lost[:, k])
-        noisy_batch_kernel(
-            Y[:, k : k + 1],
-            Z[:, k : k + 1],
-            NOISE_STD_ABS,
-            NOISE_STD_REL,
-            config.noise_scale,
-            OBS[:, k : k + 1],
-        )
+        for b in range(B):
+            # the serial kernel: the parallel batch one costs a thread-pool start per sample
+            OBS[b, k] = noisy_kernel(
+                Y[b, k], Z[b, k], NOISE_STD_ABS, NOISE_STD_REL, config.noise_scale
+            )
         for b in range(B):
             saturated = controller_update(C[b], SP[b, k], OBS[b, k], gains)
             if k + 1 < T:  # the flag of the output in force over the next sample
                 SAT[b, k + 1] = saturated
         x = x_next
-    u_F = U[:, :, 0]
-    return assemble_observation(Y, u_F, SP), assemble_observation(OBS, u_F, SP), X, A, SAT
+    return (
+        assemble_observation(Y, command, SP),
+        assemble_observation(OBS, command, SP),
+        X,
+        A,
+        SAT,
+    )

@@ -55,7 +55,7 @@ from __future__ import annotations
 import dataclasses
 import math
 from collections import deque
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from enum import StrEnum
 from typing import Any, SupportsFloat
@@ -118,6 +118,10 @@ _T_RG1, _T_RG2, _W_SP = 4, 7, 8
 _R_AR, _F_FEED = 1, 4
 
 _PRICE = Real(0.0, 1e7, closed="both")
+# afterburn_delta_C's Python body (the same source): the compiled one, called from Python with
+# a list of floats or a transposed array, spent most of the single env's reward on typing its
+# argument (issue 44)
+_afterburn_delta = afterburn_delta_C.py_func
 
 #: The reward's terms, the one list (module doc: each term's definition): names, order, kinds
 #: and the ranges of their prices are read from here.
@@ -187,7 +191,10 @@ class EconomicReward:
     trip_usd: float = 200_000.0
 
     def __post_init__(self) -> None:
-        check_params(dataclasses.asdict(self), _RANGES)
+        # stored as checked, as floats: an int or a float32 price is the same number in float64,
+        # and the single env's reward (Python floats) then needs no conversion per step
+        for name, value in check_params(dataclasses.asdict(self), _RANGES).items():
+            object.__setattr__(self, name, value)
 
     @classmethod
     def from_option(cls, value: EconomicReward | Mapping[str, Any] | None) -> EconomicReward:
@@ -206,6 +213,51 @@ def _excess(v: np.ndarray) -> np.ndarray:
     return np.where(v > 0.0, v, 0.0)
 
 
+def _excess_float(v: float) -> float:
+    """:func:`_excess` of one float."""
+    return v if v > 0.0 else 0.0
+
+
+def _select_float(condition: Any, a: float, b: float) -> float:
+    """``np.where(condition, a, b)`` of one condition."""
+    return a if condition else b
+
+
+def _term_formulas(
+    x: Any,
+    u: Any,
+    conversion: Any,
+    coke_make: Any,
+    saturated: Any,
+    terminated: Any,
+    economics: EconomicReward,
+    dt_s: float,
+    excess: Callable[[Any], Any],
+    select: Callable[[Any, Any, Any], Any],
+) -> dict[str, Any]:
+    """The reward's terms (module doc), written once for numpy arrays of many envs and for the
+    Python floats of one: ``x[i]`` / ``u[i]`` is state / input ``i`` (an array over the envs or a
+    float), ``excess`` is ``max(0, ·)`` and ``select`` is ``np.where`` in the same arithmetic.
+    Every operation is one IEEE-754 double operation in the same order either way, so the two
+    give the same bits (``tests/fcc_env/test_control_speed.py``)."""
+    e = economics
+    hours = dt_s / 3600.0
+    too_hot = excess(x[_T_RG2] - e.regenerator_max_C)
+    too_cold = excess(e.regenerator_min_C - x[_T_RG1])
+    return {
+        "conversion": u[_F_FEED] * conversion * dt_s / 1000.0 * e.conversion_usd_per_t,
+        "coke": -coke_make * dt_s / 1000.0 * e.coke_usd_per_t,
+        "air": -u[_R_AR] * hours * e.air_usd_per_t,
+        "afterburn": -excess(_afterburn_delta(x) - AFTERBURN_WARNING_C)
+        * hours
+        * e.afterburn_usd_per_C_h,
+        "regenerator": -(too_hot + too_cold) * hours * e.regenerator_usd_per_C_h,
+        "well": -excess(e.well_min_t - x[_W_SP] / 1000.0) * hours * e.well_usd_per_t_h,
+        "saturation": select(saturated, -hours * e.saturation_usd_per_h, 0.0),
+        "trip": select(terminated, -e.trip_usd, 0.0),
+    }
+
+
 def reward_term_arrays(
     info: Mapping[str, Any], terminated: Any, economics: EconomicReward, dt_s: float
 ) -> dict[str, np.ndarray]:
@@ -214,29 +266,19 @@ def reward_term_arrays(
     (scalars, or shape ``(n,)`` over ``n`` envs), ``state`` (``(11,)`` or ``(n, 11)``) and
     ``inputs`` (``(6,)`` or ``(n, 6)``); ``terminated`` a bool or ``(n,)``. Each term has the
     envs' shape (``()`` for one env). Their sum is the reward (:func:`total_reward`)."""
-    e = economics
     # transposed, row i is variable i of every env (of the one env for a 1-D state)
-    x = np.asarray(info["state"], dtype=np.float64).T
-    u = np.asarray(info["inputs"], dtype=np.float64).T
-    hours = dt_s / 3600.0
-    too_hot = _excess(x[_T_RG2] - e.regenerator_max_C)
-    too_cold = _excess(e.regenerator_min_C - x[_T_RG1])
-    terms = {
-        "conversion": u[_F_FEED]
-        * np.asarray(info["X"], dtype=np.float64)
-        * dt_s
-        / 1000.0
-        * e.conversion_usd_per_t,
-        "coke": -np.asarray(info["coke_make"], dtype=np.float64) * dt_s / 1000.0 * e.coke_usd_per_t,
-        "air": -u[_R_AR] * hours * e.air_usd_per_t,
-        "afterburn": -_excess(afterburn_delta_C(x) - AFTERBURN_WARNING_C)
-        * hours
-        * e.afterburn_usd_per_C_h,
-        "regenerator": -(too_hot + too_cold) * hours * e.regenerator_usd_per_C_h,
-        "well": -_excess(e.well_min_t - x[_W_SP] / 1000.0) * hours * e.well_usd_per_t_h,
-        "saturation": np.where(info["controller_saturated"], -hours * e.saturation_usd_per_h, 0.0),
-        "trip": np.where(terminated, -e.trip_usd, 0.0),
-    }
+    terms = _term_formulas(
+        np.asarray(info["state"], dtype=np.float64).T,
+        np.asarray(info["inputs"], dtype=np.float64).T,
+        np.asarray(info["X"], dtype=np.float64),
+        np.asarray(info["coke_make"], dtype=np.float64),
+        info["controller_saturated"],
+        terminated,
+        economics,
+        dt_s,
+        _excess,
+        np.where,
+    )
     shape = np.broadcast_shapes(*(np.shape(v) for v in terms.values()))
     return {name: np.broadcast_to(v, shape).astype(np.float64) for name, v in terms.items()}
 
@@ -244,8 +286,22 @@ def reward_term_arrays(
 def reward_terms(
     info: Mapping[str, Any], terminated: bool, economics: EconomicReward, dt_s: float
 ) -> dict[str, float]:
-    """:func:`reward_term_arrays` of one env step's ``info``, as floats."""
-    return {k: float(v) for k, v in reward_term_arrays(info, terminated, economics, dt_s).items()}
+    """:func:`reward_term_arrays` of one env step's ``info``, as floats, bit for bit; computed
+    in Python floats, as numpy's per-call overhead on 0-d arrays was three quarters of the
+    control env's step (issue 44)."""
+    terms = _term_formulas(
+        np.asarray(info["state"], dtype=np.float64).tolist(),
+        np.asarray(info["inputs"], dtype=np.float64).tolist(),
+        float(info["X"]),
+        float(info["coke_make"]),
+        bool(info["controller_saturated"]),
+        bool(terminated),
+        economics,
+        float(dt_s),
+        _excess_float,
+        _select_float,
+    )
+    return terms  # floats: every operand is one (the prices too, EconomicReward stores floats)
 
 
 def total_reward(terms: Mapping[str, Any]) -> np.ndarray:
@@ -305,7 +361,7 @@ class FCCControlEnv(gym.Env):
         obs, _, terminated, truncated, info = self.plant.step(action)
         terms = reward_terms(info, terminated, self.economics, self._dt_s)
         info["reward_terms"] = terms
-        reward = float(total_reward(terms))
+        reward = math.fsum(terms.values())  # total_reward's exact sum, of one env's floats
         self._rewards.append(reward)
         self._returns.append(self._returns[-1] + reward)
         return obs, reward, terminated, truncated, info

@@ -14,6 +14,7 @@ from gymnasium import spaces
 
 from fcc_common.validation import Integer, check, invalid
 from fcc_env import effects as fx
+from fcc_env.actuator_faults import require_loops
 from fcc_env.closed_loop import CHANNEL_UNITS, ControlSystem, observation_channels
 from fcc_env.episode_setup import EpisodeStream, add_noise, setup_episode
 from fcc_env.params import NOMINAL_INPUTS
@@ -108,6 +109,13 @@ class FCCEnv(gym.Env):
     ``f3`` CO2/CO ratio constant −10 % (2020); ``f4`` reactor holdup +5 % (2000); any added by
     :func:`fcc_env.register_fault`. ``"random"`` draws scenario, onset and magnitude. Profiles:
     ``"abrupt"`` or ``"incipient"`` (ramp over ``ramp_samples``). Label: ``info["fault_active"]``.
+    Sensor faults on a chosen channel (:mod:`fcc_env.sensor_faults`); actuator faults
+    (:mod:`fcc_env.actuator_faults`: ``valve-stiction``, ``valve-bias``, ``valve-stuck``,
+    ``blower-capacity``), acting between the command and the process (``info["inputs"]`` the
+    inputs received; in closed loop the observation's ``u_F`` stays the command; a stuck or
+    sticking valve needs the T_rx loop and is refused in open loop); ``"concurrent"``: two
+    faults with their own onsets, ``fault=FaultSpec(scenario="concurrent", parts=(...))``,
+    whose info adds ``fault_labels`` and ``fault_times``.
 
     ## Starting State
     The hot steady state at nominal inputs, found by a root solver (:func:`fcc_env.steady_state`).
@@ -223,7 +231,7 @@ class FCCEnv(gym.Env):
         self._plant_effects = fx.resolve(plant_effects)
         # Validate now so a bad make() fails at once, not at the first reset.
         if self.fault_spec.scenario != RANDOM_SCENARIO:
-            self.fault_spec.resolve(self.horizon)
+            require_loops(self.fault_spec.resolve(self.horizon), self.config.regulatory)
         elif self.fault_spec.onset is not None:
             # a random draw may pick a fault: its onset must fit every episode, not only some
             check("fault_time", self.fault_spec.onset, fault_time_range(self.horizon))
@@ -340,11 +348,14 @@ class FCCEnv(gym.Env):
 
     # ---- helpers -------------------------------------------------------------------------------
     def _inputs(self, k: int) -> np.ndarray:
+        """Sample ``k``'s applied inputs; the inputs as commanded go to ``self._command``
+        (they differ under an actuator fault: :mod:`fcc_env.actuator_faults`)."""
         if self.closed_loop:
-            return self._control.inputs(self._episode.program(k))
-        u, saturated = actuator_inputs(self._episode.program(k), self._action)
-        self._saturated = self._saturated or saturated
-        return u
+            self._command = self._control.inputs(self._episode.program(k))
+        else:
+            self._command, saturated = actuator_inputs(self._episode.program(k), self._action)
+            self._saturated = self._saturated or saturated
+        return self._episode.schedule.actuate(k, self._command)
 
     def _measure(self, k: int) -> np.ndarray:
         return self._episode.measure(self._x, self._u, k)
@@ -353,7 +364,7 @@ class FCCEnv(gym.Env):
         obs = add_noise(self._y_clean, self._episode.noise(k), self.config.noise_scale)
         if not self.closed_loop:
             return obs
-        return self._control.observe(k, obs, self._u[0])
+        return self._control.observe(k, obs, self._command[0])
 
     def _get_info(self) -> dict[str, Any]:
         aux = self._episode.aux(self._x, self._u, self._k)
@@ -364,11 +375,7 @@ class FCCEnv(gym.Env):
             "fault_active": self.fault.active(self._k),
             **({} if self.fault.nominal else {"fault_time": self.fault.onset}),
             "fault_magnitude": self.fault.magnitude,
-            **(
-                {}
-                if self.fault.channel is None
-                else {"fault_channel": self.fault.channel, "sensor_dropout": self._episode.dropped}
-            ),
+            **self._fault_parts_info(),
             "y_clean": self._clean_observation(),
             "state": self._x.copy(),
             "inputs": self._u.copy(),
@@ -379,11 +386,24 @@ class FCCEnv(gym.Env):
             **{name: float(v) for name, v in zip(AUX_NAMES, aux, strict=True)},
         }
 
+    def _fault_parts_info(self) -> dict[str, Any]:
+        """A channel fault's channel and dropout flag; a concurrent fault's labels and onsets
+        (its parts in onset order), with the dropout flag when a part is a channel fault."""
+        f, out = self.fault, {}
+        if f.channel is not None:
+            out["fault_channel"] = f.channel
+        if f.parts:
+            out["fault_labels"] = f.labels
+            out["fault_times"] = tuple(p.onset for p in f.parts)
+        if any(c.channel is not None for c in f.components):
+            out["sensor_dropout"] = self._episode.dropped
+        return out
+
     def _clean_observation(self) -> np.ndarray:
         """The noise-free observation (the channels of the observation)."""
         if not self.closed_loop:
             return self._y_clean.copy()
-        return self._control.observe(self._k, self._y_clean, self._u[0])
+        return self._control.observe(self._k, self._y_clean, self._command[0])
 
 
 def env_id(env: gym.Env, default: str) -> str:

@@ -14,8 +14,9 @@ from typing import Any
 import numpy as np
 
 from fcc_env import effects as fx
+from fcc_env.actuator_faults import require_loops
 from fcc_env.excitation import ProgramGenerator, episode_generators
-from fcc_env.faults import SensorPath
+from fcc_env.faults import ActuatorPath, SensorPath
 from fcc_env.integrator import (
     aux_kernel,
     measure_kernel,
@@ -43,7 +44,9 @@ class PlantSchedule:
     ``d_state`` effects need the generic (Python-level RK4) path. Every method is elementwise in
     the sample index, so the env (chunk by chunk) and batch simulation (whole episodes) compute
     the same numbers. A channel fault's transmitter (``sensor``, one per episode) comes last, in
-    :meth:`sense`, which both paths call once per sample, in order.
+    :meth:`sense`, which both paths call once per sample, in order; an actuator fault's device
+    (``actuator``) transforms the inputs as commanded into those applied, in :meth:`actuate`.
+    A concurrent fault's parts act each through its own hooks, one after the other.
     """
 
     def __init__(
@@ -52,7 +55,8 @@ class PlantSchedule:
         effects: list[Any],
         params: FCCParams,
         sample_time_s: float,
-        sensor: SensorPath | None = None,
+        sensors: tuple[SensorPath, ...] = (),
+        actuators: tuple[ActuatorPath, ...] = (),
     ):
         self.fault = fault
         self.params = params
@@ -61,10 +65,11 @@ class PlantSchedule:
         self.input_effects = [e for e in effects if fx.has_hook(e, "transform_inputs")]
         self.measure_effects = [e for e in effects if fx.has_hook(e, "measure")]
         self.state_effects = [e for e in effects if fx.has_hook(e, "d_state")]
-        d = fault.definition
-        self.fault_measure = None if d is None else d.measure
-        self.fault_inputs = None if d is None else d.transform_inputs
-        self.sensor = sensor
+        parts = [(c, c.definition) for c in fault.components]
+        self.fault_measures = [(c, d.measure) for c, d in parts if d.measure is not None]
+        self.fault_inputs = [(c, d.transform_inputs) for c, d in parts if d.transform_inputs]
+        self.sensors = tuple(sensors)
+        self.actuators = tuple(actuators)
         names: list[str] = []
         for e in self.param_effects:
             names.extend(e.param_multipliers(np.zeros(1), params))
@@ -85,8 +90,16 @@ class PlantSchedule:
 
     @property
     def python_fault(self) -> bool:
-        """True when the fault acts on the measurements in Python (a hook or a transmitter)."""
-        return self.fault_measure is not None or self.sensor is not None
+        """True when the fault acts in Python per sample (a measure hook, a transmitter or an
+        actuator device)."""
+        return bool(self.fault_measures or self.sensors or self.actuators)
+
+    def actuate(self, k: int, u: np.ndarray) -> np.ndarray:
+        """Sample ``k``'s inputs ``(6,)`` as the process receives them from the inputs as
+        commanded (the actuator devices, if any)."""
+        for device in self.actuators:
+            u = device.move(k, u)
+        return u
 
     def multipliers(self, k: np.ndarray) -> np.ndarray:
         """Parameter multipliers over samples ``k``: shape (n, len(pidx))."""
@@ -101,8 +114,8 @@ class PlantSchedule:
         t = np.asarray(k) * self.sample_time_s
         for e in self.input_effects:
             u = e.transform_inputs(t, u)
-        if self.fault_inputs is not None:
-            u = np.asarray(self.fault_inputs(self.fault, np.asarray(k), u), dtype=np.float64)
+        for part, hook in self.fault_inputs:
+            u = np.asarray(hook(part, np.asarray(k), u), dtype=np.float64)
         return u
 
     def measure_effects_only(self, k: int, y: np.ndarray) -> np.ndarray:
@@ -114,9 +127,9 @@ class PlantSchedule:
 
     def measure_fault(self, k: int, y: np.ndarray) -> np.ndarray:
         """``y`` (one sample of this episode, ``(8,)``) after the fault's ``measure`` hook."""
-        if self.fault_measure is None:
-            return y
-        return np.asarray(self.fault_measure(self.fault, k, y), dtype=np.float64)
+        for part, hook in self.fault_measures:
+            y = np.asarray(hook(part, k, y), dtype=np.float64)
+        return y
 
     def measure(self, k: int, y: np.ndarray) -> np.ndarray:
         """The measurement of sample ``k`` after the effects, then the fault (the transmitter
@@ -127,10 +140,17 @@ class PlantSchedule:
         """Sample ``k`` as the transmitters deliver it: the noise-free measurement ``y``
         ``(8,)`` after :meth:`measure`, then the channel fault's transmitter on ``y`` and the
         noise draws ``z``; returns ``(y', z', dropped)``."""
-        y = self.measure(k, y)
-        if self.sensor is None:
-            return y, z, False
-        return self.sensor.read(k, y, z)
+        return self.sense_only(k, self.measure(k, y), z)
+
+    def sense_only(
+        self, k: int, y: np.ndarray, z: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray, bool]:
+        """:meth:`sense` on a measurement ``y`` that has been through :meth:`measure`."""
+        dropped = False
+        for sensor in self.sensors:
+            y, z, lost = sensor.read(k, y, z)
+            dropped = dropped or lost
+        return y, z, dropped
 
     def d_state(self, t: float, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         total = np.zeros_like(x)
@@ -159,6 +179,18 @@ class BatchSchedule:
     def measures(self) -> bool:
         return bool(self.shared.measure_effects or self.faulty_rows)
 
+    @property
+    def actuates(self) -> bool:
+        """True when an episode's fault acts on its actuators (Python per sample)."""
+        return any(s.actuators for _, s in self.faulty_rows)
+
+    def actuate(self, k: int, u: np.ndarray) -> np.ndarray:
+        """Sample ``k``'s applied inputs of every episode ``(B, 6)`` from the commanded ``u``."""
+        u = np.array(u, dtype=np.float64, copy=True)
+        for b, s in self.faulty_rows:
+            u[b] = s.actuate(k, u[b])
+        return u
+
     def d_state(self, t: float, x: np.ndarray, u: np.ndarray) -> np.ndarray:
         return self.shared.d_state(t, x, u)
 
@@ -179,8 +211,8 @@ class BatchSchedule:
         y = self.measure(k, y)
         z = np.array(z, dtype=np.float64, copy=True)
         for b, s in self.faulty_rows:
-            if s.sensor is not None:
-                y[b], z[b], lost[b] = s.sensor.read(k, y[b], z[b])
+            if s.sensors:
+                y[b], z[b], lost[b] = s.sense_only(k, y[b], z[b])
         return y, z
 
 
@@ -282,11 +314,21 @@ def setup_episode(
     resolved = fault.resolve(horizon, gens["fault"])
     effects = plant_effects or []
     fx.reset_all(effects)
-    d = resolved.definition
-    sensor = None
-    if d is not None and d.sensor is not None:  # after the draws of resolve: they stay as they were
-        sensor = d.sensor(resolved, gens["fault"], horizon, config.sample_time_s)
-    schedule = PlantSchedule(resolved, effects, config.params, config.sample_time_s, sensor)
+    require_loops(resolved, config.regulatory)
+    # the transmitters draw after resolve, so its draws stay as they were
+    sensors = tuple(
+        c.definition.sensor(c, gens["fault"], horizon, config.sample_time_s)
+        for c in resolved.components
+        if c.definition.sensor is not None
+    )
+    actuators = tuple(
+        c.definition.actuator(c, horizon, config.sample_time_s)
+        for c in resolved.components
+        if c.definition.actuator is not None
+    )
+    schedule = PlantSchedule(
+        resolved, effects, config.params, config.sample_time_s, sensors, actuators
+    )
     setpoints = None
     if config.regulatory is not None:
         setpoints = SetpointStream(

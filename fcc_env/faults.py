@@ -38,7 +38,8 @@ path through hooks that mirror the plant effects' (:mod:`fcc_env.effects`):
   controllers of a closed-loop plant read its output.
 * ``transform_inputs(fault, k, u) -> u'``: samples ``k`` ``(n,)`` and the program's inputs
   ``(n, 6)`` (:data:`fcc_env.INPUT_NAMES`) the process sees, after the input effects. In closed
-  loop the controllers' outputs replace the valve and air columns afterwards.
+  loop the controllers' outputs replace the valve and air columns afterwards (an actuator
+  fault acts after them: below).
 
 **Channel faults** (:mod:`fcc_env.sensor_faults`: ``sensor-bias``, ``sensor-drift``,
 ``sensor-stuck``, ``sensor-noise``, ``sensor-dropout``) act on one measured channel that the
@@ -53,6 +54,28 @@ kind's own unit (°C, °C per hour, a multiple of the noise std, a probability),
 defaults, the control study, the closed-loop report) leave them out until the study that
 covers them (issue 43 items 4, 5 and 7): ``fault_names(with_channel=True)`` lists them too.
 
+**Actuator faults** (:mod:`fcc_env.actuator_faults`: ``valve-stiction``, ``valve-bias``,
+``valve-stuck``, ``blower-capacity``) act on one input, their ``actuator_input`` (``u_F`` or
+``R_ar``), between the command and the process. Their ``actuator`` factory builds one
+:class:`ActuatorPath` per episode (a sticking valve's state lives with its episode); its
+``move(k, u)`` takes the inputs as commanded (the controllers', or the program's and the
+action's in open loop) and returns those the process receives. ``needs_loop`` marks a fault
+that only shows while a controller moves the actuator (a stuck or sticking valve): a plant
+whose regulatory layer leaves that loop open refuses it by name. Their magnitudes are in
+their own unit too (``magnitude_unit``), and the catalogue-wide lists leave them out like the
+channel faults (``fault_names(with_channel=True)`` lists every registered fault).
+
+**Concurrent faults** (``concurrent``, a reserved scenario name like ``random``, not a
+registry entry): two registered faults, each a whole
+:class:`~fcc_env.scenarios.FaultSpec` with its own onset, in
+:attr:`~fcc_env.scenarios.FaultSpec.parts`. The episode's fault has both, in onset order, and
+each acts through its own definition (parameter slots side by side, hooks one after the
+other). Labels: the scenario is ``concurrent`` and its onset the first part's, so detection
+scores against the first fault; for isolation the episode carries both names
+(:attr:`~fcc_env.scenarios.EpisodeFault.labels`, ``info["fault_labels"]``,
+:attr:`fcc_env.BatchResult.fault_labels`), and an isolator must name both or say
+``"unknown"`` (:func:`isolation_outcome`: one name of the two is a wrong isolation).
+
 A worker process sees the faults registered by the modules it imports: register a fault at the
 import of a module and name it with ``--import`` (as for diagnosers).
 """
@@ -60,7 +83,7 @@ import of a module and name it with ``--import`` (as for diagnosers).
 from __future__ import annotations
 
 import re
-from collections.abc import Callable
+from collections.abc import Callable, Collection
 from dataclasses import dataclass
 from enum import StrEnum
 from typing import Any, Protocol
@@ -71,11 +94,15 @@ from fcc_common.validation import Integer, Options, Real, check, invalid
 from fcc_env.params import MEASUREMENT_NAMES, PARAM_INDEX
 
 __all__ = [
+    "CONCURRENT_SCENARIO",
     "FAULTS",
     "MAX_FAULT_MAGNITUDE",
     "NOMINAL",
     "PAPER_FAULTS",
     "RANDOM_SCENARIO",
+    "UNKNOWN_LABEL",
+    "ActuatorFactory",
+    "ActuatorPath",
     "FaultDefinition",
     "InputHook",
     "MeasureHook",
@@ -85,7 +112,10 @@ __all__ = [
     "fault_definition",
     "fault_names",
     "fault_width",
+    "has_own_unit",
+    "is_actuator_fault",
     "is_channel_fault",
+    "isolation_outcome",
     "register_fault",
     "scenario_names",
     "unregister_fault",
@@ -106,6 +136,9 @@ class Scenario(StrEnum):
 NOMINAL: str = Scenario.NOMINAL.value
 #: The scenario name that draws scenario, onset and magnitude per episode.
 RANDOM_SCENARIO = "random"
+#: The scenario name of two registered faults at once, each with its own onset
+#: (:attr:`fcc_env.scenarios.FaultSpec.parts`; module docstring).
+CONCURRENT_SCENARIO = "concurrent"
 #: The paper's faults, in order (the published tracks hold these).
 PAPER_FAULTS: tuple[str, ...] = tuple(s.value for s in Scenario if s is not Scenario.NOMINAL)
 #: Upper bound on fault magnitudes: beyond it the plant leaves the hot state (f2 at 100 % stops flow).
@@ -136,6 +169,23 @@ class SensorPath(Protocol):
 SensorFactory = Callable[[Any, np.random.Generator, int, float], SensorPath]
 
 
+class ActuatorPath(Protocol):
+    """One episode's faulty actuator (an actuator fault's per-episode object).
+
+    ``move`` is called once per sample, in order (a repeated call for the same sample
+    recomputes it from the state before that sample): ``u`` the inputs ``(6,)`` as commanded
+    (the program, the action or the controllers, within the actuator limits); it returns the
+    inputs the process receives."""
+
+    def move(self, k: int, u: np.ndarray) -> np.ndarray:
+        """Sample ``k``'s applied inputs."""
+        ...
+
+
+#: ``actuator(fault, horizon, sample_time_s) -> ActuatorPath``: one per episode.
+ActuatorFactory = Callable[[Any, int, float], ActuatorPath]
+
+
 @dataclass(frozen=True)
 class FaultDefinition:
     """One fault: which parameters it scales (or which path its hooks act on), its paper size
@@ -159,15 +209,30 @@ class FaultDefinition:
     default_channel: str | None = None
     #: a channel fault's transmitter, one per episode (module docstring), or None
     sensor: SensorFactory | None = None
-    #: a channel fault's unit of ``magnitude`` (the others: a relative change)
+    #: a channel or actuator fault's unit of ``magnitude`` (the others: a relative change)
     magnitude_unit: str = "relative change"
+    #: an actuator fault's device, one per episode (module docstring), or None
+    actuator: ActuatorFactory | None = None
+    #: an actuator fault's input (:data:`fcc_env.INPUT_NAMES`: ``u_F`` or ``R_ar``)
+    actuator_input: str | None = None
+    #: True when only a controller moves the actuator enough for the fault to act (a stuck or
+    #: sticking valve): refused on a plant whose regulatory layer does not close that loop
+    needs_loop: bool = False
 
 
 #: The registry: every fault by name, in registration order (:func:`register_fault`).
 FAULTS: dict[str, FaultDefinition] = {}
 
 _NAME = re.compile(r"[a-z][a-z0-9_-]*\Z")
-_RESERVED = (NOMINAL, RANDOM_SCENARIO)
+_RESERVED = (NOMINAL, RANDOM_SCENARIO, CONCURRENT_SCENARIO)
+#: The inputs an actuator fault may act on: the valve and the air, which the loops move.
+ACTUATED_INPUTS: tuple[str, ...] = ("u_F", "R_ar")
+
+
+def own_unit(d: FaultDefinition) -> bool:
+    """True when ``d``'s magnitude is in a unit of its own (a channel or actuator fault), not a
+    relative change bound by :data:`MAX_FAULT_MAGNITUDE`."""
+    return bool(d.channels) or d.actuator is not None
 
 
 def _check_definition(name: str, d: FaultDefinition) -> None:
@@ -181,15 +246,16 @@ def _check_definition(name: str, d: FaultDefinition) -> None:
     if len(set(params)) != len(params):
         raise invalid(f"{name}.parameters", params, "distinct FCCParams field names")
     check(f"{name}.direction", d.direction, Options([1, -1]))
-    for hook in ("measure", "transform_inputs", "sensor"):
+    for hook in ("measure", "transform_inputs", "sensor", "actuator"):
         fn = getattr(d, hook)
         if fn is not None and not callable(fn):
             raise invalid(f"{name}.{hook}", fn, "a callable or None")
-    if not params and d.measure is None and d.transform_inputs is None and d.sensor is None:
+    hooks = (d.measure, d.transform_inputs, d.sensor, d.actuator)
+    if not params and all(h is None for h in hooks):
         raise invalid(
             f"{name}.parameters",
             params,
-            "at least one parameter, or a measure, transform_inputs or sensor hook",
+            "at least one parameter, or a measure, transform_inputs, sensor or actuator hook",
             "a fault must act on the plant somewhere",
         )
     if (d.sensor is None) != (not d.channels):
@@ -198,8 +264,16 @@ def _check_definition(name: str, d: FaultDefinition) -> None:
         check(f"{name}.channels", c, Options(MEASUREMENT_NAMES))
     if d.channels:
         check(f"{name}.default_channel", d.default_channel, Options(d.channels))
-    # a channel fault's size is in its own unit (module docstring), not a relative change
-    top_range = Real(0.0) if d.channels else Real(0.0, MAX_FAULT_MAGNITUDE)
+    if (d.actuator is None) != (d.actuator_input is None):
+        raise invalid(
+            f"{name}.actuator_input", d.actuator_input, "an input exactly when an actuator is given"
+        )
+    if d.actuator is not None:
+        check(f"{name}.actuator_input", d.actuator_input, Options(ACTUATED_INPUTS))
+    elif d.needs_loop:
+        raise invalid(f"{name}.needs_loop", d.needs_loop, "False for a fault without an actuator")
+    # a channel or actuator fault's size is in its own unit (module docstring)
+    top_range = Real(0.0) if own_unit(d) else Real(0.0, MAX_FAULT_MAGNITUDE)
     top = check(f"{name}.max_magnitude", d.max_magnitude, top_range)
     check(f"{name}.default_magnitude", d.default_magnitude, Real(0.0, top))
     check(f"{name}.default_onset", d.default_onset, Integer(0))
@@ -257,17 +331,58 @@ def is_channel_fault(name: str) -> bool:
     return d is not None and bool(d.channels)
 
 
+def is_actuator_fault(name: str) -> bool:
+    """True for a registered fault that acts on an actuator (the valve or the air)."""
+    d = FAULTS.get(name)
+    return d is not None and d.actuator is not None
+
+
+def has_own_unit(name: str) -> bool:
+    """True for a registered fault whose magnitude has a unit of its own (a channel or an
+    actuator fault: the definition's ``magnitude_unit``), not a relative change."""
+    d = FAULTS.get(name)
+    return d is not None and own_unit(d)
+
+
 def fault_names(with_channel: bool = False) -> tuple[str, ...]:
     """The registered faults' names, in registration order (the paper's first): the lists
-    every catalogue-wide loop reads, without the channel faults unless ``with_channel``
-    (module docstring)."""
-    return tuple(n for n in FAULTS if with_channel or not is_channel_fault(n))
+    every catalogue-wide loop reads, without the channel and actuator faults unless
+    ``with_channel`` (module docstring: the closed-loop faults of issue 43 wait for their
+    study)."""
+    return tuple(n for n in FAULTS if with_channel or not has_own_unit(n))
 
 
 def scenario_names(with_channel: bool = False) -> tuple[str, ...]:
     """``nominal`` and the registered faults of :func:`fault_names`: the scenarios an episode
     can have (``scenario="random"`` draws among those without ``with_channel``)."""
     return (NOMINAL, *fault_names(with_channel))
+
+
+#: What an isolator answers when it will not name the fault(s).
+UNKNOWN_LABEL = "unknown"
+
+
+def isolation_outcome(predicted: str | Collection[str], labels: Collection[str]) -> str:
+    """How an isolation of an episode with ``labels`` (its faults' names,
+    :attr:`fcc_env.scenarios.EpisodeFault.labels`) scores: ``"correct"``, ``"unknown"`` or
+    ``"wrong"``.
+
+    ``predicted`` is a fault's name, a collection of names, or :data:`UNKNOWN_LABEL`. It is
+    correct when it names exactly the episode's faults, in any order: a concurrent episode
+    needs both names, and one of the two is wrong (a partial isolation sends the operator to
+    one fault while the other goes on). ``"unknown"`` abstains.
+
+    >>> isolation_outcome(["valve-stiction", "sensor-bias"], ("sensor-bias", "valve-stiction"))
+    'correct'
+    >>> isolation_outcome("sensor-bias", ("sensor-bias", "valve-stiction"))
+    'wrong'
+    >>> isolation_outcome("unknown", ("f1",)), isolation_outcome("f1", ("f1",))
+    ('unknown', 'correct')
+    """
+    names = {predicted} if isinstance(predicted, str) else set(predicted)
+    if names == {UNKNOWN_LABEL}:
+        return "unknown"
+    return "correct" if names == set(labels) else "wrong"
 
 
 def fault_definition(name: str) -> FaultDefinition:

@@ -463,7 +463,12 @@ def main(argv: Sequence[str] | None = None) -> int:
         help=f"samples per episode ({DEFAULT_N_SAMPLES})",
     )
     parser.add_argument("--fault-time", type=int, default=None, help="onset sample")
-    parser.add_argument("--fault-magnitude", type=float, default=None, help="relative size")
+    parser.add_argument(
+        "--fault-magnitude",
+        type=float,
+        default=None,
+        help="size: a relative change (a sensor or actuator fault: its own unit)",
+    )
     parser.add_argument("--fault-profile", default=None, help="abrupt (default) or incipient")
     parser.add_argument("--ramp-samples", type=int, default=None, help="incipient ramp length")
     parser.add_argument(

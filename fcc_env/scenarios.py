@@ -20,6 +20,7 @@ import numpy as np
 
 from fcc_common.validation import Integer, Options, Real, check, invalid
 from fcc_env.faults import (
+    CONCURRENT_SCENARIO,
     FAULTS,
     MAX_FAULT_MAGNITUDE,
     NOMINAL,
@@ -30,6 +31,7 @@ from fcc_env.faults import (
     fault_definition,
     fault_names,
     fault_width,
+    has_own_unit,
     is_channel_fault,
     register_fault,
     scenario_names,
@@ -89,9 +91,9 @@ RAMP_SAMPLES_RANGE = Integer(1, why="samples an incipient fault takes to reach i
 
 
 def scenario_options() -> Options:
-    """Allowed scenario names now: every registered one, and ``"random"`` (draws one per
-    episode)."""
-    return Options([*scenario_names(with_channel=True), RANDOM_SCENARIO])
+    """Allowed scenario names now: every registered one, ``"random"`` (draws one per
+    episode) and ``"concurrent"`` (two of them, :attr:`FaultSpec.parts`)."""
+    return Options([*scenario_names(with_channel=True), RANDOM_SCENARIO, CONCURRENT_SCENARIO])
 
 
 def fault_channel_options(scenario: str) -> Options:
@@ -138,6 +140,20 @@ class EpisodeFault:
     profile: FaultProfile = FaultProfile.ABRUPT
     ramp_samples: int = 0  # incipient: samples to reach the full magnitude
     channel: str | None = None  # a channel fault's measured channel (MEASUREMENT_NAMES)
+    #: a concurrent fault's two faults, in onset order (onset and magnitude: the first's)
+    parts: tuple[EpisodeFault, ...] = ()
+
+    @property
+    def components(self) -> tuple[EpisodeFault, ...]:
+        """The single faults acting in the episode: none when nominal, the parts of a
+        concurrent fault, else this fault."""
+        return () if self.nominal else self.parts or (self,)
+
+    @property
+    def labels(self) -> tuple[str, ...]:
+        """The names an isolator must give: the scenario, or a concurrent fault's two (in
+        onset order; :func:`fcc_env.faults.isolation_outcome`)."""
+        return tuple(c.scenario for c in self.components)
 
     @property
     def channel_index(self) -> int:
@@ -150,13 +166,15 @@ class EpisodeFault:
 
     @property
     def definition(self) -> FaultDefinition | None:
-        """The registered definition (None when nominal)."""
-        return None if self.nominal else fault_definition(self.scenario)
+        """The registered definition (None when nominal or concurrent: see :attr:`parts`)."""
+        return None if self.nominal or self.parts else fault_definition(self.scenario)
 
     @property
     def param_indices(self) -> np.ndarray:
         """The parameter slots the fault scales, ``-1`` where unused: :func:`fault_width` of
         them (the widest registered fault's), so every episode of a batch has as many."""
+        if self.parts:  # each part's slots, one after the other
+            return np.concatenate([p.param_indices for p in self.parts])
         idx = np.full(fault_width(), -1, dtype=np.int64)
         d = self.definition
         if d is not None:
@@ -171,6 +189,8 @@ class EpisodeFault:
 
     def faulty_params(self, params: FCCParams) -> FCCParams:
         """``params`` with the fault at its full size (the plant long after the onset)."""
+        for p in self.parts:
+            params = p.faulty_params(params)
         d = self.definition
         if d is None:
             return params
@@ -198,6 +218,8 @@ class EpisodeFault:
         1 before the onset; afterwards the final multiplier, reached as :meth:`fraction`.
         """
         k = np.asarray(k)
+        if self.parts:
+            return np.concatenate([p.multipliers(k) for p in self.parts], axis=1)
         m = np.ones(k.shape[0])
         if not self.nominal:
             after = k >= self.onset
@@ -223,7 +245,7 @@ ENV_FAULT_KEYWORDS: dict[str, str] = {
 def _checked_magnitude(scenario: str, magnitude: float) -> float:
     """``magnitude`` of fault ``scenario``, within what the plant carries (the one check)."""
     d = fault_definition(scenario)
-    unit = "" if not d.channels else f" ({d.magnitude_unit})"
+    unit = f" ({d.magnitude_unit})" if has_own_unit(scenario) else ""
     why = f"for {scenario}{unit}: {d.max_reason}"
     return check("fault_magnitude", magnitude, Real(0.0, d.max_magnitude, why=why))
 
@@ -245,7 +267,8 @@ class FaultSpec:
             and any added by :func:`register_fault`) or ``"random"`` (scenario uniform over
             ``nominal`` and the registered faults, onset uniform in the middle half of the
             horizon, magnitude uniform in [0.5, 1.5] × the fault's default; explicit
-            ``onset``/``magnitude`` override the draws).
+            ``onset``/``magnitude`` override the draws; the draw leaves out the sensor and
+            actuator faults), or ``"concurrent"`` (two faults: :attr:`parts`).
         onset: sample at which the fault starts (default: the fault's paper onset).
         magnitude: relative size of the change, ≥ 0 (default: the fault's paper magnitude).
         profile: ``"abrupt"`` (a step) or ``"incipient"`` (a linear ramp).
@@ -259,6 +282,14 @@ class FaultSpec:
             env keyword is ``fault_channel``. Other faults refuse a channel. A channel fault's
             ``magnitude`` is in its own unit (°C for a bias; the definition's
             ``magnitude_unit``).
+        parts: ``scenario="concurrent"``'s two faults, each a whole :class:`FaultSpec` of a
+            registered fault with its own onset, size, profile and channel (two different
+            scenarios); the concurrent spec's own onset, magnitude, profile and ramp stay
+            unset, and its ``magnitude_scale`` multiplies both parts'. The episode's
+            :class:`EpisodeFault` has the parts in onset order, its onset (and
+            ``fault_active``) the first's; its labels for isolation are both names
+            (:attr:`EpisodeFault.labels`, :func:`fcc_env.faults.isolation_outcome`). Passed
+            whole (``fault=``): the env's keywords have no parts.
 
     >>> FaultSpec(scenario="f1").resolve(horizon=4000).magnitude
     0.1
@@ -277,13 +308,14 @@ class FaultSpec:
     ramp_samples: int | None = None
     magnitude_scale: float = 1.0
     channel: str | None = None
+    parts: tuple[FaultSpec, ...] = ()
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__
         set_(self, "scenario", str(check("scenario", self.scenario, scenario_options())))
         set_(self, "onset", check("fault_time", self.onset, fault_time_range(None), None))
         # a channel fault's magnitude has its own unit and range (checked below)
-        size_range = Real(0.0) if is_channel_fault(self.scenario) else FAULT_MAGNITUDE_RANGE
+        size_range = Real(0.0) if has_own_unit(self.scenario) else FAULT_MAGNITUDE_RANGE
         set_(self, "magnitude", check("fault_magnitude", self.magnitude, size_range, None))
         set_(self, "channel", _checked_channel(self.scenario, self.channel))
         set_(self, "profile", check("fault_profile", self.profile, Options(FaultProfile)))
@@ -301,6 +333,7 @@ class FaultSpec:
         )
         if self.scenario in FAULTS:  # a fixed fault: its size is known now (a drawn one later)
             _checked_magnitude(self.scenario, self._scaled(self.scenario, self.magnitude))
+        set_(self, "parts", _checked_parts(self))
 
     def with_env_options(self, options: Mapping[str, Any]) -> FaultSpec:
         """This spec with the env's keywords (:data:`ENV_FAULT_KEYWORDS`) applied; ``None``
@@ -323,8 +356,11 @@ class FaultSpec:
         for opt, value in options.items():
             name = ENV_FAULT_KEYWORDS[opt]
             changes[name] = defaults[name] if value is None else value
-        if not is_channel_fault(changes.get("scenario", self.scenario)):
+        scenario = changes.get("scenario", self.scenario)
+        if not is_channel_fault(scenario):
             changes["channel"] = None  # a channel stays with the channel fault it was given for
+        if scenario != CONCURRENT_SCENARIO:
+            changes["parts"] = ()  # and the parts with the concurrent fault
         return self.replace(**changes)
 
     def replace(self, **changes: Any) -> FaultSpec:
@@ -341,12 +377,23 @@ class FaultSpec:
         }
         if self.channel is not None:  # only then: the store keys of the other faults stay
             out["channel"] = self.channel
+        if self.parts:
+            out["parts"] = [p.to_json() for p in self.parts]
         return out
 
     @classmethod
     def from_json(cls, data: Mapping[str, Any]) -> FaultSpec:
         """The spec :meth:`to_json` wrote."""
-        return cls(**{**data, "profile": FaultProfile(data.get("profile", "abrupt"))})
+        parts = tuple(cls.from_json(p) for p in data.get("parts", ()))
+        return cls(
+            **{**data, "profile": FaultProfile(data.get("profile", "abrupt")), "parts": parts}
+        )
+
+    def _scaled_part(self, part: FaultSpec) -> FaultSpec:
+        """A concurrent fault's ``part`` with this spec's ``magnitude_scale`` applied too."""
+        if self.magnitude_scale == 1.0:
+            return part
+        return part.replace(magnitude_scale=part.magnitude_scale * self.magnitude_scale)
 
     def _scaled(self, scenario: str, magnitude: float | None) -> float:
         """The magnitude of fault ``scenario`` (``None``: its default) × ``magnitude_scale``."""
@@ -362,6 +409,13 @@ class FaultSpec:
         (the onset inside the episode, a drawn fault's size); errors name the value and the range.
         """
         sc, onset, magnitude = self.scenario, self.onset, self.magnitude
+        if sc == CONCURRENT_SCENARIO:
+            parts = sorted(
+                (self._scaled_part(p).resolve(horizon, rng) for p in self.parts),
+                key=lambda f: f.onset,
+            )
+            first = parts[0]
+            return EpisodeFault(sc, first.onset, first.magnitude, parts=tuple(parts))
         drawn = sc == RANDOM_SCENARIO
         if drawn:
             if rng is None:
@@ -390,6 +444,55 @@ class FaultSpec:
         if is_channel_fault(sc):
             channel = self.channel or fault_definition(sc).default_channel
         return EpisodeFault(sc, onset, magnitude, self.profile, ramp, channel)
+
+
+def _checked_parts(spec: FaultSpec) -> tuple[FaultSpec, ...]:
+    """The parts of ``spec``: two distinct registered faults for ``concurrent`` (whose own
+    fields stay at their defaults: each part carries its onset and size), none otherwise."""
+    parts = spec.parts
+    if spec.scenario != CONCURRENT_SCENARIO:
+        if parts:
+            raise invalid(
+                "parts", parts, "() (empty)", f"only scenario={CONCURRENT_SCENARIO!r} has parts"
+            )
+        return ()
+    example = (
+        "e.g. FaultSpec(scenario='concurrent', parts=(FaultSpec(scenario='sensor-bias', "
+        "onset=1500), FaultSpec(scenario='valve-stiction', onset=2500)))"
+    )
+    if isinstance(parts, FaultSpec) or not isinstance(parts, tuple | list) or len(parts) != 2:
+        raise invalid("parts", parts, "a tuple of two FaultSpec of registered faults", example)
+    names = fault_names(with_channel=True)
+    for p in parts:
+        if not isinstance(p, FaultSpec):
+            raise invalid("parts", p, "a FaultSpec of a registered fault", example)
+        check("parts scenario", p.scenario, Options(names, why="a concurrent fault's part"))
+    if parts[0].scenario == parts[1].scenario:
+        raise invalid(
+            "parts",
+            [p.scenario for p in parts],
+            "two different faults",
+            "an isolator names both, so two faults of one kind would be one label",
+        )
+    given = [
+        name
+        for name, value in (
+            ("fault_time", spec.onset),
+            ("fault_magnitude", spec.magnitude),
+            ("ramp_samples", spec.ramp_samples),
+        )
+        if value is not None
+    ]
+    if spec.profile is not FaultProfile.ABRUPT:
+        given.append("fault_profile")
+    if given:
+        raise ValueError(
+            f"scenario='concurrent' takes {given} from its parts: set them on each part's "
+            f"FaultSpec ({example})"
+        )
+    for p in parts:
+        spec._scaled_part(p)  # magnitude_scale applies to each part: checked there
+    return tuple(parts)
 
 
 def fault_from_request(fault: FaultSpec | None, keywords: Mapping[str, Any]) -> FaultSpec:

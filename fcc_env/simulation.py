@@ -144,6 +144,9 @@ class BatchResult:
     sensor_dropout: np.ndarray | None = None
     #: each episode's faulty channel (a channel fault's, :mod:`fcc_env.sensor_faults`), else None
     fault_channels: tuple[str | None, ...] = ()
+    #: each episode's faults by name (:attr:`fcc_env.scenarios.EpisodeFault.labels`): () when
+    #: healthy, a concurrent episode's two in onset order (the labels an isolator must name)
+    fault_labels: tuple[tuple[str, ...], ...] = ()
 
 
 def _episode_faults(fault: FaultSpec | Sequence[FaultSpec] | None, n: int) -> list[FaultSpec]:
@@ -274,11 +277,16 @@ def simulate_episodes(
             *controller,
         )
 
+    if config.regulatory is None and schedule.actuates:
+        # open loop: the inputs as commanded do not depend on the plant, so the devices act
+        # on the whole program before the compiled kernel runs it
+        for kk in range(T):
+            U[:, kk] = schedule.actuate(kk, U[:, kk])
     if config.regulatory is not None:
         assert SP is not None
         C = np.tile(initial_controller_state(NOMINAL_INPUTS), (B, 1))
         gains = config.regulatory.gains(config.sample_time_s)
-        if schedule.generic or schedule.measures:
+        if schedule.generic or schedule.measures or schedule.actuates:
             Y, obs, X, A, SAT = simulate_closed_per_sample(
                 x0, U, SP, C, gains, p_base, pidx, PM, Z, schedule, config, LOST
             )
@@ -334,6 +342,7 @@ def simulate_episodes(
         controller_saturated=SAT,
         sensor_dropout=LOST,
         fault_channels=tuple(f.channel for f in faults),
+        fault_labels=tuple(f.labels for f in faults),
     )
 
 

@@ -19,6 +19,12 @@ and simulated in the same batch.
 True
 >>> sorted(draw.truth)[:3]
 ['A_cr', 'UA_1', 'UA_2']
+
+The ``mismatch`` track's draws are :class:`PlantMismatch`'s: the declared parameters, and
+undeclared effects of the library (:mod:`fcc_env.effects`) at sizes a real unit shows.
+
+>>> [e.effect_id for e in PlantMismatch().draw(7).effects][:2]
+['heat_loss:stage1', 'heat_loss:stage2']
 """
 
 from __future__ import annotations
@@ -30,21 +36,29 @@ from typing import Any
 import numpy as np
 
 from fcc_common.validation import Integer, Real, check, invalid
+from fcc_env import effects as fx
 from fcc_env.params import FCCParams
 
 __all__ = [
     "GROUP_FIELDS",
+    "LAGGED_CHANNELS",
     "MAX_HALF_RANGE",
+    "MISMATCH_STREAM",
     "PLANT_STREAM",
     "AmbientCycle",
     "FeedQualityDrift",
     "PlantDraw",
+    "PlantMismatch",
     "PlantUncertainty",
 ]
 
 #: Second word of the draw's seed sequence: keeps the plant stream apart from every episode stream.
 PLANT_STREAM = 0x504C414E  # "PLAN"
 SECONDS_PER_HOUR = 3_600.0
+#: Third word of a mismatch draw's seed sequence (apart from the uncertain track's draws).
+MISMATCH_STREAM = 0x4D49534D  # "MISM"
+#: The thermocouples a mismatch draw may give a lag (the process temperatures of Table 1).
+LAGGED_CHANNELS: tuple[str, ...] = ("T_rx", "T_rg1", "T_rg2", "T_d1", "T_dg")
 
 #: FCCParams fields drawn by each group (``valve`` is the gain of the valve law, via ``rho_b0``).
 GROUP_FIELDS: dict[str, tuple[str, ...]] = {
@@ -261,3 +275,72 @@ class PlantUncertainty:
         out: dict[str, Any] = {k: getattr(self, k) for k in self.__dataclass_fields__}
         out["feed_drift_period_h"] = list(self.feed_drift_period_h)
         return out
+
+
+@dataclass(frozen=True, kw_only=True)
+class PlantMismatch:
+    """Undeclared effects of a real unit, drawn per episode: the ``mismatch`` track's plants.
+
+    Every episode (training and test alike) runs on the declared parameters plus effects of the
+    library (:mod:`fcc_env.effects`) that no detector is told of, drawn by the seed on their own
+    stream (like :class:`PlantUncertainty`'s, independent of the scenario):
+
+    * ``heat_loss`` on each of the four vessels, the extra loss coefficient uniform in
+      [0, ``extra_ua_kw_per_k``] (0.3 kW/K: UA × 1.15-1.3, offsets of 2-3 °C on average; at
+      the library's +1 kW/K the dilute phases moved by up to 80 °C and 2 of 12 healthy
+      episodes, seeds 5000-5011, ended in an afterburn);
+    * ``sensor_lag`` on one thermocouple of :data:`LAGGED_CHANNELS`, its time constant uniform
+      in ``lag_s`` (the library's 30-90 s);
+    * ``catalyst_deactivation``, the activity loss per day uniform in [0,
+      ``deactivation_per_day``] (at most 0.9 % over a 4000-sample episode by default: the
+      equilibrium catalyst is kept by fresh make-up; the library's 0.2 per day is a run of days).
+
+    Args:
+        extra_ua_kw_per_k: the heat losses' largest extra UA [kW/K], in [0, 5]; default 0.3.
+        lag_s: the range ``(low, high)`` [s] of the lag's time constant, each in [1, 600].
+        deactivation_per_day: the largest activity loss per day, in [0, 0.5].
+    """
+
+    extra_ua_kw_per_k: float = 0.3
+    lag_s: tuple[float, float] = (30.0, 90.0)
+    deactivation_per_day: float = 0.02
+
+    def __post_init__(self) -> None:
+        check("extra_ua_kw_per_k", self.extra_ua_kw_per_k, Real(0.0, 5.0, unit="kW/K"))
+        lo_hi = self.lag_s
+        if not (isinstance(lo_hi, tuple) and len(lo_hi) == 2):
+            raise invalid("lag_s", lo_hi, "a pair (low, high) of seconds in [1, 600]")
+        lo = check("lag_s[0]", lo_hi[0], Real(1.0, 600.0, unit="s"))
+        check("lag_s[1]", lo_hi[1], Real(lo, 600.0, unit="s"))
+        check("deactivation_per_day", self.deactivation_per_day, Real(0.0, 0.5, unit="1/day"))
+
+    def draw(self, seed: int, base: FCCParams | None = None) -> PlantDraw:
+        """The plant of episode ``seed``: ``base`` (default the declared parameters) unchanged,
+        with its drawn effects."""
+        seed = check("seed", seed, Integer(0, 2**63 - 1))
+        base = FCCParams() if base is None else base
+        rng = np.random.default_rng([seed, PLANT_STREAM, MISMATCH_STREAM])
+        v_ua = rng.uniform(0.0, 1.0, size=4)
+        channel = LAGGED_CHANNELS[int(rng.integers(len(LAGGED_CHANNELS)))]
+        v_lag, v_deact = rng.uniform(0.0, 1.0, size=2)
+        lo, hi = self.lag_s
+        effects = [
+            fx.make(f"heat_loss:{unit}", extra_ua_kw_per_k=float(self.extra_ua_kw_per_k * v))
+            for unit, v in zip(("stage1", "stage2", "dilute1", "dilute_general"), v_ua, strict=True)
+        ]
+        effects.append(fx.make(f"sensor_lag:{channel}", tau_s=float(lo + (hi - lo) * v_lag)))
+        rate = float(self.deactivation_per_day * v_deact)
+        effects.append(fx.make("catalyst_deactivation", loss_per_day=rate))
+        truth = {
+            "seed": seed,
+            "effects": [e.describe() for e in effects],
+            "mismatch": self.describe(),
+        }
+        return PlantDraw(seed, base, tuple(effects), truth)
+
+    def describe(self) -> dict[str, Any]:
+        return {
+            "extra_ua_kw_per_k": self.extra_ua_kw_per_k,
+            "lag_s": list(self.lag_s),
+            "deactivation_per_day": self.deactivation_per_day,
+        }

@@ -11,6 +11,29 @@ vector env seeded as ``SyncVectorEnv`` seeds its sub-envs gives their numbers bi
 (``tests/fcc_env/test_vector_env.py``). Through Gymnasium:
 ``gym.make_vec("FCC-v0", 1024, vectorization_mode="vector_entry_point", ...)``.
 
+Threads (``threads=``): a step runs the envs on that many numba threads; the default
+(:func:`vector_threads`) is one per :data:`MIN_ENVS_PER_THREAD` envs, at most
+``numba.get_num_threads()`` and the cores this process may use, and one thread is a serial
+compiled loop with no parallel region. The numbers do not depend on it: each env reads and
+writes its own rows only (``tests/fcc_env/test_vector_threads.py``). A parallel step ends at a
+barrier where the threads that finished wait for the others, and how they wait is the numba
+threading layer's (``NUMBA_THREADING_LAYER``; numba picks ``tbb``, then ``omp``, then
+``workqueue``, whichever is installed):
+
+- ``omp`` (libgomp, numba's choice on Linux without tbb): ``OMP_WAIT_POLICY=ACTIVE`` spins
+  (``GOMP_SPINCOUNT`` iterations), which on a busy machine takes the cores from the threads
+  still working (two threads at 1024 envs ran at half the speed of one); ``PASSIVE`` sleeps.
+  Importing :mod:`fcc_env` sets ``PASSIVE`` unless the environment sets the variable; libgomp
+  reads it once, when numba's pool starts, so code that ran a parallel numba kernel before
+  importing :mod:`fcc_env` must set it in the environment. Intel's runtime (libiomp5, conda's
+  ``intel-openmp``) reads ``KMP_BLOCKTIME`` (ms of spinning; ``0`` is passive) as well.
+- ``workqueue`` (numba's own): waits on condition variables (passive); it refuses kernels
+  launched from several Python threads at once.
+- ``tbb`` (the ``tbb`` package): work stealing; its idle workers also spin briefly.
+
+The figures (1 and 2 threads at 16 to 1024 envs) are in ``lab/env-speed.md``;
+``python -m bench.vector_speed --envs 16,1024 --threads 1,2,auto`` measures them.
+
 >>> envs = FCCVectorEnv(4, scenario="f1", fault_time=50)
 >>> obs, info = envs.reset(seed=0)
 >>> obs.shape, info["fault_time"].tolist()
@@ -30,6 +53,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from fcc_common.validation import Integer, check, invalid
+from fcc_common.workers import cpu_count
 from fcc_env import effects as fx
 from fcc_env.env import (
     ACTION_SCALE,
@@ -63,7 +87,14 @@ from fcc_env.regulatory import (
 )
 from fcc_env.scenarios import DEFAULT_N_SAMPLES
 
-__all__ = ["VECTOR_ENTRY_POINT", "FCCClosedLoopVectorEnv", "FCCVectorEnv"]
+__all__ = [
+    "MIN_ENVS_PER_THREAD",
+    "VECTOR_ENTRY_POINT",
+    "FCCClosedLoopVectorEnv",
+    "FCCVectorEnv",
+    "check_threads",
+    "vector_threads",
+]
 
 VECTOR_ENTRY_POINT = "fcc_env.vector_env:FCCVectorEnv"
 #: Samples of program/noise/multipliers held per env: two chunks, sample k at row k % RING, so
@@ -77,6 +108,29 @@ _NUMERICAL_FAILURE = 1
 _SKIP, _STEP, _START = 0, 1, 2
 #: Actuator limits as [low, high] rows over (u_F, R_ar): the numbers of ``actuator_inputs``.
 _SP_LIMITS = np.array([[SETPOINT_RANGES[n].low, SETPOINT_RANGES[n].high] for n in SETPOINT_NAMES]).T
+
+
+#: Envs per numba thread below which a step runs serially (``threads=None``; lab/env-speed.md).
+MIN_ENVS_PER_THREAD = 128
+
+
+def check_threads(threads: Any) -> int | None:
+    """``threads`` as the native vector envs take it: ``None`` (:func:`vector_threads` picks) or
+    1 up to numba's pool size (``NUMBA_NUM_THREADS``)."""
+    pool = numba.config.NUMBA_NUM_THREADS
+    why = f"numba's thread pool holds {pool} (NUMBA_NUM_THREADS)"
+    return check("threads", threads, Integer(1, pool, why=why), None)
+
+
+def vector_threads(num_envs: int, threads: int | None = None) -> int:
+    """The numba threads a step of ``num_envs`` envs runs on: ``threads`` when given, else one
+    per :data:`MIN_ENVS_PER_THREAD` envs, at most ``numba.get_num_threads()`` (which a user or a
+    pool worker may have lowered) and the cores this process may use; 1 means the serial
+    kernel, without a parallel region."""
+    if threads is not None:
+        return threads
+    cap = min(numba.get_num_threads(), cpu_count())
+    return max(1, min(cap, num_envs // MIN_ENVS_PER_THREAD))
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
@@ -221,14 +275,25 @@ def _batch_step(mode: np.ndarray, actions: np.ndarray, e: Episodes, s: Streams, 
         _step_env(b, mode[b], actions[b], e, s, pl)
 
 
+@numba.njit(cache=True, nogil=True, error_model="numpy")
+def _serial_step(mode: np.ndarray, actions: np.ndarray, e: Episodes, s: Streams, pl: Plant) -> None:
+    """:func:`_batch_step` on the calling thread alone: no parallel region, so no barrier and
+    no pool threads left spinning after it (one env's numbers do not depend on the loop)."""
+    for b in range(mode.shape[0]):
+        _step_env(b, mode[b], actions[b], e, s, pl)
+
+
 class FCCVectorEnv(VectorEnv):
     """``num_envs`` FCC episodes (``FCC-v0`` or, with ``regulatory``, ``FCC-closedloop-v0``)
     stepped together; Gymnasium 1.x vector semantics (NEXT_STEP autoreset, dict-of-array infos
     with ``_key`` masks, the ``TimeLimit`` of ``max_episode_steps`` inside).
 
     Keywords are ``FCCEnv``'s (validated by it, with its messages) plus ``max_episode_steps``
-    (``None``: no truncation). Plant effects that act through ``measure`` or ``d_state`` need
-    Python per sample and are refused: run them with ``vectorization_mode="sync"``.
+    (``None``: no truncation) and ``threads`` (numba threads of a step, 1 to
+    ``NUMBA_NUM_THREADS``; ``None``: :func:`vector_threads` picks them at each step; the module
+    doc says why and how the threads wait). Plant effects that act through ``measure`` or
+    ``d_state`` need Python per sample and are refused: run them with
+    ``vectorization_mode="sync"``.
     """
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}  # noqa: RUF012
@@ -239,9 +304,12 @@ class FCCVectorEnv(VectorEnv):
         *,
         max_episode_steps: int | None = DEFAULT_N_SAMPLES - 1,
         render_mode: str | None = None,
+        threads: int | None = None,
         **env_kwargs: Any,
     ) -> None:
         self.num_envs = check("num_envs", num_envs, Integer(1))
+        #: numba threads of a step (``None``: :func:`vector_threads` picks them at each step)
+        self.threads = check_threads(threads)
         self.max_episode_steps = check("max_episode_steps", max_episode_steps, Integer(1), None)
         if render_mode is not None:
             raise invalid("render_mode", render_mode, "None", "render through SyncVectorEnv")
@@ -294,6 +362,9 @@ class FCCVectorEnv(VectorEnv):
         self._onset = np.zeros(n, np.int64)
         self._magnitude = np.zeros(n)
         self._scenario = np.full(n, None, dtype=object)
+        # a concurrent episode's labels and onsets (FCCEnv's info keys), else None
+        self._labels = np.full(n, None, dtype=object)
+        self._times = np.full(n, None, dtype=object)
 
     @staticmethod
     def _streams(n: int, n_mult: int) -> Streams:
@@ -384,14 +455,16 @@ class FCCVectorEnv(VectorEnv):
                 "scenario",
                 setup.fault.scenario,
                 "a fault acting through parameters or inputs",
-                "a fault's measure hook or sensor needs Python per sample: use "
-                "vectorization_mode='sync'",
+                "a fault's measure hook, sensor or actuator device needs Python per sample: "
+                "use vectorization_mode='sync'",
             )
         self._setups[b] = setup
         fault = setup.fault
         self._faulty[b] = not fault.nominal
         self._onset[b], self._magnitude[b] = fault.onset, fault.magnitude
         self._scenario[b] = fault.scenario
+        self._labels[b] = fault.labels if fault.parts else None
+        self._times[b] = tuple(p.onset for p in fault.parts) if fault.parts else None
         n_mult = setup.schedule.pidx.shape[0]
         if n_mult > self._s.pidx.shape[1]:  # more multiplied parameters than any episode yet
             grown = self._streams(self.num_envs, n_mult)
@@ -423,7 +496,16 @@ class FCCVectorEnv(VectorEnv):
         self._drawn[b] += 1
 
     def _run(self, mode: np.ndarray, actions: np.ndarray) -> None:
-        _batch_step(mode, actions, self._e, self._s, self._plant)
+        threads = vector_threads(self.num_envs, self.threads)
+        if threads == 1:
+            _serial_step(mode, actions, self._e, self._s, self._plant)
+            return
+        before = numba.get_num_threads()
+        numba.set_num_threads(threads)
+        try:
+            _batch_step(mode, actions, self._e, self._s, self._plant)
+        finally:
+            numba.set_num_threads(before)
 
     def _check_actions(self, actions: Any) -> np.ndarray:
         raw = np.asarray(actions)
@@ -466,6 +548,8 @@ class FCCVectorEnv(VectorEnv):
             "fault_active": self._faulty & (onset >= 0) & (onset <= e.k),
             "fault_time": np.where(self._faulty, onset, 0),
             "fault_magnitude": self._magnitude.copy(),
+            "fault_labels": self._labels.copy(),
+            "fault_times": self._times.copy(),
             "y_clean": e.y_clean.copy(),
             "state": e.x.copy(),
             "inputs": e.u.copy(),
@@ -485,8 +569,10 @@ class FCCVectorEnv(VectorEnv):
             reported = np.ones(self.num_envs, np.bool_) if full else mask.copy()
             if key == "fault_time":  # a healthy episode's info has none (FCCEnv._get_info)
                 reported &= self._faulty
-                if not reported.any():
-                    continue
+            elif key in ("fault_labels", "fault_times"):  # a concurrent episode's only
+                reported &= self._labels != None  # noqa: E711 (elementwise on an object array)
+            if key in ("fault_time", "fault_labels", "fault_times") and not reported.any():
+                continue
             # envs without the key or left alone: zeros or None, as sync leaves them
             value[~reported] = None if value.dtype == object else 0
             infos[key] = value

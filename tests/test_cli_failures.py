@@ -383,6 +383,7 @@ COMMAND_MODULES = (
     "fcc_env.demo",
     "fcc_env.closed_loop_report",
     "fcc_env.closed_loop_analysis",
+    "bench.control_speed",
     "bench.detector_speed",
     "bench.filter_speed",
     "bench.bank_speed",
@@ -390,6 +391,7 @@ COMMAND_MODULES = (
     "bench.simulator_speed",
     "bench.sweep_speed",
     "bench.vector_speed",
+    "bench.scaling",
 )
 
 

@@ -29,11 +29,13 @@ COMMANDS = (
     "fcc_env.closed_loop_report",
     "fcc_env.closed_loop_analysis",
     "bench.simulator_speed",
+    "bench.control_speed",
     "bench.detector_speed",
     "bench.filter_speed",
     "bench.bank_speed",
     "bench.sweep_speed",
     "bench.vector_speed",
+    "bench.scaling",
 )
 
 

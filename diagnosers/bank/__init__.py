@@ -9,5 +9,6 @@ The rooms:
                        their centres, remaining errors and streaming state
 ``parallel``           training every (relation, training set) job, in this process or a pool
 ``relation_cache``     trained relations shared by every diagnoser of a sweep (content-addressed)
+``relation_plan``      relation jobs run from outside a fit: a fit names the relations it needs
 =====================  ===========================================================================
 """

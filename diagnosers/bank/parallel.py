@@ -25,13 +25,14 @@ from __future__ import annotations
 import os
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, NamedTuple, TypeVar
 
 import numpy as np
 import torch
 
 from diagnosers.bank.relation_cache import RelationCache, active_cache, job_key
+from diagnosers.bank.relation_plan import RelationsNeeded, active_plan
 from diagnosers.networks.lrgf_net import LRGF
 from diagnosers.networks.mem_net import NNARXErrorModel
 from diagnosers.networks.modules import build_module, export_module
@@ -39,7 +40,15 @@ from diagnosers.networks.optimisers import FitResult, torch_threads
 from diagnosers.networks.training import fit_lrgf, fit_mem
 from fcc_common.workers import init_worker, spawn_context
 
-__all__ = ["BankSettings", "TrainedBank", "run_jobs", "train_banks"]
+__all__ = [
+    "BankSettings",
+    "RelationJob",
+    "TrainedBank",
+    "TrainedRelation",
+    "run_jobs",
+    "train_banks",
+    "train_relation",
+]
 
 J = TypeVar("J")
 R = TypeVar("R")
@@ -84,7 +93,7 @@ class TrainedBank(NamedTuple):
 
 
 @dataclass(frozen=True)
-class _RelationJob:
+class RelationJob:
     """Train one relation on one training set: inputs ``u`` (T_i, n) and output ``y`` (T_i, 1)
     per record, with the relation's seed."""
 
@@ -96,6 +105,11 @@ class _RelationJob:
     init: _Exported | None = None
     #: a :class:`~diagnosers.bank.relation_cache.RelationCache` directory to read and fill, or None
     cache_dir: str | None = None
+
+    @property
+    def key(self) -> str:
+        """The job's :func:`~diagnosers.bank.relation_cache.job_key`: its result's address."""
+        return job_key(self.settings, self.u, self.y, self.seed, self.init)
 
     @property
     def cost(self) -> int:
@@ -121,7 +135,17 @@ def _build(exported: _Exported) -> Any:
     return module
 
 
-def _train_relation(job: _RelationJob) -> tuple[_Exported, _Exported, float, FitResult]:
+#: one trained relation: (LRGF export, error-model export, v_paper, the network's fit)
+TrainedRelation = tuple[_Exported, _Exported, float, FitResult]
+
+
+def train_relation(job: RelationJob) -> TrainedRelation:
+    """Train one relation job, as a task of a pool or cluster (no cache): the same bits in any
+    process (:mod:`diagnosers.bank.relation_plan`)."""
+    return _train_relation(job)
+
+
+def _train_relation(job: RelationJob) -> TrainedRelation:
     """The LRGF, then the error model on its residual; the same bits in any process."""
     s = job.settings
     # One thread for the whole job, predictions included: a thread count that differed between
@@ -177,11 +201,11 @@ def _train_relation(job: _RelationJob) -> tuple[_Exported, _Exported, float, Fit
     return _export(net), _export(mem), float(ye_tr.std(ddof=1)), fit
 
 
-def _run_relation(job: _RelationJob) -> tuple[_Exported, _Exported, float, FitResult]:
+def _run_relation(job: RelationJob) -> TrainedRelation:
     """:func:`_train_relation`, through the relation cache when the job names one."""
     if job.cache_dir is None:
         return _train_relation(job)
-    key = job_key(job.settings, job.u, job.y, job.seed, job.init)
+    key = job.key
     out = RelationCache(job.cache_dir).fetch_or_train(key, lambda: _train_relation(job))
     return out  # type: ignore[return-value]
 
@@ -238,6 +262,9 @@ def train_banks(
 
     Inside a :func:`diagnosers.bank.relation_cache.shared_relations` block, a job trained before
     (by any diagnoser, in any process sharing the directory) is read instead of trained again.
+    Inside a :func:`diagnosers.bank.relation_plan.planned_relations` block nothing is trained:
+    the results come from the block's known relations, and missing ones raise
+    :class:`~diagnosers.bank.relation_plan.RelationsNeeded`.
     """
     cache = active_cache()
     per_relation = [settings] * len(in_idx) if isinstance(settings, BankSettings) else settings
@@ -252,7 +279,7 @@ def train_banks(
                 f"an initial bank has {len(bank.lrgf)} networks for {len(in_idx)} relations"
             )
     jobs = [
-        _RelationJob(
+        RelationJob(
             per_relation[j],
             [y[:, in_idx[j]] for y in records],
             [y[:, [out_idx[j]]] for y in records],
@@ -263,7 +290,19 @@ def train_banks(
         for records, start in zip(sets, inits, strict=True)
         for j in range(len(in_idx))
     ]
-    results = run_jobs(_run_relation, jobs, n_jobs, cost=lambda job: job.cost)
+    plan = active_plan()
+    if plan is None:
+        results = run_jobs(_run_relation, jobs, n_jobs, cost=lambda job: job.cost)
+    else:
+        keys = [job.key for job in jobs]
+        missing = {
+            k: replace(job, cache_dir=None)
+            for k, job in zip(keys, jobs, strict=True)
+            if k not in plan
+        }
+        if missing:
+            raise RelationsNeeded(missing)
+        results = [plan[k] for k in keys]
     k = len(in_idx)
     banks = []
     for b in range(len(sets)):

@@ -181,6 +181,29 @@ class RelationCache:
             raise invalid("key", key, "64 lower-case hex digits (a job_key)")
         return self.root / key[:2] / f"{key}.npz"
 
+    def get(self, key: str) -> tuple[Any, ...] | None:
+        """The sound entry of ``key``, or ``None`` (missing, or not trusted: a warning names the
+        file). No lock: for a scheduler that trains the missing jobs itself
+        (:mod:`evaluation.sweep.training_stage`)."""
+        target = self.path(key)
+        try:
+            _confined_shard(self.root, target.parent)
+        except OSError as e:
+            logger.warning("relation cache: %s; not read", _reason(e))
+            return None
+        return _fetch(target, key)
+
+    def put(self, key: str, result: tuple[Any, ...]) -> None:
+        """Store ``result`` as the entry of ``key`` (atomically; a result that is not finite,
+        or a write that fails, is left out with a warning)."""
+        target = self.path(key)
+        try:
+            _confined_shard(self.root, target.parent)
+        except OSError as e:
+            logger.warning("relation cache: %s; not cached", _reason(e))
+            return
+        _store(target, key, result)
+
     def fetch_or_train(self, key: str, train: Callable[[], tuple[Any, ...]]) -> tuple[Any, ...]:
         """The cached result of ``key``, or ``train()``'s, stored under ``key`` (atomically,
         under the key's lock, so that a concurrent process waits for it).

@@ -113,11 +113,13 @@ def required_channels(name: str) -> frozenset[str]:
 
 
 def read_channels(diagnoser: Any) -> frozenset[str]:
-    """The channels ``diagnoser`` reads by name: its relations' (the LRGF family, also behind
-    an isolator's ``detector_name``), an ARX relation's output and inputs; empty when it takes
-    whatever channels it is given."""
+    """The channels ``diagnoser`` reads by name: its class's ``REQUIRED_CHANNELS`` (a model's
+    measurement map), its relations' (the LRGF family, also behind an isolator's
+    ``detector_name``), an ARX relation's output and inputs; empty when it takes whatever
+    channels it is given."""
     params = diagnoser.get_params(deep=False)
-    need: set[str] = set()
+    # a model-based diagnoser declares the channels its model reads (ukf-glr: Table 1)
+    need: set[str] = set(getattr(type(diagnoser), "REQUIRED_CHANNELS", ()))
     if "relations" in params:
         rel = params["relations"] or getattr(type(diagnoser), "DEFAULT_RELATIONS", None)
         for output, inputs in parse_relations(rel) if rel else []:

@@ -14,10 +14,17 @@ The rooms:
                        around the model's transition and measurement
 ``ukf_linear``         the same algebra on a linear-Gaussian model: the exact Kalman filter's
                        oracle
+``parameter_fit``      the model fitted to healthy records: the noise scale, parameters by the
+                       augmented filter or by maximum likelihood of the innovations
+``model_directions``   each fault's innovation direction from the fitted model's own
+                       simulations (noise twins), never from fault data
+``ukf_glr``            ``ukf-glr``, the grey-box detector: the fitted filter, a GLR per fault
+                       direction and a variance CUSUM on its whitened innovations
 =====================  ===========================================================================
 """
 
 from diagnosers.filters.state_estimator import FCCStateEstimator, FilterResult, FilterStep
 from diagnosers.filters.ukf_config import UKFConfig
+from diagnosers.filters.ukf_glr import UKFGLR
 
-__all__ = ["FCCStateEstimator", "FilterResult", "FilterStep", "UKFConfig"]
+__all__ = ["UKFGLR", "FCCStateEstimator", "FilterResult", "FilterStep", "UKFConfig"]

@@ -31,6 +31,7 @@ from typing import Any, ClassVar
 import numpy as np
 from scipy import stats
 
+from diagnosers.contract import Tier
 from diagnosers.detection import NO_DIAGNOSIS, UNKNOWN, Decision, Detection
 from diagnosers.diagnoser import Diagnoser
 from diagnosers.episode.record import Episode
@@ -86,6 +87,7 @@ class MMAE(Diagnoser):
     """
 
     isolates: ClassVar[bool] = True
+    tier: ClassVar[Tier] = Tier.GREY_BOX
     #: its classes are the registry's faults, each modelled by its parameters: labels that are
     #: not registered faults (synthetic test data) mean nothing to it
     physical_classes: ClassVar[bool] = True

@@ -188,9 +188,9 @@ class BankDetector(Diagnoser):
             folds) at once (:mod:`diagnosers.bank.parallel`), an integer ≥ 1 or ``None`` (default,
             meaning 1, as in scikit-learn). Each relation trains with its own seed and one
             thread, so the models are the same bits for every ``n_jobs``. The default is 1
-            because the leaderboard's sweep already trains diagnosers in parallel worker
-            processes (:func:`evaluation.sweep.tasks.training_jobs` gives the cores to the
-            banks it trains); ``python -m bench.detector_speed --bank`` uses 2.
+            because the leaderboard's sweep runs every relation job as a task of its own
+            pool (:mod:`evaluation.sweep.training_stage`; ``n_jobs`` is not used there);
+            ``python -m bench.detector_speed --bank`` uses 2.
 
     ``progress`` and ``n_jobs`` say how to compute, never what
     (:attr:`~diagnosers.contract.DiagnoserContract.execution_params`): the result store's

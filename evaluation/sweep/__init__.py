@@ -8,6 +8,7 @@ The rooms:
 ``runner``             the sweep itself: :func:`run_sweep`, training every diagnoser once and
                        scoring every cell
 ``tasks``              the tasks a worker runs: train one diagnoser, score one episode
+``training_stage``     the training stage: every diagnoser and every relation of its banks a task
 ``sources``            where episodes come from: :class:`SimulatedData`, the :class:`DataSource`
                        protocol, :class:`LoadedEpisode`
 ``external_data``      recorded CSV/Parquet datasets as a data source (:class:`ExternalData`)

@@ -1,8 +1,9 @@
 """Execution backends of a sweep: local processes (default), Ray, or this process.
 
 ``"local"`` runs tasks in a :class:`~concurrent.futures.ProcessPoolExecutor` with the ``spawn``
-start method (numba and torch thread pools do not survive ``fork`` reliably); each worker limits
-numba and torch to one thread, since parallelism comes from the processes. ``"ray"`` runs the
+start method (numba and torch thread pools do not survive ``fork`` reliably), one worker per
+core by default; each worker limits numba, torch and BLAS to one thread, since parallelism comes
+from the processes (:mod:`fcc_common.workers`). ``"ray"`` runs the
 same task functions as Ray tasks (``ray.init(address=...)`` when an address is given, else a
 local instance with one CPU per worker). ``n_workers=0`` runs every task in the calling process
 (:class:`SerialBackend`), for debugging and fast tests. Results always travel back to the driver,
@@ -20,7 +21,7 @@ from pathlib import Path
 from typing import Any, Protocol
 
 # the worker set-up is shared with diagnosers.bank.parallel (fcc_common.workers)
-from fcc_common.workers import cpu_count, init_worker, spawn_context
+from fcc_common.workers import THREAD_ENV_VARS, cpu_count, init_worker, spawn_context
 
 #: Execution backends accepted by :func:`evaluation.sweep.run_sweep`.
 BACKENDS: tuple[str, ...] = ("local", "ray")
@@ -70,7 +71,8 @@ def ray_runtime_env() -> dict[str, Any]:
     """Runtime environment that lets local Ray workers import this repository's packages."""
     root = str(Path(__file__).resolve().parents[1])
     path = os.pathsep.join([root, *filter(None, [os.environ.get("PYTHONPATH", "")])])
-    return {"env_vars": {"PYTHONPATH": path, "OMP_NUM_THREADS": "1"}}
+    # one thread per task for the native libraries a worker loads (see fcc_common.workers)
+    return {"env_vars": {"PYTHONPATH": path, **dict.fromkeys(THREAD_ENV_VARS, "1")}}
 
 
 def start_watchdog() -> subprocess.Popen[bytes] | None:
@@ -103,9 +105,22 @@ def stop_watchdog(proc: subprocess.Popen[bytes]) -> None:
 
 
 class RayBackend:
+    """Ray tasks of one CPU each, at most ``max_in_flight`` at once (``None``: as many as the
+    cluster takes). The cap is how ``n_workers`` applies to a cluster that has more CPUs than
+    the sweep should use (the scaling benchmark's 1, 2, 4... workers on one cluster): tasks
+    beyond it wait here and start, in submission order, as others finish."""
+
     passes_paths = False
 
-    def __init__(self, n_workers: int, address: str | None) -> None:
+    class _Task:
+        """A submitted task (hashable by identity); ``ref`` once it runs on Ray."""
+
+        def __init__(self, fn: Any, args: tuple) -> None:
+            self.fn, self.args, self.ref = fn, args, None
+
+    def __init__(
+        self, n_workers: int, address: str | None, max_in_flight: int | None = None
+    ) -> None:
         try:
             import ray
         except ImportError as e:
@@ -128,23 +143,55 @@ class RayBackend:
                 )
             self._owned = True
         self._remote: dict[Callable[..., Any], Any] = {}
+        self._limit = max_in_flight
+        self._queue: list[RayBackend._Task] = []  # submitted, waiting for a free slot
+        self._running: dict[Any, RayBackend._Task] = {}  # ref -> task
+        self._done: dict[RayBackend._Task, Any] = {}  # finished, not yet collected
 
     def put(self, obj: Any) -> Any:
         return self._ray.put(obj)
 
-    def submit(self, fn: Callable[..., Any], *args: Any) -> Any:
-        if fn not in self._remote:
-            self._remote[fn] = self._ray.remote(num_cpus=1)(fn)
-        return self._remote[fn].remote(*args)
+    def submit(self, fn: Callable[..., Any], *args: Any) -> RayBackend._Task:
+        task = self._Task(fn, args)
+        self._queue.append(task)
+        self._start_queued()
+        return task
+
+    def _start_queued(self) -> None:
+        while self._queue and (self._limit is None or len(self._running) < self._limit):
+            task = self._queue.pop(0)
+            if task.fn not in self._remote:
+                self._remote[task.fn] = self._ray.remote(num_cpus=1)(task.fn)
+            task.ref = self._remote[task.fn].remote(*task.args)
+            self._running[task.ref] = task
 
     def completed(self, handles: list[Any]) -> Iterator[tuple[Any, Any]]:
-        pending = list(handles)
+        pending = set(handles)
         while pending:
-            done, pending = self._ray.wait(pending, num_returns=1)
-            for ref in done:
-                yield ref, self._ray.get(ref)
+            ready = [h for h in pending if h in self._done]
+            if not ready:
+                if not self._running:
+                    raise RuntimeError("waiting for Ray tasks that were never submitted")
+                done, _ = self._ray.wait(list(self._running), num_returns=1)
+                for ref in done:
+                    task = self._running.pop(ref)
+                    try:
+                        self._done[task] = (True, self._ray.get(ref))
+                    except Exception as e:  # raised when its turn to be collected comes
+                        self._done[task] = (False, e)
+                self._start_queued()
+                continue
+            for h in ready:
+                pending.discard(h)
+                ok, value = self._done.pop(h)
+                if not ok:
+                    raise value
+                yield h, value
 
     def close(self, cancel: bool) -> None:
+        for ref in list(self._running) if cancel else ():
+            self._ray.cancel(ref)
+        self._queue.clear()
         if self._owned:
             self._ray.shutdown()
         if self._watchdog is not None:  # Ray cleaned up: tell the watchdog so, and let it go
@@ -185,10 +232,12 @@ def make_backend(
     backend: str, n_workers: int | None, n_tasks: int, ray_address: str | None = None
 ) -> Backend:
     """The backend that runs ``n_tasks`` tasks: ``n_workers=0`` runs them in this process;
-    otherwise ``n_workers`` (default: all cores) capped at the number of tasks."""
+    otherwise ``n_workers`` (default: all cores) capped at the number of tasks. On a Ray cluster
+    (``ray_address``, or Ray already initialised) ``n_workers`` caps the tasks running at once,
+    and its default is the whole cluster."""
     if n_workers == 0:
         return SerialBackend()
     workers = min(n_workers or cpu_count(), max(n_tasks, 1))
     if backend == "local":
         return LocalBackend(workers)
-    return RayBackend(workers, ray_address)
+    return RayBackend(workers, ray_address, max_in_flight=None if n_workers is None else workers)

@@ -6,8 +6,9 @@ start-up time ``t_on``. :func:`run_sweep` does three things, keeping recording, 
 presentation apart:
 
 1. **Train** every diagnoser once per sweep on the healthy training episodes (one parallel task per
-   diagnoser). The fitted diagnoser is stored with :meth:`Diagnoser.save` under the store's
-   ``models/<label>`` directory, so workers load it and a resumed sweep reuses it.
+   diagnoser, and one per relation of its banks: :mod:`evaluation.sweep.training_stage`). The
+   fitted diagnoser is stored with :meth:`Diagnoser.save` under the store's ``models/<label>``
+   directory, so workers load it and a resumed sweep reuses it.
 2. **Score** every test episode: one parallel task per ``(scenario, seed)`` episode runs every
    diagnoser whose cell is missing on it. One task per episode, not per cell, because simulating
    the episode costs far more than a baseline's ``detect`` (≈ 45 ms versus < 1 ms for 4000
@@ -43,7 +44,8 @@ from evaluation.sweep.records import (
 )
 from evaluation.sweep.sources import LoadedEpisode
 from evaluation.sweep.store import ResultStore
-from evaluation.sweep.tasks import EpisodeTask, dir_files, episode_task, train_task, training_jobs
+from evaluation.sweep.tasks import EpisodeTask, dir_files, episode_task
+from evaluation.sweep.training_stage import train_all
 from fcc_common.workers import cpu_count
 
 __all__ = ["detect_episode", "load_cell", "run_sweep"]
@@ -142,14 +144,15 @@ def run_sweep(
     )
 
     if to_train or missing:
-        runner = make_backend(backend, n_workers, max(len(to_train), len(missing)), ray_address)
-        # worker processes of the trainings' own on this machine's cores (local backend only:
-        # a Ray task holds one CPU of a node)
-        cores = (n_workers or cpu_count()) if backend == "local" and n_workers != 0 else 1
+        # a training may add relation tasks, unknown before it runs: then no cap below the
+        # workers (a local pool starts its workers on demand)
+        n_tasks = max(len(to_train), len(missing), (n_workers or cpu_count()) if to_train else 0)
+        runner = make_backend(backend, n_workers, n_tasks, ray_address)
         cancel = True
         try:
             cache = None if relation_cache is None else str(relation_cache)
-            _train_all(runner, store, config, to_train, mhash, progress, cores, cache)
+            with _progress_bar(len(to_train), "training", progress) as bar:
+                train_all(runner, store, config, to_train, mhash, cache, bar)
             _score_all(runner, store, config, missing, mhash, chash, n_missing, progress)
             cancel = False
         finally:
@@ -186,39 +189,6 @@ def _cell_result(
 
 def _progress_bar(total: int, desc: str, enabled: bool) -> Any:
     return tqdm(total=total, desc=desc, unit="cell", disable=not enabled or total == 0, leave=False)
-
-
-def _train_all(
-    runner: Backend,
-    store: ResultStore,
-    config: SweepConfig,
-    to_train: list[DiagnoserSpec],
-    mhash: Mapping[str, str],
-    progress: bool,
-    cores: int = 1,
-    relation_cache: str | None = None,
-) -> None:
-    if not to_train:
-        return
-    jobs = training_jobs(to_train, cores) if cores > 1 else {}
-    handles = {
-        runner.submit(
-            train_task, s, config.data, config.imports, jobs.get(s.key), relation_cache
-        ): s
-        for s in to_train
-    }
-    with _progress_bar(len(to_train), "training", progress) as bar:
-        it = runner.completed(list(handles))
-        while True:
-            try:
-                handle, (files, info) = next(it)
-            except StopIteration:
-                break
-            except Exception as e:  # a worker's exception, re-raised with the cell's name
-                raise RuntimeError(f"training failed: {type(e).__name__}: {e}") from e
-            spec = handles[handle]
-            store.write_model(spec.key, mhash[spec.key], files, {**spec.to_json(), **info})
-            bar.update(1)
 
 
 def _score_all(

@@ -10,15 +10,15 @@ from __future__ import annotations
 import dataclasses
 import tempfile
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
-from diagnosers.bank.relation_cache import shared_relations
+from diagnosers.bank.relation_plan import RelationsNeeded, planned_relations
 from diagnosers.diagnoser import Diagnoser
 from diagnosers.episode.record import Episode
-from diagnosers.registry import diagnoser_class, import_modules
+from diagnosers.registry import import_modules
 from evaluation.sweep.config import DiagnoserSpec
 from evaluation.sweep.records import (
     detect_and_score,
@@ -29,12 +29,12 @@ from fcc_common.workers import limit_threads
 
 __all__ = [
     "EpisodeTask",
+    "TrainOutcome",
     "dir_files",
     "episode_task",
     "load_model",
     "train_task",
     "training_episodes",
-    "training_jobs",
 ]
 
 _MODEL_CACHE: dict[str, Diagnoser] = {}
@@ -74,37 +74,33 @@ def load_model(model_hash: str, source: str | Mapping[str, bytes]) -> Diagnoser:
     return diag
 
 
-def training_jobs(to_train: Sequence[DiagnoserSpec], cores: int) -> dict[str, int]:
-    """``n_jobs`` for each diagnoser of ``to_train`` that has the parameter and leaves it unset.
+class TrainOutcome(NamedTuple):
+    """What a training task returns: the model (``files``, ``info``), or the relation jobs its
+    banks need first (``needed``: job key → :class:`~diagnosers.bank.parallel.RelationJob`,
+    then ``files`` and ``info`` are empty)."""
 
-    The cores are shared among those trainings (the ones with worker processes of their own, the
-    long ones): a bank that trains alone gets them all, and several never get more than the
-    cores between them. Baselines train in seconds beside them. ``n_jobs`` is an execution
-    parameter: it changes no model hash.
-    """
-    own = [
-        s.key
-        for s in to_train
-        if "n_jobs" in diagnoser_class(s.name).param_names() and s.params.get("n_jobs") is None
-    ]
-    return {key: max(1, cores // len(own)) for key in own}
+    files: dict[str, bytes]
+    info: dict[str, Any]
+    needed: dict[str, Any]
 
 
 def train_task(
     spec: DiagnoserSpec,
     data: DataSource,
     imports: tuple[str, ...] = (),
-    n_jobs: int | None = None,
-    relation_cache: str | None = None,
+    relations: Mapping[str, Any] | None = None,
     _serial: bool = False,
-) -> tuple[dict[str, bytes], dict[str, Any]]:
-    """Fit one diagnoser on the healthy training episodes; return its saved files and facts.
+) -> TrainOutcome:
+    """Fit one diagnoser on the healthy training episodes; return its saved files and facts, or
+    the relations its banks still need.
 
     A diagnoser that isolates or learns from faults also gets the labelled training faults
-    (:func:`training_episodes`). ``n_jobs``: set on the diagnoser (see :func:`training_jobs`)
-    unless ``None``.
-    ``relation_cache``: a directory of trained relations shared with the other trainings
-    (:mod:`diagnosers.bank.relation_cache`), or ``None``.
+    (:func:`training_episodes`). Its banks train nothing here
+    (:func:`diagnosers.bank.relation_plan.planned_relations`): their relation jobs come from
+    ``relations`` (job key → trained relation), and when some are missing the task returns
+    them in :attr:`TrainOutcome.needed` for the scheduler
+    (:mod:`evaluation.sweep.training_stage`) to train as tasks of their own, and is run again
+    with them.
     """
     if not _serial:
         limit_threads()
@@ -112,11 +108,11 @@ def train_task(
     t0 = time.perf_counter()
     diag = spec.build()
     episodes = training_episodes(diag, data, spec.key)
-    if n_jobs is not None:
-        diag.set_params(n_jobs=n_jobs)
     try:
-        with shared_relations(relation_cache):
+        with planned_relations(relations or {}):
             diag.fit(episodes)
+    except RelationsNeeded as need:
+        return TrainOutcome({}, {}, need.jobs)
     except Exception as e:
         raise RuntimeError(f"training {spec.key}: {type(e).__name__}: {e}") from e
     wall = time.perf_counter() - t0
@@ -128,7 +124,7 @@ def train_task(
         "n_train_episodes": len(episodes),
         "n_train_samples": int(sum(ep.n_samples for ep in episodes)),
     }
-    return files, info
+    return TrainOutcome(files, info, {})
 
 
 def training_episodes(diag: Diagnoser, data: DataSource, key: str) -> list[Episode]:

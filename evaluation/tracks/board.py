@@ -15,7 +15,8 @@ track of :mod:`evaluation.tracks`, a sweep of the chosen diagnosers over the tra
   r_fd with its 95 % bootstrap interval over healthy episodes, the share of healthy episodes
   with any alarm and the worst one; per fault r_td and t_dt with intervals, the ratio
   ``(t_dt + 1) / (oracle t_dt + 1)`` with its paired interval, misses and early terminations;
-  ranks per fault on r_td that mark ties when intervals overlap;
+  ranks per fault on r_td within each tier (black box, grey box: what a detector may know of
+  the plant, :class:`diagnosers.Tier`) that mark ties when intervals overlap;
 * ``results.csv`` / ``results.json`` — every per-seed record (the oracle's too);
 * ``figures/`` — as the classic leaderboard.
 
@@ -37,7 +38,7 @@ from pathlib import Path
 from typing import Any
 
 from diagnosers.bank.relations import read_channels, required_channels
-from diagnosers.registry import import_modules, make
+from diagnosers.registry import diagnoser_class, import_modules, make
 from evaluation.reports.outputs import figure_cells, write_figures
 from evaluation.sweep.config import DiagnoserSpec, SweepConfig, default_specs
 from evaluation.sweep.runner import run_sweep
@@ -129,7 +130,8 @@ def run_track(
     if model_cache is not None:
         _models_to_cache(config, store, model_cache)
     records = (*results.records, *reference_records(data, DEFAULT_REFERENCES))
-    rows = track_rows(records, [s.key for s in config.diagnosers], track.faults)
+    tiers = {s.key: str(diagnoser_class(s.name).tier) for s in config.diagnosers}
+    rows = track_rows(records, [s.key for s in config.diagnosers], track.faults, tiers)
     if figures:
         write_figures(results, out / "figures")
     return TrackRun(

@@ -66,8 +66,10 @@ def _label(row: TrackRow) -> str:
 
 def _marks_text() -> str:
     return (
-        f"Ranks ((rank), '=' where intervals overlap) range over the registered detectors whose "
-        f"r_fd's upper 95 % end is at most {GOAL_R_FD:g}; reference rows and detectors over "
+        f"Ranks ((rank), '=' where intervals overlap) range over the registered detectors of one "
+        "tier (black box: the records alone; grey box: also the published model, never the "
+        f"scored plant's parameters) whose r_fd's upper 95 % end is at most {GOAL_R_FD:g}; "
+        "reference rows and detectors over "
         f"that goal show '–'. {OVER_GOAL}: r_fd's upper 95 % end above {GOAL_R_FD:g} on the test "
         "episodes (a detector: unranked; a reference row: no detector is scored against it)."
     )
@@ -137,7 +139,7 @@ def track_table(run: TrackRun) -> str:
     """The compact Markdown table of a track (printed): r_fd with its interval, per fault
     r_td / t_dt / delay (rank) and t_dt/optimal; header sentences, legend, the reference line."""
     faults = run.track.faults
-    head = ["diagnoser", "r_fd [95 % CI]"]
+    head = ["diagnoser", "tier", "r_fd [95 % CI]"]
     for f in faults:
         head += [f"{f} r_td / t_dt / delay (rank)", f"{f} t_dt/optimal"]
     dt = run.records[0].sample_time_s if run.records else None
@@ -157,7 +159,7 @@ def track_table(run: TrackRun) -> str:
         "|" + "---|" * len(head),
     ]
     for row in run.rows:
-        cells = [_label(row), _ci(row.r_fd, 4)]
+        cells = [_label(row), row.tier, _ci(row.r_fd, 4)]
         for f in faults:
             c = row.faults[f]
             cells += [
@@ -173,7 +175,7 @@ def track_wide_table(run: TrackRun) -> str:
     """The wide Markdown table of a track (every column with its interval; legend, reference
     line)."""
     faults = run.track.faults
-    head = ["diagnoser", "r_fd [95 % CI]", "healthy eps. alarmed", "worst r_fd (seed)"]
+    head = ["diagnoser", "tier", "r_fd [95 % CI]", "healthy eps. alarmed", "worst r_fd (seed)"]
     for f in faults:
         head += [f"{f} r_td (rank)", f"{f} t_dt", f"{f} delay", f"{f} t_dt/oracle"]
         head += [f"{f} t_dt/optimal", f"{f} t_dt/filter", f"{f} missed/ended"]
@@ -188,6 +190,7 @@ def track_wide_table(run: TrackRun) -> str:
     for row in run.rows:
         cells = [
             _label(row),
+            row.tier,
             _ci(row.r_fd, 4),
             f"{row.alarmed_share:.2f}",
             f"{row.worst_r_fd:.4f} ({row.worst_seed})",
@@ -214,6 +217,7 @@ def _flat(row: TrackRow, track: str, run: TrackRun) -> dict[str, Any]:
     d: dict[str, Any] = {
         "track": track,
         "diagnoser": row.label,
+        "tier": row.tier,
         "reference": row.reference,
         "r_fd_meets_goal": row.meets_r_fd_goal,
         "limit_reference": limit.label if limit else "",
@@ -369,6 +373,7 @@ def summary_table(runs: Sequence[TrackRun]) -> tuple[str, list[dict[str, Any]]]:
                 {
                     "track": run.track.name,
                     "diagnoser": row.label,
+                    "tier": row.tier,
                     "r_fd": row.r_fd.estimate,
                     "r_fd_low": row.r_fd.low,
                     "r_fd_high": row.r_fd.high,

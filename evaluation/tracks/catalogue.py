@@ -86,6 +86,17 @@ _TRACK_LIST = (
         plant_variation=True,
     ),
     Track(
+        name="mismatch",
+        description=(
+            "Paper faults on the declared plant with undeclared effects drawn per episode, "
+            "training and test alike: extra heat losses of up to 0.3 kW/K per vessel, a 30-90 s "
+            "lag on one thermocouple, catalyst deactivation of up to 2 % a day "
+            "(fcc_env.uncertainty.PlantMismatch). Tests what a real unit does to a model-based "
+            "detector: it never matches its model, and no detector is told how."
+        ),
+        plant_mismatch=True,
+    ),
+    Track(
         name="random",
         description=(
             "Per faulty episode, fault type, size (uniform in 0.3-1.3 x paper), onset (uniform "

@@ -16,15 +16,16 @@ The statistic, on the filter's whitened innovations e_t (standard normal and whi
 plant is healthy, ``lab/filter-lab.md``):
 
 1. per fault g and signature window, a window-limited GLR over the fault's size along its
-   innovation signature d_g (:func:`evaluation.tracks.optimal.window_glr` with a_t = d_gᵀe_t, b_t = |d_g|²): the
-   fault's size and onset unknown, its direction known;
+   innovation signature d_g: the fault's size and onset unknown, its direction known;
 2. an omnibus for any other departure: Page's CUSUM of the log-likelihood ratio of a doubled
-   innovation variance, ``NIS_t / 4 − 4 ln 2`` per sample (8 channels), which a mean shift of
-   any direction also drives up (its NIS grows by the shift's square);
-3. one alarm when any statistic passes its limit. The limits share one tail: each statistic's
-   limit is its healthy ``1 − p`` quantile, with ``p`` chosen (bisection) so that the *union*
-   alarms on :data:`~evaluation.tracks.oracle.REFERENCE_TARGET` of the healthy calibration
-   samples (the track's validation seeds), so no statistic's scale buys it the false alarms.
+   innovation variance, ``NIS_t / 4 − 4 ln 2`` per sample (8 channels);
+3. one alarm when any statistic passes its limit, the limits on one shared tail, the *union*
+   at :data:`~evaluation.tracks.oracle.REFERENCE_TARGET` of the healthy calibration samples
+   (the track's validation seeds).
+
+The three are :class:`diagnosers.stages.innovation_stage.InnovationStage`, the stage of the
+grey-box detector ``ukf-glr`` too: the row differs from that detector in its model (the
+plant's exact parameters and noise) and in where its directions come from (below).
 
 Decision, the signatures: *learned from the track's labelled training faults*
 (:meth:`TrackData.train_fault_episodes`, training seeds only, the track's size and onset
@@ -41,7 +42,6 @@ the reachable bound *of a directional test on these innovations*, not of every t
 
 from __future__ import annotations
 
-import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -49,8 +49,9 @@ import numpy as np
 from diagnosers.detection import Detection
 from diagnosers.episode.record import Episode
 from diagnosers.filters import FCCStateEstimator, UKFConfig
+from diagnosers.stages.innovation_stage import OMNIBUS_VARIANCE, InnovationStage
 from evaluation.sweep.store import canonical_hash
-from evaluation.tracks.optimal import GLR_WINDOW, cusum, window_glr
+from evaluation.tracks.optimal import GLR_WINDOW
 from evaluation.tracks.track_data import TrackData
 from fcc_common.validation import Integer, Real, check
 from fcc_env.params import MEASUREMENT_NAMES, FCCParams
@@ -58,11 +59,9 @@ from fcc_env.scenarios import FaultSpec
 
 __all__ = [
     "FILTER_LABEL",
-    "OMNIBUS_VARIANCE",
     "SIGNATURE_SEEDS",
     "SIGNATURE_WINDOWS",
     "FilterBound",
-    "union_limits",
 ]
 
 #: The row's label in tables.
@@ -73,33 +72,11 @@ SIGNATURE_WINDOWS = (30, 300)
 #: Training fault seeds per fault the signatures are averaged over (the first of the track's):
 #: a difference to the twin is nearly noise-free, so a few suffice, and each costs a filter run.
 SIGNATURE_SEEDS = 5
-#: The omnibus CUSUM's alternative: the innovations' variance times this.
-OMNIBUS_VARIANCE = 2.0
 
 
 #: Fits of this process by :meth:`FilterBound._fit_key`: a track's row is fitted once however
 #: often its table is built (each fit filters about 125 episodes).
 _FITTED: dict[str, tuple[np.ndarray, np.ndarray]] = {}
-
-
-def union_limits(stats: np.ndarray, target: float, *, iterations: int = 40) -> np.ndarray:
-    """Limits ``(k,)`` of ``k`` statistics ``stats`` ``(N, k)`` (healthy samples): each its
-    ``1 − p`` quantile, ``p`` the largest (bisection) with at most ``target`` of the samples
-    over any limit.
-
-    >>> z = np.random.default_rng(0).normal(size=(10_000, 3))
-    >>> h = union_limits(z, 0.01)
-    >>> bool(abs(float(np.mean((z > h).any(axis=1))) - 0.01) < 0.002)
-    True
-    """
-    target = check("target", target, Real(0.0, 1.0, closed="neither"))
-    stats = np.asarray(stats, dtype=np.float64)
-    lo, hi = target / stats.shape[1], target  # the union's share lies in [p, k·p]
-    for _ in range(iterations):
-        p = 0.5 * (lo + hi)
-        share = np.mean((stats > np.quantile(stats, 1.0 - p, axis=0)).any(axis=1))
-        lo, hi = (p, hi) if share <= target else (lo, p)
-    return np.quantile(stats, 1.0 - lo, axis=0)
 
 
 class FilterBound:
@@ -194,19 +171,17 @@ class FilterBound:
         norm = np.linalg.norm(out, axis=1, keepdims=True)
         return np.divide(out, norm, out=np.zeros_like(out), where=norm > 0)
 
+    def _stage(self) -> InnovationStage:
+        return InnovationStage(
+            self.directions_, window=self.window, omnibus_variance=OMNIBUS_VARIANCE
+        )
+
     def statistics(self, episode: Episode) -> tuple[np.ndarray, np.ndarray]:
-        """(the statistics ``(T, n_faults + 1)``: the GLR per fault, the omnibus last; the
-        matched innovations ``(T, n_faults)`` d_gᵀe_t)."""
+        """(the statistics ``(T, n_faults · n_windows + 1)``: the GLR per fault and window, the
+        omnibus last; the matched innovations d_gᵀe_t and the NIS, the same shape)."""
         e = self.whitened(episode)
-        e = np.where(np.isfinite(e), e, 0.0)  # a skipped sample carries no evidence
-        a = e @ self.directions_.T
-        b = np.ones(e.shape[0])
-        glr = [window_glr(a[:, i], b, self.window) for i in range(a.shape[1])]
-        nis = np.sum(e**2, axis=1)
-        v, half_n = OMNIBUS_VARIANCE, 0.5 * e.shape[1]
-        step = 0.5 * (1.0 - 1.0 / v) * nis - half_n * math.log(v)
-        omnibus = cusum(step[:, None])[:, 0]
-        return np.stack([*glr, omnibus], axis=1), a
+        stage = self._stage()
+        return stage.statistics(e), stage.matched(e)
 
     def fit(self, healthy: Sequence[Episode]) -> FilterBound:
         """Learn the signatures (training faults) and set the limits on ``healthy``
@@ -218,8 +193,8 @@ class FilterBound:
             self.directions_, self.limits_ = _FITTED[key]
             return self
         self.directions_ = self._learn_signatures()
-        stats = np.concatenate([self.statistics(ep)[0] for ep in healthy])
-        self.limits_ = union_limits(stats, self.false_alarm_target)
+        stage = self._stage().fit([self.whitened(ep) for ep in healthy], self.false_alarm_target)
+        self.limits_ = stage.limits_
         _FITTED[key] = (self.directions_, self.limits_)
         return self
 

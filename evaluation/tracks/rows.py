@@ -8,7 +8,9 @@ reference rows); a :class:`TrackRun` holds a finished track run. Presentation is
 Matched false-alarm rates. A row *meets the r_fd goal* when the upper end of its r_fd interval on
 the test episodes is at most :data:`~evaluation.tracks.oracle.GOAL_R_FD`
 (:func:`meets_r_fd_goal`). Only registered detectors that meet it are ranked
-(:func:`rank_rows`); reference rows are never ranked. A ratio is taken against a *yardstick*
+(:func:`rank_rows`), each within its tier (:class:`diagnosers.Tier`: a grey-box detector knows
+the published model, a black-box one only the records; :attr:`TrackRow.tier`); reference rows
+are never ranked. A ratio is taken against a *yardstick*
 (:func:`yardstick`): the physical-limit row for ``t_dt/oracle`` and the goal, the optimal CUSUM
 row for ``t_dt/optimal``, the optimal filter row (the reachable bound) for ``t_dt/filter``,
 or, where that row misses the goal on the test episodes, the next
@@ -19,12 +21,13 @@ when no reference row does: the ratio is then undefined).
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
+from diagnosers.contract import Tier
 from evaluation.metrics.detection_metrics import censored_delay
 from evaluation.metrics.intervals import (
     UNRANKED,
@@ -42,6 +45,7 @@ from evaluation.tracks.oracle import GOAL_R_FD, ORACLE_LABEL, REFERENCE_LABELS
 from evaluation.tracks.track import Track
 
 __all__ = [
+    "REFERENCE_TIER",
     "FaultCell",
     "TrackRow",
     "TrackRun",
@@ -54,6 +58,8 @@ __all__ = [
 ]
 
 _NO_VALUE = Interval(math.nan, math.nan, math.nan, 0)
+#: The tier column's value on a reference row (it reads the true plant: no detector's tier).
+REFERENCE_TIER = "reference"
 
 
 def is_reference(label: str) -> bool:
@@ -119,6 +125,9 @@ class TrackRow:
     worst_r_fd: float
     worst_seed: int
     faults: dict[str, FaultCell]
+    #: what the row may know of the plant: a :class:`diagnosers.Tier` value, or
+    #: :data:`REFERENCE_TIER`; ranks range within one tier
+    tier: str = Tier.BLACK_BOX.value
 
     @property
     def reference(self) -> bool:
@@ -141,6 +150,7 @@ class TrackRow:
     def to_json(self) -> dict[str, Any]:
         return {
             "label": self.label,
+            "tier": self.tier,
             "r_fd": self.r_fd.to_json(),
             "alarmed_share": self.alarmed_share,
             "worst_r_fd": self.worst_r_fd,
@@ -214,11 +224,15 @@ def _reasons(records: Sequence[CellResult]) -> tuple[tuple[str, int], ...]:
 
 
 def track_rows(
-    records: Sequence[CellResult], labels: Sequence[str], faults: Sequence[str]
+    records: Sequence[CellResult],
+    labels: Sequence[str],
+    faults: Sequence[str],
+    tiers: Mapping[str, str] | None = None,
 ) -> list[TrackRow]:
     """The rows of a track table from per-seed records (pure; intervals seeded, reproducible):
     ``labels``' rows, then the reference rows present, ratios against the yardsticks
-    (:func:`yardstick`), ranks by :func:`rank_rows`."""
+    (:func:`yardstick`), ranks by :func:`rank_rows`. ``tiers``: each label's tier (a
+    :class:`diagnosers.Tier` value; a label not in it is a black box)."""
     rows = []
     # the reference rows present in the records, in REFERENCE_LABELS order
     present = {x.diagnoser for x in records}
@@ -255,6 +269,9 @@ def track_rows(
                 worst_r_fd=w.r_fd,
                 worst_seed=w.seed,
                 faults=cells,
+                tier=REFERENCE_TIER
+                if is_reference(label)
+                else str((tiers or {}).get(label, Tier.BLACK_BOX.value)),
             )
         )
     return rank_rows(rows, faults)
@@ -273,21 +290,21 @@ def _ratio(
 
 def rank_rows(rows: Sequence[TrackRow], faults: Sequence[str]) -> list[TrackRow]:
     """``rows`` with per-fault ranks on r_td (ties where intervals overlap,
-    :func:`~evaluation.metrics.intervals.rank_with_ties`) among the registered detectors whose
-    r_fd meets the goal (:func:`meets_r_fd_goal`); reference rows and detectors over the goal
+    :func:`~evaluation.metrics.intervals.rank_with_ties`) among the registered detectors of one
+    tier whose r_fd meets the goal (:func:`meets_r_fd_goal`); reference rows and detectors over the goal
     get :data:`~evaluation.metrics.intervals.UNRANKED`: a detector that alarms more than the
     goal allows buys its detection rate with false alarms, and a reference reads what no
     detector may."""
     out = [TrackRow(**{**row.__dict__, "faults": dict(row.faults)}) for row in rows]
     ranked = [row for row in out if not row.reference and row.meets_r_fd_goal]
     for f in faults:
-        ranks = dict(
-            zip(
-                (id(row) for row in ranked),
-                rank_with_ties([row.faults[f].r_td for row in ranked], lower_is_better=False),
-                strict=True,
+        ranks: dict[int, str] = {}
+        for tier in dict.fromkeys(row.tier for row in ranked):
+            group = [row for row in ranked if row.tier == tier]
+            tier_ranks = rank_with_ties(
+                [row.faults[f].r_td for row in group], lower_is_better=False
             )
-        )
+            ranks.update(zip((id(row) for row in group), tier_ranks, strict=True))
         for row in out:
             cell = row.faults[f]
             row.faults[f] = FaultCell(**{**cell.__dict__, "rank": ranks.get(id(row), UNRANKED)})

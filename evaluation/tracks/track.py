@@ -56,7 +56,7 @@ from fcc_env.scenarios import (
     fault_definition,
     fault_names,
 )
-from fcc_env.uncertainty import PlantUncertainty
+from fcc_env.uncertainty import PlantMismatch, PlantUncertainty
 
 __all__ = [
     "MIN_HEALTHY",
@@ -127,6 +127,9 @@ class Track:
         draw_fault: the fault type of each faulty test episode is drawn per seed (``random``).
         noise_scale: multiplier on the measurement noise, for training and test alike.
         plant_variation: each episode draws its plant parameters (drawn by the env).
+        plant_mismatch: each episode's plant carries undeclared effects of the library
+            (:class:`fcc_env.uncertainty.PlantMismatch`: heat losses, a thermocouple lag,
+            catalyst deactivation), drawn by the env; not together with ``plant_variation``.
         closed_loop: the plant runs under its regulatory layer (``FCC-closedloop-v0``,
             :class:`fcc_env.RegulatoryLayer`): episodes have 11 channels (Table 1, the valve
             command, the set points). Not together with ``plant_variation`` (the closed-loop
@@ -153,6 +156,7 @@ class Track:
     draw_fault: bool = False
     noise_scale: float = 1.0
     plant_variation: bool = False
+    plant_mismatch: bool = False
     closed_loop: bool = False
     n_samples: int = DEFAULT_N_SAMPLES
     n_healthy: int = MIN_HEALTHY
@@ -195,6 +199,14 @@ class Track:
             check("noise_scale", self.noise_scale, Real(0.0, 100.0, closed="right")),
         )
         set_(self, "plant_variation", check("plant_variation", self.plant_variation, Boolean()))
+        set_(self, "plant_mismatch", check("plant_mismatch", self.plant_mismatch, Boolean()))
+        if self.plant_mismatch and (self.plant_variation or self.closed_loop):
+            raise invalid(
+                "plant_mismatch",
+                True,
+                "False with plant_variation or closed_loop",
+                "a plant draws either its parameters or undeclared effects, in open loop",
+            )
         set_(self, "draw_fault", check("draw_fault", self.draw_fault, Boolean()))
         set_(self, "closed_loop", check("closed_loop", self.closed_loop, Boolean()))
         if self.closed_loop and self.plant_variation:
@@ -280,8 +292,11 @@ class Track:
         )
 
     @property
-    def plant_draw(self) -> PlantUncertainty | None:
-        """Each episode's plant drawn by its seed (``plant_variation``), or ``None``."""
+    def plant_draw(self) -> PlantUncertainty | PlantMismatch | None:
+        """Each episode's plant drawn by its seed (``plant_variation``, ``plant_mismatch``), or
+        ``None``."""
+        if self.plant_mismatch:
+            return PlantMismatch()
         return PlantUncertainty() if self.plant_variation else None
 
     @property
@@ -391,6 +406,7 @@ class Track:
             "draw_fault": self.draw_fault,
             "noise_scale": self.noise_scale,
             "plant_variation": self.plant_variation,
+            **({"plant_mismatch": True} if self.plant_mismatch else {}),
             # only when set, so that the open-loop tracks' store keys stay as they were
             **({"closed_loop": True} if self.closed_loop else {}),
             "n_samples": self.n_samples,

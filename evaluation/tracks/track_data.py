@@ -99,6 +99,7 @@ class TrackData:
             "n_samples": t.n_samples,
             "plant": t.plant.to_json(),
             "plant_variation": t.plant_variation,
+            **({"plant_mismatch": True} if t.plant_mismatch else {}),
             "train_seeds": [t.train_seeds.start, t.train_seeds.stop],
         }
 

@@ -395,18 +395,6 @@ def test_model_hash_leaves_out_execution_parameters(name, execution, result):
     assert CONFIG.model_hash(DiagnoserSpec(name, result), "d") != default
 
 
-def test_training_jobs_share_the_cores_among_the_banks():
-    """A bank that trains alone gets every core; several share them; baselines get none."""
-    from evaluation.sweep.tasks import training_jobs
-
-    glr, mem = DiagnoserSpec("lrgf-glr"), DiagnoserSpec("lrgf-mem")
-    assert training_jobs([DiagnoserSpec("limits"), glr], 2) == {"lrgf-glr": 2}
-    assert training_jobs([glr, mem], 2) == {"lrgf-glr": 1, "lrgf-mem": 1}
-    assert training_jobs([glr, mem], 5) == {"lrgf-glr": 2, "lrgf-mem": 2}
-    # a value the user chose is left alone
-    assert training_jobs([DiagnoserSpec("lrgf-glr", {"n_jobs": 1}), mem], 4) == {"lrgf-mem": 4}
-
-
 def test_trainings_of_a_sweep_share_their_relations(tmp_path) -> None:
     from diagnosers.lrgf.lrgf_mem import LRGFMEM
 

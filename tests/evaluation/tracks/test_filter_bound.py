@@ -7,8 +7,9 @@ import dataclasses
 import numpy as np
 import pytest
 
+from diagnosers.stages.innovation_stage import union_limits
 from evaluation.tracks import TRACKS
-from evaluation.tracks.filter_bound import FILTER_LABEL, FilterBound, union_limits
+from evaluation.tracks.filter_bound import FILTER_LABEL, FilterBound
 from evaluation.tracks.optimal import CUSUM_LABEL
 from evaluation.tracks.oracle import REFERENCE_LABELS, REFERENCE_TARGET, OracleConfig
 from evaluation.tracks.track_data import TrackData

@@ -161,3 +161,12 @@ def test_the_summary_names_the_stand_in_for_a_physical_limit_over_the_goal() -> 
         f"Track paper: the physical limit's r_fd misses the goal, so the limit is `{CUSUM_LABEL}`"
         in text
     )
+
+
+def test_ranks_range_within_a_tier() -> None:
+    grey = TrackRow(**{**_row("grey", QUIET, 0.99).__dict__, "tier": "grey box"})
+    rows = rank_rows([_row("black", QUIET, 0.5), grey, _row("black2", QUIET, 0.9)], PAPER.faults)
+    by = {r.label: r.faults["f1"].rank for r in rows}
+    assert by["grey"] == "1" and by["black2"] == "1" and by["black"] == "2"
+    table = track_table(_run(*rows))
+    assert "| grey | grey box |" in table and "| black | black box |" in table

@@ -10,6 +10,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+import fcc_env
 from evaluation.tracks import (
     MIN_HEALTHY,
     RAMP_LENGTHS,
@@ -280,8 +281,8 @@ def test_parse_tracks() -> None:
     assert [t.name for t in parse_tracks(" noisy , paper, noisy")] == ["noisy", "paper"]
     assert parse_tracks("all") == tuple(TRACKS.values())
     allowed = (
-        r"one of \['closed', 'closed-random', 'incipient', 'noisy', 'paper', 'random', 'small', "
-        r"'uncertain', 'all'\]"
+        r"one of \['closed', 'closed-random', 'incipient', 'mismatch', 'noisy', 'paper', 'random', "
+        r"'small', 'uncertain', 'all'\]"
     )
     with pytest.raises(ValueError, match=rf"track='bogus' is outside the allowed range: {allowed}"):
         parse_tracks("paper,bogus")
@@ -323,3 +324,17 @@ def test_lrgf_glr_default_fault_seeds_are_the_tracks_first_training_seeds() -> N
     assert DEFAULT_FAULT_SEEDS == tuple(range(TRAIN_SEED_START, TRAIN_SEED_START + 3))
     for track in TRACKS.values():  # each has its healthy twin among the training episodes
         assert set(DEFAULT_FAULT_SEEDS) <= set(track.train_seeds) & set(track.train_fault_seeds)
+
+
+def test_a_mismatch_track_draws_undeclared_effects_on_the_declared_plant() -> None:
+    t = TRACKS["mismatch"]
+    draw = t.plant_draw.draw(5000)  # type: ignore[union-attr]
+    assert draw.params == fcc_env.FCCParams()  # nothing declared changes
+    kinds = sorted({e.kind for e in draw.effects})
+    assert kinds == ["catalyst_deactivation", "heat_loss", "sensor_lag"]
+    assert draw == t.plant_draw.draw(5000) != t.plant_draw.draw(5001)  # type: ignore[union-attr]
+    assert (
+        t.to_json()["plant_mismatch"] is True and "plant_mismatch" not in TRACKS["paper"].to_json()
+    )
+    with pytest.raises(ValueError, match="plant_mismatch"):
+        t.replace(plant_variation=True)
