@@ -76,7 +76,7 @@ def test_no_grey_box_diagnoser_reads_the_scored_plants_parameters(
     train, test, hidden = _drawn_episodes()
     cls = diagnosers.diagnoser_class(name)
     online = {"online": "always"} if "online" in cls.param_names() else {}
-    det = diagnosers.make(name, **cls.fast_params(), **online)
+    det = diagnosers.make(name, **{**cls.fast_params(), **online})
     if cls.isolates:  # an isolator also gets labelled faults, on the same drawn plants
         f2 = fcc_env.FaultSpec(scenario="f2", onset=400)
         unc = PlantUncertainty()
