@@ -13,5 +13,7 @@
 ``loop_speed``         ``python -m bench.loop_speed``: wall time of the modelling loop
 ``filter_speed``       ``python -m bench.filter_speed``: the FCC state estimator, batched and
                        streaming (and filterpy's UKF beside it, if installed)
+``bank_speed``         ``python -m bench.bank_speed``: ``mmae``'s 5-hypothesis filter bank,
+                       streaming and in one call
 =====================  ===========================================================================
 """

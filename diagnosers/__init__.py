@@ -18,7 +18,7 @@ The rooms (the contract, the registry and the presets at the top; the parts belo
 ``bank/``              a bank of relations: their models, parallel training and cache
 ``stages/``            alarm stages: filters, statistics, limits, the paper's band
 ``lrgf/``              the LRGF detectors (``lrgf-mem``, ``lrgf-glr`` and their presets)
-``isolation/``         the isolators ``lrgf-iso`` and ``lrgf-lda``
+``isolation/``         the isolators ``lrgf-iso``, ``lrgf-lda`` and ``mmae``
 ``filters/``           state estimators of the FCC model: the unscented Kalman filter's
                        innovations, state and disturbance estimates, and the grey-box
                        detector ``ukf-glr`` on them
@@ -44,7 +44,7 @@ from fcc_env import __version__  # the project's one version
 from diagnosers import (
     classical,  # noqa: F401  (registers limits, pca, arx-band)
     filters,  # noqa: F401  (registers ukf-glr)
-    isolation,  # noqa: F401  (registers lrgf-iso, lrgf-lda)
+    isolation,  # noqa: F401  (registers lrgf-iso, lrgf-lda, mmae)
     lrgf,  # noqa: F401  (registers lrgf-mem, lrgf-glr and their presets)
 )
 

@@ -116,6 +116,9 @@ class Decision:
     #: isolating diagnosers: a score per class of :attr:`Detection.class_names` (higher = fits
     #: better), ``None`` for a diagnoser that only detects
     class_scores: np.ndarray | None = None
+    #: a probabilistic diagnoser (``mmae``): the probability of each hypothesis of
+    #: :attr:`Detection.hypothesis_names` (summing to 1), ``None`` for the others
+    posterior: np.ndarray | None = None
     #: the score on a limit (:data:`SCORE_THRESHOLD`)
     threshold: ClassVar[float] = SCORE_THRESHOLD
 
@@ -133,6 +136,10 @@ class Detection:
     An isolating diagnoser also fills ``diagnosis`` (``(T,)`` str: a class of ``class_names``,
     :data:`UNKNOWN`, or ``""`` while not alarmed) and ``class_scores`` (``(T, C)``, one column
     per name of ``class_names``); a detector leaves them ``None`` and ``()``.
+
+    A probabilistic diagnoser (a bank of filters, ``mmae``) also fills ``posterior`` (``(T, H)``:
+    the probability of each hypothesis of ``hypothesis_names`` after sample k, each row summing
+    to 1; the healthy hypothesis is named ``"nominal"``); the others leave ``None`` and ``()``.
 
     :attr:`score` ``(T,)`` is the normalised score (:func:`normalised_score`, computed from
     ``signal``/``lower``/``upper``), and ``score > threshold`` (:data:`SCORE_THRESHOLD`, 1)
@@ -153,11 +160,34 @@ class Detection:
     diagnosis: np.ndarray | None = None  # (T,) str, isolating diagnosers only
     class_scores: np.ndarray | None = None  # (T, C), isolating diagnosers only
     class_names: tuple[str, ...] = ()
+    posterior: np.ndarray | None = None  # (T, H), probabilistic diagnosers only
+    hypothesis_names: tuple[str, ...] = ()
     #: the score on a limit (:data:`SCORE_THRESHOLD`): ``score > threshold`` is the raw test
     threshold: ClassVar[float] = SCORE_THRESHOLD
 
     def __post_init__(self) -> None:
         n = len(self.alarm)
+        if self.posterior is not None:
+            post = np.asarray(self.posterior, dtype=np.float64)
+            names = tuple(self.hypothesis_names)
+            if post.shape != (n, len(names)) or not names:
+                raise ValueError(
+                    f"Detection.posterior must have shape ({n}, {len(names)}) for "
+                    f"hypothesis_names {names} (at least one), got {post.shape}"
+                )
+            total = post.sum(axis=1)
+            if not (np.all(post >= 0.0) and np.allclose(total, 1.0, rtol=0.0, atol=1e-9)):
+                bad = int(np.argmax(np.abs(total - 1.0) + (post < 0).any(axis=1)))
+                raise ValueError(
+                    "Detection.posterior rows must be probabilities summing to 1; row "
+                    f"{bad} is {post[bad].tolist()}"
+                )
+            object.__setattr__(self, "posterior", post)
+            object.__setattr__(self, "hypothesis_names", names)
+        elif self.hypothesis_names:
+            raise ValueError(
+                f"Detection.hypothesis_names {self.hypothesis_names} given without a posterior"
+            )
         if self.diagnosis is not None:
             diag = np.asarray(self.diagnosis, dtype=str)
             if diag.shape != (n,):
@@ -179,6 +209,11 @@ class Detection:
         return normalised_score(self.signal, self.lower, self.upper)
 
     @property
+    def probabilistic(self) -> bool:
+        """Whether the detection carries a posterior over hypotheses per sample."""
+        return self.posterior is not None
+
+    @property
     def isolates(self) -> bool:
         """Whether the detection carries a diagnosis per sample."""
         return self.diagnosis is not None
@@ -189,9 +224,16 @@ class Detection:
         decisions: Sequence[Decision],
         signal_names: tuple[str, ...],
         class_names: tuple[str, ...] | None = None,
+        hypothesis_names: tuple[str, ...] | None = None,
     ) -> Detection:
-        """Stack per-sample decisions; with ``class_names`` also their diagnoses and scores."""
+        """Stack per-sample decisions; with ``class_names`` also their diagnoses and scores,
+        with ``hypothesis_names`` their posteriors."""
         iso: dict[str, Any] = {}
+        if hypothesis_names is not None:
+            iso["posterior"] = np.stack([d.posterior for d in decisions]).reshape(
+                len(decisions), len(hypothesis_names)
+            )
+            iso["hypothesis_names"] = tuple(hypothesis_names)
         if class_names is not None:
             scores = [d.class_scores for d in decisions]
             iso = {
@@ -222,4 +264,5 @@ class Detection:
             residual=self.residual[k],
             diagnosis=NO_DIAGNOSIS if self.diagnosis is None else str(self.diagnosis[k]),
             class_scores=None if self.class_scores is None else self.class_scores[k],
+            posterior=None if self.posterior is None else self.posterior[k],
         )

@@ -386,6 +386,7 @@ COMMAND_MODULES = (
     "bench.control_speed",
     "bench.detector_speed",
     "bench.filter_speed",
+    "bench.bank_speed",
     "bench.loop_speed",
     "bench.simulator_speed",
     "bench.sweep_speed",

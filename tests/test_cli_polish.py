@@ -32,6 +32,7 @@ COMMANDS = (
     "bench.control_speed",
     "bench.detector_speed",
     "bench.filter_speed",
+    "bench.bank_speed",
     "bench.sweep_speed",
     "bench.vector_speed",
     "bench.scaling",

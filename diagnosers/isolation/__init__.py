@@ -1,4 +1,5 @@
-"""Isolating diagnosers: any LRGF detector's alarms plus which fault it is.
+"""Isolating diagnosers: any LRGF detector's alarms plus which fault it is, or a bank of
+filters' probability of each fault.
 
 The rooms:
 
@@ -6,6 +7,10 @@ The rooms:
 ``isolating_detector``  :class:`~diagnosers.isolation.isolating_detector.IsolatingDetector`: the
                         inner detector, the alarm-relative features, the decision
 ``isolators``           the registered classifiers ``lrgf-iso`` and ``lrgf-lda``
+``filter_bank``         a bank of FCC state estimators, one per hypothesis, run as one compiled
+                        call, and their multiple-model posterior
+``mmae``                the registered ``mmae``: the bank's posterior per hypothesis, its alarm
+                        and diagnosis (isolation with probabilities, grey box)
 ======================  ==========================================================================
 
 Importing the package registers the isolators.
@@ -13,5 +18,6 @@ Importing the package registers the isolators.
 
 from diagnosers.isolation.isolating_detector import IsolatingDetector
 from diagnosers.isolation.isolators import LRGFISO, LRGFLDA
+from diagnosers.isolation.mmae import MMAE
 
-__all__ = ["LRGFISO", "LRGFLDA", "IsolatingDetector"]
+__all__ = ["LRGFISO", "LRGFLDA", "MMAE", "IsolatingDetector"]

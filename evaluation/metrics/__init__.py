@@ -5,6 +5,8 @@
                          :func:`episode_scores`
 ``isolation_metrics``    isolation indexes and the confusion matrix: :func:`t_it`, :func:`r_ti`,
                          :func:`r_fi`, :func:`cdr`, :func:`isolation_scores`
+``probability_metrics``  the calibration of a posterior over hypotheses: :func:`brier_score`,
+                         :func:`reliability_curve`, a hard decision's implied posterior
 ``intervals``            bootstrap confidence intervals, ranks with ties, ratios to a limit
 =======================  =========================================================================
 

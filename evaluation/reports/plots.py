@@ -316,3 +316,31 @@ def confusion_figure(
     path.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(path, dpi=100)
     return path
+
+
+def reliability_figure(
+    curves: Mapping[str, tuple[np.ndarray, np.ndarray, np.ndarray]], title: str, path: Path
+) -> Path:
+    """Reliability diagram: per diagnoser (label -> :func:`~evaluation.metrics.probability_metrics.reliability_curve`'s
+    mean prediction, observed frequency, count per bin), the observed frequency against the
+    mean predicted probability, with the diagonal of perfect calibration; a lower panel shows
+    how many predictions fall in each bin (log scale)."""
+    fig = Figure(figsize=(5.2, 6.0))
+    FigureCanvasAgg(fig)
+    ax, axn = fig.subplots(2, 1, height_ratios=(3, 1), sharex=True)
+    ax.plot([0, 1], [0, 1], color="0.6", linestyle=":", label="perfectly calibrated")
+    for label, (mean_p, freq, count) in curves.items():
+        keep = np.asarray(count) > 0
+        (line,) = ax.plot(np.asarray(mean_p)[keep], np.asarray(freq)[keep], marker="o", label=label)
+        edges = np.linspace(0, 1, len(count) + 1)
+        axn.stairs(np.maximum(np.asarray(count), 0.5), edges, color=line.get_color())
+    ax.set_ylabel("observed frequency of the hypothesis [–]")
+    ax.set_xlim(0, 1)
+    ax.set_ylim(0, 1)
+    ax.legend(fontsize=8, loc="upper left")
+    ax.set_title(title, fontsize=9)
+    axn.set_yscale("log")
+    axn.set_xlabel("predicted probability of a hypothesis (bin mean) [–]")
+    axn.set_ylabel("predictions [samples × hypotheses]", fontsize=7)
+    fig.tight_layout()
+    return save_png(fig, path)

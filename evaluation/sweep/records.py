@@ -206,6 +206,9 @@ def pack_detection(
         out[f"{view}_signal_names"] = np.array(det.signal_names, dtype=str)
         if det.diagnosis is not None:  # isolating diagnosers: the diagnosis per sample
             out[f"{view}_diagnosis"] = np.asarray(det.diagnosis, dtype=str)
+        if det.posterior is not None:  # probabilistic diagnosers: the posterior per sample
+            out[f"{view}_posterior"] = det.posterior
+            out[f"{view}_hypothesis_names"] = np.array(det.hypothesis_names, dtype=str)
     return out
 
 
@@ -236,6 +239,10 @@ def unpack_detection(
                 **{f: arrays[f"{view}_{f}"] for f in _DET_FIELDS},
                 signal_names=tuple(str(n) for n in arrays[f"{view}_signal_names"]),
                 diagnosis=arrays.get(f"{view}_diagnosis"),
+                posterior=arrays.get(f"{view}_posterior"),
+                hypothesis_names=tuple(
+                    str(n) for n in arrays.get(f"{view}_hypothesis_names", np.array([], str))
+                ),
             )
         )
     det, bands = views

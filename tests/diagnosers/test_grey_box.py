@@ -74,8 +74,15 @@ def test_no_grey_box_diagnoser_reads_the_scored_plants_parameters(
     name: str, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     train, test, hidden = _drawn_episodes()
-    params = {**diagnosers.diagnoser_class(name).fast_params(), "online": "always"}
-    det = diagnosers.make(name, **params)
+    cls = diagnosers.diagnoser_class(name)
+    online = {"online": "always"} if "online" in cls.param_names() else {}
+    det = diagnosers.make(name, **{**cls.fast_params(), **online})
+    if cls.isolates:  # an isolator also gets labelled faults, on the same drawn plants
+        f2 = fcc_env.FaultSpec(scenario="f2", onset=400)
+        unc = PlantUncertainty()
+        train = train + Episode.from_batch(
+            fcc_env.simulate_episodes(TRAIN, N, fault=f2, plant_uncertainty=unc)
+        )
     _guarded(monkeypatch, hidden)
     detection = _fit_and_detect(det, train, test)
     assert detection.alarm.shape == (test.n_samples,)
