@@ -139,7 +139,7 @@ def detect_and_score(
     n = ep.n_samples
     onset = ep.fault_onset  # None also when the episode ended before the planned onset
     if n > t_on:
-        scores = episode_scores(det.alarm, onset, t_on=t_on)
+        scores = episode_scores(det.alarm, onset, t_on=t_on, novelty=det.novelty)
     else:  # too short to score anything
         scores = {"r_fd": nan, "r_td": nan, "t_dt": nan}
     if loaded.fault_onset is not None and onset is None:
@@ -206,6 +206,8 @@ def pack_detection(
         out[f"{view}_signal_names"] = np.array(det.signal_names, dtype=str)
         if det.diagnosis is not None:  # isolating diagnosers: the diagnosis per sample
             out[f"{view}_diagnosis"] = np.asarray(det.diagnosis, dtype=str)
+        if det.novelty is not None:  # samples flagged outside the training range
+            out[f"{view}_novelty"] = det.novelty
     return out
 
 
@@ -236,6 +238,7 @@ def unpack_detection(
                 **{f: arrays[f"{view}_{f}"] for f in _DET_FIELDS},
                 signal_names=tuple(str(n) for n in arrays[f"{view}_signal_names"]),
                 diagnosis=arrays.get(f"{view}_diagnosis"),
+                novelty=arrays.get(f"{view}_novelty"),
             )
         )
     det, bands = views
