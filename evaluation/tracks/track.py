@@ -307,7 +307,7 @@ class Track:
     @property
     def test_plant(self) -> PlantConfig:
         """The plant of the test episodes: :attr:`plant`, its set-point program widened to
-        ``test_setpoint_halfranges`` where that is set (the same object otherwise)."""
+        ``test_setpoint_halfranges`` where that is set (equal to it otherwise)."""
         plant = self.plant
         if self.test_setpoint_halfranges is None:
             return plant

@@ -280,8 +280,8 @@ def test_parse_tracks() -> None:
     assert [t.name for t in parse_tracks(" noisy , paper, noisy")] == ["noisy", "paper"]
     assert parse_tracks("all") == tuple(TRACKS.values())
     allowed = (
-        r"one of \['closed', 'closed-random', 'incipient', 'noisy', 'paper', 'random', 'small', "
-        r"'uncertain', 'all'\]"
+        r"one of \['closed', 'closed-random', 'incipient', 'noisy', 'paper', 'random', 'regimes', "
+        r"'small', 'uncertain', 'all'\]"
     )
     with pytest.raises(ValueError, match=rf"track='bogus' is outside the allowed range: {allowed}"):
         parse_tracks("paper,bogus")
