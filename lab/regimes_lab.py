@@ -60,6 +60,16 @@ def main() -> None:
             dets = [det.detect(ep) for ep in eps]
             r_fd = [episode_scores(d.alarm, None)["r_fd"] for d in dets]
             print(f"{prog}: r_fd {_ci(r_fd)}")
+            if dets[0].novelty is not None:  # the detector's own flag
+                own = [episode_scores(d.alarm, None, novelty=d.novelty) for d in dets]
+                alarms = sum(int(d.alarm.sum()) for d in dets)
+                covered = sum(int((d.alarm & d.novel).sum()) for d in dets)
+                print(
+                    f"  own novelty: novel share {_ci([s['novelty'] for s in own])}, alarms "
+                    f"flagged novel {covered / max(alarms, 1):.3f} ({covered}/{alarms}), "
+                    f"r_fd outside novelty {_ci([s['r_fd'] for s in own])}"
+                )
+                continue
             for h, rng in ranges.items():
                 flags = [rng.flag(ep) for ep in eps]
                 alarms = sum(int(d.alarm.sum()) for d in dets)
