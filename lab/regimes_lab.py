@@ -38,6 +38,12 @@ def main() -> None:
     ap.add_argument("--n", type=int, default=60, help="healthy validation episodes per program")
     ap.add_argument("--detectors", default="limits,pca")
     ap.add_argument("--hold", default="0,300", help="OperatingRange hold values to try")
+    ap.add_argument(
+        "--fast",
+        action="store_true",
+        help="each detector at its fast_params() (small training; for a detector whose full "
+        "training does not fit the time at hand), fault-learning ones on 3 fault seeds",
+    )
     args = ap.parse_args()
     data = TrackData(track=TRACKS["regimes"])
     train = data.train_episodes()
@@ -54,7 +60,13 @@ def main() -> None:
     ranges = {h: OperatingRange(hold=h).fit(train) for h in holds}
     for name in args.detectors.split(","):
         t0 = time.process_time()
-        det = diagnosers.make(name).fit(train)
+        cls = diagnosers.diagnoser_class(name)
+        det = diagnosers.make(name, **(cls.fast_params() if args.fast else {}))
+        faults = []
+        if det.learns_from_faults or det.isolates:
+            seeds_f = list(data.track.train_fault_seeds)[: 3 if args.fast else None]
+            faults = data.train_fault_episodes(seeds_f)
+        det.fit(train + faults)
         print(f"\n## {name} (fit {time.process_time() - t0:.1f} s CPU)")
         for prog, eps in programs.items():
             dets = [det.detect(ep) for ep in eps]
