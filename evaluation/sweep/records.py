@@ -68,6 +68,9 @@ class CellResult:
     # the fault onset is assumed, not stated by the data (r_td/t_dt count from an assumption);
     # set from the data source when results are presented (:func:`mark_assumed_onsets`)
     onset_assumed: bool = False
+    # share of the fault-free window the diagnoser flagged novel (outside its training range,
+    # Detection.novelty; those samples are not in r_fd); nan when it flags no novelty at all
+    novelty: float = math.nan
 
     @property
     def faulty(self) -> bool:
@@ -169,6 +172,7 @@ def detect_and_score(
         n_alarms=int(np.count_nonzero(det.alarm)),
         sample_time_s=float(ep.sample_time_s),
         detect_wall_s=wall,
+        novelty=float(scores.get("novelty", nan)),
         **iso,
     )
     return record, det
@@ -272,6 +276,7 @@ class CellSummary:
     n_detected: int
     n_terminated: int
     onset_assumed: bool = False  # the scenario's onset is assumed, not stated by the data
+    novelty: float = float("nan")  # mean novel share (CellResult.novelty), nan when none flagged
 
     def to_json(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
@@ -315,6 +320,7 @@ def summarize(records: Sequence[CellResult]) -> list[CellSummary]:
                 n_detected=len(detected),
                 n_terminated=sum(r.terminated_at is not None for r in rs),
                 onset_assumed=any(r.onset_assumed for r in rs),
+                novelty=_mean_std([r.novelty for r in rs])[0],
             )
         )
     return out

@@ -49,3 +49,19 @@ def test_novelty_variant_keeps_the_base_alarms(name: str, base: str, tmp_path) -
     assert flags.any() and np.array_equal(got.novel, flags)
     back = diagnosers.Diagnoser.load(det.save(tmp_path / "m"))
     assert np.array_equal(back.detect(test).novel, flags)
+
+
+def test_a_scored_cell_reports_the_novel_share_beside_r_fd() -> None:
+    from evaluation.metrics.detection_metrics import novelty_rate
+    from evaluation.sweep.records import detect_and_score, summarize
+
+    data = TrackData(track=TRACKS["regimes"].replace(n_samples=1500))
+    train = data.train_episodes()[:3]
+    loaded = data.simulate([5000], FaultSpec(), test=True)[0]
+    cell, det = detect_and_score(diagnosers.make("limits-novelty").fit(train), loaded)
+    n = loaded.episode.n_samples
+    assert cell.novelty == novelty_rate(det.novel, n) > 0
+    assert cell.r_fd == np.mean(det.alarm & ~det.novel)
+    plain, _ = detect_and_score(diagnosers.make("limits").fit(train), loaded)
+    assert np.isnan(plain.novelty) and plain.r_fd == np.mean(det.alarm)
+    assert summarize([cell])[0].novelty == cell.novelty
