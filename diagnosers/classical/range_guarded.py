@@ -75,7 +75,8 @@ class LimitsNovelty(_RangeGuard, LimitChecker):
     """``limits`` that flags the samples outside its training set-point range as novel.
 
     Args:
-        alpha, channels: as :class:`~diagnosers.classical.limit_checker.LimitChecker`.
+        alpha: as :class:`~diagnosers.classical.limit_checker.LimitChecker` (default 0.01).
+        channels: as :class:`~diagnosers.classical.limit_checker.LimitChecker` (default all).
         novelty_hold: samples a novelty flag lasts after the set points return (≥ 0,
             default :data:`NOVELTY_HOLD`).
     """
@@ -107,8 +108,12 @@ class PCANovelty(_RangeGuard, PCADetector):
     """``pca`` that flags the samples outside its training set-point range as novel.
 
     Args:
-        alpha, variance_explained, n_components, channels, limits: as
-            :class:`~diagnosers.classical.pca_monitor.PCADetector`.
+        alpha: as :class:`~diagnosers.classical.pca_monitor.PCADetector`, as are the
+            following four.
+        variance_explained: components kept to this share of the variance.
+        n_components: or this many components.
+        channels: the monitored channels.
+        limits: ``"analytic"`` or ``"empirical"`` T² and SPE limits.
         novelty_hold: samples a novelty flag lasts after the set points return (≥ 0,
             default :data:`NOVELTY_HOLD`).
     """
