@@ -149,6 +149,13 @@ class Detection:
     such a detector) alarms only after ``on_delay`` raw exceedances in a row. An EWMA or
     T² stage (``lrgf-mem``'s ``alarm_filter``) filters the *signal* instead, so its alarm is
     the raw test of the filtered signal and equals ``score > 1``.
+
+    ``novelty`` ``(T,)`` bool marks the samples the diagnoser declares outside its training
+    range (an operating point no training episode reached, where a learned model
+    extrapolates): its own outcome, "novel", not a fault. The scoring
+    (:func:`evaluation.metrics.detection_metrics.episode_scores`) counts no novel sample as a
+    false alarm and reports the novel share beside ``r_fd``. ``None`` (the default, every
+    diagnoser that flags nothing) reads as all False (:attr:`novel`).
     """
 
     alarm: np.ndarray  # (T,) bool
@@ -162,6 +169,7 @@ class Detection:
     class_names: tuple[str, ...] = ()
     posterior: np.ndarray | None = None  # (T, H), probabilistic diagnosers only
     hypothesis_names: tuple[str, ...] = ()
+    novelty: np.ndarray | None = None  # (T,) bool, samples outside the training range
     #: the score on a limit (:data:`SCORE_THRESHOLD`): ``score > threshold`` is the raw test
     threshold: ClassVar[float] = SCORE_THRESHOLD
 
@@ -188,6 +196,14 @@ class Detection:
             raise ValueError(
                 f"Detection.hypothesis_names {self.hypothesis_names} given without a posterior"
             )
+        if self.novelty is not None:
+            nov = np.asarray(self.novelty)
+            if nov.dtype != np.bool_ or nov.shape != (n,):
+                raise ValueError(
+                    f"Detection.novelty must be a bool array of shape ({n},), got dtype "
+                    f"{nov.dtype} and shape {nov.shape}"
+                )
+            object.__setattr__(self, "novelty", nov)
         if self.diagnosis is not None:
             diag = np.asarray(self.diagnosis, dtype=str)
             if diag.shape != (n,):
@@ -212,6 +228,14 @@ class Detection:
     def probabilistic(self) -> bool:
         """Whether the detection carries a posterior over hypotheses per sample."""
         return self.posterior is not None
+
+    @property
+    def novel(self) -> np.ndarray:
+        """``(T,)`` bool: the samples flagged outside the training range (all False when the
+        diagnoser flags none)."""
+        if self.novelty is None:
+            return np.zeros(len(self.alarm), dtype=bool)
+        return self.novelty
 
     @property
     def isolates(self) -> bool:

@@ -16,5 +16,6 @@ The rooms:
 ``band``               the paper's uncertainty band ``y_m + y_e ± t_α v`` and its scale
 ``baseline``           the held baseline a stage may remove first (running mean or regression)
 ``baseline_kernels``   the regression baseline's compiled per-sample steps
+``operating_range``    the training range of the set points; samples outside it are novel
 =====================  ===========================================================================
 """

@@ -6,6 +6,8 @@ Times are sample indices (integers); to get seconds multiply by the episode's ``
 * :func:`r_fd` - false detection rate, eq. (12): share of ``[t_on, t_from)`` spent in alarm.
 * :func:`r_td` - true detection rate, eq. (13): share of ``[t_from, t_hor)`` spent in alarm.
 * :func:`t_dt` - detection time: samples from ``t_from`` to the first alarm at or after it.
+* :func:`novelty_rate` - share of ``[t_on, t_from)`` a diagnoser flagged as outside its training
+  range (``Detection.novelty``): its own outcome, never counted as a false alarm.
 * :func:`censored_delay` - the detection time with a miss counted: ``min(t_dt, horizon)``, a
   miss (``nan``) at ``horizon``, the samples scored from the onset on.
 
@@ -24,7 +26,15 @@ import numbers
 
 import numpy as np
 
-__all__ = ["censored_delay", "check_sample_index", "episode_scores", "r_fd", "r_td", "t_dt"]
+__all__ = [
+    "censored_delay",
+    "check_sample_index",
+    "episode_scores",
+    "novelty_rate",
+    "r_fd",
+    "r_td",
+    "t_dt",
+]
 
 
 def _check_alarms(alarms: np.ndarray) -> np.ndarray:
@@ -116,20 +126,60 @@ def _check_from(a: np.ndarray, t_from: object, name: str = "t_from") -> int:
     return t
 
 
-def episode_scores(alarms: np.ndarray, fault_onset: int | None, t_on: int = 0) -> dict[str, float]:
-    """All three indexes of one episode.
+def novelty_rate(novelty: np.ndarray, t_from: int, t_on: int = 0) -> float:
+    """Share of the fault-free window ``[t_on, t_from)`` flagged novel (outside the diagnoser's
+    training range); arguments as :func:`r_fd`, ``novelty`` a bool ``(t_hor,)``.
+
+    >>> novelty_rate(np.array([True, True, False, False]), t_from=4)
+    0.5
+    """
+    return r_fd(novelty, t_from, t_on)
+
+
+def episode_scores(
+    alarms: np.ndarray,
+    fault_onset: int | None,
+    t_on: int = 0,
+    novelty: np.ndarray | None = None,
+) -> dict[str, float]:
+    """All three indexes of one episode (and the novelty rate where novelty is flagged).
 
     Args:
         alarms: bool, shape ``(t_hor,)``.
         fault_onset: onset sample of the fault, or ``None`` for a healthy episode.
         t_on: start-up samples not scored for false alarms, ``0 <= t_on < t_hor``.
+        novelty: bool ``(t_hor,)``, the samples the diagnoser flagged outside its training
+            range (``Detection.novelty``), or ``None`` (none flagged). Before the onset a novel
+            sample is not a false alarm: ``r_fd`` counts the alarms on the other samples
+            (over the whole window, so flagging nothing changes no figure) and
+            ``"novelty"`` reports the novel share of the window (:func:`novelty_rate`).
+            After the onset the alarms are scored as they are: a fault is still detected.
 
     Returns:
-        ``{"r_fd", "r_td", "t_dt"}``. Healthy episode: ``r_fd`` over ``[t_on, t_hor)``, ``r_td`` and
-        ``t_dt`` are ``nan``. Faulty episode: ``r_fd`` over ``[t_on, fault_onset)`` (``nan`` when
-        the fault starts at or before ``t_on``, so no fault-free sample is scored), ``r_td`` and
-        ``t_dt`` from ``fault_onset`` on.
+        ``{"r_fd", "r_td", "t_dt"}``, and ``"novelty"`` when ``novelty`` is given. Healthy
+        episode: ``r_fd`` over ``[t_on, t_hor)``, ``r_td`` and ``t_dt`` are ``nan``. Faulty
+        episode: ``r_fd`` over ``[t_on, fault_onset)`` (``nan`` when the fault starts at or
+        before ``t_on``, so no fault-free sample is scored), ``r_td`` and ``t_dt`` from
+        ``fault_onset`` on.
+
+    >>> a = np.array([True, True, False, False])
+    >>> episode_scores(a, None, novelty=np.array([True, False, False, False]))["r_fd"]
+    0.25
     """
+    if novelty is not None:
+        a = _check_alarms(alarms)
+        nov = _check_alarms(novelty)
+        if nov.shape != a.shape:
+            raise ValueError(f"novelty has shape {nov.shape}; allowed: {a.shape}, as alarms")
+        out = episode_scores(a, fault_onset, t_on)
+        end = a.size if fault_onset is None else _check_from(a, fault_onset, "fault_onset")
+        fault_free = a.copy()
+        fault_free[:end] &= ~nov[:end]
+        nan = float("nan")
+        scored = end > t_on
+        out["r_fd"] = r_fd(fault_free, end, t_on) if scored else nan
+        out["novelty"] = novelty_rate(nov, end, t_on) if scored else nan
+        return out
     a = _check_alarms(alarms)
     t_on = check_sample_index("t_on", t_on)
     if not 0 <= t_on < a.size:

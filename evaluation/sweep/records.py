@@ -68,6 +68,9 @@ class CellResult:
     # the fault onset is assumed, not stated by the data (r_td/t_dt count from an assumption);
     # set from the data source when results are presented (:func:`mark_assumed_onsets`)
     onset_assumed: bool = False
+    # share of the fault-free window the diagnoser flagged novel (outside its training range,
+    # Detection.novelty; those samples are not in r_fd); nan when it flags no novelty at all
+    novelty: float = math.nan
 
     @property
     def faulty(self) -> bool:
@@ -139,7 +142,7 @@ def detect_and_score(
     n = ep.n_samples
     onset = ep.fault_onset  # None also when the episode ended before the planned onset
     if n > t_on:
-        scores = episode_scores(det.alarm, onset, t_on=t_on)
+        scores = episode_scores(det.alarm, onset, t_on=t_on, novelty=det.novelty)
     else:  # too short to score anything
         scores = {"r_fd": nan, "r_td": nan, "t_dt": nan}
     if loaded.fault_onset is not None and onset is None:
@@ -169,6 +172,7 @@ def detect_and_score(
         n_alarms=int(np.count_nonzero(det.alarm)),
         sample_time_s=float(ep.sample_time_s),
         detect_wall_s=wall,
+        novelty=float(scores.get("novelty", nan)),
         **iso,
     )
     return record, det
@@ -209,6 +213,8 @@ def pack_detection(
         if det.posterior is not None:  # probabilistic diagnosers: the posterior per sample
             out[f"{view}_posterior"] = det.posterior
             out[f"{view}_hypothesis_names"] = np.array(det.hypothesis_names, dtype=str)
+        if det.novelty is not None:  # samples flagged outside the training range
+            out[f"{view}_novelty"] = det.novelty
     return out
 
 
@@ -243,6 +249,7 @@ def unpack_detection(
                 hypothesis_names=tuple(
                     str(n) for n in arrays.get(f"{view}_hypothesis_names", np.array([], str))
                 ),
+                novelty=arrays.get(f"{view}_novelty"),
             )
         )
     det, bands = views
@@ -276,6 +283,7 @@ class CellSummary:
     n_detected: int
     n_terminated: int
     onset_assumed: bool = False  # the scenario's onset is assumed, not stated by the data
+    novelty: float = float("nan")  # mean novel share (CellResult.novelty), nan when none flagged
 
     def to_json(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
@@ -319,6 +327,7 @@ def summarize(records: Sequence[CellResult]) -> list[CellSummary]:
                 n_detected=len(detected),
                 n_terminated=sum(r.terminated_at is not None for r in rs),
                 onset_assumed=any(r.onset_assumed for r in rs),
+                novelty=_mean_std([r.novelty for r in rs])[0],
             )
         )
     return out

@@ -133,6 +133,22 @@ _TRACK_LIST += (
     ),
 )
 
+#: ``regimes``: the ``closed`` track whose test episodes move the set points twice as widely.
+_TRACK_LIST += (
+    next(t for t in _TRACK_LIST if t.name == "closed").replace(
+        name="regimes",
+        description=(
+            "The closed track's faults, sizes and onsets, trained on its set-point program "
+            "(T_rx ± 4 °C, T_rg1 ± 6 °C) but tested on one twice as wide (± 8 °C, ± 12 °C). "
+            "Tests operating regimes: operators move set points beyond any history a detector "
+            "learned from, and learned relations do not extrapolate. A detector must hold its "
+            "false-alarm rate there or flag the samples as novel (outside its training range), "
+            "never as a fault."
+        ),
+        test_setpoint_halfranges=(8.0, 12.0),
+    ),
+)
+
 #: The published tracks by name.
 TRACKS: dict[str, Track] = {t.name: t for t in _TRACK_LIST}
 

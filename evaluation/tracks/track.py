@@ -143,6 +143,12 @@ class Track:
         n_train_faults: labelled faulty training episodes per fault, for diagnosers that isolate
             (seeds from ``train_seed_start``; 20: the setting the isolators were validated on).
         n_validation: validation episodes (per scenario, healthy and each fault).
+        test_setpoint_halfranges: closed loop only: the half-ranges ``(T_rx, T_rg1)`` [°C] of
+            the set-point program of the *test* episodes, where they differ from the training
+            program's (:class:`fcc_env.regulatory.SetpointProgram`); ``None`` (default): the
+            test episodes run the training program. Training (and validation) episodes always
+            run :attr:`plant`'s program: an operator moves set points wider than any history a
+            detector learned from (:attr:`test_plant`).
         test_seed_start, train_seed_start, validation_seed_start: first seed of each range.
     """
 
@@ -167,6 +173,7 @@ class Track:
     test_seed_start: int = TEST_SEED_START
     train_seed_start: int = TRAIN_SEED_START
     validation_seed_start: int = VALIDATION_SEED_START
+    test_setpoint_halfranges: tuple[float, float] | None = None
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__
@@ -218,6 +225,7 @@ class Track:
                 "not built for closed loop",
             )
         set_(self, "magnitudes", _checked_magnitudes(self.magnitudes, self.faults))
+        self._check_test_program()
         last_onset = self.n_samples - RAMP_MARGIN
         if self.onset is not None:
             check_distribution(
@@ -234,6 +242,23 @@ class Track:
         set_(self, "profiles", profiles)
         self._check_ramp()
         _check_seed_ranges(self)
+
+    def _check_test_program(self) -> None:
+        given = self.test_setpoint_halfranges
+        if given is None:
+            return
+        if not self.closed_loop:
+            raise invalid(
+                "test_setpoint_halfranges", given, "None on an open-loop track", "no set points"
+            )
+        if isinstance(given, str) or not isinstance(given, tuple | list) or len(given) != 2:
+            raise invalid("test_setpoint_halfranges", given, "a pair (T_rx, T_rg1) of °C")
+        limits = (("T_rx_sp_halfrange_C", 10.0), ("T_rg1_sp_halfrange_C", 15.0))
+        pair = tuple(
+            float(check(name, v, Real(0.0, high, unit="°C")))
+            for (name, high), v in zip(limits, given, strict=True)
+        )
+        object.__setattr__(self, "test_setpoint_halfranges", pair)
 
     def _check_ramp(self) -> None:
         incipient = FaultProfile.INCIPIENT in self.profiles
@@ -290,6 +315,21 @@ class Track:
         return PlantConfig.build(
             noise_scale=self.noise_scale, regulatory=True if self.closed_loop else None
         )
+
+    @property
+    def test_plant(self) -> PlantConfig:
+        """The plant of the test episodes: :attr:`plant`, its set-point program widened to
+        ``test_setpoint_halfranges`` where that is set (equal to it otherwise)."""
+        plant = self.plant
+        if self.test_setpoint_halfranges is None:
+            return plant
+        layer = plant.regulatory
+        assert layer is not None and layer.program is not None  # closed loop (checked)
+        t_rx, t_rg1 = self.test_setpoint_halfranges
+        program = dataclasses.replace(
+            layer.program, T_rx_sp_halfrange_C=t_rx, T_rg1_sp_halfrange_C=t_rg1
+        )
+        return dataclasses.replace(plant, regulatory=layer.replace(program=program))
 
     @property
     def plant_draw(self) -> PlantUncertainty | PlantMismatch | None:
@@ -418,6 +458,12 @@ class Track:
             "test_seed_start": self.test_seed_start,
             "train_seed_start": self.train_seed_start,
             "validation_seed_start": self.validation_seed_start,
+            # only when set, so that every other track's store keys stay as they were
+            **(
+                {"test_setpoint_halfranges": list(self.test_setpoint_halfranges)}
+                if self.test_setpoint_halfranges is not None
+                else {}
+            ),
         }
 
     def digest(self) -> str:

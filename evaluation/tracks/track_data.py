@@ -103,11 +103,16 @@ class TrackData:
             "train_seeds": [t.train_seeds.start, t.train_seeds.stop],
         }
 
-    def simulate(self, seeds: Sequence[int], spec: FaultSpec) -> list[LoadedEpisode]:
-        """Episodes of ``seeds`` with the fault ``spec``, under the track's noise and plant."""
+    def simulate(
+        self, seeds: Sequence[int], spec: FaultSpec, *, test: bool = False
+    ) -> list[LoadedEpisode]:
+        """Episodes of ``seeds`` with the fault ``spec``, under the track's noise and plant
+        (``test``: the test episodes' plant, :attr:`Track.test_plant`, whose set-point program
+        may be wider than the training one)."""
         track = self.track
+        plant = track.test_plant if test else track.plant
         return simulate_loaded(
-            seeds, track.n_samples, spec, plant=track.plant, plant_uncertainty=track.plant_draw
+            seeds, track.n_samples, spec, plant=plant, plant_uncertainty=track.plant_draw
         )
 
     def train_episodes(self) -> list[Episode]:
@@ -142,7 +147,7 @@ class TrackData:
         return key
 
     def load_test(self, scenario: str, seed: int) -> LoadedEpisode:
-        return self.simulate([seed], self.track.fault_spec(scenario, seed))[0]
+        return self.simulate([seed], self.track.fault_spec(scenario, seed), test=True)[0]
 
     def reference(self, seed: int, measured: np.ndarray | None = None) -> np.ndarray:
         """The healthy plant's noise-free measurements of ``seed`` (same plant): what the
@@ -190,7 +195,7 @@ class TrackData:
         (``lab/closed_f3_limit.py``); a row at what the measured channels allow would estimate
         the drift (an observer), which is not built. Returns ``(T, 8)``, the Table 1 channels.
         """
-        plant = self.track.plant
+        plant = self.track.test_plant
         if record is None:
             twin = fcc_env.simulate_episodes([seed], self.track.n_samples, plant=plant)
             record = twin.y_clean[0]

@@ -282,6 +282,7 @@ def test_parse_tracks() -> None:
     assert parse_tracks("all") == tuple(TRACKS.values())
     allowed = (
         r"one of \['closed', 'closed-random', 'incipient', 'mismatch', 'noisy', 'paper', 'random', "
+        r"'regimes', "
         r"'small', 'uncertain', 'all'\]"
     )
     with pytest.raises(ValueError, match=rf"track='bogus' is outside the allowed range: {allowed}"):
