@@ -5,7 +5,9 @@ The published tracks have 200 healthy and 20 faulty test episodes per fault; on 
 so this script runs the same track definitions with fewer episodes, its test seeds moved to
 the validation range (``--seed-start``, default 5100: above the tracks' own validation seeds
 5000-5019, never a test seed) and prints the track's compact table (r_fd with its 95 %
-interval, per fault r_td / t_dt / delay) plus the wide table's path. Record in
+interval, per fault r_td / t_dt / delay) plus the wide table's path. ``--no-references``
+scores the diagnosers alone (the sweep, without the six reference rows, whose calibration on
+validation episodes and filter dominate the time): what fits the loaded machine. Record in
 ``lab/fault-tracks.md``.
 
     PYTHONPATH=$PWD python lab/fault_tracks.py --tracks actuator --healthy 20 --faulty 4 \
@@ -18,9 +20,34 @@ import argparse
 import time
 from pathlib import Path
 
+from evaluation.sweep.config import SweepConfig, default_specs
+from evaluation.sweep.runner import run_sweep
+from evaluation.sweep.store import canonical_hash
 from evaluation.tracks.board import run_track
 from evaluation.tracks.board_tables import track_table, write_track
 from evaluation.tracks.catalogue import TRACKS
+from evaluation.tracks.rows import TrackRun, track_rows
+from evaluation.tracks.track import Track
+from evaluation.tracks.track_data import TrackData
+
+
+def diagnosers_only(track: Track, names: list[str], out: Path, workers: int) -> TrackRun:
+    """The track's sweep without the reference rows (their columns read '–')."""
+    t0 = time.perf_counter()
+    data = TrackData(track=track)
+    config = SweepConfig(diagnosers=default_specs(names), data=data)
+    config.validate()
+    store = out / "store" / canonical_hash(data.store_key())[:12]
+    res = run_sweep(config, store, n_workers=workers, progress=False)
+    rows = track_rows(res.records, [s.key for s in config.diagnosers], track.faults)
+    return TrackRun(
+        track=track,
+        records=tuple(res.records),
+        rows=tuple(rows),
+        wall_s=time.perf_counter() - t0,
+        n_computed=res.n_computed,
+        n_reused=res.n_reused,
+    )
 
 
 def main() -> None:
@@ -32,6 +59,8 @@ def main() -> None:
     ap.add_argument("--train", type=int, default=9)
     ap.add_argument("--seed-start", type=int, default=5100)
     ap.add_argument("--out", type=Path, default=Path("/tmp/fault-tracks"))
+    ap.add_argument("--no-references", action="store_true")
+    ap.add_argument("--workers", type=int, default=0)
     args = ap.parse_args()
     for name in args.tracks.split(","):
         track = TRACKS[name].replace(
@@ -39,14 +68,19 @@ def main() -> None:
         )
         track = track.with_seeds(test=args.seed_start)
         t0, c0 = time.perf_counter(), time.process_time()
-        run = run_track(
-            track,
-            args.diagnosers.split(","),
-            args.out / name,
-            progress=False,
-            figures=False,
-            model_cache=args.out / "models",
-        )
+        names = args.diagnosers.split(",")
+        if args.no_references:
+            run = diagnosers_only(track, names, args.out / name, args.workers)
+        else:
+            run = run_track(
+                track,
+                names,
+                args.out / name,
+                workers=args.workers,
+                progress=False,
+                figures=False,
+                model_cache=args.out / "models",
+            )
         write_track(run, args.out / name)
         print(track_table(run))
         print(

@@ -125,27 +125,70 @@ def test_open_loop_template_track_defaults():
     assert (spec.scenario, spec.magnitude, spec.onset) == ("f2", 0.15, 1900)
 
 
-def test_tiny_run_end_to_end(tmp_path: Path):
-    """A short sensor track, one healthy and one faulty episode per fault, through the sweep
-    (the diagnoser ``limits``) and the reference rows: every row has every column."""
-    from evaluation.tracks.board import run_track
-
-    base = TRACKS["sensor"]
-    t = base.replace(
+def _tiny(name: str, n_templates: int) -> Track:
+    base = TRACKS[name]
+    return base.replace(
         n_samples=600,
         onset=Uniform(200, 350),
-        n_healthy=1,
+        n_healthy=2,
         n_faulty=1,
         n_train=2,
         n_validation=1,
         n_train_faults=2,
-        fault_templates=base.fault_templates[:2],
-        faults=base.faults[:2],
+        fault_templates=base.fault_templates[:n_templates],
+        faults=base.faults[:n_templates],
+    )
+
+
+def _check_run(t: Track, records, rows) -> None:
+    for fault in t.faults:
+        recs = [r for r in records if r.scenario == fault]
+        assert recs and {r.fault_onset for r in recs} == {t.fault_spec(fault, 0).onset}
+    assert all(set(row.faults) == set(t.faults) for row in rows)
+
+
+def test_tiny_run_end_to_end(tmp_path: Path):
+    """A short sensor track through the sweep (the diagnoser ``limits``), its rows and its
+    table: every row has every column, every record its cell's drawn onset."""
+    from evaluation.sweep.config import SweepConfig, default_specs
+    from evaluation.sweep.runner import run_sweep
+    from evaluation.tracks.board_tables import track_table
+    from evaluation.tracks.rows import TrackRun, track_rows
+
+    t = _tiny("sensor", 2)
+    config = SweepConfig(diagnosers=default_specs(["limits"]), data=TrackData(track=t))
+    res = run_sweep(config, tmp_path, n_workers=0, progress=False)
+    rows = track_rows(res.records, ["limits"], t.faults)
+    _check_run(t, res.records, rows)
+    run = TrackRun(
+        track=t,
+        records=tuple(res.records),
+        rows=tuple(rows),
+        wall_s=0.0,
+        n_computed=res.n_computed,
+        n_reused=res.n_reused,
+    )
+    assert "sensor-drift r_td" in track_table(run)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("name", NEW)
+def test_tiny_run_with_reference_rows(tmp_path: Path, name: str):
+    """The same through :func:`run_track`: the six reference rows on each new track."""
+    from evaluation.tracks.board import run_track
+
+    t = (
+        _tiny(name, 2)
+        if name != "concurrent"
+        else TRACKS[name].replace(
+            n_healthy=1,
+            n_faulty=1,
+            n_train=2,
+            n_validation=1,
+            n_train_faults=2,
+            fault_templates=TRACKS[name].fault_templates[:1],
+            faults=TRACKS[name].faults[:1],
+        )
     )
     run = run_track(t, ["limits"], tmp_path, progress=False, figures=False)
-    for fault in t.faults:
-        recs = [r for r in run.records if r.scenario == fault]
-        assert recs and all(r.fault_onset is not None for r in recs)
-        spec = t.fault_spec(fault, 0)
-        assert {r.fault_onset for r in recs} == {spec.onset}
-    assert all(set(row.faults) == set(t.faults) for row in run.rows)
+    _check_run(t, run.records, run.rows)
