@@ -50,6 +50,32 @@ def diagnosers_only(track: Track, names: list[str], out: Path, workers: int) -> 
     )
 
 
+def _ci(c: dict, fmt: str) -> str:
+    if c["estimate"] is None:
+        return "–"
+    return f"{c['estimate']:{fmt}} [{c['low']:{fmt}}, {c['high']:{fmt}}]"
+
+
+def summary(path: Path) -> str:
+    """A compact Markdown table of a written track (``leaderboard.json``): r_fd, and per
+    fault r_td and t_dt, each with its 95 % interval, misses and early ends."""
+    import json
+
+    data = json.loads(path.read_text())
+    rows = data["rows"]
+    faults = list(rows[0]["faults"])
+    out = ["| row | r_fd | fault | r_td | t_dt | missed/ended |", "|---|---|---|---|---|---|"]
+    for r in rows:
+        for i, f in enumerate(faults):
+            c = r["faults"][f]
+            head = f"| {r['label']} | {_ci(r['r_fd'], '.4f')} " if i == 0 else "| | "
+            out.append(
+                f"{head}| {f} | {_ci(c['r_td'], '.3f')} | {_ci(c['t_dt'], '.0f')} | "
+                f"{c['misses']}/{c['terminated']} |"
+            )
+    return "\n".join(out)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--tracks", default="sensor,actuator,concurrent")
@@ -83,6 +109,7 @@ def main() -> None:
             )
         write_track(run, args.out / name)
         print(track_table(run))
+        print(summary(args.out / name / "leaderboard.json"))
         print(
             f"track {name}: {time.perf_counter() - t0:.0f} s wall, "
             f"{time.process_time() - c0:.0f} s CPU (this process; contention-bound), "

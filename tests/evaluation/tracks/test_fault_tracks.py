@@ -125,10 +125,10 @@ def test_open_loop_template_track_defaults():
     assert (spec.scenario, spec.magnitude, spec.onset) == ("f2", 0.15, 1900)
 
 
-def _tiny(name: str, n_templates: int) -> Track:
+def _tiny(name: str, n_templates: int, n_samples: int = 600) -> Track:
     base = TRACKS[name]
     return base.replace(
-        n_samples=600,
+        n_samples=n_samples,
         onset=Uniform(200, 350),
         n_healthy=2,
         n_faulty=1,
