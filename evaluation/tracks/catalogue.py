@@ -13,8 +13,10 @@
 from __future__ import annotations
 
 from evaluation.tracks.distributions import Choice, Distribution, Fixed, Uniform
+from evaluation.tracks.fault_templates import FaultTemplate
 from evaluation.tracks.track import RAMP_LENGTHS, Track
 from fcc_common.validation import Options, check, invalid
+from fcc_env.params import MEASUREMENT_NAMES
 from fcc_env.scenarios import PAPER_FAULTS, FaultProfile, fault_definition
 
 __all__ = ["SMALL_MAGNITUDES", "TRACKS", "parse_tracks", "tracks_markdown"]
@@ -146,6 +148,87 @@ _TRACK_LIST += (
             "never as a fault."
         ),
         test_setpoint_halfranges=(8.0, 12.0),
+    ),
+)
+
+#: The closed-loop faults of issue 43 (sensor, actuator, two at once): their columns are
+#: :class:`FaultTemplate` s, each size range within the fault's registered one
+#: (``fcc_env/sensor_faults.py``, ``lab/actuator-faults.md``).
+_SENSOR_TEMPLATES = tuple(
+    FaultTemplate(scenario=s, magnitude=m, channel=MEASUREMENT_NAMES)
+    for s, m in (
+        ("sensor-bias", Uniform(2.0, 10.0)),
+        ("sensor-drift", Uniform(0.5, 2.0)),
+        ("sensor-stuck", Fixed(1.0)),
+        ("sensor-noise", Uniform(2.0, 20.0)),
+        ("sensor-dropout", Uniform(0.2, 0.9)),
+    )
+)
+_ACTUATOR_TEMPLATES = tuple(
+    FaultTemplate(scenario=s, magnitude=m)
+    for s, m in (
+        ("valve-stiction", Uniform(0.02, 0.3)),
+        ("valve-bias", Uniform(0.05, 0.2)),
+        ("valve-stuck", Uniform(0.5, 1.0)),
+        ("blower-capacity", Fixed(0.12)),
+    )
+)
+#: The pairs measured together at their default sizes (``lab/actuator-faults.md``: none of
+#: 20 episodes left the envelope), the first fault in 1000-2000, the second in 2000-3000.
+_PAIRS = (
+    ("sensor-bias", "valve-stiction"),
+    ("valve-stiction", "sensor-drift"),
+    ("valve-bias", "blower-capacity"),
+    ("blower-capacity", "sensor-bias"),
+    ("f1", "valve-stiction"),
+)
+_CONCURRENT_TEMPLATES = tuple(
+    FaultTemplate(
+        scenario="concurrent",
+        parts=(
+            FaultTemplate(scenario=a, onset=Uniform(1000, 2000)),
+            FaultTemplate(scenario=b, onset=Uniform(2000, 3000)),
+        ),
+    )
+    for a, b in _PAIRS
+)
+_TRACK_LIST += (
+    Track(
+        name="sensor",
+        description=(
+            "Sensor faults on the closed-loop plant: bias 2-10, drift 0.5-2 per hour, stuck, "
+            "noise 2-20 x its own, dropouts 0.2-0.9 (held, as a DCS shows them), each on a "
+            "measured channel drawn per episode, onset uniform in 1000-3000. Tests the faults "
+            "operators meet first: on T_rx or T_rg1 the loop moves the true process to follow "
+            "the wrong reading."
+        ),
+        closed_loop=True,
+        onset=Uniform(1000, 3000),
+        fault_templates=_SENSOR_TEMPLATES,
+    ),
+    Track(
+        name="actuator",
+        description=(
+            "Actuator faults on the closed-loop plant: slide-valve stiction S 0.02-0.3 "
+            "(Choudhury et al. 2005), valve bias 0.05-0.2, a valve stuck 0.5-1, the air blower "
+            "at 0.12 capacity lost, onset uniform in 1000-3000. Tests the faults that make "
+            "loops oscillate or saturate, where the loop hides the fault in its command."
+        ),
+        closed_loop=True,
+        onset=Uniform(1000, 3000),
+        fault_templates=_ACTUATOR_TEMPLATES,
+    ),
+    Track(
+        name="concurrent",
+        description=(
+            "Two faults at once on the closed-loop plant, at their default sizes, the first "
+            "with onset in 1000-2000, the second in 2000-3000: sensor-bias+valve-stiction, "
+            "valve-stiction+sensor-drift, valve-bias+blower-capacity, "
+            "blower-capacity+sensor-bias, f1+valve-stiction. Detection scores from the first "
+            "onset; isolation must name both faults or say unknown."
+        ),
+        closed_loop=True,
+        fault_templates=_CONCURRENT_TEMPLATES,
     ),
 )
 

@@ -44,6 +44,7 @@ from evaluation.tracks.distributions import (
     Uniform,
     check_distribution,
 )
+from evaluation.tracks.fault_templates import FaultTemplate
 from fcc_common.validation import Boolean, Integer, Options, Real, check, invalid
 from fcc_env.plant import PlantConfig
 from fcc_env.scenarios import (
@@ -150,6 +151,13 @@ class Track:
             run :attr:`plant`'s program: an operator moves set points wider than any history a
             detector learned from (:attr:`test_plant`).
         test_seed_start, train_seed_start, validation_seed_start: first seed of each range.
+        fault_templates: the track's faults as spec templates
+            (:class:`~evaluation.tracks.fault_templates.FaultTemplate`: scenario, size, onset and
+            channel distributions, or two faults at once), for faults that ``faults`` and
+            ``magnitudes`` cannot say (a channel, a size in a unit of its own, a pair). When
+            given, ``faults`` becomes their names and ``magnitudes`` stays ``None``; a
+            template's onset ``None`` takes ``onset``. Empty (the default) for the paper-fault
+            tracks, whose definitions and store keys it leaves as they were.
     """
 
     name: str
@@ -174,6 +182,7 @@ class Track:
     train_seed_start: int = TRAIN_SEED_START
     validation_seed_start: int = VALIDATION_SEED_START
     test_setpoint_halfranges: tuple[float, float] | None = None
+    fault_templates: tuple[FaultTemplate, ...] = ()
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__
@@ -181,7 +190,11 @@ class Track:
             raise invalid("name", self.name, "a lowercase name of letters, digits, '-' or '_'")
         if not isinstance(self.description, str) or not self.description.strip():
             raise invalid("description", self.description, "a non-empty string")
+        if self.fault_templates:
+            self._set_templates()
         faults, registered = self.faults, fault_names()
+        if self.fault_templates:
+            registered = faults
         if isinstance(faults, str) or not isinstance(faults, tuple | list) or not faults:
             raise invalid("faults", faults, f"a non-empty tuple of {list(registered)}")
         faults = tuple(str(check("faults", f, Options(registered))) for f in faults)
@@ -224,7 +237,8 @@ class Track:
                 "the closed-loop reference rows replay the declared plant; drawn plants are "
                 "not built for closed loop",
             )
-        set_(self, "magnitudes", _checked_magnitudes(self.magnitudes, self.faults))
+        if not self.fault_templates:
+            set_(self, "magnitudes", _checked_magnitudes(self.magnitudes, self.faults))
         self._check_test_program()
         last_onset = self.n_samples - RAMP_MARGIN
         if self.onset is not None:
@@ -233,6 +247,13 @@ class Track:
             )
             if isinstance(self.onset, Uniform) and math.ceil(self.onset.low) > self.onset.high:
                 raise invalid("onset", self.onset, "a range holding an integer sample")
+        if self.fault_templates and self._latest_onset() > last_onset:
+            raise invalid(
+                "fault_templates onset",
+                self._latest_onset(),
+                f"at most {last_onset}",
+                f"{RAMP_MARGIN} samples must follow",
+            )
         profiles = self.profiles
         if isinstance(profiles, str) or not isinstance(profiles, tuple | list) or not profiles:
             raise invalid("profiles", profiles, f"a non-empty tuple of {list(FaultProfile)}")
@@ -260,6 +281,42 @@ class Track:
         )
         object.__setattr__(self, "test_setpoint_halfranges", pair)
 
+    def _set_templates(self) -> None:
+        """``fault_templates`` checked; ``faults`` their names (module docstring)."""
+        given = self.fault_templates
+        if not isinstance(given, tuple | list) or not all(
+            isinstance(t, FaultTemplate) for t in given
+        ):
+            raise invalid("fault_templates", given, "a tuple of FaultTemplate")
+        names = tuple(t.name for t in given)
+        if self.faults not in (PAPER_FAULTS, names):
+            raise invalid("faults", self.faults, f"{names}: the templates' names, or unset")
+        if self.magnitudes not in (None, ()):
+            raise invalid("magnitudes", self.magnitudes, "None", "the templates carry the sizes")
+        needs_loop = sorted({s for t in given for s in t.definitions_needing_loop})
+        if needs_loop and not self.closed_loop:
+            raise invalid(
+                "closed_loop",
+                False,
+                "True",
+                f"{needs_loop} only act while a controller moves the valve",
+            )
+        object.__setattr__(self, "fault_templates", tuple(given))
+        object.__setattr__(self, "faults", names)
+        object.__setattr__(self, "magnitudes", ())
+
+    def template(self, fault: str) -> FaultTemplate:
+        """The template of column ``fault`` of a track with ``fault_templates``."""
+        by_name = {t.name: t for t in self.fault_templates}
+        return by_name[str(check("fault", fault, Options(list(by_name))))]
+
+    def labels(self, fault: str) -> tuple[str, ...]:
+        """The fault names an isolator must give for an episode of column ``fault`` (two
+        for a concurrent column: :func:`fcc_env.faults.isolation_outcome`)."""
+        if self.fault_templates:
+            return self.template(fault).labels
+        return (str(check("fault", fault, Options(self.faults))),)
+
     def _check_ramp(self) -> None:
         incipient = FaultProfile.INCIPIENT in self.profiles
         if not incipient:
@@ -286,6 +343,8 @@ class Track:
         object.__setattr__(self, "ramp", ramp)
 
     def _latest_onset(self) -> int:
+        if self.fault_templates:
+            return max(t.latest_onset(self.onset) for t in self.fault_templates)
         if self.onset is not None:
             return math.floor(self.onset.high)
         return max(fault_definition(f).default_onset for f in self.faults)
@@ -367,8 +426,15 @@ class Track:
 
     # ---- draws ---------------------------------------------------------------------------------
     def magnitude(self, fault: str) -> Distribution:
-        """The magnitude distribution of ``fault``."""
+        """The magnitude distribution of ``fault`` (a template's: :meth:`template`)."""
         fault = check("fault", fault, Options(self.faults))
+        if self.fault_templates:
+            raise invalid(
+                "fault",
+                fault,
+                "a fault of a track without fault_templates",
+                "read template(fault).magnitude",
+            )
         return dict(self.magnitudes)[fault]  # type: ignore[arg-type]
 
     def _streams(self, seed: int, key: str, n: int) -> list[np.random.Generator]:
@@ -388,6 +454,10 @@ class Track:
         seed = check("seed", seed, Integer(0))
         if scenario == NOMINAL:
             return FaultSpec(scenario=scenario)
+        if self.fault_templates:
+            return self.template(scenario).draw(
+                lambda key, n: self._streams(seed, key, n), self._profile_and_ramp, self.onset
+            )
         g_mag, g_onset, g_profile, g_ramp = self._streams(seed, scenario, 4)
         magnitude = self.magnitude(scenario).sample(g_mag)
         onset = (
@@ -409,6 +479,18 @@ class Track:
             profile=profile,
             ramp_samples=ramp,
         )
+
+    def _profile_and_ramp(
+        self, g_profile: np.random.Generator, g_ramp: np.random.Generator, onset: int
+    ) -> tuple[FaultProfile, int | None]:
+        """A template fault's profile and ramp, drawn as :meth:`fault_spec` draws them."""
+        profile = self.profiles[int(g_profile.integers(len(self.profiles)))]
+        if profile is not FaultProfile.INCIPIENT:
+            return profile, None
+        room = self.n_samples - RAMP_MARGIN - onset
+        dist = self.ramp.at_most(room) if isinstance(self.ramp, Choice) else self.ramp
+        assert dist is not None  # _check_ramp set it
+        return profile, dist.sample_int(g_ramp)
 
     def drawn_fault(self, seed: int) -> str:
         """The fault type of faulty episode ``seed`` of a ``draw_fault`` track (uniform)."""
@@ -462,6 +544,12 @@ class Track:
             **(
                 {"test_setpoint_halfranges": list(self.test_setpoint_halfranges)}
                 if self.test_setpoint_halfranges is not None
+                else {}
+            ),
+            # only when set, so that the paper-fault tracks' store keys stay as they were
+            **(
+                {"fault_templates": [t.to_json() for t in self.fault_templates]}
+                if self.fault_templates
                 else {}
             ),
         }

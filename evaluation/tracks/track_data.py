@@ -6,6 +6,7 @@ The physical-limit rows also need the healthy plant's output driven by what a de
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -133,7 +134,7 @@ class TrackData:
         out = []
         for fault in self.track.faults:
             for seed in own if seeds is None else [s for s in seeds if s in own]:
-                ep = self.simulate([seed], self.track.fault_spec(fault, seed))[0].episode
+                ep = self.load_test(fault, seed).episode
                 if ep.fault_onset is not None and ep.n_samples - ep.fault_onset >= 2:
                     out.append(ep)
         return out
@@ -147,7 +148,17 @@ class TrackData:
         return key
 
     def load_test(self, scenario: str, seed: int) -> LoadedEpisode:
-        return self.simulate([seed], self.track.fault_spec(scenario, seed), test=True)[0]
+        """Episode ``(scenario, seed)`` of the track (``scenario`` a column of the track).
+
+        A column whose name is not its episodes' scenario (a concurrent pair's ``a+b``, whose
+        episodes say ``concurrent``) labels them with its name, so that what learns per label
+        (an isolator, the reference rows' fault directions) learns one per column, and an
+        isolator's answer is scored against the pair (:meth:`Track.labels`).
+        """
+        le = self.simulate([seed], self.track.fault_spec(scenario, seed), test=True)[0]
+        if le.episode.scenario == scenario or scenario not in self.track.faults:
+            return le
+        return dataclasses.replace(le, episode=dataclasses.replace(le.episode, scenario=scenario))
 
     def reference(self, seed: int, measured: np.ndarray | None = None) -> np.ndarray:
         """The healthy plant's noise-free measurements of ``seed`` (same plant): what the

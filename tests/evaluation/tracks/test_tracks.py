@@ -69,7 +69,8 @@ def test_every_cell_resolves_in_the_env_horizon() -> None:
     for t in TRACKS.values():
         for sc, seed in t.test_cells():
             cfg = t.fault_spec(sc, seed).resolve(horizon=t.n_samples)
-            assert cfg.scenario == sc
+            # a concurrent column (a+b) resolves to its two faults
+            assert cfg.scenario == sc if sc == "nominal" else cfg.labels == t.labels(sc)
 
 
 # ---- determinism -------------------------------------------------------------------------------
@@ -281,9 +282,8 @@ def test_parse_tracks() -> None:
     assert [t.name for t in parse_tracks(" noisy , paper, noisy")] == ["noisy", "paper"]
     assert parse_tracks("all") == tuple(TRACKS.values())
     allowed = (
-        r"one of \['closed', 'closed-random', 'incipient', 'mismatch', 'noisy', 'paper', 'random', "
-        r"'regimes', "
-        r"'small', 'uncertain', 'all'\]"
+        r"one of \['actuator', 'closed', 'closed-random', 'concurrent', 'incipient', 'mismatch', "
+        r"'noisy', 'paper', 'random', 'regimes', 'sensor', 'small', 'uncertain', 'all'\]"
     )
     with pytest.raises(ValueError, match=rf"track='bogus' is outside the allowed range: {allowed}"):
         parse_tracks("paper,bogus")

@@ -1,0 +1,185 @@
+"""The closed-loop fault tracks (issue 43 item 5): ``sensor``, ``actuator``, ``concurrent``.
+
+A track carries a fault as a :class:`FaultTemplate`; the paper-fault tracks' definitions and
+store keys must stay byte-identical (their stored results stay valid).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from pathlib import Path
+
+import pytest
+
+from evaluation.tracks import TRACKS, Fixed, Track, Uniform
+from evaluation.tracks.fault_templates import FaultTemplate
+from evaluation.tracks.track_data import TrackData
+from fcc_env.faults import CONCURRENT_SCENARIO, fault_definition, isolation_outcome
+from fcc_env.params import MEASUREMENT_NAMES
+
+# measured on main at 451af0c, before fault templates existed: (digest, store-key hash)
+_BEFORE = {
+    "paper": ("42df532383708a17", "1cc0908372b1f1f0"),
+    "small": ("6ce2d53974f5e7ca", "884fffc5c87ac779"),
+    "incipient": ("d1d2066a0e1f201b", "3a0132150d08f301"),
+    "noisy": ("57da448e45d46b17", "6a983e67ff6c771d"),
+    "uncertain": ("831a2942e7fa9cab", "550a818caf79639e"),
+    "random": ("77925d11feee56b2", "9644715f00064406"),
+    "closed": ("50d72a0cd34df2ef", "f4c0274098b5d00a"),
+    "closed-random": ("47a1782b7f231b8c", "a6ddfb0229ee589d"),
+}
+NEW = ("sensor", "actuator", "concurrent")
+
+
+def _key_hash(track: Track) -> str:
+    text = json.dumps(TrackData(track=track).store_key(), sort_keys=True)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+@pytest.mark.parametrize("name", sorted(_BEFORE))
+def test_existing_tracks_unchanged(name):
+    track = TRACKS[name]
+    assert (track.digest()[:16], _key_hash(track)) == _BEFORE[name]
+    assert "fault_templates" not in track.to_json()
+
+
+@pytest.mark.parametrize("name", NEW)
+def test_new_tracks_build(name):
+    t = TRACKS[name]
+    assert t.closed_loop and t.n_healthy >= 200 and t.n_faulty == 20
+    assert t.faults == tuple(tp.name for tp in t.fault_templates)
+    assert len(t.test_cells()) == t.n_healthy + 20 * len(t.faults)
+    assert t.to_json()["fault_templates"][0]["name"] == t.faults[0]
+
+
+def _check_single(spec, template, track):
+    d = fault_definition(spec.scenario)
+    assert spec.scenario == template.scenario
+    assert template.magnitude.low <= spec.magnitude <= template.magnitude.high
+    assert 0.0 <= spec.magnitude <= d.max_magnitude
+    onset = template.onset or track.onset
+    assert onset.low <= spec.onset <= onset.high <= track.n_samples - 200
+    if d.channels:
+        allowed = template.channel or (d.default_channel,)
+        assert spec.channel in allowed
+    else:
+        assert spec.channel is None
+
+
+@pytest.mark.parametrize("name", NEW)
+def test_episodes_carry_the_template_spec(name):
+    t = TRACKS[name]
+    for fault in t.faults:
+        tp = t.template(fault)
+        channels = set()
+        for seed in range(20):
+            spec = t.fault_spec(fault, seed)
+            assert spec == t.fault_spec(fault, seed)  # deterministic in (track, fault, seed)
+            if tp.parts:
+                assert spec.scenario == CONCURRENT_SCENARIO
+                assert t.labels(fault) == tuple(p.scenario for p in spec.parts)
+                for part, ptp in zip(spec.parts, tp.parts, strict=True):
+                    _check_single(part, ptp, t)
+                assert spec.parts[0].onset < spec.parts[1].onset
+            else:
+                _check_single(spec, tp, t)
+                channels.add(spec.channel)
+        if name == "sensor":  # the channel is drawn among the measured ones
+            assert len(channels) >= 4 and channels <= set(MEASUREMENT_NAMES)
+
+
+def test_concurrent_labels_follow_isolation_outcome():
+    t = TRACKS["concurrent"]
+    labels = t.labels("sensor-bias+valve-stiction")
+    assert isolation_outcome(list(reversed(labels)), labels) == "correct"
+    assert isolation_outcome(labels[0], labels) == "wrong"
+    assert TRACKS["paper"].labels("f1") == ("f1",)
+
+
+def test_templates_refused_with_reasons():
+    with pytest.raises(ValueError, match="magnitude of valve-bias"):
+        FaultTemplate(scenario="valve-bias", magnitude=Uniform(0.1, 0.5))
+    with pytest.raises(ValueError, match="acts on no measured channel"):
+        FaultTemplate(scenario="valve-bias", channel="T_rx")
+    with pytest.raises(ValueError, match="channel="):
+        FaultTemplate(scenario="sensor-bias", channel="u_F")
+    bias = FaultTemplate(scenario="sensor-bias")
+    with pytest.raises(ValueError, match="two different faults"):
+        FaultTemplate(scenario="concurrent", parts=(bias, bias))
+    with pytest.raises(ValueError, match="each part carries its own"):
+        FaultTemplate(
+            scenario="concurrent", parts=(bias, FaultTemplate(scenario="f1")), onset=Fixed(100)
+        )
+    with pytest.raises(ValueError, match="closed_loop"):
+        Track(name="x", description="x", fault_templates=(FaultTemplate(scenario="valve-stuck"),))
+    with pytest.raises(ValueError, match="magnitudes"):
+        Track(name="x", description="x", fault_templates=(bias,), magnitudes={"f1": Fixed(0.1)})
+    with pytest.raises(ValueError, match="onset"):
+        Track(name="x", description="x", fault_templates=(bias,), onset=Uniform(1000, 3900))
+
+
+def test_open_loop_template_track_defaults():
+    t = Track(name="x", description="x", fault_templates=(FaultTemplate(scenario="f2"),))
+    spec = t.fault_spec("f2", 0)
+    assert (spec.scenario, spec.magnitude, spec.onset) == ("f2", 0.15, 1900)
+
+
+def _tiny(name: str, n_templates: int, n_samples: int = 600) -> Track:
+    base = TRACKS[name]
+    return base.replace(
+        n_samples=n_samples,
+        onset=Uniform(200, 350),
+        n_healthy=2,
+        n_faulty=1,
+        n_train=2,
+        n_validation=1,
+        n_train_faults=2,
+        fault_templates=base.fault_templates[:n_templates],
+        faults=base.faults[:n_templates],
+    )
+
+
+def _check_run(t: Track, records, rows) -> None:
+    for fault in t.faults:
+        recs = [r for r in records if r.scenario == fault]
+        assert recs and {r.fault_onset for r in recs} == {t.fault_spec(fault, 0).onset}
+    assert all(set(row.faults) == set(t.faults) for row in rows)
+
+
+def test_tiny_run_end_to_end(tmp_path: Path):
+    """A short sensor track through the sweep (the diagnoser ``limits``), its rows and its
+    table: every row has every column, every record its cell's drawn onset."""
+    from evaluation.sweep.config import SweepConfig, default_specs
+    from evaluation.sweep.runner import run_sweep
+    from evaluation.tracks.board_tables import track_table
+    from evaluation.tracks.rows import TrackRun, track_rows
+
+    t = _tiny("sensor", 2)
+    config = SweepConfig(diagnosers=default_specs(["limits"]), data=TrackData(track=t))
+    res = run_sweep(config, tmp_path, n_workers=0, progress=False)
+    rows = track_rows(res.records, ["limits"], t.faults)
+    _check_run(t, res.records, rows)
+    run = TrackRun(
+        track=t,
+        records=tuple(res.records),
+        rows=tuple(rows),
+        wall_s=0.0,
+        n_computed=res.n_computed,
+        n_reused=res.n_reused,
+    )
+    assert "sensor-drift r_td" in track_table(run)
+
+
+@pytest.mark.slow
+def test_tiny_run_with_reference_rows(tmp_path: Path):
+    """The same through :func:`run_track`: the six reference rows on the sensor track (50 s).
+
+    The same on a tiny ``actuator`` track raised in the directional row (``no training episode
+    of fault valve-bias lasted through its window``), which the row's fit alone on one
+    calibration seed does not: not resolved yet (lab/fault-tracks.md)."""
+    from evaluation.tracks.board import run_track
+
+    t = _tiny("sensor", 2)
+    run = run_track(t, ["limits"], tmp_path, progress=False, figures=False)
+    _check_run(t, run.records, run.rows)
