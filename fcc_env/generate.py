@@ -353,6 +353,7 @@ PROGRESS_CHUNK = 16
 #: The fields of :class:`~fcc_env.simulation.BatchResult` that hold one entry per episode.
 _PER_EPISODE = (
     "seeds",
+    "fault_labels",
     "scenarios",
     "fault_onsets",
     "fault_magnitudes",

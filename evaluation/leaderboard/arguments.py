@@ -97,9 +97,14 @@ HELP_DEFAULTS: dict[str, dict[str, Any]] = {
             "incipient",
             "noisy",
             "uncertain",
+            "mismatch",
             "random",
             "closed",
             "closed-random",
+            "regimes",
+            "sensor",
+            "actuator",
+            "concurrent",
         )
     },
 }

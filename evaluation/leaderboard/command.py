@@ -97,8 +97,14 @@ def resolve_options(
         diags = tuple(d for d in BASELINES if d in avail)
     else:
         diags = tuple(avail)
-        if args.external is not None:  # recorded data have no labelled training faults
-            diags = tuple(d for d in diags if not diagnoser_class(d).isolates)
+        if args.external is not None:
+            # recorded data have no labelled training faults, and another unit is not the
+            # published FCC model a grey-box diagnoser knows: the black box tier only
+            diags = tuple(
+                d
+                for d in diags
+                if not diagnoser_class(d).isolates and diagnoser_class(d).tier == "black box"
+            )
         else:  # FCC-v0's channels: a closed-loop detector (it reads u_F) has nothing to read
             diags = tuple(applicable(diags, fcc_env.MEASUREMENT_NAMES, "")[0])
     unknown = [d for d in diags if d not in avail]
