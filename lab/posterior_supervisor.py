@@ -3,8 +3,12 @@
 ``python lab/posterior_supervisor.py table --seeds 1000,1001 --out T.json``: ``R_h(sp)`` on
 training seeds (``merge T1.json T2.json`` prints the averaged table of several runs, to paste
 into ``evaluation.control.posterior_policy.RETURN_TABLE``).
-``python -m evaluation.control --policies fixed,posterior ...`` runs the study (the record:
-``lab/posterior_supervisor.md``).
+``python lab/posterior_supervisor.py study --seeds 5000 --policies fixed,posterior --out S.json``:
+the study's episodes (every scenario; the oracle always, last) on validation seeds, per episode
+to JSON; ``summary S1.json S2.json ...`` pools chunks and prints the loss against the oracle,
+overall and per scenario (the record: ``lab/posterior_supervisor.md``). ``--policies`` may name
+``iso`` for the supervisor on ``lrgf-iso`` around ``lrgf-glr-closed`` (trained as the command
+trains it).
 """
 
 from __future__ import annotations
@@ -15,7 +19,9 @@ import time
 
 import numpy as np
 
+from evaluation.control import make_policy
 from evaluation.control.posterior_policy import measure_return_table
+from evaluation.control.returns import EpisodeScore, run_study, summarise
 
 
 def main(argv: list[str]) -> None:
@@ -27,6 +33,41 @@ def main(argv: list[str]) -> None:
         print(json.dumps(table, indent=1), f"\n{time.process_time() - t:.0f} s CPU")
         with open(out, "w") as f:
             json.dump(table, f)
+    elif argv[0] == "study":
+        seeds = [int(s) for s in argv[argv.index("--seeds") + 1].split(",")]
+        names = argv[argv.index("--policies") + 1].split(",")
+        out = argv[argv.index("--out") + 1]
+        t = time.process_time()
+        policies = [
+            make_policy("supervisor", name="lrgf-iso", params={"detector_name": "lrgf-glr-closed"})
+            if n == "iso"
+            else make_policy(n)
+            for n in names
+        ]
+        policies.append(make_policy("oracle"))
+        print(f"built in {time.process_time() - t:.0f} s CPU", flush=True)
+        scores = run_study(policies, seeds, 3999, ["nominal", "f1", "f2", "f3", "f4"])
+        with open(out, "w") as f:
+            json.dump([s.__dict__ for s in scores], f)
+        print(f"{len(scores)} episodes, {time.process_time() - t:.0f} s CPU")
+    elif argv[0] == "summary":
+        scores = [EpisodeScore(**d) for p in argv[1:] for d in json.load(open(p))]
+        ref = next(s.policy for s in scores if s.policy.startswith("oracle"))
+        for s in summarise(scores, ref):
+            li = s.loss_vs_oracle_usd
+            print(
+                f"| {s.policy} | {s.n_episodes} | {s.return_usd.estimate:,.0f} | "
+                f"{li.estimate:,.0f} [{li.low:,.0f}, {li.high:,.0f}] |"
+            )
+        print()
+        scen = sorted({s.scenario for s in scores})
+        print("| policy | " + " | ".join(scen) + " |")
+        for name in dict.fromkeys(s.policy for s in scores):
+            row = [
+                np.mean([s.return_usd for s in scores if s.policy == name and s.scenario == c])
+                for c in scen
+            ]
+            print(f"| {name} | " + " | ".join(f"{v:,.0f}" for v in row) + " |")
     elif argv[0] == "merge":
         tables = [json.load(open(p)) for p in argv[1:]]
         merged = {

@@ -11,7 +11,8 @@ points ``sp`` (the healthy plant's best, and each fault's best) that maximise
 
 with ``R_h(sp)`` the return rate (USD/h) of set points ``sp`` held on a plant with hypothesis
 ``h``: a table (:data:`RETURN_TABLE`) measured on the control study's own episodes
-(:func:`measure_return_table`, training seeds 1000.., never a test seed; ``lab/posterior_supervisor.md``).
+(:func:`measure_return_table`, training seeds 1000.., never a test seed;
+``lab/posterior_supervisor.md``).
 An uncertain posterior thus picks the set points that lose least in expectation, not the mean of
 the faults' set points, and a confident one the fault's own.
 
@@ -50,13 +51,19 @@ __all__ = [
 ]
 
 #: The seeds :data:`RETURN_TABLE` was measured on (training seeds: never a test seed).
-RETURN_TABLE_SEEDS = (1000, 1001)
+RETURN_TABLE_SEEDS = (1000, 1001, 1002, 1003, 1004)
 
 #: ``R_h(sp)``, USD/h: rows the hypotheses (the plant: healthy or a fault at the paper's size),
 #: columns the candidate set points (``"healthy"``: the healthy plant's best; ``"f1"``..: each
 #: fault's best). Measured by ``python lab/posterior_supervisor.py table`` (
 #: :func:`measure_return_table` on :data:`RETURN_TABLE_SEEDS`; ``lab/posterior_supervisor.md``).
-RETURN_TABLE: dict[str, dict[str, float]] = {}
+RETURN_TABLE: dict[str, dict[str, float]] = {
+    "nominal": {"healthy": 5854.0, "f1": 5851.0, "f2": 5862.0, "f3": 5865.3, "f4": 5861.0},
+    "f1": {"healthy": 5279.8, "f1": 5717.9, "f2": 3627.8, "f3": 2727.1, "f4": 3880.3},
+    "f2": {"healthy": 5852.0, "f1": 5849.1, "f2": 5859.9, "f3": 5863.2, "f4": 5859.0},
+    "f3": {"healthy": 5868.8, "f1": 5866.0, "f2": 5875.7, "f3": 5878.5, "f4": 5874.9},
+    "f4": {"healthy": 5852.9, "f1": 5850.0, "f2": 5860.7, "f3": 5863.8, "f4": 5859.8},
+}
 
 
 def candidate_setpoints() -> dict[str, np.ndarray]:
