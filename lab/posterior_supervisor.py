@@ -41,6 +41,8 @@ def main(argv: list[str]) -> None:
         policies = [
             make_policy("supervisor", name="lrgf-iso", params={"detector_name": "lrgf-glr-closed"})
             if n == "iso"
+            else make_policy("posterior", trust_after=int(n.split(":")[1]))
+            if n.startswith("posterior:")
             else make_policy(n)
             for n in names
         ]

@@ -106,7 +106,10 @@ class PosteriorSupervisor:
     ``candidates``). Armed after ``arm_after`` samples from a fresh ``reset``, as
     :class:`~evaluation.control.policies.DiagnosisSupervisor` (the start-up move is not what
     the diagnoser was trained on). ``history``: each change of alarm, most probable
-    hypothesis or target.
+    hypothesis or target. ``trust_after``: samples after the arming during which the posterior
+    is not acted on (the prior, healthy, stands in): ``mmae``'s filters start at the steady
+    state of the nominal inputs, not of the set points in force, and its posterior names f1
+    for 400-1600 samples after a reset on healthy episodes (``lab/posterior_supervisor.md``).
     """
 
     name: str
@@ -115,6 +118,7 @@ class PosteriorSupervisor:
     candidates: Mapping[str, np.ndarray]
     margin_usd_per_h: float = 20.0
     arm_after: int = ARM_AFTER
+    trust_after: int = 0
     history: list[SupervisorEvent] = field(init=False, default_factory=list)
     _R: np.ndarray = field(init=False, repr=False)
     _names: list[str] = field(init=False, repr=False)
@@ -154,6 +158,8 @@ class PosteriorSupervisor:
             self.diagnoser.reset()  # its training records start here
         decision = self.diagnoser.update(np.asarray(obs, dtype=np.float64))
         post = np.asarray(decision.posterior, dtype=np.float64)
+        if self._k <= self.arm_after + self.trust_after:
+            post = np.eye(len(post))[0]  # the filters' start-up: the prior, healthy
         self._current = best_candidate(post, self._R, self._current, self.margin_usd_per_h)
         likely = str(self.diagnoser.hypotheses_[int(np.argmax(post))])
         self._record(
@@ -216,6 +222,7 @@ def posterior_supervisor(
     table: Mapping[str, Mapping[str, float]] | None = None,
     margin_usd_per_h: float = 20.0,
     params: dict[str, Any] | None = None,
+    trust_after: int = 0,
 ) -> PosteriorSupervisor:
     """A :class:`PosteriorSupervisor` on ``mmae`` (``params``: its hyperparameters), fitted on
     episodes of the training seeds run at the healthy set points (one healthy, to calibrate
@@ -237,10 +244,12 @@ def posterior_supervisor(
     for fault in fault_names():
         train += operated_episodes(fixed, fault, seed, n_train_steps)
     table = {("nominal" if h == NOMINAL else h): row for h, row in table.items()}
+    label = f", trusted after {trust_after}" if trust_after else ""
     return PosteriorSupervisor(
-        "supervisor on the mmae posterior (expected return)",
+        f"supervisor on the mmae posterior (expected return{label})",
         make("mmae", **(params or {})).fit(train),
         table,
         candidate_setpoints(),
         margin_usd_per_h,
+        trust_after=trust_after,
     )
