@@ -98,3 +98,13 @@ def test_the_registered_policy_runs_an_episode():
     sup = make_policy("posterior")
     score = run_episode(sup, "f1", 5000, 400)
     assert score.n_steps == 400 and sup.history[0].target == "healthy"
+
+
+def test_the_posterior_is_not_acted_on_before_trust_after():
+    healthy = fixed_setpoints().target(0, {})
+    table = {"nominal": {"healthy": 100.0, "f1": 90.0}, "f1": {"healthy": 0.0, "f1": 100.0}}
+    cands = {"healthy": healthy, "f1": healthy + np.array([-4.0, 2.0])}
+    sup = PosteriorSupervisor("posterior (stub)", _Stub(flip=5), table, cands, 5.0, 10, 30)
+    run_episode(sup, "nominal", 5000, 60)
+    # the stub names f1 from its 6th update (k = 16), acted on from k = 10 + 30 + 1
+    assert [(e.k, e.target) for e in sup.history if e.target == "f1"][0] == (41, "f1")
