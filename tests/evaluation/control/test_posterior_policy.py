@@ -107,4 +107,4 @@ def test_the_posterior_is_not_acted_on_before_trust_after():
     sup = PosteriorSupervisor("posterior (stub)", _Stub(flip=5), table, cands, 5.0, 10, 30)
     run_episode(sup, "nominal", 5000, 60)
     # the stub names f1 from its 6th update (k = 16), acted on from k = 10 + 30 + 1
-    assert [(e.k, e.target) for e in sup.history if e.target == "f1"][0] == (41, "f1")
+    assert next((e.k, e.target) for e in sup.history if e.target == "f1") == (41, "f1")
