@@ -11,6 +11,7 @@ name, what builds one: a class or a function. The built-ins are :data:`BUILTIN_P
 ``oracle``      knows the fault and its onset: the study's reference, always its last row
 ``supervisor``  a diagnosis-driven supervisor: ``make_policy("supervisor", name="pca")``
 ``ppo``         a saved PPO agent: ``make_policy("ppo", directory=DIR)``
+``posterior``   a supervisor on the ``mmae`` posterior: the set points of highest expected return
 ==============  ==================================================================================
 
 A policy of your own joins with ``@register_policy("name")`` on its class (or on a function
@@ -88,6 +89,11 @@ BUILTIN_POLICIES: tuple[PolicySpec, ...] = (
         "evaluation.control.rl_policy:load_policy",
         "a saved PPO agent (policy.npz + policy.json)",
         needs="directory=DIR (python -m evaluation.control.rl evaluate --policy DIR)",
+    ),
+    PolicySpec(
+        "posterior",
+        "evaluation.control.posterior_policy:posterior_supervisor",
+        "a supervisor on the mmae posterior: the set points of highest expected return",
     ),
 )
 

@@ -1,0 +1,83 @@
+"""The posterior-driven supervisor (issue 42 item 7b): its return table and a short study.
+
+``python lab/posterior_supervisor.py table --seeds 1000,1001 --out T.json``: ``R_h(sp)`` on
+training seeds (``merge T1.json T2.json`` prints the averaged table of several runs, to paste
+into ``evaluation.control.posterior_policy.RETURN_TABLE``).
+``python lab/posterior_supervisor.py study --seeds 5000 --policies fixed,posterior --out S.json``:
+the study's episodes (every scenario; the oracle always, last) on validation seeds, per episode
+to JSON; ``summary S1.json S2.json ...`` pools chunks and prints the loss against the oracle,
+overall and per scenario (the record: ``lab/posterior_supervisor.md``). ``--policies`` may name
+``iso`` for the supervisor on ``lrgf-iso`` around ``lrgf-glr-closed`` (trained as the command
+trains it).
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+
+import numpy as np
+
+from evaluation.control import make_policy
+from evaluation.control.posterior_policy import measure_return_table
+from evaluation.control.returns import EpisodeScore, run_study, summarise
+
+
+def main(argv: list[str]) -> None:
+    if argv[0] == "table":
+        seeds = [int(s) for s in argv[argv.index("--seeds") + 1].split(",")]
+        out = argv[argv.index("--out") + 1]
+        t = time.process_time()
+        table = measure_return_table(seeds=seeds)
+        print(json.dumps(table, indent=1), f"\n{time.process_time() - t:.0f} s CPU")
+        with open(out, "w") as f:
+            json.dump(table, f)
+    elif argv[0] == "study":
+        seeds = [int(s) for s in argv[argv.index("--seeds") + 1].split(",")]
+        names = argv[argv.index("--policies") + 1].split(",")
+        out = argv[argv.index("--out") + 1]
+        t = time.process_time()
+        policies = [
+            make_policy("supervisor", name="lrgf-iso", params={"detector_name": "lrgf-glr-closed"})
+            if n == "iso"
+            else make_policy("posterior", trust_after=int(n.split(":")[1]))
+            if n.startswith("posterior:")
+            else make_policy(n)
+            for n in names
+        ]
+        policies.append(make_policy("oracle"))
+        print(f"built in {time.process_time() - t:.0f} s CPU", flush=True)
+        scores = run_study(policies, seeds, 3999, ["nominal", "f1", "f2", "f3", "f4"])
+        with open(out, "w") as f:
+            json.dump([s.__dict__ for s in scores], f)
+        print(f"{len(scores)} episodes, {time.process_time() - t:.0f} s CPU")
+    elif argv[0] == "summary":
+        scores = [EpisodeScore(**d) for p in argv[1:] for d in json.load(open(p))]
+        ref = next(s.policy for s in scores if s.policy.startswith("oracle"))
+        for s in summarise(scores, ref):
+            li = s.loss_vs_oracle_usd
+            print(
+                f"| {s.policy} | {s.n_episodes} | {s.return_usd.estimate:,.0f} | "
+                f"{li.estimate:,.0f} [{li.low:,.0f}, {li.high:,.0f}] |"
+            )
+        print()
+        scen = sorted({s.scenario for s in scores})
+        print("| policy | " + " | ".join(scen) + " |")
+        for name in dict.fromkeys(s.policy for s in scores):
+            row = [
+                np.mean([s.return_usd for s in scores if s.policy == name and s.scenario == c])
+                for c in scen
+            ]
+            print(f"| {name} | " + " | ".join(f"{v:,.0f}" for v in row) + " |")
+    elif argv[0] == "merge":
+        tables = [json.load(open(p)) for p in argv[1:]]
+        merged = {
+            h: {c: round(float(np.mean([t[h][c] for t in tables])), 1) for c in tables[0][h]}
+            for h in tables[0]
+        }
+        print(json.dumps(merged, indent=4))
+
+
+if __name__ == "__main__":
+    main(sys.argv[1:])
