@@ -266,3 +266,48 @@ def test_known_fault_bank_refuses_a_non_finite_limit():
     )
     with pytest.raises(ValueError, match="limit is nan"):
         bank.fit([ep])
+
+
+class _Names:
+    """An isolator stand-in that names ``label`` from sample ``start`` on."""
+
+    name = "names"
+
+    def __init__(self, label: str, classes: tuple[str, ...], start: int = 10) -> None:
+        self.label, self.classes, self.start = label, classes, start
+
+    def detect(self, ep):
+        from diagnosers import Detection
+
+        n = ep.n_samples
+        z = np.zeros((n, 1))
+        alarm = np.arange(n) >= self.start
+        diagnosis = np.where(alarm, self.label, "")
+        return Detection(alarm, z, z, z, z, ("x",), diagnosis=diagnosis, class_names=self.classes)
+
+
+@pytest.mark.parametrize(
+    ("said", "outcome"),
+    [
+        ("sensor-bias+valve-stiction", "correct"),
+        ("valve-stiction+sensor-bias", "correct"),  # both names in the other order
+        ("sensor-bias", "wrong"),  # one of the two
+        ("unknown", "unknown"),
+    ],
+)
+def test_concurrent_isolation_scored_as_isolation_outcome(said: str, outcome: str):
+    """A concurrent column's episode is isolated when the diagnosis names both of its faults
+    (:meth:`Track.labels`) in any order, as :func:`isolation_outcome` says, whatever order
+    the diagnoser's class is named in."""
+    from diagnosers.episode.record import Episode
+    from evaluation.sweep.records import score_episode
+    from evaluation.sweep.sources import LoadedEpisode
+
+    column = "sensor-bias+valve-stiction"
+    labels = TRACKS["concurrent"].labels(column)
+    assert isolation_outcome(said.split("+"), labels) == outcome or said == "unknown"
+    ep = Episode(np.zeros((100, 1)), ("x",), 10.0, 5, column, 0)
+    classes = ("valve-stiction+sensor-bias", "sensor-bias", "valve-stiction")
+    rec = score_episode(_Names(said, classes), LoadedEpisode(ep, 5, 100, None, None))
+    assert rec.cdr == (1.0 if outcome == "correct" else 0.0)
+    assert rec.diagnosis == (column if outcome == "correct" else said)
