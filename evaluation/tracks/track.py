@@ -191,7 +191,7 @@ class Track:
         if not isinstance(self.description, str) or not self.description.strip():
             raise invalid("description", self.description, "a non-empty string")
         if self.fault_templates:
-            self._set_templates()
+            _set_templates(self)
         faults, registered = self.faults, fault_names()
         if self.fault_templates:
             registered = faults
@@ -239,7 +239,7 @@ class Track:
             )
         if not self.fault_templates:
             set_(self, "magnitudes", _checked_magnitudes(self.magnitudes, self.faults))
-        self._check_test_program()
+        _check_test_program(self)
         last_onset = self.n_samples - RAMP_MARGIN
         if self.onset is not None:
             check_distribution(
@@ -263,47 +263,6 @@ class Track:
         set_(self, "profiles", profiles)
         self._check_ramp()
         _check_seed_ranges(self)
-
-    def _check_test_program(self) -> None:
-        given = self.test_setpoint_halfranges
-        if given is None:
-            return
-        if not self.closed_loop:
-            raise invalid(
-                "test_setpoint_halfranges", given, "None on an open-loop track", "no set points"
-            )
-        if isinstance(given, str) or not isinstance(given, tuple | list) or len(given) != 2:
-            raise invalid("test_setpoint_halfranges", given, "a pair (T_rx, T_rg1) of °C")
-        limits = (("T_rx_sp_halfrange_C", 10.0), ("T_rg1_sp_halfrange_C", 15.0))
-        pair = tuple(
-            float(check(name, v, Real(0.0, high, unit="°C")))
-            for (name, high), v in zip(limits, given, strict=True)
-        )
-        object.__setattr__(self, "test_setpoint_halfranges", pair)
-
-    def _set_templates(self) -> None:
-        """``fault_templates`` checked; ``faults`` their names (module docstring)."""
-        given = self.fault_templates
-        if not isinstance(given, tuple | list) or not all(
-            isinstance(t, FaultTemplate) for t in given
-        ):
-            raise invalid("fault_templates", given, "a tuple of FaultTemplate")
-        names = tuple(t.name for t in given)
-        if self.faults not in (PAPER_FAULTS, names):
-            raise invalid("faults", self.faults, f"{names}: the templates' names, or unset")
-        if self.magnitudes not in (None, ()):
-            raise invalid("magnitudes", self.magnitudes, "None", "the templates carry the sizes")
-        needs_loop = sorted({s for t in given for s in t.definitions_needing_loop})
-        if needs_loop and not self.closed_loop:
-            raise invalid(
-                "closed_loop",
-                False,
-                "True",
-                f"{needs_loop} only act while a controller moves the valve",
-            )
-        object.__setattr__(self, "fault_templates", tuple(given))
-        object.__setattr__(self, "faults", names)
-        object.__setattr__(self, "magnitudes", ())
 
     def template(self, fault: str) -> FaultTemplate:
         """The template of column ``fault`` of a track with ``fault_templates``."""
@@ -585,6 +544,47 @@ def _checked_magnitudes(
         )
         for f in sorted(given)
     )
+
+
+def _check_test_program(track: Track) -> None:
+    given = track.test_setpoint_halfranges
+    if given is None:
+        return
+    if not track.closed_loop:
+        raise invalid(
+            "test_setpoint_halfranges", given, "None on an open-loop track", "no set points"
+        )
+    if isinstance(given, str) or not isinstance(given, tuple | list) or len(given) != 2:
+        raise invalid("test_setpoint_halfranges", given, "a pair (T_rx, T_rg1) of °C")
+    limits = (("T_rx_sp_halfrange_C", 10.0), ("T_rg1_sp_halfrange_C", 15.0))
+    pair = tuple(
+        float(check(name, v, Real(0.0, high, unit="°C")))
+        for (name, high), v in zip(limits, given, strict=True)
+    )
+    object.__setattr__(track, "test_setpoint_halfranges", pair)
+
+
+def _set_templates(track: Track) -> None:
+    """``fault_templates`` checked; ``faults`` their names (module docstring)."""
+    given = track.fault_templates
+    if not isinstance(given, tuple | list) or not all(isinstance(t, FaultTemplate) for t in given):
+        raise invalid("fault_templates", given, "a tuple of FaultTemplate")
+    names = tuple(t.name for t in given)
+    if track.faults not in (PAPER_FAULTS, names):
+        raise invalid("faults", track.faults, f"{names}: the templates' names, or unset")
+    if track.magnitudes not in (None, ()):
+        raise invalid("magnitudes", track.magnitudes, "None", "the templates carry the sizes")
+    needs_loop = sorted({s for t in given for s in t.definitions_needing_loop})
+    if needs_loop and not track.closed_loop:
+        raise invalid(
+            "closed_loop",
+            False,
+            "True",
+            f"{needs_loop} only act while a controller moves the valve",
+        )
+    object.__setattr__(track, "fault_templates", tuple(given))
+    object.__setattr__(track, "faults", names)
+    object.__setattr__(track, "magnitudes", ())
 
 
 def _check_seed_ranges(track: Track) -> None:
