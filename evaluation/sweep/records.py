@@ -24,6 +24,7 @@ from diagnosers.episode.record import Episode
 from evaluation.metrics.detection_metrics import episode_scores
 from evaluation.metrics.isolation_metrics import UNKNOWN, isolation_scores
 from evaluation.sweep.sources import LoadedEpisode
+from fcc_env.faults import isolation_outcome
 
 #: Python types a stored cell field may hold, by the annotation of :class:`CellResult`.
 _FIELD_KINDS: dict[str, type | tuple[type, ...]] = {
@@ -123,6 +124,32 @@ def mark_assumed_onsets(
     return out
 
 
+def column_label(label: str, column: str) -> str:
+    """``label`` as ``column`` where both name the same faults: a concurrent column ``a+b``
+    (its faults, :meth:`evaluation.tracks.Track.labels`, joined by ``+``) named ``b+a``, in
+    :func:`fcc_env.faults.isolation_outcome`'s convention (both names, any order; one of the
+    two is wrong, ``unknown`` abstains). Other labels are returned as they are.
+
+    >>> column_label("valve-stiction+sensor-bias", "sensor-bias+valve-stiction")
+    'sensor-bias+valve-stiction'
+    >>> column_label("sensor-bias", "sensor-bias+valve-stiction")
+    'sensor-bias'
+    """
+    if label == column or "+" not in column or "+" not in label:
+        return label
+    same = isolation_outcome(label.split("+"), column.split("+")) == "correct"
+    return column if same else label
+
+
+def column_labels(diagnosis: np.ndarray, column: str) -> np.ndarray:
+    """:func:`column_label` of every sample's diagnosis (each distinct label once)."""
+    if "+" not in column:
+        return diagnosis
+    names, inverse = np.unique(diagnosis, return_inverse=True)
+    mapped = np.array([column_label(str(n), column) for n in names], dtype=object)
+    return mapped[inverse].astype(str)
+
+
 def score_episode(
     diagnoser: Diagnoser, loaded: LoadedEpisode, *, label: str | None = None, t_on: int = 0
 ) -> CellResult:
@@ -151,8 +178,9 @@ def detect_and_score(
     iso: dict[str, Any] = {}
     if det.diagnosis is not None and onset is not None:
         # a fault the diagnoser was not trained on is rightly called "unknown"
-        truth = ep.scenario if ep.scenario in det.class_names else UNKNOWN
-        iso = isolation_scores(det.diagnosis, truth, onset)
+        classes = {column_label(c, ep.scenario) for c in det.class_names}
+        truth = ep.scenario if ep.scenario in classes else UNKNOWN
+        iso = isolation_scores(column_labels(det.diagnosis, ep.scenario), truth, onset)
         iso["diagnosis"] = iso.pop("label")
     record = CellResult(
         diagnoser=label or diagnoser.name,

@@ -276,6 +276,12 @@ class KnownFaultBank:
         top = np.concatenate([self.scores(ep)[0].max(axis=1) for ep in healthy])
         limit = calibrate_limit(top[:, None], self.false_alarm_target, method=LimitMethod.EMPIRICAL)
         self.limit_ = float(limit[0])
+        if not np.isfinite(self.limit_):  # a NaN limit would never alarm, silently
+            raise ValueError(
+                f"the {self.statistic.value} bank's limit is {self.limit_}: a healthy "
+                "calibration episode's statistic is not finite (its reference or a fault's "
+                "signature holds NaN or inf); allowed: finite statistics"
+            )
         return self
 
     def detect(self, episode: Episode) -> Detection:

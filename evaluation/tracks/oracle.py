@@ -436,6 +436,15 @@ def reference_over(ref: np.ndarray, y: np.ndarray) -> np.ndarray:
     return out
 
 
+#: Why the directional row has no direction for a fault (``_PerfectModelStage.skipped_``):
+#: a noise fault (``sensor-noise``) changes the variance, not the mean, so its noise-free
+#: signature is zero and a mean direction is 0/0; the omnibus T² (and the EWMA scales) still
+#: see its variance.
+NO_MEAN_SIGNATURE = "no mean signature (the fault changes the noise, not the mean)"
+#: ... and when every training episode of a fault ends inside the direction window.
+NO_LASTING_EPISODE = "no training episode lasted {window} samples past its onset"
+
+
 class _PerfectModelStage:
     """``lrgf-glr``'s alarm stage on a reference trajectory instead of a trained bank.
 
@@ -482,12 +491,52 @@ class _PerfectModelStage:
         w = self.steady_window
         rem = [(ep.y[:, self.out_idx_] - self._centre_of(ep))[w:] for ep in episodes]
         self.v_residual_ = np.maximum(np.sqrt(np.mean(np.concatenate(rem) ** 2, axis=0)), 1e-9)
-        pairs = self.directions.pairs(training)
+        kept = self._lasting(training)
+        has_faults = any(ep.fault_onset is not None for ep in kept)
+        pairs = self.directions.pairs(kept) if has_faults else {}
         n = len(self.out_idx_)
+        for fault in list(pairs):
+            means = [self._window_mean(ep, twin) for ep, twin in pairs[fault]]
+            if not np.linalg.norm(np.mean(means, axis=0)) > 0.0:  # zero (or not finite)
+                self.skipped_[fault] = NO_MEAN_SIGNATURE
+                del pairs[fault]
         self.directions_, self.faults = self.directions.learn(pairs, n, self._signature)
         self.stage.fit([r / self.v_residual_ for r in rem], self.directions_)
         self.signal_names_ = self.stage.signal_names(self.faults)
         return self
+
+    def _lasting(self, training: Sequence[Episode]) -> list[Episode]:
+        """``training`` without the faulty episodes that end inside the direction window (or
+        whose healthy twin does); a fault left with none gets no direction, the reason in
+        :attr:`skipped_`.
+
+        ``FaultDirections`` raises for such a fault, right for a detector that is given its
+        training faults; here a track whose onsets come near its end (a short track: onsets
+        may reach ``n_samples`` − 200, the window is 300) or whose training faults trip the
+        plant would otherwise lose the whole row. The omnibus T² still watches the fault."""
+        window = self.directions.window
+        length = {ep.seed: ep.n_samples for ep in training if ep.fault_onset is None}
+        self.skipped_: dict[str, str] = {}
+        kept, faults = [], {}
+        for ep in training:
+            if ep.fault_onset is None:
+                kept.append(ep)
+                continue
+            end = ep.fault_onset + window
+            lasts = ep.n_samples >= end and length.get(ep.seed, end) >= end
+            faults[ep.scenario] = faults.get(ep.scenario, False) or lasts
+            if lasts:
+                kept.append(ep)
+        for fault, any_lasting in faults.items():
+            if not any_lasting:
+                self.skipped_[fault] = NO_LASTING_EPISODE.format(window=window)
+        return kept
+
+    def _window_mean(self, faulty: Episode, twin: Episode) -> np.ndarray:
+        """The mean signature of one training pair over the direction window."""
+        onset = faulty.fault_onset
+        assert onset is not None  # a pair's faulty episode has one
+        return self._signature(faulty, twin, onset + self.directions.window)[onset:].mean(axis=0)
 
     def _signature(self, faulty: Episode, healthy: Episode, end: int) -> np.ndarray:
         """The training fault's noise-free signature: the faulty plant's clean output minus its

@@ -204,7 +204,8 @@ class TrackData:
         program's feed-quality (coking-factor) drift. With the declared coking factor instead,
         the perfect model's residual spread on T_rg1 is 1.29 °C against 0.36 °C
         (``lab/closed_f3_limit.py``); a row at what the measured channels allow would estimate
-        the drift (an observer), which is not built. Returns ``(T, 8)``, the Table 1 channels.
+        the drift (an observer), which is not built. Returns ``(T', 8)``, the Table 1 channels,
+        ``T' < T`` where the healthy model left its domain (non-finite output) at sample ``T'``.
         """
         plant = self.track.test_plant
         if record is None:
@@ -222,7 +223,14 @@ class TrackData:
             u[:, INPUT_NAMES.index(name)] = record[:, CLOSED_LOOP_CHANNELS.index(name)]
         x0 = PlantConfig().initial_state()
         sim = simulate_inputs(u, x0=x0, sample_time_s=self.track.plant.sample_time_s)
-        return np.asarray(sim.y_clean, dtype=np.float64)
+        y = np.asarray(sim.y_clean, dtype=np.float64)
+        # The healthy model driven by a faulty record can leave its domain where the faulty
+        # plant, under its controllers, did not (actuator seed 5018, valve-stuck: NaN from
+        # sample 2537): the reference ends there, as a tripped twin's does, and the rows read
+        # no healthy alternative past it (reference_over, FaultSignatures.of). A NaN left in
+        # would make every statistic NaN and a limit calibrated on it never alarm.
+        finite = np.isfinite(y).all(axis=1)
+        return y if finite.all() else y[: int(np.argmin(finite))]
 
     def describe(self) -> DataDescription:
         t = self.track
