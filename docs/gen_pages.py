@@ -59,15 +59,11 @@ and/or `leaderboard/`). What the columns mean is in [Tracks and reference rows](
 
 def copy_repository_pages() -> None:
     """The changelog and the lab record, as the repository holds them."""
-    pages = {
-        "changelog.md": ROOT / "CHANGELOG.md",
-        "lab/index.md": ROOT / "lab" / "README.md",
-        "lab/detector-lab.md": ROOT / "lab" / "detector-lab.md",
-        "lab/filter-lab.md": ROOT / "lab" / "filter-lab.md",
-        "lab/results-history.md": ROOT / "lab" / "results-history.md",
-        "lab/changelog-record.md": ROOT / "lab" / "changelog-record.md",
-        "lab/scale-lab.md": ROOT / "lab" / "scale-lab.md",
-    }
+    pages = {"changelog.md": ROOT / "CHANGELOG.md", "lab/index.md": ROOT / "lab" / "README.md"}
+    # every record the lab folder holds, so a new record is published without a list to edit
+    for source in sorted((ROOT / "lab").glob("*.md")):
+        if source.name != "README.md":
+            pages[f"lab/{source.name}"] = source
     for page, source in pages.items():
         with mkdocs_gen_files.open(page, "w") as f:
             f.write(source.read_text(encoding="utf-8"))

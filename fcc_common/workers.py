@@ -31,6 +31,7 @@ import multiprocessing
 import os
 import signal
 import sys
+import threading
 from collections.abc import Iterator
 from multiprocessing.context import SpawnContext, SpawnProcess
 from typing import Any
@@ -123,7 +124,6 @@ def exit_with_parent(parent_pid: int, poll_s: float = PARENT_POLL_S) -> None:
     thread also polls ``os.getppid()`` (re-parenting means the parent is gone) and calls
     ``os._exit``. Without this a killed leaderboard leaves its spawn workers running forever.
     """
-    import threading
     import time
 
     if sys.platform.startswith("linux"):
@@ -160,16 +160,54 @@ def _sigint_blocked() -> Iterator[None]:
         signal.pthread_sigmask(signal.SIG_SETMASK, old)  # a pending Ctrl-C is delivered here
 
 
+@contextlib.contextmanager
+def _sigint_deferred() -> Iterator[None]:
+    """:func:`_sigint_blocked`, and a Ctrl-C that arrives within the block raised after it.
+
+    Blocking SIGINT in this thread is not enough in a process with other threads (a progress
+    bar's, the pool's manager): the kernel hands the signal to one of them, and Python then
+    raises KeyboardInterrupt in the main thread whatever its mask, in the middle of writing a
+    starting worker's preparation data (the worker then prints an ``EOFError`` traceback). So
+    the main thread's handler only records the signal until the worker has started."""
+    if threading.current_thread() is not threading.main_thread():
+        with _sigint_blocked():
+            yield
+        return
+    caught: list[int] = []
+    previous = signal.signal(signal.SIGINT, lambda signum, _frame: caught.append(signum))
+    try:
+        with _sigint_blocked():
+            yield
+    finally:
+        signal.signal(signal.SIGINT, previous)
+        if caught:
+            signal.raise_signal(signal.SIGINT)  # delivered now, to the handler restored above
+
+
 class _QuietSpawnProcess(SpawnProcess):
     """A ``spawn`` process that starts with SIGINT blocked (see the module doc)."""
 
     def start(self) -> None:
-        with _sigint_blocked():
+        with _sigint_deferred():
             super().start()
 
 
 class _QuietSpawnContext(SpawnContext):
     Process = _QuietSpawnProcess
+
+
+def stop_workers(timeout_s: float = 5.0) -> None:
+    """Stop every pool worker this process started (:func:`spawn_context`'s processes), at
+    once, and wait for them: what an interrupted driver does before it exits.
+
+    A worker still starting when Ctrl-C arrives would otherwise unpickle the pool's semaphores
+    after the driver has released them and print a traceback of its own; one that the pool had
+    not yet registered is among these too (``multiprocessing.active_children``)."""
+    workers = [p for p in multiprocessing.active_children() if isinstance(p, _QuietSpawnProcess)]
+    for proc in workers:
+        proc.terminate()
+    for proc in workers:
+        proc.join(timeout=timeout_s)
 
 
 def spawn_context() -> Any:

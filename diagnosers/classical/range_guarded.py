@@ -40,7 +40,22 @@ NOVELTY_HOLD = 300
 
 
 class _RangeGuard:
-    """What both variants add: fit the operating range, flag its novel samples."""
+    """What both variants add: fit the operating range, flag its novel samples. It comes first
+    among the bases, so its methods wrap the detector's (``super()`` is the detector)."""
+
+    def _fit(self, episodes: list[Episode]) -> None:
+        super()._fit(episodes)  # type: ignore[misc]
+        self._fit_range(episodes)
+
+    def _get_state(self) -> dict[str, np.ndarray]:
+        return {**super()._get_state(), **self._range_state()}  # type: ignore[misc]
+
+    def _set_state(self, state: dict[str, np.ndarray]) -> None:
+        super()._set_state(state)  # type: ignore[misc]
+        self._set_range_state(state)
+
+    def _detect(self, y: np.ndarray) -> Detection:
+        return self._flag(super()._detect(y), y)  # type: ignore[misc]
 
     novelty_hold: int
     channels_: tuple[str, ...]
@@ -88,20 +103,6 @@ class LimitsNovelty(_RangeGuard, LimitChecker):
     }
     __init__ = keyword_init(DEFAULTS)
 
-    def _fit(self, episodes: list[Episode]) -> None:
-        super()._fit(episodes)
-        self._fit_range(episodes)
-
-    def _get_state(self) -> dict[str, np.ndarray]:
-        return {**super()._get_state(), **self._range_state()}
-
-    def _set_state(self, state: dict[str, np.ndarray]) -> None:
-        super()._set_state(state)
-        self._set_range_state(state)
-
-    def _detect(self, y: np.ndarray) -> Detection:
-        return self._flag(super()._detect(y), y)
-
 
 @register("pca-novelty")
 class PCANovelty(_RangeGuard, PCADetector):
@@ -120,17 +121,3 @@ class PCANovelty(_RangeGuard, PCADetector):
 
     DEFAULTS: ClassVar[dict[str, Any]] = {**PCADetector.DEFAULTS, "novelty_hold": NOVELTY_HOLD}
     __init__ = keyword_init(DEFAULTS)
-
-    def _fit(self, episodes: list[Episode]) -> None:
-        super()._fit(episodes)
-        self._fit_range(episodes)
-
-    def _get_state(self) -> dict[str, np.ndarray]:
-        return {**super()._get_state(), **self._range_state()}
-
-    def _set_state(self, state: dict[str, np.ndarray]) -> None:
-        super()._set_state(state)
-        self._set_range_state(state)
-
-    def _detect(self, y: np.ndarray) -> Detection:
-        return self._flag(super()._detect(y), y)

@@ -21,7 +21,13 @@ from pathlib import Path
 from typing import Any, Protocol
 
 # the worker set-up is shared with diagnosers.bank.parallel (fcc_common.workers)
-from fcc_common.workers import THREAD_ENV_VARS, cpu_count, init_worker, spawn_context
+from fcc_common.workers import (
+    THREAD_ENV_VARS,
+    cpu_count,
+    init_worker,
+    spawn_context,
+    stop_workers,
+)
 
 #: Execution backends accepted by :func:`evaluation.sweep.run_sweep`.
 BACKENDS: tuple[str, ...] = ("local", "ray")
@@ -64,6 +70,8 @@ class LocalBackend:
                 yield fut, fut.result()
 
     def close(self, cancel: bool) -> None:
+        if cancel:  # a Ctrl-C: no worker, even one still starting, outlives the driver
+            stop_workers()
         self._pool.shutdown(wait=not cancel, cancel_futures=cancel)
 
 
