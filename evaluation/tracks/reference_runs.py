@@ -42,6 +42,7 @@ from typing import Any
 
 from tqdm.auto import tqdm
 
+from diagnosers.registry import diagnoser_class
 from evaluation.sweep.backends import BACKENDS, Backend, make_backend
 from evaluation.sweep.records import CellResult, score_episode
 from evaluation.sweep.store import ResultStore, canonical_hash
@@ -52,15 +53,20 @@ from evaluation.tracks.oracle import (
     Simulations,
 )
 from evaluation.tracks.track_data import TrackData
+from fcc_common.import_graph import import_closure
 from fcc_common.workers import limit_threads
 from fcc_env import MODEL_VERSION, __version__
 
 __all__ = [
+    "PROJECT_PACKAGES",
     "REFERENCE_CODE",
+    "REFERENCE_REGISTRY",
+    "REFERENCE_ROOTS",
     "REFERENCE_STORE_VERSION",
     "ReferenceSeedTask",
     "code_version",
     "fit_task",
+    "reference_code",
     "reference_hash",
     "reference_label",
     "run_references",
@@ -71,35 +77,34 @@ __all__ = [
 #: Bumped when the meaning of a stored reference record changes (part of every address).
 REFERENCE_STORE_VERSION = 1
 
-#: The modules whose source the reference rows' numbers depend on beyond the simulator (the
-#: simulator is named by the package and model versions, as for every detector cell): the rows,
-#: their track data, the stages and filter they run, and the scoring. Not this module: it
+#: The project's own top-level packages (what the reference rows' closure is kept to).
+PROJECT_PACKAGES: tuple[str, ...] = ("diagnosers", "evaluation", "fcc_common", "fcc_env")
+#: The modules the reference rows compute with: the rows (:mod:`~evaluation.tracks.oracle`, which
+#: imports the optimal and filter rows), their track data and the scoring. Not this module: it
 #: schedules and stores, and computes no number (its tasks call the rows and the scoring).
-REFERENCE_CODE: tuple[str, ...] = (
+REFERENCE_ROOTS: tuple[str, ...] = (
     "evaluation.tracks.oracle",
-    "evaluation.tracks.optimal",
-    "evaluation.tracks.filter_bound",
     "evaluation.tracks.track_data",
-    "evaluation.tracks.track",
-    "evaluation.tracks.distributions",
     "evaluation.sweep.records",
-    "evaluation.sweep.sources",
-    "evaluation.metrics.detection_metrics",
-    "evaluation.metrics.isolation_metrics",
-    "diagnosers.detection",
-    "diagnosers.episode.record",
-    "diagnosers.stages.alarm",
-    "diagnosers.stages.directional_stage",
-    "diagnosers.stages.innovation_stage",
-    "diagnosers.lrgf.fault_directions",
-    "diagnosers.lrgf.lrgf_glr",
-    "diagnosers.lrgf.lrgf_presets",
-    "diagnosers.filters.state_estimator",
-    "diagnosers.filters.ukf_config",
-    "diagnosers.filters.ukf_kernels",
-    "diagnosers.filters.ukf_linear",
-    "diagnosers.filters.ukf_model",
 )
+#: Diagnosers the rows read by registry name (:func:`diagnosers.registry.diagnoser_class`, which
+#: the import graph does not show): the directional rows take ``lrgf-glr``'s defaults.
+REFERENCE_REGISTRY: tuple[str, ...] = ("lrgf-glr",)
+
+
+def reference_code() -> tuple[str, ...]:
+    """The modules whose source the reference rows' numbers depend on beyond the simulator:
+    the import closure (:func:`fcc_common.import_graph.import_closure`) of
+    :data:`REFERENCE_ROOTS` and of the modules of :data:`REFERENCE_REGISTRY`, within this
+    project's packages. The simulator (``fcc_env``) is left out: it is named by the package and
+    model versions, as for every detector cell. Derived, so a new dependency of a row is never
+    forgotten; conservative, so an edit of any module the rows import recomputes them."""
+    roots = (*REFERENCE_ROOTS, *(diagnoser_class(n).__module__ for n in REFERENCE_REGISTRY))
+    return import_closure(roots, PROJECT_PACKAGES, exclude=("fcc_env",))
+
+
+#: :func:`reference_code` when this module was imported (what :func:`code_version` hashes).
+REFERENCE_CODE: tuple[str, ...] = reference_code()
 
 
 @cache
