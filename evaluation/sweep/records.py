@@ -12,7 +12,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
-from collections.abc import Collection, Mapping, Sequence
+from collections.abc import Callable, Collection, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -158,13 +158,22 @@ def score_episode(
 
 
 def detect_and_score(
-    diagnoser: Diagnoser, loaded: LoadedEpisode, *, label: str | None = None, t_on: int = 0
+    diagnoser: Diagnoser,
+    loaded: LoadedEpisode,
+    *,
+    label: str | None = None,
+    t_on: int = 0,
+    detect: Callable[[Episode], Detection] | None = None,
 ) -> tuple[CellResult, Detection]:
-    """:func:`score_episode` that also returns the :class:`Detection` it scored (no I/O)."""
+    """:func:`score_episode` that also returns the :class:`Detection` it scored (no I/O).
+
+    ``detect``: what gives the diagnoser's detection of the episode, if not
+    ``diagnoser.detect`` (an isolator that reuses its inner detector's stored detection); the
+    record's ``detect_wall_s`` is its wall time."""
     ep = loaded.episode
     nan = float("nan")
     t0 = time.perf_counter()
-    det = diagnoser.detect(ep)
+    det = (diagnoser.detect if detect is None else detect)(ep)
     wall = time.perf_counter() - t0
     n = ep.n_samples
     onset = ep.fault_onset  # None also when the episode ended before the planned onset
@@ -231,19 +240,39 @@ def pack_detection(
         "planned_onset": np.array(-1 if loaded.fault_onset is None else loaded.fault_onset),
     }
     for view, det in zip(_VIEWS, (detection, bands), strict=True):
-        if det is None:
-            continue
-        for f in _DET_FIELDS:
-            out[f"{view}_{f}"] = getattr(det, f)
-        out[f"{view}_signal_names"] = np.array(det.signal_names, dtype=str)
-        if det.diagnosis is not None:  # isolating diagnosers: the diagnosis per sample
-            out[f"{view}_diagnosis"] = np.asarray(det.diagnosis, dtype=str)
-        if det.posterior is not None:  # probabilistic diagnosers: the posterior per sample
-            out[f"{view}_posterior"] = det.posterior
-            out[f"{view}_hypothesis_names"] = np.array(det.hypothesis_names, dtype=str)
-        if det.novelty is not None:  # samples flagged outside the training range
-            out[f"{view}_novelty"] = det.novelty
+        if det is not None:
+            out.update(detection_arrays(det, f"{view}_"))
     return out
+
+
+def detection_arrays(det: Detection, prefix: str = "") -> dict[str, np.ndarray]:
+    """A :class:`Detection` as plain arrays named ``<prefix><field>`` (no pickles), exactly:
+    :func:`detection_from_arrays` gives it back to the bit. An isolator's inner detection is
+    stored this way (:mod:`evaluation.sweep.runner`)."""
+    out = {f"{prefix}{f}": np.asarray(getattr(det, f)) for f in _DET_FIELDS}
+    out[f"{prefix}signal_names"] = np.array(det.signal_names, dtype=str)
+    if det.diagnosis is not None:  # isolating diagnosers: the diagnosis per sample
+        out[f"{prefix}diagnosis"] = np.asarray(det.diagnosis, dtype=str)
+    if det.posterior is not None:  # probabilistic diagnosers: the posterior per sample
+        out[f"{prefix}posterior"] = det.posterior
+        out[f"{prefix}hypothesis_names"] = np.array(det.hypothesis_names, dtype=str)
+    if det.novelty is not None:  # samples flagged outside the training range
+        out[f"{prefix}novelty"] = det.novelty
+    return out
+
+
+def detection_from_arrays(arrays: Mapping[str, np.ndarray], prefix: str = "") -> Detection:
+    """Inverse of :func:`detection_arrays`."""
+    return Detection(
+        **{f: arrays[f"{prefix}{f}"] for f in _DET_FIELDS},
+        signal_names=tuple(str(n) for n in arrays[f"{prefix}signal_names"]),
+        diagnosis=arrays.get(f"{prefix}diagnosis"),
+        posterior=arrays.get(f"{prefix}posterior"),
+        hypothesis_names=tuple(
+            str(n) for n in arrays.get(f"{prefix}hypothesis_names", np.array([], str))
+        ),
+        novelty=arrays.get(f"{prefix}novelty"),
+    )
 
 
 def unpack_detection(
@@ -263,23 +292,10 @@ def unpack_detection(
         seed=None if seed < 0 else seed,
         units=None if units is None else tuple(str(u) for u in units),
     )
-    views: list[Detection | None] = []
-    for view in _VIEWS:
-        if f"{view}_alarm" not in arrays:
-            views.append(None)
-            continue
-        views.append(
-            Detection(
-                **{f: arrays[f"{view}_{f}"] for f in _DET_FIELDS},
-                signal_names=tuple(str(n) for n in arrays[f"{view}_signal_names"]),
-                diagnosis=arrays.get(f"{view}_diagnosis"),
-                posterior=arrays.get(f"{view}_posterior"),
-                hypothesis_names=tuple(
-                    str(n) for n in arrays.get(f"{view}_hypothesis_names", np.array([], str))
-                ),
-                novelty=arrays.get(f"{view}_novelty"),
-            )
-        )
+    views: list[Detection | None] = [
+        detection_from_arrays(arrays, f"{view}_") if f"{view}_alarm" in arrays else None
+        for view in _VIEWS
+    ]
     det, bands = views
     assert det is not None, "a kept detection always holds the diagnoser's decisions"
     return ep, None if planned < 0 else planned, det, bands

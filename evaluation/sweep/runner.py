@@ -30,12 +30,14 @@ import logging
 import os
 import time
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 from tqdm.auto import tqdm
 
 from diagnosers.detection import Detection
 from diagnosers.diagnoser import Diagnoser
+from diagnosers.isolation.isolating_detector import IsolatingDetector
 from diagnosers.registry import import_modules
 from evaluation.sweep.backends import BACKENDS, Backend, make_backend
 from evaluation.sweep.config import DiagnoserSpec, SweepConfig, SweepResults
@@ -44,11 +46,11 @@ from evaluation.sweep.records import (
 )
 from evaluation.sweep.sources import LoadedEpisode
 from evaluation.sweep.store import ResultStore
-from evaluation.sweep.tasks import EpisodeTask, dir_files, episode_task
+from evaluation.sweep.tasks import OWN_INNER, EpisodeTask, dir_files, episode_task
 from evaluation.sweep.training_stage import train_all
 from fcc_common.workers import cpu_count
 
-__all__ = ["detect_episode", "load_cell", "run_sweep"]
+__all__ = ["detect_episode", "inner_detectors", "load_cell", "run_sweep"]
 
 logger = logging.getLogger(__name__)
 
@@ -154,7 +156,9 @@ def run_sweep(
             cache = None if relation_cache is None else str(relation_cache)
             with _progress_bar(len(to_train), "training", progress) as bar:
                 train_all(runner, store, config, to_train, mhash, cache, bar)
-            _score_all(runner, store, config, missing, mhash, chash, n_missing, progress)
+            inner_of = inner_detectors(store, specs)
+            plan = _ScorePlan(store, chash, inner_of)
+            _score_all(runner, store, config, missing, mhash, plan, n_missing, progress)
             cancel = False
         finally:
             runner.close(cancel=cancel)
@@ -201,12 +205,13 @@ def _score_all(
     config: SweepConfig,
     missing: Mapping[tuple[str, int], list[tuple[DiagnoserSpec, bool, bool]]],
     mhash: Mapping[str, str],
-    chash: Mapping[str, str],
+    plan: _ScorePlan,
     n_missing: int,
     progress: bool,
 ) -> None:
     if not missing:
         return
+    chash = plan.chash
     labels_needed = {s.key for ss in missing.values() for s, _, _ in ss}
     refs: dict[str, Any] = {}
     if not runner.passes_paths:
@@ -214,8 +219,10 @@ def _score_all(
         refs = {lab: runner.put(dir_files(store.model_dir(lab))) for lab in labels_needed}
     handles: dict[Any, tuple[str, int]] = {}
     need_cell = {(sc, seed, s.key): cell for (sc, seed), ss in missing.items() for s, cell, _ in ss}
-    for (sc, seed), ss in missing.items():
+    for (sc, seed), unordered in missing.items():
+        ss = sorted(unordered, key=lambda t: t[0].key in plan.inner_of)  # detectors first
         labels = tuple(s.key for s, _, _ in ss)
+        inner, given, share = plan.episode(sc, seed, labels)
         task = EpisodeTask(
             data=config.data,
             scenario=sc,
@@ -230,6 +237,9 @@ def _score_all(
             ),
             keep=tuple(det for _, _, det in ss),
             imports=tuple(config.imports),
+            inner=inner,
+            inner_arrays=given,
+            share=share,
         )
         args = [] if runner.passes_paths else [refs[lab] for lab in labels]
         handles[runner.submit(episode_task, task, *args)] = (sc, seed)
@@ -243,13 +253,85 @@ def _score_all(
             except Exception as e:
                 raise RuntimeError(f"scoring failed: {type(e).__name__}: {e}") from e
             sc, seed = handles[handle]
-            for rec, arrays in recs:
+            for rec, arrays, inner_arrays in recs:
                 label = rec["diagnoser"]
                 if arrays is not None:
                     store.write_detection(label, sc, seed, chash[label], arrays)
+                if inner_arrays is not None:  # a detector's detection, for its isolators
+                    det_label = plan.inner_of.get(label, label)
+                    store.write_detection(
+                        det_label, sc, seed, chash[det_label], inner_arrays, inner=True
+                    )
                 if need_cell[(sc, seed, label)]:
                     store.write_cell(label, sc, seed, chash[label], rec)
                     bar.update(1)
+
+
+def inner_detectors(store: ResultStore, specs: Sequence[DiagnoserSpec]) -> dict[str, str]:
+    """Which isolator of the sweep wraps which detector of the sweep: ``{isolator label:
+    detector label}``, from their stored models.
+
+    An isolator (:class:`~diagnosers.isolation.isolating_detector.IsolatingDetector`) counts
+    as wrapping a detector only when its saved inner model (``models/<isolator>/detector``)
+    holds the same files, byte for byte, as the detector's model: then the detector's
+    detection of an episode *is* the inner detection, and the isolator's cell reuses it.
+    Settings that merely look alike (the same name and hyperparameters) are not trusted.
+    """
+    out: dict[str, str] = {}
+    for s in specs:
+        iso = s.build()
+        if not isinstance(iso, IsolatingDetector):
+            continue
+        inner_dir = store.model_dir(s.key) / "detector"
+        if not inner_dir.is_dir():
+            continue
+        inner_files = dir_files(inner_dir)
+        for d in specs:
+            if d.name != iso.detector_name or d.key == s.key:
+                continue
+            files = dir_files(store.model_dir(d.key))
+            files.pop("spec.json", None)  # the store's own record (wall times)
+            if files == inner_files:
+                out[s.key] = d.key
+                break
+    return out
+
+
+@dataclass(frozen=True)
+class _ScorePlan:
+    """Which inner detections each episode task computes, reads or hands on (for
+    :class:`~evaluation.sweep.tasks.EpisodeTask`'s ``inner``, ``inner_arrays``, ``share``)."""
+
+    store: ResultStore
+    chash: Mapping[str, str]
+    inner_of: Mapping[str, str]  # isolator label -> detector label (inner_detectors)
+
+    def _stored(self, det_label: str, sc: str, seed: int) -> dict[str, Any] | None:
+        return self.store.read_detection(det_label, sc, seed, self.chash[det_label], inner=True)
+
+    def episode(
+        self, sc: str, seed: int, labels: Sequence[str]
+    ) -> tuple[tuple[int, ...], tuple[dict[str, Any] | None, ...], tuple[bool, ...]]:
+        """``(inner, inner_arrays, share)`` of the task of episode ``(sc, seed)`` that scores
+        ``labels`` (detectors before isolators)."""
+        wrapped = set(self.inner_of.values())
+        inner, given, share = [], [], []
+        for label in labels:
+            det_label = self.inner_of.get(label)
+            stored = None
+            if det_label is None:
+                inner.append(-1)
+            elif det_label in labels:  # computed earlier in the task
+                inner.append(labels.index(det_label))
+            else:
+                stored = self._stored(det_label, sc, seed)
+                inner.append(-1 if stored is not None else OWN_INNER)
+            given.append(stored)
+            share.append(label in wrapped and not self._has_inner(label, sc, seed))
+        return tuple(inner), tuple(given), tuple(share)
+
+    def _has_inner(self, det_label: str, sc: str, seed: int) -> bool:
+        return self.store.detection_path(det_label, sc, seed, inner=True).is_file()
 
 
 def detect_episode(

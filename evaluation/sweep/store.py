@@ -6,6 +6,8 @@ Layout of a store directory (everything is plain JSON or a :meth:`Diagnoser.save
     <root>/models/<label>/                            trained diagnoser (Diagnoser.save) + spec.json
     <root>/cells/<label>/<scenario>/seed-<seed>.json  one finished cell
     <root>/detections/<label>/<scenario>/seed-<seed>.npz  the whole detection of a figure cell
+    <root>/inner/<label>/<scenario>/seed-<seed>.npz   a detector's detection, for the isolators
+                                                      that wrap it (keyed by its cell hash)
 
 Why it is built like this:
 
@@ -340,17 +342,21 @@ class ResultStore:
         yield from sorted((self.root / "cells").glob("*/*/seed-*.json"))
 
     # ---- detections of figure cells ----------------------------------------------------------
-    def detection_path(self, label: str, scenario: str, seed: int) -> Path:
+    def detection_path(self, label: str, scenario: str, seed: int, inner: bool = False) -> Path:
+        """Where a figure cell's arrays are, or (``inner``) a detector's bare detection that
+        the isolators wrapping it read instead of detecting again."""
         check_name("diagnoser label", label)
         check_name("scenario", scenario)
-        return self._confined(self.root / "detections" / label / scenario / f"seed-{int(seed)}.npz")
+        folder = "inner" if inner else "detections"
+        return self._confined(self.root / folder / label / scenario / f"seed-{int(seed)}.npz")
 
     def read_detection(
-        self, label: str, scenario: str, seed: int, cell_hash: str
+        self, label: str, scenario: str, seed: int, cell_hash: str, inner: bool = False
     ) -> dict[str, np.ndarray] | None:
         """The stored arrays of a figure cell, or ``None`` when absent or of other settings
-        (then the cell's detection is simply computed again; figures are never stale)."""
-        path = self.detection_path(label, scenario, seed)
+        (then the cell's detection is simply computed again; figures are never stale).
+        ``inner``: the bare detection of an isolator's inner detector (:meth:`detection_path`)."""
+        path = self.detection_path(label, scenario, seed, inner)
         if not path.is_file():
             return None
         try:
@@ -365,10 +371,17 @@ class ResultStore:
         return arrays
 
     def write_detection(
-        self, label: str, scenario: str, seed: int, cell_hash: str, arrays: Mapping[str, Any]
+        self,
+        label: str,
+        scenario: str,
+        seed: int,
+        cell_hash: str,
+        arrays: Mapping[str, Any],
+        inner: bool = False,
     ) -> Path:
-        """Write a figure cell's arrays atomically (numeric and text arrays, no pickles)."""
-        path = self.detection_path(label, scenario, seed)
+        """Write a figure cell's arrays (or ``inner``: a bare detection) atomically (numeric and
+        text arrays, no pickles)."""
+        path = self.detection_path(label, scenario, seed, inner)
         with atomic_open(path, "wb") as fh:
             np.savez_compressed(fh, cell_hash=np.array(cell_hash), **dict(arrays))
         return path

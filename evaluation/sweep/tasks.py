@@ -10,24 +10,29 @@ from __future__ import annotations
 import dataclasses
 import tempfile
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, NamedTuple
 
 from diagnosers.bank.relation_plan import RelationsNeeded, planned_relations
+from diagnosers.detection import Detection
 from diagnosers.diagnoser import Diagnoser
 from diagnosers.episode.record import Episode
+from diagnosers.isolation.isolating_detector import IsolatingDetector
 from diagnosers.registry import import_modules
 from evaluation.sweep.config import DiagnoserSpec
 from evaluation.sweep.records import (
     detect_and_score,
+    detection_arrays,
+    detection_from_arrays,
     pack_detection,
 )
 from evaluation.sweep.sources import DataSource
 from fcc_common.workers import limit_threads
 
 __all__ = [
+    "OWN_INNER",
     "EpisodeTask",
     "TrainOutcome",
     "dir_files",
@@ -150,9 +155,24 @@ def training_episodes(diag: Diagnoser, data: DataSource, key: str) -> list[Episo
     return episodes + faulty()
 
 
+#: :attr:`EpisodeTask.inner` of a label whose isolator computes its inner detection itself
+#: (and returns it for the store); ``-1``: no inner detection is involved.
+OWN_INNER = -2
+
+
 @dataclass(frozen=True)
 class EpisodeTask:
-    """Score the diagnosers ``labels`` on episode ``(scenario, seed)`` of ``data``."""
+    """Score the diagnosers ``labels`` on episode ``(scenario, seed)`` of ``data``.
+
+    The isolators' inner detections (:mod:`evaluation.sweep.runner` finds which detector of the
+    sweep an isolator wraps): per label, ``inner`` is the index of the label in this task whose
+    detection is its inner detection (computed first), :data:`OWN_INNER` (its own inner
+    detector detects; the detection goes back for the store) or ``-1`` (not an isolator of a
+    detector of the sweep); ``inner_arrays`` the stored inner detection
+    (:func:`~evaluation.sweep.records.detection_arrays`) when the detector's cell is not in
+    this task; ``share`` whether the label's detection goes back for the store as a detector's
+    inner detection.
+    """
 
     data: DataSource
     scenario: str
@@ -163,26 +183,45 @@ class EpisodeTask:
     model_paths: tuple[str, ...] | None  # local backend; None when models come as bytes
     keep: tuple[bool, ...] = ()  # per label: return the whole detection (a figure cell)
     imports: tuple[str, ...] = ()  # SweepConfig.imports, imported in the worker
+    inner: tuple[int, ...] = ()  # per label (see the class docstring); () all -1
+    inner_arrays: tuple[Mapping[str, Any] | None, ...] = ()  # per label; () all None
+    share: tuple[bool, ...] = ()  # per label; () all False
 
 
 def episode_task(
     task: EpisodeTask, *model_files: Mapping[str, bytes], _serial: bool = False
-) -> list[tuple[dict[str, Any], dict[str, Any] | None]]:
-    """``(record, detection arrays or None)`` per label of the task."""
+) -> list[tuple[dict[str, Any], dict[str, Any] | None, dict[str, Any] | None]]:
+    """``(record, detection arrays or None, inner detection arrays or None)`` per label.
+
+    An isolator whose inner detection is given (by an earlier label of the task or as stored
+    arrays) runs only its isolation stage on it
+    (:meth:`~diagnosers.isolation.isolating_detector.IsolatingDetector.diagnose_detection`):
+    the detection is the one :meth:`detect` computes, bit for bit, since its inner model is the
+    detector's (the driver compares the saved files).
+    """
     if not _serial:
         limit_threads()
     import_modules(task.imports)
     loaded = task.data.load_test(task.scenario, task.seed)
+    n = len(task.labels)
     out = []
-    keep = task.keep or (False,) * len(task.labels)
+    keep = task.keep or (False,) * n
+    inner = task.inner or (-1,) * n
+    given = task.inner_arrays or (None,) * n
+    share = task.share or (False,) * n
+    dets: list[Detection | None] = [None] * n
     for i, (label, mhash) in enumerate(zip(task.labels, task.model_hashes, strict=True)):
         source = task.model_paths[i] if task.model_paths is not None else model_files[i]
         try:
             diag = load_model(mhash, source)
-            rec, det = detect_and_score(diag, loaded, label=label, t_on=task.t_on)
+            detect, box = _inner_detect(diag, inner[i], given[i], dets)
+            rec, det = detect_and_score(diag, loaded, label=label, t_on=task.t_on, detect=detect)
+            dets[i] = det
             arrays = (
                 pack_detection(loaded, det, diag.band_view(loaded.episode)) if keep[i] else None
             )
+            shared = box.get("own", det if share[i] else None)
+            inner_out = None if shared is None else detection_arrays(shared)
         except Exception as e:
             # Name the cell: the traceback of a worker process does not reach the user.
             raise RuntimeError(
@@ -190,5 +229,35 @@ def episode_task(
             ) from e
         # External data name the episode by file; keep the sweep's cell key as given.
         rec = dataclasses.replace(rec, scenario=task.scenario, seed=task.seed)
-        out.append((rec.to_json(), arrays))
+        out.append((rec.to_json(), arrays, inner_out))
     return out
+
+
+def _inner_detect(
+    diag: Diagnoser,
+    inner: int,
+    given: Mapping[str, Any] | None,
+    dets: list[Detection | None],
+) -> tuple[Callable[[Episode], Detection] | None, dict[str, Detection]]:
+    """How an isolator's cell detects: ``(detect, box)``, ``box["own"]`` the inner detection
+    ``detect`` computed itself, if it did; ``(None, box)`` for any other cell (its own
+    ``detect``)."""
+    box: dict[str, Detection] = {}
+    if inner == -1 and given is None:
+        return None, box
+    if not isinstance(diag, IsolatingDetector):
+        raise TypeError(f"an inner detection was given to {diag.name!r}, which is no isolator")
+
+    def detect(episode: Episode) -> Detection:
+        if given is not None:
+            det = detection_from_arrays(given)
+        elif inner >= 0:
+            found = dets[inner]
+            if found is None:
+                raise RuntimeError(f"the inner detection (label {inner}) is not computed yet")
+            det = found
+        else:  # OWN_INNER: timed with the cell, as its detect would be
+            det = box["own"] = diag.detector_.detect(episode)
+        return diag.diagnose_detection(det)
+
+    return detect, box
