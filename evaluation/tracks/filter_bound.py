@@ -42,14 +42,14 @@ the reachable bound *of a directional test on these innovations*, not of every t
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
 import numpy as np
 
 from diagnosers.detection import Detection
 from diagnosers.episode.record import Episode
 from diagnosers.filters import FCCStateEstimator, UKFConfig
-from diagnosers.stages.innovation_stage import OMNIBUS_VARIANCE, InnovationStage
+from diagnosers.stages.innovation_stage import OMNIBUS_VARIANCE, InnovationStage, union_limits
 from evaluation.sweep.store import canonical_hash
 from evaluation.tracks.optimal import GLR_WINDOW
 from evaluation.tracks.track_data import TrackData
@@ -145,31 +145,52 @@ class FilterBound:
         y = np.asarray(episode.y, dtype=np.float64)[None, :, idx]
         return est.filter(y, innovation_cov=False).whitened[0]
 
-    def _learn_signatures(self) -> np.ndarray:
-        """Unit directions ``(n_faults · n_windows, 8)`` (fault-major): the training faults'
-        mean whitened-innovation difference to their healthy twins over each window after onset
-        (module docstring)."""
-        faulty = self.data.train_fault_episodes(
-            self.data.track.train_fault_seeds[: self.signature_seeds]
-        )
-        seeds = sorted({ep.seed for ep in faulty if ep.seed is not None})
-        twins = {
-            s: self.whitened(le.episode)
-            for s, le in zip(seeds, self.data.simulate(seeds, FaultSpec()), strict=True)
-        }
-        wins = self.signature_windows
-        sums = {f: np.zeros((len(wins), len(MEASUREMENT_NAMES))) for f in self.faults}
+    def signature_seeds_used(self) -> list[int]:
+        """The training fault seeds the signatures are averaged over, in the order they are
+        summed (the first :attr:`signature_seeds` of the track's)."""
+        return list(self.data.track.train_fault_seeds[: self.signature_seeds])
+
+    def signature_terms(self, seed: int) -> dict[str, list[tuple[int, np.ndarray]]]:
+        """One training fault seed's share of the signatures: per fault, ``(window index, mean
+        whitened-innovation difference to the healthy twin over that window after onset)``
+        (a fault whose episode ended before its onset, or a window with no sample, adds
+        nothing). Each seed is independent of the others: one task each
+        (:mod:`evaluation.tracks.reference_runs`)."""
+        faulty = self.data.train_fault_episodes([seed])
+        h = self.whitened(self.data.simulate([seed], FaultSpec())[0].episode)
+        out: dict[str, list[tuple[int, np.ndarray]]] = {}
         for ep in faulty:
-            assert ep.seed is not None and ep.fault_onset is not None
-            e, h = self.whitened(ep), twins[ep.seed]
-            k0 = ep.fault_onset
-            for j, w in enumerate(wins):
+            assert ep.fault_onset is not None
+            e, k0 = self.whitened(ep), ep.fault_onset
+            for j, w in enumerate(self.signature_windows):
                 k1 = min(k0 + w, e.shape[0], h.shape[0])
                 if k1 > k0:
-                    sums[ep.scenario][j] += np.mean(e[k0:k1] - h[k0:k1], axis=0)
+                    out.setdefault(ep.scenario, []).append(
+                        (j, np.mean(e[k0:k1] - h[k0:k1], axis=0))
+                    )
+        return out
+
+    def combine_signatures(
+        self, terms: Sequence[Mapping[str, Sequence[tuple[int, np.ndarray]]]]
+    ) -> np.ndarray:
+        """Unit directions ``(n_faults · n_windows, 8)`` (fault-major) from the
+        :meth:`signature_terms` of the seeds of :meth:`signature_seeds_used`, in that order
+        (the order of the sums fixes their last bits)."""
+        wins = self.signature_windows
+        sums = {f: np.zeros((len(wins), len(MEASUREMENT_NAMES))) for f in self.faults}
+        for seed_terms in terms:
+            for f, parts in seed_terms.items():
+                for j, mean in parts:
+                    sums[f][j] += mean
         out = np.concatenate([sums[f] for f in self.faults])
         norm = np.linalg.norm(out, axis=1, keepdims=True)
         return np.divide(out, norm, out=np.zeros_like(out), where=norm > 0)
+
+    def _learn_signatures(self) -> np.ndarray:
+        """The training faults' mean whitened-innovation difference to their healthy twins over
+        each window after onset, as unit directions (module docstring)."""
+        terms = [self.signature_terms(s) for s in self.signature_seeds_used()]
+        return self.combine_signatures(terms)
 
     def _stage(self) -> InnovationStage:
         return InnovationStage(
@@ -193,9 +214,23 @@ class FilterBound:
             self.directions_, self.limits_ = _FITTED[key]
             return self
         self.directions_ = self._learn_signatures()
-        stage = self._stage().fit([self.whitened(ep) for ep in healthy], self.false_alarm_target)
-        self.limits_ = stage.limits_
+        self.set_limits([self.calibration_statistics(healthy)])
         _FITTED[key] = (self.directions_, self.limits_)
+        return self
+
+    def calibration_statistics(self, healthy: Sequence[Episode]) -> np.ndarray:
+        """The statistics ``(Σ T_i, n_statistics)`` of healthy calibration episodes, stacked in
+        their order (``directions_`` set): a part of :meth:`fit` that any split of the
+        calibration episodes computes in pieces (one task per chunk)."""
+        stage = self._stage()
+        return np.concatenate([stage.statistics(self.whitened(ep)) for ep in healthy])
+
+    def set_limits(self, statistics: Sequence[np.ndarray]) -> FilterBound:
+        """Set the union's limits on the :meth:`calibration_statistics` of the calibration
+        episodes, given in chunks in the episodes' order."""
+        if not statistics:
+            raise ValueError("statistics is empty; allowed: at least one chunk of statistics")
+        self.limits_ = union_limits(np.concatenate(list(statistics)), self.false_alarm_target)
         return self
 
     def _fit_key(self, healthy: Sequence[Episode]) -> str:

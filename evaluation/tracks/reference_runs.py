@@ -40,12 +40,14 @@ from functools import cache
 from pathlib import Path
 from typing import Any
 
+import numpy as np
 from tqdm.auto import tqdm
 
 from diagnosers.registry import diagnoser_class
 from evaluation.sweep.backends import BACKENDS, Backend, make_backend
 from evaluation.sweep.records import CellResult, score_episode
 from evaluation.sweep.store import ResultStore, canonical_hash
+from evaluation.tracks.filter_bound import SIGNATURE_SEEDS, FilterBound
 from evaluation.tracks.oracle import (
     OracleConfig,
     OracleStage,
@@ -58,6 +60,7 @@ from fcc_common.workers import limit_threads
 from fcc_env import MODEL_VERSION, __version__
 
 __all__ = [
+    "FILTER_CHUNK",
     "PROJECT_PACKAGES",
     "REFERENCE_CODE",
     "REFERENCE_REGISTRY",
@@ -65,6 +68,9 @@ __all__ = [
     "REFERENCE_STORE_VERSION",
     "ReferenceSeedTask",
     "code_version",
+    "filter_limits_task",
+    "filter_signature_task",
+    "filter_statistics_task",
     "fit_task",
     "reference_code",
     "reference_hash",
@@ -156,6 +162,72 @@ def fit_task(data: TrackData, config: OracleConfig, _serial: bool = False) -> Ph
         return PhysicalLimit(data, config).fit()
     except Exception as e:  # a worker's traceback does not reach the user: name the row
         raise RuntimeError(f"fitting {config.label!r}: {type(e).__name__}: {e}") from e
+
+
+#: Calibration episodes per statistics task of the filter row's split fit.
+FILTER_CHUNK = 10
+
+
+def _filter_bound(data: TrackData, config: OracleConfig, terms: Sequence[Any]) -> FilterBound:
+    """The filter row's stage as :meth:`PhysicalLimit.fit` builds it, its directions from the
+    signature seeds' ``terms`` (:meth:`FilterBound.signature_terms`, in seed order)."""
+    bound = FilterBound(data, false_alarm_target=config.false_alarm_target)
+    if terms:
+        bound.directions_ = bound.combine_signatures(terms)
+    return bound
+
+
+def _filter_bound_seeds(data: TrackData, config: OracleConfig) -> list[int]:
+    """The training fault seeds the filter row's signatures are averaged over, in order."""
+    return list(data.track.train_fault_seeds[:SIGNATURE_SEEDS])
+
+
+def filter_signature_task(
+    data: TrackData, config: OracleConfig, seed: int, _serial: bool = False
+) -> dict[str, list[tuple[int, np.ndarray]]]:
+    """One training fault seed's share of the filter row's signatures (the first part of its
+    fit, split by seed: :meth:`FilterBound.signature_terms`)."""
+    if not _serial:
+        limit_threads()
+    try:
+        return _filter_bound(data, config, ()).signature_terms(seed)
+    except Exception as e:  # name the row and seed: a worker's traceback does not reach the user
+        raise RuntimeError(f"fitting {config.label!r}, seed {seed}: {type(e).__name__}: {e}") from e
+
+
+def filter_statistics_task(
+    data: TrackData,
+    config: OracleConfig,
+    terms: Sequence[Any],
+    seeds: Sequence[int],
+    _serial: bool = False,
+) -> np.ndarray:
+    """The filter row's statistics on the calibration seeds ``seeds`` (a chunk of them),
+    given every signature seed's terms: :meth:`FilterBound.calibration_statistics`."""
+    if not _serial:
+        limit_threads()
+    try:
+        healthy = [data.load_test("nominal", s).episode for s in seeds]
+        return _filter_bound(data, config, terms).calibration_statistics(healthy)
+    except Exception as e:
+        raise RuntimeError(f"fitting {config.label!r}: {type(e).__name__}: {e}") from e
+
+
+def filter_limits_task(
+    data: TrackData,
+    config: OracleConfig,
+    terms: Sequence[Any],
+    statistics: Sequence[np.ndarray],
+    _serial: bool = False,
+) -> PhysicalLimit:
+    """The fitted filter row from its parts: the directions from the signature terms, the
+    limits on the calibration statistics (chunks in seed order). The same bits as
+    :func:`fit_task` of the row (``tests/evaluation/tracks/test_filter_split.py``)."""
+    if not _serial:
+        limit_threads()
+    row = PhysicalLimit(data, config)
+    row.stage_ = _filter_bound(data, config, terms).set_limits(statistics)
+    return row
 
 
 @dataclass(frozen=True)
@@ -332,19 +404,29 @@ class _Work:
         n_tasks: int,
         progress: bool,
     ) -> None:
-        fits = {
-            self.runner.submit(fit_task, self.data, self.configs[i]): i for g, _ in plan for i in g
-        }
+        fits: dict[Any, int] = {}
+        self._parts: dict[Any, tuple[int, str, int]] = {}  # the filter rows' split fits
+        self._terms: dict[int, list[Any]] = {}
+        self._stats: dict[int, list[Any]] = {}
+        self._pending: list[Any] = []
         fitted: dict[int, PhysicalLimit] = {}
         scoring: dict[Any, tuple[list[int], tuple[tuple[str, int], ...]]] = {}
-        pending = list(fits)
+        pending = self._pending
         with tqdm(
-            total=n_tasks,
+            total=n_tasks,  # one per fit: a split fit adds its parts less one
             desc="reference rows",
             unit="task",
             disable=not progress,
             leave=False,
         ) as bar:
+            self._bar = bar
+            for i in (i for g, _ in plan for i in g):
+                if self.configs[i].stage == OracleStage.FILTER:
+                    bar.total -= 1
+                    self._start_filter(i)
+                else:
+                    fits[self.runner.submit(fit_task, self.data, self.configs[i])] = i
+            pending.extend(fits)
             while pending:
                 try:
                     handle, result = next(self.runner.completed(pending))
@@ -355,15 +437,56 @@ class _Work:
                 if handle in scoring:
                     self._write(*scoring.pop(handle), result)
                     continue
-                fitted[fits[handle]] = result
+                if handle in self._parts:
+                    i, row = self._filter_part(handle, result)
+                    if row is None:
+                        continue
+                    result = row
+                else:
+                    i = fits[handle]
+                fitted[i] = result
                 for rows, seeds in plan:
-                    if fits[handle] in rows and all(i in fitted for i in rows):
-                        shared = self.runner.put(tuple(fitted[i] for i in rows))
+                    if i in rows and all(j in fitted for j in rows):
+                        shared = self.runner.put(tuple(fitted[j] for j in rows))
                         for cells in seeds:
                             task = ReferenceSeedTask(data=self.data, cells=cells, t_on=self.t_on)
                             h = self.runner.submit(seed_task, task, shared)
                             scoring[h] = (rows, cells)
                             pending.append(h)
+
+    # ---- the filter row's fit, split: signatures per seed, statistics per chunk, limits ------
+    def _submit_part(self, i: int, kind: str, index: int, fn: Any, *args: Any) -> None:
+        handle = self.runner.submit(fn, self.data, self.configs[i], *args)
+        self._parts[handle] = (i, kind, index)
+        self._pending.append(handle)
+        self._bar.total += 1
+
+    def _start_filter(self, i: int) -> None:
+        seeds = _filter_bound_seeds(self.data, self.configs[i])
+        self._terms[i] = [None] * len(seeds)
+        for k, seed in enumerate(seeds):
+            self._submit_part(i, "signature", k, filter_signature_task, seed)
+
+    def _filter_part(self, handle: Any, result: Any) -> tuple[int, PhysicalLimit | None]:
+        """Take one finished part of a filter row's fit; submit what it unblocks. Returns the
+        row and, once its limits are in, the fitted row."""
+        i, kind, index = self._parts.pop(handle)
+        if kind == "limits":
+            return i, result
+        if kind == "signature":
+            self._terms[i][index] = result
+            if any(t is None for t in self._terms[i]):
+                return i, None
+            seeds = list(self.configs[i].calibration_seeds(self.data.track))
+            chunks = [seeds[k : k + FILTER_CHUNK] for k in range(0, len(seeds), FILTER_CHUNK)]
+            self._stats[i] = [None] * len(chunks)
+            for k, chunk in enumerate(chunks):
+                self._submit_part(i, "statistics", k, filter_statistics_task, self._terms[i], chunk)
+            return i, None
+        self._stats[i][index] = result
+        if all(st is not None for st in self._stats[i]):
+            self._submit_part(i, "limits", 0, filter_limits_task, self._terms[i], self._stats[i])
+        return i, None
 
     def _write(
         self,
