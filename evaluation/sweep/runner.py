@@ -17,6 +17,11 @@ presentation apart:
    (:mod:`evaluation.sweep.store`), so an interrupted sweep loses nothing finished. For the cells named
    in ``SweepConfig.keep_detections`` the worker also returns the whole :class:`Detection` and the
    episode, stored beside the cell, so figures are drawn from the scoring pass itself.
+   An isolator wrapping a detector of the same sweep (:func:`inner_detectors`: its saved inner
+   model is that detector's, file for file) does not run that detector again: its cell takes
+   the detector's detection of the episode, computed first in the same task, or stored by an
+   earlier run (``inner/<detector>/``, keyed by the detector's cell hash), and runs only its
+   isolation stage; the records are the bits of a full ``detect``.
 3. **Collect** the cell records of the sweep into :class:`SweepResults`
    (:mod:`evaluation.sweep.records`).
 
