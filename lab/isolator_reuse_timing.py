@@ -1,7 +1,8 @@
 """CPU time of scoring the isolators with and without reusing their inner detector's detection
 (issue 44: the isolators re-ran their inner detector's detection).
 
-    python lab/isolator_reuse_timing.py --before /tmp/before-checkout --out /tmp/isoreuse-timing
+    python lab/isolator_reuse_timing.py --before /tmp/before-checkout --out /tmp/isoreuse-timing \\
+        [--workers 0] [--repeat 2]
 
 A small sweep (validation seeds 5000+, fast trainings): ``lrgf-mem`` and the isolators
 ``lrgf-iso`` and ``lrgf-lda`` wrapping it. Each checkout (``--before``: an export of the code
@@ -57,7 +58,7 @@ def _cpu() -> float:
     return s.ru_utime + s.ru_stime + c.ru_utime + c.ru_stime
 
 
-def child(store: Path, phase: str) -> None:
+def child(store: Path, phase: str, workers: int) -> None:
     """One phase in this process (run with the checkout under test on PYTHONPATH)."""
     from evaluation.sweep import run_sweep
 
@@ -73,7 +74,7 @@ def child(store: Path, phase: str) -> None:
     if phase == "all":
         shutil.rmtree(store / "inner", ignore_errors=True)
     t0, c0 = time.perf_counter(), _cpu()
-    res = run_sweep(config, store, n_workers=1, progress=False)
+    res = run_sweep(config, store, n_workers=workers, progress=False)
     digest = sorted(
         json.dumps(
             {k: v for k, v in r.to_json().items() if not k.endswith("wall_s")}, sort_keys=True
@@ -93,9 +94,10 @@ def child(store: Path, phase: str) -> None:
     )
 
 
-def run(code: Path, store: Path, phase: str) -> dict:
+def run(code: Path, store: Path, phase: str, workers: int = 1) -> dict:
     env = {**os.environ, "PYTHONPATH": str(code)}
     argv = [sys.executable, __file__, "--child", phase, "--store", str(store)]
+    argv += ["--workers", str(workers)]
     proc = subprocess.run(argv, capture_output=True, text=True, env=env, check=False)
     if proc.returncode != 0:
         sys.exit(f"{phase} in {code} failed:\n{proc.stderr[-3000:]}")
@@ -107,11 +109,15 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--before", type=Path, help="a checkout of the code before the change")
     ap.add_argument("--out", type=Path, default=Path("/tmp/isoreuse-timing"))
+    ap.add_argument(
+        "--workers", type=int, default=1, help="scoring workers (0: in the process; default 1)"
+    )
+    ap.add_argument("--repeat", type=int, default=1, help="timed scoring passes per phase")
     ap.add_argument("--child", help=argparse.SUPPRESS)
     ap.add_argument("--store", type=Path, help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.child:
-        child(args.store, args.child)
+        child(args.store, args.child, args.workers)
         return
     after = Path(__file__).resolve().parents[1]
     sides = [("after", after)] + ([("before", args.before.resolve())] if args.before else [])
@@ -120,8 +126,9 @@ def main() -> None:
         shutil.rmtree(store, ignore_errors=True)
         run(code, store, "train")
         phases = ["all", "isolators"] if name == "after" else ["all"]
-        for phase in phases:
-            print(name, json.dumps(run(code, store, phase)), flush=True)
+        for _ in range(args.repeat):
+            for phase in phases:
+                print(name, json.dumps(run(code, store, phase, args.workers)), flush=True)
 
 
 if __name__ == "__main__":
