@@ -1,0 +1,282 @@
+"""``oscillation-acf`` and ``stiction-ccf``: a control loop's oscillation and its valve's
+stiction, from the loop's own records (set point, controlled variable, controller output).
+
+Both read one loop of the closed-loop observation (``FCC-closedloop-v0``): the measured
+controlled variable, its set point and the controller's output, which the observation records
+as the controller's command (the valve's true position is not measured, as on most units).
+They slide a window over the loop's last ``window_s`` seconds and compute the indexes of
+:mod:`diagnosers.loops.loop_indexes` every ``every`` samples (the decision holds in between):
+
+* ``oscillation-acf`` alarms when the control error oscillates (Thornhill, Huang & Zhang 2003:
+  the ACF's zero crossings regular, ``r > regularity_limit``, at a period no faster than
+  ``min_period_s``). It names no fault: an oscillating loop has many causes (a sticking valve,
+  an aggressive tuning, an oscillating disturbance from upstream; Thornhill & Hägglund 1997),
+  so it is a detector, and the diagnosis is :class:`StictionCCF`'s job.
+* ``stiction-ccf`` alarms when the loop oscillates *and* Horch (1999)'s cross-correlation
+  test says the valve sticks (the CCF of controller output and control error odd: its phase
+  at lag zero above ``phase_limit_deg``), and names the fault ``label``, the fault registry's
+  name of the valve's stiction (``valve-stiction`` on the T_rx loop's slide valve). An
+  oscillation with an even CCF (from outside the valve) does not alarm it.
+
+Neither learns thresholds from data: the limits are the papers' (``r > 1``) or stated
+(``phase_limit_deg``); ``fit`` checks that the training records carry the loop's channels and
+vary. Their false-alarm rate on healthy closed-loop episodes is measured in
+``lab/stiction-detection.md``.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any, ClassVar
+
+import numpy as np
+
+from diagnosers.contract import require_varying
+from diagnosers.detection import NO_DIAGNOSIS, Decision, Detection
+from diagnosers.diagnoser import Diagnoser
+from diagnosers.episode.record import Episode
+from diagnosers.loops.loop_indexes import acf_regularity, horch_phase
+from diagnosers.registry import register
+from fcc_common.validation import Integer, Options, Real, check_params, invalid
+
+__all__ = ["LOOP_CHANNELS", "LoopMonitor", "OscillationACF", "StictionCCF"]
+
+#: Each loop's channels in the closed-loop observation: (controlled variable, set point,
+#: controller output).
+LOOP_CHANNELS: dict[str, tuple[str, str, str]] = {
+    "T_rx": ("T_rx", "T_rx_sp", "u_F"),
+    "T_rg1": ("T_rg1", "T_rg1_sp", "R_ar"),
+}
+
+_CONSTRAINTS: dict[str, Any] = {
+    "loop": Options(tuple(LOOP_CHANNELS), why="a loop of the closed-loop plant"),
+    "window_s": Real(0.0, closed="neither", unit="s", why="a few cycles of the oscillation"),
+    "min_period_s": Real(0.0, unit="s", why="faster periods are measurement noise"),
+    "n_crossings": Integer(4, 64, why="the ACF's first zero crossings; 4 give 2 periods"),
+    "regularity_limit": Real(0.0, closed="neither", why="Thornhill et al. (2003): 1"),
+    "every": Integer(1, why="samples between two evaluations of the window"),
+    "phase_limit_deg": Real(0.0, 90.0, closed="right", unit="°", why="90: a purely odd CCF"),
+}
+
+
+class LoopMonitor(Diagnoser):
+    """What both loop monitors share: the loop's channels, the sliding window, the evaluation
+    every ``every`` samples and the decision held in between (module docstring).
+
+    Subclasses implement :meth:`_evaluate` (the window's signal row) and :meth:`_decide`.
+    """
+
+    #: the default loop's channels, for the harness (a track without them skips the monitor)
+    REQUIRED_CHANNELS: ClassVar[tuple[str, ...]] = LOOP_CHANNELS["T_rx"]
+
+    def _validate_params(self) -> None:
+        check_params(self.get_params(), _CONSTRAINTS)
+
+    def _fit(self, episodes: list[Episode]) -> None:
+        names = LOOP_CHANNELS[self.loop]
+        missing = [c for c in names if c not in self.channels_]
+        if missing:
+            raise invalid(
+                "loop",
+                self.loop,
+                f"a loop whose channels {list(names)} the episodes carry",
+                f"missing {missing} of {list(self.channels_)}: record the closed-loop plant "
+                "(FCC-closedloop-v0), whose observation holds set points and controller outputs",
+            )
+        idx = [self.channels_.index(c) for c in names]
+        y = np.concatenate([ep.y[:, idx] for ep in episodes])
+        require_varying(y, list(names), self.name or type(self).__name__, every=False)
+        self.channel_idx_ = np.asarray(idx, dtype=np.int64)
+        self._finish()
+
+    def _finish(self) -> None:
+        window = round(float(self.window_s) / self.sample_time_s_)
+        if window < 8:
+            raise invalid(
+                "window_s",
+                self.window_s,
+                f"at least 8 samples of {self.sample_time_s_:g} s",
+                "the window must hold a few cycles of the oscillation",
+            )
+        self.window_ = window
+        self.min_period_ = float(self.min_period_s) / self.sample_time_s_
+        self.signal_names_ = self._signal_names()
+
+    def _get_state(self) -> dict[str, np.ndarray]:
+        return {"channel_idx": self.channel_idx_}
+
+    def _set_state(self, state: dict[str, np.ndarray]) -> None:
+        self.channel_idx_ = np.asarray(state["channel_idx"], dtype=np.int64)
+        self._finish()
+
+    def _reset(self) -> None:
+        self.error_buf_ = np.zeros(self.window_)
+        self.output_buf_ = np.zeros(self.window_)
+        self.k_ = 0
+        self.row_ = self._idle_row()
+
+    def _update(self, y: np.ndarray) -> Decision:
+        pv, sp, op = y[self.channel_idx_]
+        w, i = self.window_, self.k_ % self.window_
+        self.error_buf_[i], self.output_buf_[i] = pv - sp, op
+        self.k_ += 1
+        if self.k_ >= w and (self.k_ - w) % int(self.every) == 0:
+            order = (np.arange(w) + self.k_) % w  # oldest first
+            self.row_ = self._evaluate(self.error_buf_[order], self.output_buf_[order])
+        return self._decide(self.row_, pv - sp)
+
+    def _regularity(self, e: np.ndarray) -> tuple[float, float]:
+        r, period = acf_regularity(e, self.window_ // 2, int(self.n_crossings), self.min_period_)
+        return r, period
+
+    def _signal_names(self) -> tuple[str, ...]:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def _idle_row(self) -> np.ndarray:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def _evaluate(self, e: np.ndarray, op: np.ndarray) -> np.ndarray:  # pragma: no cover
+        raise NotImplementedError
+
+    def _decide(self, row: np.ndarray, error: float) -> Decision:  # pragma: no cover
+        raise NotImplementedError
+
+
+@register("oscillation-acf")
+class OscillationACF(LoopMonitor):
+    """An oscillating control loop: the regularity of the control error's ACF zero crossings
+    (Thornhill, Huang & Zhang 2003; :mod:`diagnosers.loops.loop_indexes`).
+
+    Args:
+        loop: ``"T_rx"`` (riser outlet on the slide valve, default) or ``"T_rg1"`` (stage-1
+            bed on the air).
+        window_s: the sliding window (default 4800 s: about six cycles of the sticking slide
+            valve's 8-minute limit cycle, ``lab/stiction-detection.md``).
+        min_period_s: the fastest period counted as an oscillation (default 240 s); a healthy
+            loop's ACF crosses zero regularly at 2–12 samples (the noise through the PI law).
+        n_crossings: the ACF's first zero crossings that give the periods (default 6).
+        regularity_limit: alarm when ``r`` exceeds it (default 1, the paper's).
+        every: evaluate the window every this many samples (default 5; the decision holds).
+
+    Decision arrays: signal = (``r``, the mean period in s), upper = (``regularity_limit``,
+    inf); residual = the control error (controlled variable − set point).
+    """
+
+    def __init__(
+        self,
+        *,
+        loop: str = "T_rx",
+        window_s: float = 4800.0,
+        min_period_s: float = 240.0,
+        n_crossings: int = 6,
+        regularity_limit: float = 1.0,
+        every: int = 5,
+    ) -> None:
+        self.loop = loop
+        self.window_s = window_s
+        self.min_period_s = min_period_s
+        self.n_crossings = n_crossings
+        self.regularity_limit = regularity_limit
+        self.every = every
+
+    def _signal_names(self) -> tuple[str, ...]:
+        return (f"{self.loop} ACF regularity", f"{self.loop} oscillation period [s]")
+
+    def _idle_row(self) -> np.ndarray:
+        return np.array([0.0, math.nan])
+
+    def _evaluate(self, e: np.ndarray, op: np.ndarray) -> np.ndarray:
+        r, period = self._regularity(e)
+        return np.array([r, period * self.sample_time_s_])
+
+    def _decide(self, row: np.ndarray, error: float) -> Decision:
+        upper = np.array([float(self.regularity_limit), math.inf])
+        signal = np.array([row[0], 0.0 if math.isnan(row[1]) else row[1]])
+        return Decision(
+            bool(row[0] > upper[0]), signal, np.full(2, -math.inf), upper, np.array([error])
+        )
+
+
+@register("stiction-ccf")
+class StictionCCF(LoopMonitor):
+    """A sticking control valve: an oscillating loop (Thornhill et al. 2003's ACF regularity)
+    whose controller output and control error have an odd cross-correlation (Horch 1999);
+    :mod:`diagnosers.loops.loop_indexes`.
+
+    Args:
+        loop, window_s, min_period_s, n_crossings, regularity_limit, every: as
+            :class:`OscillationACF`'s.
+        phase_limit_deg: Horch's phase above which the CCF counts as odd (default 60°: the
+            CCF at lag zero below half its peak, ``cos 60° = 0.5``).
+        label: the fault the alarm names, the fault registry's name of the valve's stiction
+            (default ``"valve-stiction"``, the T_rx loop's slide valve).
+
+    Decision arrays: signal = (the stiction index ``min(r / regularity_limit, φ /
+    phase_limit)``, ``r``, Horch's phase ``φ`` in degrees), upper = (1, inf, inf): the alarm
+    is the index above 1, both tests passed; residual = the control error. The diagnosis is
+    ``label`` while alarmed (class score: the index).
+    """
+
+    isolates: ClassVar[bool] = True
+
+    def __init__(
+        self,
+        *,
+        loop: str = "T_rx",
+        window_s: float = 4800.0,
+        min_period_s: float = 240.0,
+        n_crossings: int = 6,
+        regularity_limit: float = 1.0,
+        every: int = 5,
+        phase_limit_deg: float = 60.0,
+        label: str = "valve-stiction",
+    ) -> None:
+        self.loop = loop
+        self.window_s = window_s
+        self.min_period_s = min_period_s
+        self.n_crossings = n_crossings
+        self.regularity_limit = regularity_limit
+        self.every = every
+        self.phase_limit_deg = phase_limit_deg
+        self.label = label
+
+    def _validate_params(self) -> None:
+        super()._validate_params()
+        if not isinstance(self.label, str) or self.label in ("", "unknown", "nominal"):
+            raise invalid("label", self.label, "a fault's name (not '', 'unknown' or 'nominal')")
+
+    def _finish(self) -> None:
+        super()._finish()
+        self.classes_ = (str(self.label),)
+
+    def _signal_names(self) -> tuple[str, ...]:
+        return (
+            f"{self.loop} stiction index",
+            f"{self.loop} ACF regularity",
+            f"{self.loop} Horch phase [deg]",
+        )
+
+    def _idle_row(self) -> np.ndarray:
+        return np.zeros(3)
+
+    def _evaluate(self, e: np.ndarray, op: np.ndarray) -> np.ndarray:
+        r, period = self._regularity(e)
+        phase = 0.0 if r == 0.0 else math.degrees(horch_phase(op, e, period))
+        index = min(r / float(self.regularity_limit), phase / float(self.phase_limit_deg))
+        return np.array([index, r, phase])
+
+    def _detect(self, y: np.ndarray) -> Detection:
+        decisions = [self._update(row) for row in y]
+        return Detection.from_decisions(decisions, self.signal_names_, self.classes_)
+
+    def _decide(self, row: np.ndarray, error: float) -> Decision:
+        alarm = bool(row[0] > 1.0)
+        return Decision(
+            alarm,
+            row.copy(),
+            np.full(3, -math.inf),
+            np.array([1.0, math.inf, math.inf]),
+            np.array([error]),
+            diagnosis=self.classes_[0] if alarm else NO_DIAGNOSIS,
+            class_scores=row[:1].copy(),
+        )
