@@ -14,12 +14,14 @@ They slide a window over the loop's last ``window_s`` seconds and compute the in
   so it is a detector, and the diagnosis is :class:`StictionCCF`'s job.
 * ``stiction-ccf`` alarms when the loop oscillates *and* Horch (1999)'s cross-correlation
   test says the valve sticks (the CCF of controller output and control error odd: its phase
-  at lag zero above ``phase_limit_deg``), and names the fault ``label``, the fault registry's
-  name of the valve's stiction (``valve-stiction`` on the T_rx loop's slide valve). An
-  oscillation with an even CCF (from outside the valve) does not alarm it.
+  at lag zero above ``phase_limit_deg``) *and* He et al. (2007)'s curve fit finds the
+  controller output a triangle wave rather than a sine, and names the fault ``label``, the
+  fault registry's name of the valve's stiction (``valve-stiction`` on the T_rx loop's slide
+  valve). An oscillation with an even CCF or a sinusoidal controller output (from outside
+  the valve) does not alarm it.
 
 Neither learns thresholds from data: the limits are the papers' (``r > 1``) or stated
-(``phase_limit_deg``); ``fit`` checks that the training records carry the loop's channels and
+(``phase_limit_deg``, ``shape_limit``); ``fit`` checks that the training records carry the loop's channels and
 vary. Their false-alarm rate on healthy closed-loop episodes is measured in
 ``lab/stiction-detection.md``.
 """
@@ -35,7 +37,7 @@ from diagnosers.contract import require_varying
 from diagnosers.detection import NO_DIAGNOSIS, Decision, Detection
 from diagnosers.diagnoser import Diagnoser
 from diagnosers.episode.record import Episode
-from diagnosers.loops.loop_indexes import acf_regularity, horch_phase
+from diagnosers.loops.loop_indexes import acf_regularity, horch_phase, shape_index
 from diagnosers.registry import register
 from fcc_common.validation import Integer, Options, Real, check_params, invalid
 
@@ -56,6 +58,7 @@ _CONSTRAINTS: dict[str, Any] = {
     "regularity_limit": Real(0.0, closed="neither", why="Thornhill et al. (2003): 1"),
     "every": Integer(1, why="samples between two evaluations of the window"),
     "phase_limit_deg": Real(0.0, 90.0, closed="right", unit="°", why="90: a purely odd CCF"),
+    "shape_limit": Real(0.0, 1.0, closed="left", why="He et al. (2007): 0.4; 0 turns it off"),
 }
 
 
@@ -200,21 +203,28 @@ class OscillationACF(LoopMonitor):
 @register("stiction-ccf")
 class StictionCCF(LoopMonitor):
     """A sticking control valve: an oscillating loop (Thornhill et al. 2003's ACF regularity)
-    whose controller output and control error have an odd cross-correlation (Horch 1999);
-    :mod:`diagnosers.loops.loop_indexes`.
+    whose controller output and control error have an odd cross-correlation (Horch 1999) and
+    whose controller output is a triangle wave rather than a sine (He et al. 2007's curve
+    fit); :mod:`diagnosers.loops.loop_indexes`.
+
+    Horch's test alone cannot tell a sticking valve from an external sinusoid under an
+    integral-dominated controller (the T_rx loop's): both read odd. The curve fit can, so it
+    is on by default; ``shape_limit=0`` leaves Horch's test alone.
 
     Args:
         loop, window_s, min_period_s, n_crossings, regularity_limit, every: as
             :class:`OscillationACF`'s.
         phase_limit_deg: Horch's phase above which the CCF counts as odd (default 60°: the
             CCF at lag zero below half its peak, ``cos 60° = 0.5``).
+        shape_limit: He et al.'s index above which the controller output counts as a triangle
+            (default 0.4, the paper's bound of "no stiction"; 0 turns the test off).
         label: the fault the alarm names, the fault registry's name of the valve's stiction
             (default ``"valve-stiction"``, the T_rx loop's slide valve).
 
     Decision arrays: signal = (the stiction index ``min(r / regularity_limit, φ /
-    phase_limit)``, ``r``, Horch's phase ``φ`` in degrees), upper = (1, inf, inf): the alarm
-    is the index above 1, both tests passed; residual = the control error. The diagnosis is
-    ``label`` while alarmed (class score: the index).
+    phase_limit, SI / shape_limit)``, ``r``, Horch's phase ``φ`` in degrees, He's ``SI``),
+    upper = (1, inf, inf, inf): the alarm is the index above 1, every test passed; residual =
+    the control error. The diagnosis is ``label`` while alarmed (class score: the index).
     """
 
     isolates: ClassVar[bool] = True
@@ -229,6 +239,7 @@ class StictionCCF(LoopMonitor):
         regularity_limit: float = 1.0,
         every: int = 5,
         phase_limit_deg: float = 60.0,
+        shape_limit: float = 0.4,
         label: str = "valve-stiction",
     ) -> None:
         self.loop = loop
@@ -238,6 +249,7 @@ class StictionCCF(LoopMonitor):
         self.regularity_limit = regularity_limit
         self.every = every
         self.phase_limit_deg = phase_limit_deg
+        self.shape_limit = shape_limit
         self.label = label
 
     def _validate_params(self) -> None:
@@ -254,16 +266,23 @@ class StictionCCF(LoopMonitor):
             f"{self.loop} stiction index",
             f"{self.loop} ACF regularity",
             f"{self.loop} Horch phase [deg]",
+            f"{self.loop} He shape index",
         )
 
     def _idle_row(self) -> np.ndarray:
-        return np.zeros(3)
+        return np.zeros(4)
 
     def _evaluate(self, e: np.ndarray, op: np.ndarray) -> np.ndarray:
         r, period = self._regularity(e)
-        phase = 0.0 if r == 0.0 else math.degrees(horch_phase(op, e, period))
+        if r == 0.0:  # no oscillation: the other tests have no period to work with
+            return np.zeros(4)
+        phase = math.degrees(horch_phase(op, e, period))
+        si = shape_index(op, period)
+        si = 0.0 if math.isnan(si) else si
         index = min(r / float(self.regularity_limit), phase / float(self.phase_limit_deg))
-        return np.array([index, r, phase])
+        if float(self.shape_limit) > 0.0:
+            index = min(index, si / float(self.shape_limit))
+        return np.array([index, r, phase, si])
 
     def _detect(self, y: np.ndarray) -> Detection:
         decisions = [self._update(row) for row in y]
@@ -274,8 +293,8 @@ class StictionCCF(LoopMonitor):
         return Decision(
             alarm,
             row.copy(),
-            np.full(3, -math.inf),
-            np.array([1.0, math.inf, math.inf]),
+            np.full(4, -math.inf),
+            np.array([1.0, math.inf, math.inf, math.inf]),
             np.array([error]),
             diagnosis=self.classes_[0] if alarm else NO_DIAGNOSIS,
             class_scores=row[:1].copy(),

@@ -24,14 +24,31 @@ correlations.
   CCF, 0 for an even one (for a CCF ``cos(ωτ + φ)`` it is ``|φ|`` folded into [0, π/2]).
   Horch's test assumes a self-regulating process (true of the riser outlet temperature, which
   follows the valve at once); an integrating process needs his second test, not built here.
+  It also assumes that the proportional action dominates at the oscillation's frequency: with
+  an integral-dominated controller (the plant's T_rx loop, ``Ts/τ_I = 2.3``) the controller
+  output lags the control error by about a quarter period whatever the cause, so a slow
+  external sinusoid reads odd too (measured in ``lab/stiction-detection.md``).
+* :func:`shape_index`: Q. P. He, J. Wang, M. Pottmann, S. J. Qin, "A curve fitting method for
+  detecting valve stiction in oscillating control loops", *Ind. Eng. Chem. Res.* 46 (2007)
+  4549–4560. Under stiction in a self-regulating loop the controller output is a triangle
+  wave (the integral ramps it while the valve sticks), under an external sinusoid a sine.
+  Each half cycle of the controller output is fitted with a triangle and with a sine; the
+  index ``SI = MSE_sine / (MSE_sine + MSE_triangle)`` is near 1 for a triangle, near 0 for a
+  sine; the paper reads ``SI ≤ 0.4`` as no stiction and ``SI ≥ 0.6`` as stiction. Simplified
+  here (stated): both fits are symmetric humps over the half cycle between two zero
+  crossings (amplitude and offset free), the output's trend removed with a moving average of
+  one period first.
 """
 
 from __future__ import annotations
 
+import itertools
+
 import numpy as np
+from scipy.ndimage import uniform_filter1d
 from scipy.signal import correlate, detrend
 
-__all__ = ["acf_regularity", "detrended", "horch_phase", "zero_crossings"]
+__all__ = ["acf_regularity", "detrended", "horch_phase", "shape_index", "zero_crossings"]
 
 
 def detrended(x: np.ndarray) -> np.ndarray:
@@ -92,3 +109,34 @@ def horch_phase(op: np.ndarray, e: np.ndarray, period: float) -> float:
     if peak == 0.0:
         return 0.0
     return float(np.arccos(min(abs(float(c[lag])) / peak, 1.0)))
+
+
+def _hump_misfit(segment: np.ndarray, hump: np.ndarray) -> float:
+    """The residual sum of squares of ``segment ≈ a·hump + b`` (least squares)."""
+    basis = np.column_stack([hump, np.ones_like(hump)])
+    coef, *_ = np.linalg.lstsq(basis, segment, rcond=None)
+    return float(np.sum((segment - basis @ coef) ** 2))
+
+
+def shape_index(op: np.ndarray, period: float) -> float:
+    """He et al. (2007)'s stiction index of a window of controller output ``op`` ``(n,)``
+    oscillating with ``period`` samples: ``MSE_sine / (MSE_sine + MSE_triangle)`` over its
+    complete half cycles (module docstring); ``nan`` with fewer than two half cycles."""
+    p = max(round(period), 3)
+    x = detrended(op)
+    x = x - uniform_filter1d(x, p, mode="nearest")  # the trend left within the window
+    neg = x < 0.0
+    cuts = np.flatnonzero(neg[1:] != neg[:-1]) + 1
+    sine = triangle = 0.0
+    halves = 0
+    for a, b in itertools.pairwise(cuts):
+        m = int(b - a)
+        if m < max(p // 4, 3):  # a noise crossing, not a half cycle
+            continue
+        t = (np.arange(m) + 0.5) / m
+        sine += _hump_misfit(x[a:b], np.sin(np.pi * t))
+        triangle += _hump_misfit(x[a:b], 1.0 - np.abs(2.0 * t - 1.0))
+        halves += 1
+    if halves < 2 or sine + triangle == 0.0:
+        return float("nan")
+    return sine / (sine + triangle)
