@@ -9,7 +9,8 @@ They slide a window over the loop's last ``window_s`` seconds and compute the in
 
 * ``oscillation-acf`` alarms when the control error oscillates (Thornhill, Huang & Zhang 2003:
   the ACF's zero crossings regular, ``r > regularity_limit``, at a period no faster than
-  ``min_period_s``). It names no fault: an oscillating loop has many causes (a sticking valve,
+  ``min_period_s``, and the ACF one period on above ``peak_limit``: an oscillation that
+  stands out of the noise). It names no fault: an oscillating loop has many causes (a sticking valve,
   an aggressive tuning, an oscillating disturbance from upstream; Thornhill & Hägglund 1997),
   so it is a detector, and the diagnosis is :class:`StictionCCF`'s job.
 * ``stiction-ccf`` alarms when the loop oscillates *and* Horch (1999)'s cross-correlation
@@ -20,8 +21,9 @@ They slide a window over the loop's last ``window_s`` seconds and compute the in
   valve). An oscillation with an even CCF or a sinusoidal controller output (from outside
   the valve) does not alarm it.
 
-Neither learns thresholds from data: the limits are the papers' (``r > 1``) or stated
-(``phase_limit_deg``, ``shape_limit``); ``fit`` checks that the training records carry the loop's channels and
+Neither learns thresholds from data: the limits are the papers' (``r > 1``, ``SI > 0.4``) or
+stated (``phase_limit_deg``; ``peak_limit`` and ``min_period_s``, set on validation seeds
+5000–5019, ``lab/stiction-detection.md``); ``fit`` checks that the training records carry the loop's channels and
 vary. Their false-alarm rate on healthy closed-loop episodes is measured in
 ``lab/stiction-detection.md``.
 """
@@ -56,6 +58,7 @@ _CONSTRAINTS: dict[str, Any] = {
     "min_period_s": Real(0.0, unit="s", why="faster periods are measurement noise"),
     "n_crossings": Integer(4, 64, why="the ACF's first zero crossings; 4 give 2 periods"),
     "regularity_limit": Real(0.0, closed="neither", why="Thornhill et al. (2003): 1"),
+    "peak_limit": Real(0.0, 1.0, closed="left", why="the ACF one period on; 0 turns it off"),
     "every": Integer(1, why="samples between two evaluations of the window"),
     "phase_limit_deg": Real(0.0, 90.0, closed="right", unit="°", why="90: a purely odd CCF"),
     "shape_limit": Real(0.0, 1.0, closed="left", why="He et al. (2007): 0.4; 0 turns it off"),
@@ -63,10 +66,11 @@ _CONSTRAINTS: dict[str, Any] = {
 
 
 class LoopMonitor(Diagnoser):
-    """What both loop monitors share: the loop's channels, the sliding window, the evaluation
-    every ``every`` samples and the decision held in between (module docstring).
+    """What both loop monitors share: the loop's channels, the sliding window, the oscillation
+    test on it every ``every`` samples and the decision held in between (module docstring).
 
-    Subclasses implement :meth:`_evaluate` (the window's signal row) and :meth:`_decide`.
+    Subclasses name their signals (:meth:`_signal_names`, the first the alarm index with its
+    limit 1) and compute the rest of a window's row (:meth:`_evaluate`).
     """
 
     #: the default loop's channels, for the harness (a track without them skips the monitor)
@@ -116,7 +120,7 @@ class LoopMonitor(Diagnoser):
         self.error_buf_ = np.zeros(self.window_)
         self.output_buf_ = np.zeros(self.window_)
         self.k_ = 0
-        self.row_ = self._idle_row()
+        self.row_ = np.zeros(len(self.signal_names_))
 
     def _update(self, y: np.ndarray) -> Decision:
         pv, sp, op = y[self.channel_idx_]
@@ -128,20 +132,29 @@ class LoopMonitor(Diagnoser):
             self.row_ = self._evaluate(self.error_buf_[order], self.output_buf_[order])
         return self._decide(self.row_, pv - sp)
 
-    def _regularity(self, e: np.ndarray) -> tuple[float, float]:
-        r, period = acf_regularity(e, self.window_ // 2, int(self.n_crossings), self.min_period_)
-        return r, period
+    def _oscillation(self, e: np.ndarray) -> tuple[float, float, float, float]:
+        """The window's oscillation index ``min(r / regularity_limit, peak / peak_limit)``
+        (above 1: it oscillates), ``r``, the ACF peak and the period (samples; ``nan``)."""
+        r, period, peak = acf_regularity(
+            e, self.window_ // 2, int(self.n_crossings), self.min_period_
+        )
+        if r == 0.0:
+            return 0.0, 0.0, 0.0, period
+        index = r / float(self.regularity_limit)
+        if float(self.peak_limit) > 0.0:
+            index = min(index, peak / float(self.peak_limit))
+        return index, r, peak, period
+
+    def _decide(self, row: np.ndarray, error: float) -> Decision:
+        alarm = bool(row[0] > 1.0)
+        upper = np.full(row.shape, math.inf)
+        upper[0] = 1.0
+        return Decision(alarm, row.copy(), np.full(row.shape, -math.inf), upper, np.array([error]))
 
     def _signal_names(self) -> tuple[str, ...]:  # pragma: no cover - abstract
         raise NotImplementedError
 
-    def _idle_row(self) -> np.ndarray:  # pragma: no cover - abstract
-        raise NotImplementedError
-
     def _evaluate(self, e: np.ndarray, op: np.ndarray) -> np.ndarray:  # pragma: no cover
-        raise NotImplementedError
-
-    def _decide(self, row: np.ndarray, error: float) -> Decision:  # pragma: no cover
         raise NotImplementedError
 
 
@@ -158,11 +171,14 @@ class OscillationACF(LoopMonitor):
         min_period_s: the fastest period counted as an oscillation (default 240 s); a healthy
             loop's ACF crosses zero regularly at 2–12 samples (the noise through the PI law).
         n_crossings: the ACF's first zero crossings that give the periods (default 6).
-        regularity_limit: alarm when ``r`` exceeds it (default 1, the paper's).
+        regularity_limit: ``r`` must exceed it (default 1, the paper's).
+        peak_limit: the ACF one period on must exceed it (default 0.3; 0 turns it off).
         every: evaluate the window every this many samples (default 5; the decision holds).
 
-    Decision arrays: signal = (``r``, the mean period in s), upper = (``regularity_limit``,
-    inf); residual = the control error (controlled variable − set point).
+    Decision arrays: signal = (the oscillation index ``min(r / regularity_limit, peak /
+    peak_limit)``, ``r``, the ACF peak, the mean period in s), upper = (1, inf, inf, inf): the
+    alarm is the index above 1; residual = the control error (controlled variable − set
+    point).
     """
 
     def __init__(
@@ -173,6 +189,7 @@ class OscillationACF(LoopMonitor):
         min_period_s: float = 240.0,
         n_crossings: int = 6,
         regularity_limit: float = 1.0,
+        peak_limit: float = 0.3,
         every: int = 5,
     ) -> None:
         self.loop = loop
@@ -180,39 +197,36 @@ class OscillationACF(LoopMonitor):
         self.min_period_s = min_period_s
         self.n_crossings = n_crossings
         self.regularity_limit = regularity_limit
+        self.peak_limit = peak_limit
         self.every = every
 
     def _signal_names(self) -> tuple[str, ...]:
-        return (f"{self.loop} ACF regularity", f"{self.loop} oscillation period [s]")
-
-    def _idle_row(self) -> np.ndarray:
-        return np.array([0.0, math.nan])
+        return (
+            f"{self.loop} oscillation index",
+            f"{self.loop} ACF regularity",
+            f"{self.loop} ACF peak",
+            f"{self.loop} oscillation period [s]",
+        )
 
     def _evaluate(self, e: np.ndarray, op: np.ndarray) -> np.ndarray:
-        r, period = self._regularity(e)
-        return np.array([r, period * self.sample_time_s_])
-
-    def _decide(self, row: np.ndarray, error: float) -> Decision:
-        upper = np.array([float(self.regularity_limit), math.inf])
-        signal = np.array([row[0], 0.0 if math.isnan(row[1]) else row[1]])
-        return Decision(
-            bool(row[0] > upper[0]), signal, np.full(2, -math.inf), upper, np.array([error])
-        )
+        index, r, peak, period = self._oscillation(e)
+        period_s = 0.0 if math.isnan(period) else period * self.sample_time_s_
+        return np.array([index, r, peak, period_s])
 
 
 @register("stiction-ccf")
 class StictionCCF(LoopMonitor):
-    """A sticking control valve: an oscillating loop (Thornhill et al. 2003's ACF regularity)
-    whose controller output and control error have an odd cross-correlation (Horch 1999) and
-    whose controller output is a triangle wave rather than a sine (He et al. 2007's curve
-    fit); :mod:`diagnosers.loops.loop_indexes`.
+    """A sticking control valve: an oscillating loop (:class:`OscillationACF`'s test) whose
+    controller output and control error have an odd cross-correlation (Horch 1999) and whose
+    controller output is a triangle wave rather than a sine (He et al. 2007's curve fit);
+    :mod:`diagnosers.loops.loop_indexes`.
 
     Horch's test alone cannot tell a sticking valve from an external sinusoid under an
     integral-dominated controller (the T_rx loop's): both read odd. The curve fit can, so it
     is on by default; ``shape_limit=0`` leaves Horch's test alone.
 
     Args:
-        loop, window_s, min_period_s, n_crossings, regularity_limit, every: as
+        loop, window_s, min_period_s, n_crossings, regularity_limit, peak_limit, every: as
             :class:`OscillationACF`'s.
         phase_limit_deg: Horch's phase above which the CCF counts as odd (default 60°: the
             CCF at lag zero below half its peak, ``cos 60° = 0.5``).
@@ -221,10 +235,11 @@ class StictionCCF(LoopMonitor):
         label: the fault the alarm names, the fault registry's name of the valve's stiction
             (default ``"valve-stiction"``, the T_rx loop's slide valve).
 
-    Decision arrays: signal = (the stiction index ``min(r / regularity_limit, φ /
-    phase_limit, SI / shape_limit)``, ``r``, Horch's phase ``φ`` in degrees, He's ``SI``),
-    upper = (1, inf, inf, inf): the alarm is the index above 1, every test passed; residual =
-    the control error. The diagnosis is ``label`` while alarmed (class score: the index).
+    Decision arrays: signal = (the stiction index ``min(oscillation index, φ / phase_limit,
+    SI / shape_limit)``, ``r``, the ACF peak, Horch's phase ``φ`` in degrees, He's ``SI``),
+    upper = (1, inf, inf, inf, inf): the alarm is the index above 1, every test passed;
+    residual = the control error. The diagnosis is ``label`` while alarmed (class score: the
+    index).
     """
 
     isolates: ClassVar[bool] = True
@@ -237,6 +252,7 @@ class StictionCCF(LoopMonitor):
         min_period_s: float = 240.0,
         n_crossings: int = 6,
         regularity_limit: float = 1.0,
+        peak_limit: float = 0.3,
         every: int = 5,
         phase_limit_deg: float = 60.0,
         shape_limit: float = 0.4,
@@ -247,6 +263,7 @@ class StictionCCF(LoopMonitor):
         self.min_period_s = min_period_s
         self.n_crossings = n_crossings
         self.regularity_limit = regularity_limit
+        self.peak_limit = peak_limit
         self.every = every
         self.phase_limit_deg = phase_limit_deg
         self.shape_limit = shape_limit
@@ -265,37 +282,35 @@ class StictionCCF(LoopMonitor):
         return (
             f"{self.loop} stiction index",
             f"{self.loop} ACF regularity",
+            f"{self.loop} ACF peak",
             f"{self.loop} Horch phase [deg]",
             f"{self.loop} He shape index",
         )
 
-    def _idle_row(self) -> np.ndarray:
-        return np.zeros(4)
-
     def _evaluate(self, e: np.ndarray, op: np.ndarray) -> np.ndarray:
-        r, period = self._regularity(e)
+        index, r, peak, period = self._oscillation(e)
         if r == 0.0:  # no oscillation: the other tests have no period to work with
-            return np.zeros(4)
+            return np.zeros(5)
         phase = math.degrees(horch_phase(op, e, period))
         si = shape_index(op, period)
         si = 0.0 if math.isnan(si) else si
-        index = min(r / float(self.regularity_limit), phase / float(self.phase_limit_deg))
+        index = min(index, phase / float(self.phase_limit_deg))
         if float(self.shape_limit) > 0.0:
             index = min(index, si / float(self.shape_limit))
-        return np.array([index, r, phase, si])
+        return np.array([index, r, peak, phase, si])
 
     def _detect(self, y: np.ndarray) -> Detection:
         decisions = [self._update(row) for row in y]
         return Detection.from_decisions(decisions, self.signal_names_, self.classes_)
 
     def _decide(self, row: np.ndarray, error: float) -> Decision:
-        alarm = bool(row[0] > 1.0)
+        d = super()._decide(row, error)
         return Decision(
-            alarm,
-            row.copy(),
-            np.full(4, -math.inf),
-            np.array([1.0, math.inf, math.inf, math.inf]),
-            np.array([error]),
-            diagnosis=self.classes_[0] if alarm else NO_DIAGNOSIS,
+            d.alarm,
+            d.signal,
+            d.lower,
+            d.upper,
+            d.residual,
+            diagnosis=self.classes_[0] if d.alarm else NO_DIAGNOSIS,
             class_scores=row[:1].copy(),
         )
