@@ -21,15 +21,17 @@ They slide a window over the loop's last ``window_s`` seconds and compute the in
   valve). An oscillation with an even CCF or a sinusoidal controller output (from outside
   the valve) does not alarm it.
 
-Neither learns thresholds from data: the limits are the papers' (``r > 1``, ``SI > 0.4``) or
-stated (``phase_limit_deg``; ``peak_limit`` and ``min_period_s``, set on validation seeds
-5000–5019, ``lab/stiction-detection.md``); ``fit`` checks that the training records carry the loop's channels and
-vary. Their false-alarm rate on healthy closed-loop episodes is measured in
-``lab/stiction-detection.md``.
+Neither learns a threshold from data: the limits are the papers' (``r > 1``, ``SI > 0.4``)
+or stated (``phase_limit_deg``; ``peak_limit`` and ``min_period_s``, set on validation seeds
+5000–5019). ``fit`` checks that the training records carry the loop's channels and vary, and
+records the training loops' largest alarm index (``training_index_max_``), with a warning when
+it is above 1 (those loops already oscillate). The false-alarm rate on healthy closed-loop
+episodes is measured in ``lab/stiction-detection.md``.
 """
 
 from __future__ import annotations
 
+import logging
 import math
 from typing import Any, ClassVar
 
@@ -44,6 +46,8 @@ from diagnosers.registry import register
 from fcc_common.validation import Integer, Options, Real, check_params, invalid
 
 __all__ = ["LOOP_CHANNELS", "LoopMonitor", "OscillationACF", "StictionCCF"]
+
+logger = logging.getLogger(__name__)
 
 #: Each loop's channels in the closed-loop observation: (controlled variable, set point,
 #: controller output).
@@ -95,6 +99,20 @@ class LoopMonitor(Diagnoser):
         require_varying(y, list(names), self.name or type(self).__name__, every=False)
         self.channel_idx_ = np.asarray(idx, dtype=np.int64)
         self._finish()
+        # what the training loops show: a healthy loop that already oscillates is worth a word
+        peak = 0.0
+        for ep in episodes:
+            self._reset()
+            peak = max([peak, *(self._update(row).signal[0] for row in ep.y)])
+        self.training_index_max_ = float(peak)
+        if peak > 1.0:
+            logger.warning(
+                "%s: the training episodes already alarm (largest index %.2f > 1): their loop "
+                "%s oscillates; train on healthy records, or expect alarms on such loops",
+                self.name or type(self).__name__,
+                peak,
+                self.loop,
+            )
 
     def _finish(self) -> None:
         window = round(float(self.window_s) / self.sample_time_s_)
@@ -110,10 +128,14 @@ class LoopMonitor(Diagnoser):
         self.signal_names_ = self._signal_names()
 
     def _get_state(self) -> dict[str, np.ndarray]:
-        return {"channel_idx": self.channel_idx_}
+        return {
+            "channel_idx": self.channel_idx_,
+            "training_index_max": np.asarray(self.training_index_max_),
+        }
 
     def _set_state(self, state: dict[str, np.ndarray]) -> None:
         self.channel_idx_ = np.asarray(state["channel_idx"], dtype=np.int64)
+        self.training_index_max_ = float(state["training_index_max"])
         self._finish()
 
     def _reset(self) -> None:

@@ -171,6 +171,14 @@ def test_on_the_plant_stiction_is_found_and_healthy_loops_stay_silent(plant_epis
     assert set(det.diagnosis[det.alarm]) == {"valve-stiction"}
     for ep in plant_episodes["healthy"]:  # validation seeds
         assert not d.detect(ep).alarm.any()
+    assert d.training_index_max_ < 1.0  # the healthy training loops do not oscillate
+
+
+def test_training_on_an_oscillating_loop_warns(plant_episodes, caplog) -> None:
+    with caplog.at_level("WARNING", logger="diagnosers.loops.loop_detectors"):
+        d = diagnosers.make("oscillation-acf").fit(plant_episodes["test"])
+    assert d.training_index_max_ > 1.0
+    assert "the training episodes already alarm" in caplog.text
 
 
 @pytest.mark.parametrize("name", ["oscillation-acf", "stiction-ccf"])
