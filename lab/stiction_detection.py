@@ -21,6 +21,8 @@ none); CDR as the metrics define it (the share of the alarmed samples after the 
 name the episode's own fault). Record in ``lab/stiction-detection.md``.
 
     PYTHONPATH=$PWD python lab/stiction_detection.py --healthy 100 --faulty 40
+    PYTHONPATH=$PWD python lab/stiction_detection.py --seed-start 5000 --healthy 20 \
+        --faulty 10 --sizes --set window_s=2400 n_crossings=4      # a variant, tuning seeds
 """
 
 from __future__ import annotations
@@ -103,13 +105,29 @@ def main() -> None:
     ap.add_argument("--seed-start", type=int, default=5100)
     ap.add_argument("--sizes", type=float, nargs="*", default=[0.02, 0.05, 0.1, 0.2, 0.3])
     ap.add_argument("--per-size", type=int, default=10)
+    ap.add_argument(
+        "--set",
+        nargs="*",
+        default=[],
+        metavar="KEY=VALUE",
+        help="a hyperparameter of both monitors (a variant; numbers only), e.g. window_s=2400",
+    )
     args = ap.parse_args()
+    params = {}
+    for item in args.set:
+        key, _, value = item.partition("=")
+        try:
+            params[key] = int(value) if value.isdigit() else float(value)
+        except ValueError:
+            ap.error(f"--set {item!r}: allowed KEY=NUMBER")
     if args.seed_start < 5000:
         raise SystemExit(f"--seed-start={args.seed_start}: use validation seeds (5000+)")
     t0 = time.process_time()
     plant = fcc_env.PlantConfig.build(regulatory=True)
     train = Episode.from_batch(fcc_env.simulate_episodes([1000, 1001], 1500, plant=plant))
-    fitted = {n: diagnosers.make(n).fit(train) for n in NAMES}
+    fitted = {n: diagnosers.make(n, **params).fit(train) for n in NAMES}
+    if params:
+        print(f"variant: {params}")
 
     seeds = list(range(args.seed_start, args.seed_start + args.healthy))
     healthy = Episode.from_batch(fcc_env.simulate_episodes(seeds, SAMPLES, plant=plant))
