@@ -24,8 +24,8 @@ They slide a window over the loop's last ``window_s`` seconds and compute the in
 Neither learns a threshold from data: the limits are the papers' (``r > 1``, ``SI > 0.4``)
 or stated (``phase_limit_deg``; ``peak_limit`` and ``min_period_s``, set on validation seeds
 5000–5019). ``fit`` checks that the training records carry the loop's channels and vary, and
-records the training loops' largest alarm index (``training_index_max_``), with a warning when
-it is above 1 (those loops already oscillate). The false-alarm rate on healthy closed-loop
+records the healthy training loops' largest alarm index (``training_index_max_``), with a
+warning when it is above 1 (those loops already oscillate). The false-alarm rate on healthy closed-loop
 episodes is measured in ``lab/stiction-detection.md``.
 """
 
@@ -99,9 +99,10 @@ class LoopMonitor(Diagnoser):
         require_varying(y, list(names), self.name or type(self).__name__, every=False)
         self.channel_idx_ = np.asarray(idx, dtype=np.int64)
         self._finish()
-        # what the training loops show: a healthy loop that already oscillates is worth a word
+        # what the healthy training loops show: one that already oscillates is worth a word
+        # (an isolating monitor also receives labelled faulty episodes: those may oscillate)
         peak = 0.0
-        for ep in episodes:
+        for ep in (ep for ep in episodes if ep.fault_onset is None):
             self._reset()
             peak = max([peak, *(self._update(row).signal[0] for row in ep.y)])
         self.training_index_max_ = float(peak)
