@@ -249,8 +249,13 @@ class StictionCCF(LoopMonitor):
     is on by default; ``shape_limit=0`` leaves Horch's test alone.
 
     Args:
-        loop, window_s, min_period_s, n_crossings, regularity_limit, peak_limit, every: as
-            :class:`OscillationACF`'s.
+        loop: the loop, as :class:`OscillationACF`'s (default ``"T_rx"``).
+        window_s: the sliding window in s (default 4800).
+        min_period_s: the fastest period counted as an oscillation, in s (default 240).
+        n_crossings: the ACF's first zero crossings that give the periods (default 6).
+        regularity_limit: Thornhill's ``r`` must exceed it (default 1).
+        peak_limit: the ACF one period on must exceed it (default 0.3; 0 turns it off).
+        every: evaluate the window every this many samples (default 5).
         phase_limit_deg: Horch's phase above which the CCF counts as odd (default 60°: the
             CCF at lag zero below half its peak, ``cos 60° = 0.5``).
         shape_limit: He et al.'s index above which the controller output counts as a triangle
