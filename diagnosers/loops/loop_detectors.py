@@ -189,8 +189,8 @@ class OscillationACF(LoopMonitor):
     Args:
         loop: ``"T_rx"`` (riser outlet on the slide valve, default) or ``"T_rg1"`` (stage-1
             bed on the air).
-        window_s: the sliding window (default 4800 s: about six cycles of the sticking slide
-            valve's 8-minute limit cycle, ``lab/stiction-detection.md``).
+        window_s: the sliding window (default 4800 s: about five cycles of the sticking
+            slide valve's 10-minute limit cycle, ``lab/stiction-detection.md``).
         min_period_s: the fastest period counted as an oscillation (default 240 s); a healthy
             loop's ACF crosses zero regularly at 2–12 samples (the noise through the PI law).
         n_crossings: the ACF's first zero crossings that give the periods (default 6).
