@@ -21,6 +21,7 @@ none); CDR as the metrics define it (the share of the alarmed samples after the 
 name the episode's own fault). Record in ``lab/stiction-detection.md``.
 
     PYTHONPATH=$PWD python lab/stiction_detection.py --healthy 100 --faulty 40
+    PYTHONPATH=$PWD python lab/stiction_detection.py --healthy 0 --faulty 0 --sizes --others 8
     PYTHONPATH=$PWD python lab/stiction_detection.py --seed-start 5000 --healthy 20 \
         --faulty 10 --sizes --set window_s=2400 n_crossings=4      # a variant, tuning seeds
 """
@@ -106,6 +107,14 @@ def main() -> None:
     ap.add_argument("--sizes", type=float, nargs="*", default=[0.02, 0.05, 0.1, 0.2, 0.3])
     ap.add_argument("--per-size", type=int, default=10)
     ap.add_argument(
+        "--others",
+        type=int,
+        default=0,
+        metavar="N",
+        help="then N episodes of each other fault of the sensor (on T_rx) and actuator tracks: "
+        "how many stiction-ccf alarms on after the onset",
+    )
+    ap.add_argument(
         "--set",
         nargs="*",
         default=[],
@@ -129,19 +138,20 @@ def main() -> None:
     if params:
         print(f"variant: {params}")
 
-    seeds = list(range(args.seed_start, args.seed_start + args.healthy))
-    healthy = Episode.from_batch(fcc_env.simulate_episodes(seeds, SAMPLES, plant=plant))
-    print(f"## healthy: {len(healthy)} episodes, seeds {seeds[0]}-{seeds[-1]}")
-    for n, d in fitted.items():
-        rates = [r_fd(d.detect(ep).alarm, ep.n_samples) for ep in healthy]
-        k = sum(r > 0 for r in rates)
-        print(f"{n}: r_fd {ci(rates, '.4f')}; episodes alarmed {wilson(k, len(rates))}")
+    if args.healthy:
+        seeds = list(range(args.seed_start, args.seed_start + args.healthy))
+        healthy = Episode.from_batch(fcc_env.simulate_episodes(seeds, SAMPLES, plant=plant))
+        print(f"## healthy: {len(healthy)} episodes, seeds {seeds[0]}-{seeds[-1]}")
+        for n, d in fitted.items():
+            rates = [r_fd(d.detect(ep).alarm, ep.n_samples) for ep in healthy]
+            k = sum(r > 0 for r in rates)
+            print(f"{n}: r_fd {ci(rates, '.4f')}; episodes alarmed {wilson(k, len(rates))}")
 
     fseeds = list(range(args.seed_start + 1000, args.seed_start + 1000 + args.faulty))
-    columns = {
-        "valve-stiction (drawn)": drawn("valve-stiction", fseeds, 0.02, 0.3, None),
-        "sensor-drift T_rx (drawn)": drawn("sensor-drift", fseeds, 0.5, 2.0, "T_rx"),
-    }
+    columns = {}
+    if args.faulty:
+        columns["valve-stiction (drawn)"] = drawn("valve-stiction", fseeds, 0.02, 0.3, None)
+        columns["sensor-drift T_rx (drawn)"] = drawn("sensor-drift", fseeds, 0.5, 2.0, "T_rx")
     for size in args.sizes:
         ss = list(range(args.seed_start + 2000, args.seed_start + 2000 + args.per_size))
         columns[f"valve-stiction S={size:g}"] = [
@@ -163,15 +173,48 @@ def main() -> None:
                 f"{n}: r_td {ci(row['r_td'], '.3f')}; t_dt {ci(row['t_dt'], '.0f')}; "
                 f"missed {row['missed']}/{len(eps)}{extra}"
             )
-    st = results["valve-stiction (drawn)"]["stiction-ccf"]["labels"]
-    dr = results["sensor-drift T_rx (drawn)"]["stiction-ccf"]["labels"]
-    right = sum(lab == "valve-stiction" for lab in st) + sum(lab != "valve-stiction" for lab in dr)
-    print(
-        f"## stiction vs drift (drawn columns): stiction named {wilson(sum(lab == 'valve-stiction' for lab in st), len(st))}, "
-        f"drift called stiction {wilson(sum(lab == 'valve-stiction' for lab in dr), len(dr))}, "
-        f"told apart {wilson(right, len(st) + len(dr))}"
-    )
+    if args.faulty:
+        st = results["valve-stiction (drawn)"]["stiction-ccf"]["labels"]
+        dr = results["sensor-drift T_rx (drawn)"]["stiction-ccf"]["labels"]
+        right = sum(lab == "valve-stiction" for lab in st) + sum(
+            lab != "valve-stiction" for lab in dr
+        )
+        print(
+            f"## stiction vs drift (drawn columns): stiction named {wilson(sum(lab == 'valve-stiction' for lab in st), len(st))}, "
+            f"drift called stiction {wilson(sum(lab == 'valve-stiction' for lab in dr), len(dr))}, "
+            f"told apart {wilson(right, len(st) + len(dr))}"
+        )
+    if args.others:
+        others(fitted["stiction-ccf"], args.others, args.seed_start + 1100, plant)
     print(f"{time.process_time() - t0:.0f} s CPU (this process; shared 2-core machine)")
+
+
+#: the tracks' other faults with their drawn size ranges (``evaluation/tracks/catalogue.py``)
+OTHERS = {
+    "sensor-bias": (2.0, 10.0),
+    "sensor-stuck": (1.0, 1.0),
+    "sensor-noise": (2.0, 20.0),
+    "sensor-dropout": (0.2, 0.9),
+    "valve-bias": (0.05, 0.2),
+    "valve-stuck": (0.5, 1.0),
+    "blower-capacity": (0.12, 0.12),
+}
+
+
+def others(d, n: int, start: int, plant) -> None:
+    """The episodes of each other fault (sensor faults on T_rx) that ``d`` alarms on after
+    the onset."""
+    seeds = list(range(start, start + n))
+    for name, (low, high) in OTHERS.items():
+        channel = "T_rx" if name.startswith("sensor") else None
+        eps = [
+            simulate(s, f, plant)
+            for s, f in zip(seeds, drawn(name, seeds, low, high, channel), strict=True)
+        ]
+        hit = sum(bool(d.detect(ep).alarm[ep.fault_onset :].any()) for ep in eps)
+        print(
+            f"{name}{' T_rx' if channel else ''}: {d.name} alarms after the onset in {wilson(hit, n)}"
+        )
 
 
 if __name__ == "__main__":
