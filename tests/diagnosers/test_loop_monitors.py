@@ -213,3 +213,14 @@ def test_bad_settings_and_records_are_refused_by_name(plant_episodes) -> None:
     open_loop = Episode.from_batch(fcc_env.simulate_episodes([1000], 300))
     with pytest.raises(ValueError, match=r"missing \['T_rx_sp', 'u_F'\]"):
         diagnosers.make("stiction-ccf").fit(open_loop)
+
+
+def test_the_harness_runs_them_on_closed_loop_tracks_only() -> None:
+    from evaluation.tracks.board import applicable, track_channels
+    from evaluation.tracks.catalogue import TRACKS
+
+    names = ["oscillation-acf", "stiction-ccf"]
+    keep, skipped = applicable(names, track_channels(TRACKS["paper"]), "on track paper")
+    assert keep == [] and all("no channel T_rx_sp, u_F" in s for s in skipped)
+    keep, _ = applicable(names, track_channels(TRACKS["actuator"]), "on track actuator")
+    assert keep == names
