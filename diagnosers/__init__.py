@@ -22,6 +22,8 @@ The rooms (the contract, the registry and the presets at the top; the parts belo
 ``filters/``           state estimators of the FCC model: the unscented Kalman filter's
                        innovations, state and disturbance estimates, and the grey-box
                        detector ``ukf-glr`` on them
+``loops/``             control-loop monitors on a loop's own records: ``oscillation-acf``,
+                       ``stiction-ccf``
 =====================  ===========================================================================
 
 >>> import diagnosers
@@ -45,6 +47,7 @@ from diagnosers import (
     classical,  # noqa: F401  (registers limits, pca, arx-band)
     filters,  # noqa: F401  (registers ukf-glr)
     isolation,  # noqa: F401  (registers lrgf-iso, lrgf-lda, mmae)
+    loops,  # noqa: F401  (registers oscillation-acf, stiction-ccf)
     lrgf,  # noqa: F401  (registers lrgf-mem, lrgf-glr and their presets)
 )
 

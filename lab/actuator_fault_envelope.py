@@ -1,6 +1,6 @@
 """The envelope of the actuator faults (fcc_env.actuator_faults): which sizes keep the plant in
 its envelope, in closed loop and (valve-bias, blower-capacity) in open loop, and the limit
-cycle of a sticking slide valve.
+cycle of a sticking slide valve (its figure and period: ``lab/stiction_limit_cycle.py``).
 
 Training seeds (1000 onwards), the paper's 4000 samples, onset 2000. Per case: the episodes
 that leave the envelope (terminated) against the healthy twins, the true process's mean shift
@@ -13,7 +13,6 @@ steps' brief transients stay above it).
     PYTHONPATH=$PWD python lab/actuator_fault_envelope.py --seeds 10
     PYTHONPATH=$PWD python lab/actuator_fault_envelope.py --cases closed:valve-stiction:0.05
     PYTHONPATH=$PWD python lab/actuator_fault_envelope.py --cases closed:sensor-bias+valve-stiction:1
-    PYTHONPATH=$PWD python lab/actuator_fault_envelope.py --figure /tmp/stiction.png
     PYTHONPATH=$PWD python lab/actuator_fault_envelope.py --signatures --seeds 10
 """
 
@@ -84,39 +83,6 @@ def _single(name: str, size: float, seeds: list[int], samples: int, plant):
         fcc_env.register_fault(name, d)
 
 
-def figure(path: str, size: float, seed: int = 1000) -> None:
-    """The limit cycle of a sticking valve (``valve-stiction`` at ``size``): command and valve
-    position, T_rx against its set point over 90 minutes after the onset, and the phase plot
-    (command against position), written to ``path``."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    spec = FaultSpec(scenario="valve-stiction", magnitude=size, onset=ONSET)
-    b = simulate_episodes(
-        [seed], 3000, fault=spec, plant=fcc_env.PlantConfig.build(regulatory=True)
-    )
-    k = np.arange(ONSET - 60, ONSET + 540)
-    t_min = (k - ONSET) * b.sample_time_s / 60
-    command = b.y_clean[0, k, b.channels.index("u_F")]
-    position = b.inputs[0, k, 0]
-    fig, ax = plt.subplots(1, 3, figsize=(14, 4))
-    ax[0].plot(t_min, command, label="command u_F (recorded)")
-    ax[0].plot(t_min, position, label="valve position (flow received)")
-    ax[0].set(xlabel="minutes after the onset", ylabel="kg/s", title=f"valve-stiction S = {size:g}")
-    ax[0].legend()
-    ax[1].plot(t_min, b.aux[0, k, AUX_NAMES.index("T_rx")], label="T_rx (true)")
-    ax[1].plot(t_min, b.setpoints[0, k, 0], "--", label="set point")
-    ax[1].set(xlabel="minutes after the onset", ylabel="°C")
-    ax[1].legend()
-    after = k >= ONSET
-    ax[2].plot(command[after], position[after], ".-", lw=0.5, ms=2)
-    ax[2].set(xlabel="command u_F (kg/s)", ylabel="valve position (kg/s)", title="phase plot")
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-
-
 def signatures(seeds: list[int]) -> None:
     """Each actuator fault at its default: the mean faulty − healthy difference of each
     noise-free observation channel over samples 2500–4000 / its standard deviation over time
@@ -151,15 +117,10 @@ def main() -> None:
         help="MODE:NAME:SIZE (MODE open|closed); NAME A+B: concurrent, both at their defaults "
         "times SIZE, onsets 2000 and 2500",
     )
-    ap.add_argument("--figure", default=None, help="PATH: draw the stiction limit cycle, then stop")
-    ap.add_argument("--figure-size", type=float, default=0.05, help="the figure's S")
     ap.add_argument("--signatures", action="store_true", help="the defaults' signatures, then stop")
     args = ap.parse_args()
     if args.signatures:
         signatures(list(range(1000, 1000 + args.seeds)))
-        return
-    if args.figure:
-        figure(args.figure, args.figure_size)
         return
     cases = DEFAULT_CASES
     if args.cases:

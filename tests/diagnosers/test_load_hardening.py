@@ -24,6 +24,7 @@ import torch
 
 import diagnosers
 from diagnosers import Diagnoser
+from diagnosers.bank.relations import required_channels
 from diagnosers.conformance import default_episodes
 from fcc_common.safe_files import (
     MAX_FILE_BYTES,
@@ -34,8 +35,6 @@ from fcc_common.safe_files import (
     read_bytes,
 )
 
-CLOSED_LOOP = ("lrgf-glr-closed",)  # needs the closed-loop plant's channels
-
 
 @pytest.fixture(scope="module")
 def saved(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
@@ -44,7 +43,7 @@ def saved(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     data = {False: default_episodes(), True: None}
     out = {}
     for name in diagnosers.available():
-        closed = name in CLOSED_LOOP
+        closed = "u_F" in required_channels(name)  # needs the closed-loop plant's channels
         if data[closed] is None:
             data[closed] = default_episodes(closed_loop=True)
         train, _, faulty = data[closed]
