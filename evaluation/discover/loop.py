@@ -85,6 +85,21 @@ FORM_MODES = ("auto", "always", "never")
 ALPHA = Real(0.0, 0.5, closed="neither")
 
 
+@dataclass(frozen=True)
+class _FitContext:
+    """What every joint re-fit of a run reads: the model, the data, the held-out split and the
+    weights, and the significance level of the block test (fixed for the run)."""
+
+    model: ModelAdapter
+    data: MeasuredData
+    Y: np.ndarray
+    n_train: int
+    sqrt_w: np.ndarray
+    block_len: int
+    alpha: float
+    min_rel: float
+
+
 @dataclass
 class _Accepted:
     cand: Candidate
@@ -180,6 +195,7 @@ def discover(
     sigma = noise_levels(E0[:, :n_train])
     sigma = np.where(sigma > 0, sigma, 1.0)
     sqrt_w = 1.0 / sigma
+    ctx = _FitContext(model, data, Y, n_train, sqrt_w, block_len, alpha, min_rel_reduction)
 
     accepted: list[_Accepted] = []
     excluded: set[str] = set()  # dropped by backward elimination: not offered again
@@ -242,19 +258,7 @@ def discover(
                 {x: win[x] for x in ("score", "rel_reduction", "p_value")},
             )
         )
-        _refit_all(
-            model,
-            data,
-            accepted,
-            Y,
-            n_train,
-            sqrt_w,
-            block_len,
-            alpha,
-            min_rel_reduction,
-            rounds[-1],
-            excluded,
-        )
+        _refit_all(ctx, accepted, rounds[-1], excluded)
 
     can_form = forms != "never" and callable(getattr(model, "signals", None))
     form_note = None
@@ -328,19 +332,7 @@ def discover(
                 {x: row[x] for x in ("score", "rel_reduction", "p_value")},
             )
         )
-        _refit_all(
-            model,
-            data,
-            accepted,
-            Y,
-            n_train,
-            sqrt_w,
-            block_len,
-            alpha,
-            min_rel_reduction,
-            rounds[-1],
-            excluded,
-        )
+        _refit_all(ctx, accepted, rounds[-1], excluded)
 
     effs = [a.cand for a in accepted]
     th_acc = np.concatenate([a.theta for a in accepted]) if accepted else np.zeros(0)
@@ -425,23 +417,14 @@ def discover(
     return report
 
 
-def _backward_elimination(
-    model: ModelAdapter,
-    data: MeasuredData,
-    accepted: list[_Accepted],
-    Y: np.ndarray,
-    n_train: int,
-    sqrt_w: np.ndarray,
-    block_len: int,
-    alpha: float,
-    min_rel: float,
-) -> list[str]:
+def _backward_elimination(ctx: _FitContext, accepted: list[_Accepted]) -> list[str]:
     """Drop earlier effects made redundant by later ones (greedy forward selection's repair).
 
     For each accepted effect but the newest, the others are re-fitted jointly without it; if the
     held-out test no longer finds it significant (same level and minimum reduction as for
     adding), it is removed and the others keep their re-fitted values.
     """
+    model, data, Y, n_train, sqrt_w = ctx.model, ctx.data, ctx.Y, ctx.n_train, ctx.sqrt_w
     dropped: list[str] = []
     T = data.n_samples
     for a in list(accepted[:-1]):
@@ -464,8 +447,8 @@ def _backward_elimination(
         )
         e_without = Y - model.predict(data, [x.cand for x in rest], fit.theta[None], T)[0]
         e_with = Y - model.predict(data, full_e, full_th[None], T)[0]
-        cmp = heldout_comparison(e_without[:, n_train:], e_with[:, n_train:], sqrt_w, block_len)
-        if cmp["p_value"] < alpha / len(accepted) and cmp["rel_reduction"] >= min_rel:
+        cmp = heldout_comparison(e_without[:, n_train:], e_with[:, n_train:], sqrt_w, ctx.block_len)
+        if cmp["p_value"] < ctx.alpha / len(accepted) and cmp["rel_reduction"] >= ctx.min_rel:
             continue
         accepted.remove(a)
         dropped.append(a.cand.id)
@@ -478,32 +461,23 @@ def _backward_elimination(
 
 
 def _refit_all(
-    model: ModelAdapter,
-    data: MeasuredData,
-    accepted: list[_Accepted],
-    Y: np.ndarray,
-    n_train: int,
-    sqrt_w: np.ndarray,
-    block_len: int,
-    alpha: float,
-    min_rel: float,
-    round_table: dict[str, Any],
-    excluded: set[str],
+    ctx: _FitContext, accepted: list[_Accepted], round_table: dict[str, Any], excluded: set[str]
 ) -> None:
     """Joint re-fit of everything accepted so far, then backward elimination (in place)."""
     if len(accepted) < 2:
         return
     effs = [a.cand for a in accepted]
     th = np.concatenate([a.theta for a in accepted])
-    fit = fit_effects(model, data, effs, th, np.ones(th.size, bool), Y, n_train, sqrt_w, grid=False)
+    free = np.ones(th.size, bool)
+    fit = fit_effects(
+        ctx.model, ctx.data, effs, th, free, ctx.Y, ctx.n_train, ctx.sqrt_w, grid=False
+    )
     j = 0
     for a in accepted:
         n_p = len(a.cand.params)
         a.theta, a.stderr = fit.theta[j : j + n_p], fit.stderr[j : j + n_p]
         j += n_p
-    dropped = _backward_elimination(
-        model, data, accepted, Y, n_train, sqrt_w, block_len, alpha, min_rel
-    )
+    dropped = _backward_elimination(ctx, accepted)
     if dropped:
         round_table["dropped"] = dropped
         excluded.update(dropped)
