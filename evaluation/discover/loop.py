@@ -1,5 +1,9 @@
 """The residual → missing-effect loop (:func:`discover`) over a pluggable declared model.
 
+0. *Drift*: on closed-loop data the unmeasured feed-coking drift is estimated first by the
+   state estimator and fed to the model as a known input (:mod:`evaluation.discover.drift`;
+   ``drift="off"`` turns it off); "the declared model" below
+   is then the model with the drift.
 1. *Residual*: the model is simulated on the measured inputs (output error, never one-step
    prediction); the residual of every output channel is split in time into a training part (the
    first ``train_fraction`` of every episode) and a held-out part (the rest).
@@ -42,6 +46,7 @@ import numpy as np
 
 from evaluation.discover.base import Candidate, ModelAdapter
 from evaluation.discover.data import MeasuredData, load_measured
+from evaluation.discover.drift import apply_drift, check_mode, plot_drift
 from evaluation.discover.fitting import fit_effects
 from evaluation.discover.form_search import FormSearch, form_round
 from evaluation.discover.physics_model import PhysicsModel
@@ -127,6 +132,7 @@ def discover(
     forms: str = "auto",
     max_forms: int = 1,
     form_search: FormSearch | None = None,
+    drift: str = "auto",
 ) -> DiscoveryReport:
     """Run the residual → missing-effect loop and return the report (also written to ``out_dir``).
 
@@ -148,6 +154,10 @@ def discover(
             a model with a state simulator (:class:`PhysicsModel`).
         max_forms: at most this many forms are added (0–5).
         form_search: the search's settings (default :class:`FormSearch`: at most 3 terms).
+        drift: estimate the unmeasured feed-coking drift first and feed it to the model
+            (:mod:`evaluation.discover.drift`): ``"auto"`` on closed-loop data
+            (``data.closed_loop``), ``"estimate"`` always, ``"off"`` never; the report's
+            ``drift`` section and ``drift.png`` show the estimate.
 
     Returns:
         A frozen :class:`~evaluation.discover.report.DiscoveryReport`. Until the previous
@@ -160,6 +170,7 @@ def discover(
     alpha = check("alpha", alpha, ALPHA)
     forms = check("forms", forms, Options(FORM_MODES))
     max_forms = check("max_forms", max_forms, MAX_FORMS)
+    drift = check_mode(drift)
     search = form_search if form_search is not None else FormSearch()
     if not isinstance(data, MeasuredData):
         data = load_measured(data)
@@ -187,6 +198,7 @@ def discover(
             raise ValueError(f"extra candidate {c!r} has no id/params (see Candidate)")
         pool[c.id] = c
     block_len = int(block_len or max(25, n_hold // 32))
+    est = apply_drift(drift, data, model, n_train, block_len)
     chans = model.output_channels
     Y = data.stack(chans)
     empty = np.zeros((1, 0))
@@ -359,6 +371,8 @@ def discover(
         Path(out_dir).mkdir(parents=True, exist_ok=True)
         if plots:
             plot_files = tuple(plot_residuals(Path(out_dir), data, E0, E1, n_train, chans, max_lag))
+            if est is not None:
+                plot_files += (plot_drift(Path(out_dir), est, data.sample_time_s),)
     report = DiscoveryReport(
         model=model.name,
         data=data.source,
@@ -407,7 +421,9 @@ def discover(
             "forms": forms,
             "max_forms": max_forms,
             "max_terms": search.max_terms,
+            "drift": drift,
         },
+        drift=None if est is None else est.summary(data.sample_time_s),
         note=note,
         elapsed_s=elapsed_s,
         plots=plot_files,
