@@ -1,7 +1,8 @@
 """The residual → missing-effect loop (:func:`discover`) over a pluggable declared model.
 
 0. *Drift*: on closed-loop data the unmeasured feed-coking drift is estimated first by the
-   state estimator and fed to the model as a known input (:mod:`evaluation.discover.drift`;
+   state estimator and fed to the model as a known input when its fluctuation fits the held-out
+   part significantly better than a straight line (:mod:`evaluation.discover.drift`;
    ``drift="off"`` turns it off); "the declared model" below
    is then the model with the drift.
 1. *Residual*: the model is simulated on the measured inputs (output error, never one-step
@@ -198,7 +199,7 @@ def discover(
             raise ValueError(f"extra candidate {c!r} has no id/params (see Candidate)")
         pool[c.id] = c
     block_len = int(block_len or max(25, n_hold // 32))
-    est = apply_drift(drift, data, model, n_train, block_len)
+    est = apply_drift(drift, data, model, n_train, block_len, alpha, min_rel_reduction)
     chans = model.output_channels
     Y = data.stack(chans)
     empty = np.zeros((1, 0))
