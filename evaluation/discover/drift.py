@@ -36,23 +36,18 @@ How (:func:`estimate_drift`):
    (the closed-loop program without a feed-quality drift, where the loop already named 13 of
    13, stays so). ``"estimate"`` skips the gate.
 
-4. The estimate is centred on the declared feed (each episode's mean set to 1): a hidden
-   effect leaks into the estimate mostly as a *level* (a stage-1 afterburn factor of 1.3 as
-   f_coke 0.965, a 1 kW/K stage-2 heat loss as 0.992), and a level fed to the model hides
-   the effect from the library (validation seed 5001: the afterburn was misnamed a T_fp bias,
-   the declared model's T_dg error grew from 9.3 to 14.8 °C); centred, both were named first.
-   What this costs: a true constant offset of the feed's coking factor is not fed (the
-   default program's levels average 1 ± 0.005 per episode); it is left to the library, like
-   any constant effect.
-
 What a user sees: ``report.json``'s ``drift`` section (per episode: mean, range and linear trend
 of the estimate, dimensionless, and the trend per day; the chosen lag; the gate's verdict) and
 ``drift.png`` (the estimate against time). ``discover(drift="off")`` (``--drift off``) turns it
 off.
 
-Limitation, measured: a hidden effect that itself changes f_coke (``feed_coking_drift``) is the
-drift, to the estimator; it ends in the estimate (its trend is shown in the report's
-``trend_per_day``) rather than named as a library effect.
+Limitations, measured (``lab/discover_drift.md``): a hidden effect leaks into the estimate (the
+filter explains what it can with f_coke). An effect that itself changes f_coke
+(``feed_coking_drift``) *is* the drift, to the estimator: it ends in the estimate (its trend
+shows in the report's ``trend_per_day``), not named. A catalyst deactivation leaks as a
+trend, a stage-1 afterburn factor as a level (f_coke 0.965 for a factor of 1.3): both were
+misnamed. Centring the estimate on 1 fixed the afterburn but named a T_fp bias on a clean
+record (the program's own mean level, 1 ± 0.005, was then missing), so it is not done.
 """
 
 from __future__ import annotations
@@ -284,7 +279,6 @@ def apply_drift(
     sigma = noise_levels(e_without[:, :n_train])
     sqrt_w = 1.0 / np.where(sigma > 0, sigma, 1.0)
     f, lag = estimate_drift(data, model, n_train, sqrt_w)
-    f = f - f.mean(axis=1, keepdims=True) + 1.0  # the module's step 3: levels are effects'
     fluct = fluctuation(f)
     used = mode == "estimate" or fluct >= MIN_FLUCTUATION
     model.set_drift(f if used else None)
