@@ -150,7 +150,9 @@ def load_measured(path: str | os.PathLike) -> MeasuredData:
     order = np.argsort(episode, kind="stable")
     E, T = eps.size, int(counts[0])
     channels = {c: table[order, len(index) + j].reshape(E, T) for j, c in enumerate(wanted)}
-    return MeasuredData(channels, float(dt), str(csv), "regulatory" in meta)
+    plant = meta.get("plant")
+    closed = isinstance(plant, dict) and "regulatory" in plant  # written for closed loop only
+    return MeasuredData(channels, float(dt), str(csv), closed or "setpoint" in roles)
 
 
 def from_external(data: Any) -> MeasuredData:

@@ -17,6 +17,7 @@ from evaluation.discover.drift import (
     SETTLE_SAMPLES,
     apply_drift,
     estimate_drift,
+    plot_drift,
     shift_and_smooth,
     straight_line,
 )
@@ -58,7 +59,7 @@ def test_drift_estimate_recovers_the_true_coking_factor() -> None:
     assert lag in DRIFT_LAGS and lag > 0  # the causal filter lags: a shift was needed
 
 
-def test_gate_keeps_the_declared_feed_without_a_drift() -> None:
+def test_gate_keeps_the_declared_feed_without_a_drift(tmp_path) -> None:
     """No feed-quality drift: the estimate only jitters (0.0010-0.0014 measured), below the
     gate, so the model keeps f_coke = 1 and the loop runs as it did."""
     n = 1500
@@ -75,6 +76,10 @@ def test_gate_keeps_the_declared_feed_without_a_drift() -> None:
         model.predict(data, [], empty, n), fresh.predict(data, [], empty, n)
     )
     assert apply_drift("off", data, model, 900, 25, 0.01, 0.01) is None
+    summary = est.summary(data.sample_time_s)
+    assert summary["used"] is False and summary["unit"].startswith("1 ")
+    assert plot_drift(tmp_path, est, data.sample_time_s) == "drift.png"
+    assert (tmp_path / "drift.png").stat().st_size > 0
 
 
 def test_loop_with_the_drift_names_the_hidden_effect_first() -> None:
@@ -123,3 +128,14 @@ def test_bad_drift_settings_are_refused() -> None:
     arx = d.ARXModel({"T_rx": ("T_fp",)})
     with pytest.raises(ValueError, match="set_drift"):
         apply_drift("estimate", data, arx, 100, 25, 0.01, 0.01)
+
+
+@pytest.mark.parametrize("closed", [True, False])
+def test_datasets_say_whether_they_are_closed_loop(tmp_path, closed: bool) -> None:
+    """``auto`` estimates the drift on closed-loop data only: a dataset's sidecar says which."""
+    from fcc_env.generate import write_dataset
+
+    path = tmp_path / "d.csv"
+    plant = fcc_env.PlantConfig.build(regulatory=True if closed else None)
+    write_dataset(path, plant=plant, seeds=(1002,), n_samples=60)
+    assert d.load_measured(path).closed_loop is closed
