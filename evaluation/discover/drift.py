@@ -28,8 +28,9 @@ How (:func:`estimate_drift`):
    effect was hidden (a hidden effect leaks into the estimate as a *level* or a *trend*: a
    stage-1 afterburn factor of 1.3 as a level of 0.965, a catalyst deactivation as a trend),
    and 0.010-0.015 under the default program's drift on 4000 samples (0.0037-0.0081 on 1500:
-   a short episode holds few drift levels, and a straight line follows them). A gate on the fit failed: with an effect
-   present, the declared model fed the estimate fitted the held-out part no better than fed
+   a short episode holds few drift levels, and a straight line follows them). A gate on the
+   fit failed: with an effect present, the declared model fed the estimate fitted the
+   held-out part no better than fed
    f_coke = 1, or than fed the estimate's straight line (T_fp bias of 3 °C, validation seed
    5000: p = 0.61 and 0.83), although, fed the drift, the loop names that bias first. Below
    the gate the model keeps the declared f_coke = 1 and the loop runs as without the drift
