@@ -251,20 +251,10 @@ def fluctuation(f: np.ndarray) -> float:
     return float(np.mean(np.std(f - straight_line(f), axis=1)))
 
 
-def apply_drift(
-    mode: str,
-    data: MeasuredData,
-    model: Any,
-    n_train: int,
-    block_len: int,
-    alpha: float,
-    min_rel_reduction: float,
-) -> DriftEstimate | None:
+def apply_drift(mode: str, data: MeasuredData, model: Any, n_train: int) -> DriftEstimate | None:
     """Estimate the drift (``mode`` of :data:`DRIFT_MODES`), gate it (the module's step 3) and
     feed ``model`` with it when it passes; None when not estimated (``"off"``, or ``"auto"``
-    on data not marked closed-loop, or a model without ``set_drift`` under ``"auto"``).
-    ``block_len``, ``alpha`` and ``min_rel_reduction`` are the loop's; kept for a gate on the
-    fit, which failed (the module's step 3), they are not read now."""
+    on data not marked closed-loop, or a model without ``set_drift`` under ``"auto"``)."""
     from evaluation.discover.scoring import noise_levels
 
     mode = check_mode(mode)

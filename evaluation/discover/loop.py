@@ -199,7 +199,7 @@ def discover(
             raise ValueError(f"extra candidate {c!r} has no id/params (see Candidate)")
         pool[c.id] = c
     block_len = int(block_len or max(25, n_hold // 32))
-    est = apply_drift(drift, data, model, n_train, block_len, alpha, min_rel_reduction)
+    est = apply_drift(drift, data, model, n_train)
     chans = model.output_channels
     Y = data.stack(chans)
     empty = np.zeros((1, 0))

@@ -66,7 +66,7 @@ def test_gate_keeps_the_declared_feed_without_a_drift(tmp_path) -> None:
     data = d.from_batch(_closed(1002, n, NO_DRIFT, [fx.parse("sensor_bias:T_fp,bias=3")]))
     model = d.PhysicsModel()
     model.prepare(data, 900)
-    est = apply_drift("auto", data, model, 900, 25, 0.01, 0.01)
+    est = apply_drift("auto", data, model, 900)
     assert est is not None and not est.used
     assert est.fluctuation < MIN_FLUCTUATION
     fresh = d.PhysicsModel()
@@ -75,7 +75,7 @@ def test_gate_keeps_the_declared_feed_without_a_drift(tmp_path) -> None:
     np.testing.assert_array_equal(
         model.predict(data, [], empty, n), fresh.predict(data, [], empty, n)
     )
-    assert apply_drift("off", data, model, 900, 25, 0.01, 0.01) is None
+    assert apply_drift("off", data, model, 900) is None
     summary = est.summary(data.sample_time_s)
     assert summary["used"] is False and summary["unit"].startswith("1 ")
     assert plot_drift(tmp_path, est, data.sample_time_s) == "drift.png"
@@ -127,7 +127,7 @@ def test_bad_drift_settings_are_refused() -> None:
         model.set_drift(np.ones((2, 200)))
     arx = d.ARXModel({"T_rx": ("T_fp",)})
     with pytest.raises(ValueError, match="set_drift"):
-        apply_drift("estimate", data, arx, 100, 25, 0.01, 0.01)
+        apply_drift("estimate", data, arx, 100)
 
 
 @pytest.mark.parametrize("closed", [True, False])
