@@ -23,6 +23,8 @@ The package, one room per concern:
                           explains the residual (PySINDy's STLSQ over simulated sensitivities,
                           the held-out gate, a stability check)
 ``scoring``               :func:`heldout_comparison`, :func:`structure_statistics`
+``drift``                 the unmeasured feed-coking drift of closed-loop data, estimated by the
+                          state estimator, gated, and fed to the model before the search
 ``loop``                  :func:`discover`
 ``report``                :class:`DiscoveryReport`, residual tests and plots of the report
 ``residual_tests``        whiteness, bias, drift and correlation tests of a residual
@@ -34,6 +36,10 @@ sparse correction of at most three terms to one state equation or measurement, g
 library effect and reported as an equation (``--forms``, :class:`FormSearch`); a report's
 effects and forms are accepted into the model with ``--accept DIR/report.json``
 (``PhysicsModel(declared=declared_from_report(...))``).
+
+On closed-loop data (``MeasuredData.closed_loop``) the loop first estimates the unmeasured
+feed-coking drift and feeds it to the model as a known input (``drift="auto"``; the report's
+``drift`` section and ``drift.png`` show it; ``--drift off`` turns it off).
 
 Limitations (stated, not hidden): a first-order *sensor lag on a model input channel* (T_ar,
 T_fp) cannot be inverted without differentiating noise, so those candidates are not offered

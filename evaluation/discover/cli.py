@@ -1,6 +1,6 @@
 """Command line: ``python -m evaluation.discover (--data PATH.csv | --external DIR | --manifest
 DIR/dataset.json) --out DIR [--candidates id,id] [--train-fraction 0.6] [--max-effects 3]
-[--alpha 0.01] [--no-plots] [--progress | --no-progress]``.
+[--alpha 0.01] [--drift auto|estimate|off] [--no-plots] [--progress | --no-progress]``.
 
 ``--data`` reads a dataset with this project's JSON sidecar (CSV or Parquet). ``--external`` and
 ``--manifest`` read a user's directory through its manifest
@@ -94,6 +94,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="search for a form when structure remains (auto), always, or never",
     )
     parser.add_argument("--max-terms", type=int, default=3, help="terms of a form, 1-5; 3")
+    parser.add_argument(
+        "--drift",
+        choices=("auto", "estimate", "off"),
+        default="auto",
+        help="estimate the unmeasured feed-coking drift first and feed it to the model: on "
+        "closed-loop data (auto), always, or never",
+    )
     add_progress_flag(parser)
     return run_command(parser, _discover, argv)
 
@@ -121,6 +128,7 @@ def _discover(args: argparse.Namespace) -> int:
         progress=args.progress,
         forms=args.forms,
         form_search=FormSearch(max_terms=args.max_terms),
+        drift=args.drift,
     )
     for e in report.effects:
         if e.equation is not None:
@@ -131,6 +139,12 @@ def _discover(args: argparse.Namespace) -> int:
         print("no significant effect found")
     for c in report.channels:
         print(f"  {c:6s} held-out RMSE {report.rmse_before[c]:.3f} -> {report.rmse_after[c]:.3f}")
+    if report.drift is not None:
+        for i, ep in enumerate(report.drift["episodes"][:5]):
+            print(
+                f"  drift (estimated f_coke, episode {i}): mean {ep['mean']:.4f} "
+                f"range {ep['min']:.4f}-{ep['max']:.4f}, trend {ep['trend_per_day']:+.4f}/day"
+            )
     print(f"unexplained structure: {report.unexplained} {list(report.unexplained_channels)}")
     print(f"wrote {Path(args.out) / REPORT_FILE} in {report.elapsed_s:.1f} s")
     return 0

@@ -47,6 +47,9 @@ class MeasuredData:
     channels: Mapping[str, np.ndarray]
     sample_time_s: float
     source: str = "<arrays>"
+    #: recorded under a regulatory layer (closed loop): True, False, or None when unknown; the
+    #: loop estimates the unmeasured feed-coking drift of closed-loop data by default
+    closed_loop: bool | None = None
 
     def __post_init__(self) -> None:
         if not self.channels:
@@ -88,13 +91,15 @@ def from_arrays(
     channels: Mapping[str, Any],
     sample_time_s: float = DEFAULT_SAMPLE_TIME_S,
     source: str = "<arrays>",
+    closed_loop: bool | None = None,
 ) -> MeasuredData:
-    """Measured data from arrays (T,) or (n_episodes, T) per channel name."""
+    """Measured data from arrays (T,) or (n_episodes, T) per channel name; ``closed_loop``:
+    whether they were recorded under a regulatory layer (None: unknown)."""
     out = {}
     for name, v in channels.items():
         a = np.asarray(v, dtype=np.float64)
         out[str(name)] = a[None] if a.ndim == 1 else a
-    return MeasuredData(out, float(sample_time_s), source)
+    return MeasuredData(out, float(sample_time_s), source, closed_loop)
 
 
 def from_batch(batch: Any) -> MeasuredData:
@@ -103,7 +108,8 @@ def from_batch(batch: Any) -> MeasuredData:
     ch = {name: obs[:, :, i] for i, name in enumerate(TABLE1)}
     ch["cmd_u_F"] = np.asarray(batch.inputs[:, :, 0], np.float64)
     ch["cmd_R_ar"] = np.asarray(batch.inputs[:, :, 1], np.float64)
-    return MeasuredData(ch, float(batch.sample_time_s), "<BatchResult>")
+    closed = "u_F" in tuple(getattr(batch, "channels", ()))
+    return MeasuredData(ch, float(batch.sample_time_s), "<BatchResult>", closed)
 
 
 def load_measured(path: str | os.PathLike) -> MeasuredData:
@@ -144,7 +150,9 @@ def load_measured(path: str | os.PathLike) -> MeasuredData:
     order = np.argsort(episode, kind="stable")
     E, T = eps.size, int(counts[0])
     channels = {c: table[order, len(index) + j].reshape(E, T) for j, c in enumerate(wanted)}
-    return MeasuredData(channels, float(dt), str(csv))
+    plant = meta.get("plant")
+    closed = isinstance(plant, dict) and "regulatory" in plant  # written for closed loop only
+    return MeasuredData(channels, float(dt), str(csv), closed or "setpoint" in roles)
 
 
 def from_external(data: Any) -> MeasuredData:

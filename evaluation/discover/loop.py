@@ -1,5 +1,10 @@
 """The residual → missing-effect loop (:func:`discover`) over a pluggable declared model.
 
+0. *Drift*: on closed-loop data the unmeasured feed-coking drift is estimated first by the
+   state estimator and fed to the model as a known input when its fluctuation fits the held-out
+   part significantly better than a straight line (:mod:`evaluation.discover.drift`;
+   ``drift="off"`` turns it off); "the declared model" below
+   is then the model with the drift.
 1. *Residual*: the model is simulated on the measured inputs (output error, never one-step
    prediction); the residual of every output channel is split in time into a training part (the
    first ``train_fraction`` of every episode) and a held-out part (the rest).
@@ -42,6 +47,7 @@ import numpy as np
 
 from evaluation.discover.base import Candidate, ModelAdapter
 from evaluation.discover.data import MeasuredData, load_measured
+from evaluation.discover.drift import apply_drift, check_mode, plot_drift
 from evaluation.discover.fitting import fit_effects
 from evaluation.discover.form_search import FormSearch, form_round
 from evaluation.discover.physics_model import PhysicsModel
@@ -85,6 +91,21 @@ FORM_MODES = ("auto", "always", "never")
 ALPHA = Real(0.0, 0.5, closed="neither")
 
 
+@dataclass(frozen=True)
+class _FitContext:
+    """What every joint re-fit of a run reads: the model, the data, the held-out split and the
+    weights, and the significance level of the block test (fixed for the run)."""
+
+    model: ModelAdapter
+    data: MeasuredData
+    Y: np.ndarray
+    n_train: int
+    sqrt_w: np.ndarray
+    block_len: int
+    alpha: float
+    min_rel: float
+
+
 @dataclass
 class _Accepted:
     cand: Candidate
@@ -112,6 +133,7 @@ def discover(
     forms: str = "auto",
     max_forms: int = 1,
     form_search: FormSearch | None = None,
+    drift: str = "auto",
 ) -> DiscoveryReport:
     """Run the residual → missing-effect loop and return the report (also written to ``out_dir``).
 
@@ -133,6 +155,10 @@ def discover(
             a model with a state simulator (:class:`PhysicsModel`).
         max_forms: at most this many forms are added (0–5).
         form_search: the search's settings (default :class:`FormSearch`: at most 3 terms).
+        drift: estimate the unmeasured feed-coking drift first and feed it to the model
+            (:mod:`evaluation.discover.drift`): ``"auto"`` on closed-loop data
+            (``data.closed_loop``), ``"estimate"`` always, ``"off"`` never; the report's
+            ``drift`` section and ``drift.png`` show the estimate.
 
     Returns:
         A frozen :class:`~evaluation.discover.report.DiscoveryReport`. Until the previous
@@ -145,6 +171,7 @@ def discover(
     alpha = check("alpha", alpha, ALPHA)
     forms = check("forms", forms, Options(FORM_MODES))
     max_forms = check("max_forms", max_forms, MAX_FORMS)
+    drift = check_mode(drift)
     search = form_search if form_search is not None else FormSearch()
     if not isinstance(data, MeasuredData):
         data = load_measured(data)
@@ -172,6 +199,7 @@ def discover(
             raise ValueError(f"extra candidate {c!r} has no id/params (see Candidate)")
         pool[c.id] = c
     block_len = int(block_len or max(25, n_hold // 32))
+    est = apply_drift(drift, data, model, n_train)
     chans = model.output_channels
     Y = data.stack(chans)
     empty = np.zeros((1, 0))
@@ -180,6 +208,7 @@ def discover(
     sigma = noise_levels(E0[:, :n_train])
     sigma = np.where(sigma > 0, sigma, 1.0)
     sqrt_w = 1.0 / sigma
+    ctx = _FitContext(model, data, Y, n_train, sqrt_w, block_len, alpha, min_rel_reduction)
 
     accepted: list[_Accepted] = []
     excluded: set[str] = set()  # dropped by backward elimination: not offered again
@@ -242,19 +271,7 @@ def discover(
                 {x: win[x] for x in ("score", "rel_reduction", "p_value")},
             )
         )
-        _refit_all(
-            model,
-            data,
-            accepted,
-            Y,
-            n_train,
-            sqrt_w,
-            block_len,
-            alpha,
-            min_rel_reduction,
-            rounds[-1],
-            excluded,
-        )
+        _refit_all(ctx, accepted, rounds[-1], excluded)
 
     can_form = forms != "never" and callable(getattr(model, "signals", None))
     form_note = None
@@ -328,19 +345,7 @@ def discover(
                 {x: row[x] for x in ("score", "rel_reduction", "p_value")},
             )
         )
-        _refit_all(
-            model,
-            data,
-            accepted,
-            Y,
-            n_train,
-            sqrt_w,
-            block_len,
-            alpha,
-            min_rel_reduction,
-            rounds[-1],
-            excluded,
-        )
+        _refit_all(ctx, accepted, rounds[-1], excluded)
 
     effs = [a.cand for a in accepted]
     th_acc = np.concatenate([a.theta for a in accepted]) if accepted else np.zeros(0)
@@ -367,6 +372,8 @@ def discover(
         Path(out_dir).mkdir(parents=True, exist_ok=True)
         if plots:
             plot_files = tuple(plot_residuals(Path(out_dir), data, E0, E1, n_train, chans, max_lag))
+            if est is not None:
+                plot_files += (plot_drift(Path(out_dir), est, data.sample_time_s),)
     report = DiscoveryReport(
         model=model.name,
         data=data.source,
@@ -415,7 +422,9 @@ def discover(
             "forms": forms,
             "max_forms": max_forms,
             "max_terms": search.max_terms,
+            "drift": drift,
         },
+        drift=None if est is None else est.summary(data.sample_time_s),
         note=note,
         elapsed_s=elapsed_s,
         plots=plot_files,
@@ -425,23 +434,14 @@ def discover(
     return report
 
 
-def _backward_elimination(
-    model: ModelAdapter,
-    data: MeasuredData,
-    accepted: list[_Accepted],
-    Y: np.ndarray,
-    n_train: int,
-    sqrt_w: np.ndarray,
-    block_len: int,
-    alpha: float,
-    min_rel: float,
-) -> list[str]:
+def _backward_elimination(ctx: _FitContext, accepted: list[_Accepted]) -> list[str]:
     """Drop earlier effects made redundant by later ones (greedy forward selection's repair).
 
     For each accepted effect but the newest, the others are re-fitted jointly without it; if the
     held-out test no longer finds it significant (same level and minimum reduction as for
     adding), it is removed and the others keep their re-fitted values.
     """
+    model, data, Y, n_train, sqrt_w = ctx.model, ctx.data, ctx.Y, ctx.n_train, ctx.sqrt_w
     dropped: list[str] = []
     T = data.n_samples
     for a in list(accepted[:-1]):
@@ -464,8 +464,8 @@ def _backward_elimination(
         )
         e_without = Y - model.predict(data, [x.cand for x in rest], fit.theta[None], T)[0]
         e_with = Y - model.predict(data, full_e, full_th[None], T)[0]
-        cmp = heldout_comparison(e_without[:, n_train:], e_with[:, n_train:], sqrt_w, block_len)
-        if cmp["p_value"] < alpha / len(accepted) and cmp["rel_reduction"] >= min_rel:
+        cmp = heldout_comparison(e_without[:, n_train:], e_with[:, n_train:], sqrt_w, ctx.block_len)
+        if cmp["p_value"] < ctx.alpha / len(accepted) and cmp["rel_reduction"] >= ctx.min_rel:
             continue
         accepted.remove(a)
         dropped.append(a.cand.id)
@@ -478,32 +478,23 @@ def _backward_elimination(
 
 
 def _refit_all(
-    model: ModelAdapter,
-    data: MeasuredData,
-    accepted: list[_Accepted],
-    Y: np.ndarray,
-    n_train: int,
-    sqrt_w: np.ndarray,
-    block_len: int,
-    alpha: float,
-    min_rel: float,
-    round_table: dict[str, Any],
-    excluded: set[str],
+    ctx: _FitContext, accepted: list[_Accepted], round_table: dict[str, Any], excluded: set[str]
 ) -> None:
     """Joint re-fit of everything accepted so far, then backward elimination (in place)."""
     if len(accepted) < 2:
         return
     effs = [a.cand for a in accepted]
     th = np.concatenate([a.theta for a in accepted])
-    fit = fit_effects(model, data, effs, th, np.ones(th.size, bool), Y, n_train, sqrt_w, grid=False)
+    free = np.ones(th.size, bool)
+    fit = fit_effects(
+        ctx.model, ctx.data, effs, th, free, ctx.Y, ctx.n_train, ctx.sqrt_w, grid=False
+    )
     j = 0
     for a in accepted:
         n_p = len(a.cand.params)
         a.theta, a.stderr = fit.theta[j : j + n_p], fit.stderr[j : j + n_p]
         j += n_p
-    dropped = _backward_elimination(
-        model, data, accepted, Y, n_train, sqrt_w, block_len, alpha, min_rel
-    )
+    dropped = _backward_elimination(ctx, accepted)
     if dropped:
         round_table["dropped"] = dropped
         excluded.update(dropped)

@@ -128,7 +128,7 @@ class PhysicsModel:
 
     Inputs: u_F = ``cmd_u_F`` and R_ar = ``cmd_R_ar`` (the commanded valve and air, which the
     regulatory layer delivers); T_ar, T_fp = the measured channels; F_feed = 61.111 kg/s and
-    f_coke = 1 (declared nominal). Outputs: R_ar (the air measurement against its command),
+    f_coke = 1 (declared nominal), or an estimated coking drift (:meth:`set_drift`). Outputs: R_ar (the air measurement against its command),
     T_rx, T_rg1, T_rg2, T_d1, T_dg. Taking the air from its command rather than from its noisy
     measurement matters: the 0.5 % air-flow noise, integrated by the slow coke balance, made the
     clean declared model's residual wander enough for a spurious drift to pass the held-out
@@ -155,6 +155,24 @@ class PhysicsModel:
         self._cands, self._skipped = library_candidates()
         self._U: np.ndarray | None = None
         self._data_id: int | None = None
+        self._drift: np.ndarray | None = None
+
+    def set_drift(self, f_coke: np.ndarray | None) -> None:
+        """Feed the prepared data's episodes an estimated feed coking factor ``f_coke``
+        (n_episodes, n_samples; :mod:`evaluation.discover.drift`) instead of the declared 1;
+        None restores the declared value. Kept until the next :meth:`prepare` on other data."""
+        if self._U is None:
+            raise RuntimeError("prepare() the model on the data before set_drift()")
+        if f_coke is not None:
+            f_coke = np.asarray(f_coke, np.float64)
+            if f_coke.shape != self._U.shape[:2] or not np.isfinite(f_coke).all():
+                raise ValueError(
+                    f"f_coke of shape {f_coke.shape} must be finite and match the data's "
+                    f"(n_episodes, n_samples) = {self._U.shape[:2]}"
+                )
+        self._drift = f_coke
+        self._U[:, :, 5] = NOMINAL_INPUTS[5] if f_coke is None else f_coke
+        self._cache.clear()
 
     def prepare(self, data: MeasuredData, n_train: int) -> None:
         data.require(
@@ -169,6 +187,10 @@ class PhysicsModel:
         U[:, :, 4] = NOMINAL_INPUTS[4]
         U[:, :, 5] = NOMINAL_INPUTS[5]
         self._U = U
+        if self._data_id == id(data) and self._drift is not None:
+            U[:, :, 5] = self._drift  # re-prepared on the same data: the drift stays
+        else:
+            self._drift = None
         self._data_id = id(data)
         self._cache.clear()
 

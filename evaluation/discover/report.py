@@ -121,6 +121,8 @@ class DiscoveryReport:
     note: str | None = None
     elapsed_s: float
     plots: tuple[str, ...] | None = None  # file names in the output folder
+    #: the estimated feed-coking drift (:meth:`evaluation.discover.drift.DriftEstimate.summary`)
+    drift: Mapping[str, Any] | None = None
 
     def to_json(self) -> dict[str, Any]:
         """The report as the plain JSON-ready dict of ``report.json`` (a fresh copy)."""
@@ -157,6 +159,8 @@ class DiscoveryReport:
         out["elapsed_s"] = self.elapsed_s
         if self.plots is not None:
             out["plots"] = list(self.plots)
+        if self.drift is not None:
+            out["drift"] = copy.deepcopy(dict(self.drift))
         return out
 
     def write(self, out_dir: str | os.PathLike) -> Path:
