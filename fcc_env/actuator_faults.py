@@ -57,7 +57,7 @@ from __future__ import annotations
 import numpy as np
 
 from fcc_common.validation import Real, check, invalid
-from fcc_env.faults import ACTUATED_INPUTS, FaultDefinition, register_fault
+from fcc_env.faults import ACTUATED_INPUTS, FaultDefinition, path_fault, register_fault
 from fcc_env.params import INPUT_NAMES, NOMINAL_INPUTS
 from fcc_env.regulatory import ACTUATOR_LIMITS, LOOP_NAMES, RegulatoryLayer
 from fcc_env.stiction import StictionValve
@@ -173,15 +173,12 @@ def _actuator_fault(
     needs_loop: bool = False,
     jump_ratio: float = DEFAULT_JUMP_RATIO,
 ) -> FaultDefinition:
-    return FaultDefinition(
-        (),
-        +1,
-        default,
-        2000,
+    return path_fault(
         description,
-        max_magnitude=largest,
-        max_reason=reason,
-        magnitude_unit=unit,
+        default=default,
+        largest=largest,
+        unit=unit,
+        reason=reason,
         actuator=_factory(kind, jump_ratio),
         actuator_input=actuator_input,
         needs_loop=needs_loop,

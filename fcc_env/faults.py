@@ -116,6 +116,7 @@ __all__ = [
     "is_actuator_fault",
     "is_channel_fault",
     "isolation_outcome",
+    "path_fault",
     "register_fault",
     "scenario_names",
     "unregister_fault",
@@ -227,6 +228,33 @@ _NAME = re.compile(r"[a-z][a-z0-9_-]*\Z")
 _RESERVED = (NOMINAL, RANDOM_SCENARIO, CONCURRENT_SCENARIO)
 #: The inputs an actuator fault may act on: the valve and the air, which the loops move.
 ACTUATED_INPUTS: tuple[str, ...] = ("u_F", "R_ar")
+
+
+def path_fault(
+    description: str,
+    *,
+    default: float,
+    largest: float,
+    unit: str,
+    reason: str,
+    onset: int = 2000,
+    **path: Any,
+) -> FaultDefinition:
+    """A fault on the measurement or actuator path (it scales no parameter): its size in
+    ``unit``, ``default`` and ``largest`` (``reason``: why, measured), and its hooks in
+    ``path`` (``sensor`` with ``channels``, or ``actuator`` with ``actuator_input``; the
+    :class:`FaultDefinition` fields). The sensor and actuator catalogues build theirs here."""
+    return FaultDefinition(
+        (),
+        +1,
+        default,
+        onset,
+        description,
+        max_magnitude=largest,
+        max_reason=reason,
+        magnitude_unit=unit,
+        **path,
+    )
 
 
 def own_unit(d: FaultDefinition) -> bool:

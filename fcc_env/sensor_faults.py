@@ -48,7 +48,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from fcc_env.faults import FaultDefinition, register_fault
+from fcc_env.faults import FaultDefinition, path_fault, register_fault
 from fcc_env.params import MEASUREMENT_NAMES
 
 __all__ = ["SENSOR_FAULTS", "ChannelSensor"]
@@ -117,18 +117,15 @@ def _factory(kind: str):
 def _sensor_fault(
     kind: str, default: float, largest: float, unit: str, description: str, reason: str
 ) -> FaultDefinition:
-    return FaultDefinition(
-        (),
-        +1,
-        default,
-        2000,
+    return path_fault(
         description,
-        max_magnitude=largest,
-        max_reason=reason,
+        default=default,
+        largest=largest,
+        unit=unit,
+        reason=reason,
         channels=MEASUREMENT_NAMES,
         default_channel=DEFAULT_CHANNEL,
         sensor=_factory(kind),
-        magnitude_unit=unit,
     )
 
 
