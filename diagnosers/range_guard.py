@@ -138,12 +138,13 @@ def novelty_variant(base: type[D], *, module: str, hold: int = NOVELTY_HOLD) -> 
     name = f"{base.name}-novelty"
     defaults = {**_defaults(base), "novelty_hold": hold}
     qualname = variant_class_name(name)
+    kept = ", ".join(f"``{k}``" for k in defaults if k != "novelty_hold")
     doc = (
         f"``{base.name}`` that flags the samples outside its training set-point range as novel "
         f"(:class:`~diagnosers.range_guard.RangeGuard`).\n\nHyperparameters: those of "
-        f":class:`~{base.__module__}.{base.__qualname__}` (each documented there), plus "
-        f"``novelty_hold``: samples a novelty flag lasts after the set points return inside "
-        f"their training range (≥ 0, default {hold})."
+        f":class:`~{base.__module__}.{base.__qualname__}`, each documented there ({kept}), "
+        f"plus ``novelty_hold``: samples a novelty flag lasts after the set points return "
+        f"inside their training range (≥ 0, default {hold})."
     )
     cls = type(
         qualname,

@@ -34,7 +34,7 @@ from fcc_common.safe_files import (
     read_bytes,
 )
 
-CLOSED_LOOP = ("lrgf-glr-closed",)  # needs the closed-loop plant's channels
+CLOSED_LOOP = ("lrgf-glr-closed", "lrgf-glr-closed-novelty")  # need the closed-loop channels
 
 
 @pytest.fixture(scope="module")
