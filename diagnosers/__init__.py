@@ -9,6 +9,8 @@ The rooms (the contract, the registry and the presets at the top; the parts belo
 ``detection``          :class:`Decision` (one sample) and :class:`Detection` (an episode)
 ``registry``           :func:`make`, :func:`available`, :func:`register`, ``--import`` modules
 ``presets``            hyperparameters declared once; registered variants that differ in defaults
+``range_guard``        ``<name>-novelty`` variants: a detector's alarms plus the samples outside
+                       its training set-point range, flagged novel (:func:`novelty_variant`)
 ``conformance``        :func:`check_diagnoser`: the contract as a public test suite
 ``tuning/``            tuning on labelled episodes: :func:`grid_search`, :func:`make_scorer` for
                        scikit-learn's ``GridSearchCV``

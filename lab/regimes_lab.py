@@ -17,6 +17,7 @@ Contention-bound machine: CPU times, not wall times, are printed.
 from __future__ import annotations
 
 import argparse
+import json
 import time
 
 import diagnosers
@@ -44,7 +45,18 @@ def main() -> None:
         help="each detector at its fast_params() (small training; for a detector whose full "
         "training does not fit the time at hand), fault-learning ones on 3 fault seeds",
     )
+    ap.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        help="a hyperparameter of one detector, NAME.key=JSON (e.g. n4sid-glr-novelty.order=8)",
+    )
     args = ap.parse_args()
+    overrides: dict[str, dict[str, object]] = {}
+    for item in args.set:
+        key, value = item.split("=", 1)
+        det_name, param = key.rsplit(".", 1)
+        overrides.setdefault(det_name, {})[param] = json.loads(value)
     data = TrackData(track=TRACKS["regimes"])
     train = data.train_episodes()
     seeds = list(range(5000, 5000 + args.n))
@@ -61,13 +73,14 @@ def main() -> None:
     for name in args.detectors.split(","):
         t0 = time.process_time()
         cls = diagnosers.diagnoser_class(name)
-        det = diagnosers.make(name, **(cls.fast_params() if args.fast else {}))
+        params = {**(cls.fast_params() if args.fast else {}), **overrides.get(name, {})}
+        det = diagnosers.make(name, **params)
         faults = []
         if det.learns_from_faults or det.isolates:
             seeds_f = list(data.track.train_fault_seeds)[: 3 if args.fast else None]
             faults = data.train_fault_episodes(seeds_f)
         det.fit(train + faults)
-        print(f"\n## {name} (fit {time.process_time() - t0:.1f} s CPU)")
+        print(f"\n## {name} {params or ''} (fit {time.process_time() - t0:.1f} s CPU)")
         for prog, eps in programs.items():
             dets = [det.detect(ep) for ep in eps]
             r_fd = [episode_scores(d.alarm, None)["r_fd"] for d in dets]

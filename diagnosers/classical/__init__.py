@@ -8,8 +8,9 @@ All learn from healthy episodes only and decide with a confidence level ``1 - al
 * ``limits``   - :class:`LimitChecker`: per-channel ``mean ± t_α·std`` limits.
 * ``pca``      - :class:`PCADetector`: Hotelling T² and SPE (Q) on standardised measurements;
   ``pca-empirical`` (:class:`PCAEmpirical`) sets both limits at the training data's percentile.
-* ``limits-novelty``, ``pca-novelty`` - the same, flagging samples outside the training set-point
-  range as novel (:mod:`diagnosers.classical.range_guarded`).
+* ``limits-novelty``, ``pca-novelty``, ``pca-empirical-novelty``, ``arx-band-novelty``,
+  ``dpca-novelty``, ``cva-novelty``, ``n4sid-glr-novelty`` - each the same as its base, flagging
+  samples outside the training set-point range as novel (:mod:`diagnosers.classical.range_guarded`).
 * ``arx-band`` - :class:`ARXBand`: a linear ARX model of ``T_rx`` from ``T_rg2`` and ``T_fp``
   (the paper's relation (14)) run in simulation, with a band ``y_m ± t_α·σ``.
 * ``dpca``     - :class:`DPCADetector`: T² and Q of the lagged channels (Ku et al. 1995).
@@ -24,7 +25,7 @@ The rooms:
 ``limit_checker``      ``limits``: per-channel limits
 ``pca_monitor``        ``pca`` and ``pca-empirical``: T² and SPE on standardised measurements
 ``arx_band``           ``arx-band``: the ARX output-error band
-``range_guarded``      ``limits-novelty``, ``pca-novelty``: the same decisions, plus the samples
+``range_guarded``      the ``<name>-novelty`` variants: the same decisions, plus the samples
                        outside the training set-point range flagged as novel, not as faults
 ``channel_selection``  what they share: the channels they watch and their significance level
 ``subspace``           the algebra of the dynamic monitors: lagged vectors, canonical variates,
@@ -47,17 +48,30 @@ from diagnosers.classical.pca_monitor import (
     hotelling_t2_limit,
     spe_limit,
 )
-from diagnosers.classical.range_guarded import LimitsNovelty, PCANovelty
+from diagnosers.classical.range_guarded import (
+    ARXBandNovelty,
+    CVANovelty,
+    DPCANovelty,
+    LimitsNovelty,
+    N4SIDGLRNovelty,
+    PCAEmpiricalNovelty,
+    PCANovelty,
+)
 
 __all__ = [
     "N4SIDGLR",
     "ARXBand",
+    "ARXBandNovelty",
     "CVADetector",
+    "CVANovelty",
     "DPCADetector",
+    "DPCANovelty",
     "LimitChecker",
     "LimitsNovelty",
+    "N4SIDGLRNovelty",
     "PCADetector",
     "PCAEmpirical",
+    "PCAEmpiricalNovelty",
     "PCANovelty",
     "fit_percent",
     "hotelling_t2_limit",

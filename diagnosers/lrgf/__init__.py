@@ -8,7 +8,8 @@ The rooms:
                        an alarm stage, persistence)
 ``lrgf_mem``           ``lrgf-mem``: the paper's detector with an EWMA stage
 ``lrgf_glr``           ``lrgf-glr``: a cross-fitted limit and tests along fault directions
-``lrgf_presets``       the registered variants (``lrgf-mem-paper``, ``lrgf-glr-adaptive``, ...)
+``lrgf_presets``       the registered variants (``lrgf-mem-paper``, ``lrgf-glr-adaptive``, ...,
+                       ``lrgf-glr-closed-novelty``)
 ``fault_directions``   where each fault moves the remaining error (``lrgf-glr``'s directions),
                        learned from the labelled faults passed to ``fit`` and their noise twins
 ``novelty``            how far a model's prediction lies outside its training range

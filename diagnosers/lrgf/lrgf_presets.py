@@ -3,7 +3,8 @@
 ``lrgf-mem`` (:class:`diagnosers.lrgf.lrgf_mem.LRGFMEM`) and ``lrgf-glr``
 (:class:`diagnosers.lrgf.lrgf_glr.LRGFGLR`) are registered by their classes; the variants below are
 presets of them (:func:`diagnosers.presets.preset`): the same code, parameters and saved format,
-other defaults. ``diagnosers.make("lrgf-glr-adaptive")`` equals
+other defaults. ``lrgf-glr-closed-novelty`` adds the novelty flag of
+:func:`diagnosers.range_guard.novelty_variant`. ``diagnosers.make("lrgf-glr-adaptive")`` equals
 ``diagnosers.make("lrgf-glr", **PRESETS["lrgf-glr-adaptive"])``; ``lrgf-mem-paper`` also reads
 ``relations=None`` as the paper's one relation (:data:`diagnosers.bank.relations.PAPER_RELATIONS`).
 """
@@ -16,8 +17,15 @@ from diagnosers.bank.relations import CLOSED_LOOP_RELATIONS, PAPER_RELATIONS
 from diagnosers.lrgf.lrgf_glr import LRGFGLR
 from diagnosers.lrgf.lrgf_mem import LRGFMEM
 from diagnosers.presets import preset
+from diagnosers.range_guard import novelty_variant
 
-__all__ = ["PRESETS", "LRGFGLRAdaptive", "LRGFGLRClosed", "LRGFMEMPaper"]
+__all__ = [
+    "PRESETS",
+    "LRGFGLRAdaptive",
+    "LRGFGLRClosed",
+    "LRGFGLRClosedNovelty",
+    "LRGFMEMPaper",
+]
 
 #: each variant's defaults that differ from its family's
 PRESETS: dict[str, dict[str, Any]] = {
@@ -106,3 +114,7 @@ LRGFGLRClosed = preset(
     module=__name__,
     attributes={"DEFAULT_RELATIONS": CLOSED_LOOP_RELATIONS},
 )
+
+#: ``lrgf-glr-closed-novelty``: ``lrgf-glr-closed``'s decisions, plus the samples outside its
+#: training set-point range flagged as novel (:mod:`diagnosers.range_guard`; the ``regimes`` track)
+LRGFGLRClosedNovelty = novelty_variant(LRGFGLRClosed, module=__name__)
