@@ -38,7 +38,9 @@ from pathlib import Path
 from typing import Any
 
 from diagnosers.bank.relations import read_channels, required_channels
+from diagnosers.range_guard import RangeGuard
 from diagnosers.registry import diagnoser_class, import_modules, make
+from diagnosers.stages.operating_range import SETPOINT_CHANNELS
 from evaluation.reports.outputs import figure_cells, write_figures
 from evaluation.sweep.config import DiagnoserSpec, SweepConfig, default_specs
 from evaluation.sweep.runner import run_sweep
@@ -62,7 +64,8 @@ def applicable(
     params: Mapping[str, Mapping[str, Any]] | None = None,
 ) -> tuple[list[str], list[str]]:
     """(the diagnosers of ``names`` that can read ``channels``, one-line reasons for the
-    others, saying they are skipped ``where``). ``params``: hyperparameters per diagnoser
+    others, saying they are skipped ``where``). A novelty variant
+    (:class:`~diagnosers.range_guard.RangeGuard`) needs a set point among ``channels`` too. ``params``: hyperparameters per diagnoser
     (e.g. a data set's relations) that replace its defaults before its channels are read."""
     keep, skipped = [], []
     for name in names:
@@ -71,6 +74,11 @@ def applicable(
         missing = sorted(need - set(channels))
         if missing:
             skipped.append(f"{name}: skipped {where} (no channel {', '.join(missing)})")
+        elif issubclass(diagnoser_class(name), RangeGuard) and not set(SETPOINT_CHANNELS) & set(
+            channels
+        ):
+            # without set points its novelty flag never fires: it would repeat its base's row
+            skipped.append(f"{name}: skipped {where} (no set point for its novelty flag)")
         else:
             keep.append(name)
     return keep, skipped
