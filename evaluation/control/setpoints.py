@@ -88,9 +88,17 @@ def steady_operation(params: FCCParams, u_F: float, R_ar: float) -> np.ndarray:
 
 
 def operating_point(
-    params: FCCParams, z: np.ndarray, economics: EconomicReward
+    params: FCCParams,
+    z: np.ndarray,
+    economics: EconomicReward,
+    reading_offset_C: tuple[float, float] = (0.0, 0.0),
 ) -> OperatingPoint | None:
-    """The steady operating point at ``z = (u_F, R_ar)``, or None where there is none."""
+    """The steady operating point at ``z = (u_F, R_ar)``, or None where there is none.
+
+    ``reading_offset_C``: how far the loops' transmitters (T_rx, T_rg1) read above the true
+    temperatures (a sensor bias): the set points that hold the point are the true temperatures
+    plus it, and the range an agent may ask for applies to them (it is the loop's reading the
+    regulatory layer compares with its set point)."""
     u_F, R_ar = (float(v) for v in z)
     try:
         x = steady_operation(params, u_F, R_ar)
@@ -99,7 +107,10 @@ def operating_point(
     u = NOMINAL_INPUTS.copy()
     u[0], u[1] = u_F, R_ar
     aux = rhs_aux(x, u, params)
-    setpoints = {"T_rx_sp": aux["T_rx"], "T_rg1_sp": float(x[4])}
+    setpoints = {
+        "T_rx_sp": aux["T_rx"] + float(reading_offset_C[0]),
+        "T_rg1_sp": float(x[4]) + float(reading_offset_C[1]),
+    }
     if not np.all(np.isfinite(x)):
         return None
     excess = sum(
@@ -125,18 +136,29 @@ def best_setpoints(
     fault: EpisodeFault | None = None,
     economics: EconomicReward | None = None,
     params: FCCParams | None = None,
+    *,
+    reading_offset_C: tuple[float, float] = (0.0, 0.0),
+    limits: np.ndarray | None = None,
 ) -> OperatingPoint:
     """The steady set points with the highest reward per hour for the plant ``params`` (default:
-    the declared plant) with ``fault`` at its full size (``None``: healthy)."""
+    the declared plant) with ``fault`` at its full size (``None``: healthy).
+
+    ``reading_offset_C``: the loops' transmitters read this much high (°C, T_rx and T_rg1;
+    :func:`operating_point`). ``limits``: the reachable ``(u_F, R_ar)`` box, shape ``(2, 2)``
+    (default :data:`~fcc_env.regulatory.ACTUATOR_LIMITS`): a weaker blower lowers the air's
+    ceiling, a stuck valve pins ``u_F`` (:mod:`evaluation.control.fault_oracle`)."""
     economics = EconomicReward() if economics is None else economics
     p = FCCParams() if params is None else params
     if fault is not None:
         p = fault.faulty_params(p)
-    lo, hi = ACTUATOR_LIMITS[:, 0], ACTUATOR_LIMITS[:, 1]
+    box = ACTUATOR_LIMITS if limits is None else np.asarray(limits, dtype=np.float64)
+    if box.shape != (2, 2) or not np.all(box[:, 0] < box[:, 1]):
+        raise ValueError(f"limits={box.tolist()}: allowed: [[u_F low, high], [R_ar low, high]]")
+    lo, hi = box[:, 0], box[:, 1]
 
     def cost(z: np.ndarray) -> float:
         z = np.clip(z, lo, hi)
-        point = operating_point(p, z, economics)
+        point = operating_point(p, z, economics, reading_offset_C)
         if point is None:
             return math.inf
         # an exterior penalty, not a wall: the optimum often lies on the range's edge
@@ -157,6 +179,6 @@ def best_setpoints(
     if not np.isfinite(res.fun):  # pragma: no cover - the declared plant always has one
         raise ValueError(f"no steady state with set points in range for fault {fault}")
     z = np.clip(res.x, lo, hi)
-    point = operating_point(p, z, economics)
+    point = operating_point(p, z, economics, reading_offset_C)
     assert point is not None
     return point
