@@ -9,20 +9,16 @@ sensor and actuator faults change no parameter; what the oracle does with each, 
 ================  =============================================================================
 fault             the oracle's set points from the onset
 ================  =============================================================================
-sensor-bias on    the best set points with the loop's transmitter reading ``m`` high: the
-T_rx or T_rg1     true optimum plus the bias where the set-point range allows
-                  (``best_setpoints(reading_offset_C=...)``: the range applies to the reading).
-                  The healthy riser optimum lies on the range's top (545 °C), so a high T_rx
-                  reading cannot be fully corrected there: the search moves T_rg1 instead
-sensor-drift on   the healthy optimum plus the drift's offset at each sample (``m`` per hour
-a loop sensor     since the onset), clipped by the env at the range; a search per sample would
-                  cost minutes, and the offsets stay within the bias's validated range
-sensor-stuck on   the set point that makes the frozen transmitter hold the true optimum:
-a loop sensor     ``h + (1 − m)(T* − h)`` with ``h`` the reading frozen at the onset (the
-                  observation of the sample before) and ``T*`` the healthy optimum; fully stuck
-                  (``m = 1``) that is ``h`` itself: the loop's error stays 0, its integral
-                  stops winding, the valve (or the air) holds where it stood, instead of the
-                  wind-up that trips the plant (8 in 10 episodes on T_rx, 10 in 10 on T_rg1)
+sensor-bias,      the loop rebuilt through its set point: each sample the set point is the
+-drift, -stuck    healthy optimum plus the transmitter's error (its noise-free reading minus
+on T_rx or T_rg1  the true temperature: ``info["y_clean"]`` and ``info["T_rx"]``/the stage-1
+                  bed state, what no agent may read), so the loop's error is the true
+                  temperature's error and the plant runs as healthy. A fully stuck T_rg1 would
+                  otherwise open its loop (the air holds while the regenerator drifts: 1 in 3
+                  training seeds extinguished, the others up to 70,000 USD lost); for T_rx the
+                  set-point range's top (545 °C, where the healthy optimum lies) clips the
+                  upward corrections, and a stuck T_rx ends in an afterburn under every policy
+                  measured (lab/control-catalogue.md)
 any sensor fault  the healthy optimum: no controller reads those channels, the process does
 on another        not move
 channel
@@ -52,11 +48,9 @@ import numpy as np
 
 from evaluation.control.policies import SetpointPolicy
 from evaluation.control.setpoints import OperatingPoint, best_setpoints
-from fcc_env.closed_loop import CLOSED_LOOP_CHANNELS
 from fcc_env.control_draws import LOOP_CHANNELS
 from fcc_env.control_task import EconomicReward
-from fcc_env.params import INPUT_NAMES
-from fcc_env.plant import PlantConfig
+from fcc_env.params import INPUT_NAMES, MEASUREMENT_NAMES
 from fcc_env.regulatory import ACTUATOR_LIMITS
 from fcc_env.scenarios import NOMINAL, FaultSpec
 
@@ -65,7 +59,8 @@ __all__ = ["BLOWER_MARGIN", "FaultOracle"]
 #: The share of the blower's faulty ceiling the oracle leaves for the air loop's noise.
 BLOWER_MARGIN = 0.01
 _U_F = INPUT_NAMES.index("u_F")
-_HOURS_PER_SAMPLE = PlantConfig().sample_time_s / 3600.0
+_T_RG1_STATE = 4  # the stage-1 bed temperature in the state (spec §1)
+_Y = {c: MEASUREMENT_NAMES.index(c) for c in LOOP_CHANNELS}
 
 
 @dataclass
@@ -86,6 +81,7 @@ class FaultOracle:
     _fault: dict[str, Any] = field(init=False, repr=False, default_factory=dict)
     _k: int = field(init=False, repr=False, default=0)
     _frozen: tuple[float, float] = field(init=False, repr=False, default=(np.nan, np.nan))
+    _sensor_error: tuple[float, float] = field(init=False, repr=False, default=(0.0, 0.0))
     _target: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -112,15 +108,20 @@ class FaultOracle:
             }
         self._k = 0
         self._frozen = (np.nan, np.nan)
+        self._sensor_error = (0.0, 0.0)
         self._target = self._healthy
         self._policy.reset(info)
 
     def act(self, obs: np.ndarray, info: Mapping[str, Any]) -> np.ndarray:
         f = self._fault
         if f and self._k == f["onset"] - 1:  # the sample before the onset: what freezes
-            channel = f["channel"] or "T_rx"
-            reading = float(obs[CLOSED_LOOP_CHANNELS.index(channel)]) if f["channel"] else 0.0
-            self._frozen = (reading, float(np.asarray(info["inputs"])[_U_F]))
+            self._frozen = (np.nan, float(np.asarray(info["inputs"])[_U_F]))
+        if f and f["channel"] in LOOP_CHANNELS:
+            y = np.asarray(info["y_clean"], dtype=np.float64)
+            true = (float(info["T_rx"]), float(np.asarray(info["state"])[_T_RG1_STATE]))
+            self._sensor_error = tuple(
+                y[_Y[c]] - t for c, t in zip(LOOP_CHANNELS, true, strict=True)
+            )
         if f and self._k >= f["onset"]:
             self._target = self._faulty_target(self._k)
         self._k += 1
@@ -134,16 +135,8 @@ class FaultOracle:
             if channel not in LOOP_CHANNELS:
                 return self._healthy
             loop = LOOP_CHANNELS.index(channel)
-            offset = np.zeros(2)
-            if sc == "sensor-bias":
-                offset[loop] = m
-                return self._point(key, reading_offset_C=tuple(offset)).setpoints
             target = self._healthy.copy()
-            if sc == "sensor-drift":
-                target[loop] += m * (k - f["onset"] + 1) * _HOURS_PER_SAMPLE
-            elif sc == "sensor-stuck":
-                held = self._frozen[0]
-                target[loop] = held + (1.0 - m) * (target[loop] - held)
+            target[loop] += self._sensor_error[loop]
             return target
         if sc == "blower-capacity":
             limits = ACTUATOR_LIMITS.astype(np.float64)
