@@ -89,6 +89,11 @@ class FaultOracle:
         self._target = self._healthy
         self._policy = SetpointPolicy(self.name, lambda k, info: self._target)
 
+    @property
+    def healthy(self) -> np.ndarray:
+        """The healthy plant's best set points (°C, T_rx and T_rg1): held before the onset."""
+        return self._healthy.copy()
+
     def _point(self, key: tuple[Any, ...], **search: Any) -> OperatingPoint:
         if key not in self._cache:
             fault = search.pop("fault", None)

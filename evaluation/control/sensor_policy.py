@@ -44,13 +44,13 @@ from fcc_env.env import SETPOINT_ACTION_SCALE
 from fcc_env.faults import FAULTS
 from fcc_env.regulatory import SETPOINT_RANGES
 
-__all__ = ["SOFT_SENSOR_SEEDS", "SensorCorrectingSupervisor", "SoftSensor"]
+__all__ = ["SOFT_SENSOR_INPUTS", "SOFT_SENSOR_SEEDS", "SensorCorrectingSupervisor", "SoftSensor"]
 
 _T_RG1_STATE = 4  # the stage-1 bed temperature in the state (spec §1)
 
 _LOOP_INDEX = [CLOSED_LOOP_CHANNELS.index(c) for c in LOOP_CHANNELS]
-#: the soft sensor's inputs: the other measured channels and the valve command
-_INPUTS = [i for i, c in enumerate(CLOSED_LOOP_CHANNELS[:9]) if c not in LOOP_CHANNELS]
+#: the soft sensor's inputs (observation indices): the other measured channels and the valve command
+SOFT_SENSOR_INPUTS = [i for i, c in enumerate(CLOSED_LOOP_CHANNELS[:9]) if c not in LOOP_CHANNELS]
 _SP = [CLOSED_LOOP_CHANNELS.index(n) for n in ("T_rx_sp", "T_rg1_sp")]
 #: training episodes of the soft sensor (never a test or validation seed)
 SOFT_SENSOR_SEEDS = range(1000, 1004)
@@ -58,12 +58,12 @@ SOFT_SENSOR_SEEDS = range(1000, 1004)
 
 @dataclass(frozen=True)
 class SoftSensor:
-    """``T̂ = [obs[_INPUTS], 1] @ coef`` for T_rx and T_rg1 (``coef`` shape ``(k + 1, 2)``)."""
+    """``T̂ = [obs[SOFT_SENSOR_INPUTS], 1] @ coef`` for T_rx and T_rg1 (``coef`` shape ``(k + 1, 2)``)."""
 
     coef: np.ndarray
 
     def estimate(self, obs: np.ndarray) -> np.ndarray:
-        x = np.asarray(obs, dtype=np.float64)[_INPUTS]
+        x = np.asarray(obs, dtype=np.float64)[SOFT_SENSOR_INPUTS]
         return np.append(x, 1.0) @ self.coef
 
     @classmethod
@@ -85,7 +85,7 @@ class SoftSensor:
                 action = np.clip((target - program) / SETPOINT_ACTION_SCALE, -1.0, 1.0)
                 move = action * SETPOINT_ACTION_SCALE
                 obs, _, terminated, truncated, info = env.step(action)
-                rows.append(np.asarray(obs, dtype=np.float64)[_INPUTS])
+                rows.append(np.asarray(obs, dtype=np.float64)[SOFT_SENSOR_INPUTS])
                 targets.append((info["T_rx"], info["state"][_T_RG1_STATE]))
                 if terminated or truncated:
                     break

@@ -8,7 +8,11 @@ import pytest
 
 import fcc_env  # noqa: F401 (registers the ids)
 from evaluation.control.fault_oracle import FaultOracle
-from evaluation.control.sensor_policy import SensorCorrectingSupervisor
+from evaluation.control.sensor_policy import (
+    SOFT_SENSOR_INPUTS,
+    SensorCorrectingSupervisor,
+    SoftSensor,
+)
 from evaluation.control.setpoints import best_setpoints, operating_point
 from fcc_env.closed_loop import CLOSED_LOOP_CHANNELS
 from fcc_env.control_task import EconomicReward
@@ -44,30 +48,35 @@ def test_limits_bound_the_search_and_bad_limits_are_refused():
         best_setpoints(limits=[[1.0, 0.0], [0.0, 1.0]])
 
 
-def _run(policy, steps: int, **make) -> tuple[list[np.ndarray], list[np.ndarray]]:
+def _run(policy, steps: int, **make) -> tuple[list[np.ndarray], list[np.ndarray], list]:
     env = gym.make("FCC-control-v0", **make)
     obs, info = env.reset(seed=5000)
     policy.reset(info)
-    seen, setpoints = [obs], []
+    seen, setpoints, infos = [obs], [], [info]
     for _ in range(steps):
         obs, _, _, _, info = env.step(policy.act(obs, info))
         seen.append(obs)
         setpoints.append(np.asarray(info["setpoints"]))
-    return seen, setpoints
+        infos.append(info)
+    return seen, setpoints, infos
 
 
-def test_oracle_holds_a_stuck_transmitter_at_its_frozen_reading(oracle):
+def test_oracle_runs_a_stuck_loop_on_the_true_temperature(oracle):
     onset = 40
-    seen, sps = _run(oracle, 60, scenario="sensor-stuck", fault_channel="T_rg1", fault_time=onset)
-    frozen = float(seen[onset - 1][_RG1])
-    assert all(float(o[_RG1]) == frozen for o in seen[onset:])  # the plant's stuck reading
-    # from the sample after the onset the loop's set point is the frozen reading
-    np.testing.assert_allclose([s[1] for s in sps[onset + 1 :]], frozen, atol=1e-3)
+    seen, sps, infos = _run(
+        oracle, 60, scenario="sensor-stuck", fault_channel="T_rg1", fault_time=onset
+    )
+    assert all(float(o[_RG1]) == float(seen[onset - 1][_RG1]) for o in seen[onset:])
+    healthy = oracle.healthy
+    for i in range(60):  # the set point of step i: from the info the oracle read at step i
+        error = infos[i]["y_clean"][4] - infos[i]["state"][4] if i >= onset else 0.0
+        assert sps[i][1] == pytest.approx(healthy[1] + error, abs=1e-3), i
+    assert abs(infos[59]["y_clean"][4] - infos[59]["state"][4]) > 1e-3  # it did move
 
 
 def test_oracle_corrects_a_drifting_transmitter_by_its_offset(oracle):
     onset, rate = 30, 2.0
-    _, sps = _run(
+    _, sps, _ = _run(
         oracle,
         50,
         scenario="sensor-drift",
@@ -75,34 +84,87 @@ def test_oracle_corrects_a_drifting_transmitter_by_its_offset(oracle):
         fault_time=onset,
         fault_magnitude=rate,
     )
-    healthy = best_setpoints().setpoints
-    k = 49  # the set point of sample k + 1 is the target of step k
+    healthy = oracle.healthy
+    k = 49  # the set point of step k: the drift's offset at sample k
     expected = healthy[1] + rate * (k - onset + 1) * 10.0 / 3600.0
     assert sps[k][1] == pytest.approx(expected, abs=1e-3)
     assert sps[k][0] == pytest.approx(healthy[0], abs=1e-3)
 
 
-def test_sensor_policy_follows_a_frozen_reading_and_releases_it():
-    healthy = np.array([540.0, 690.0])
-    policy = SensorCorrectingSupervisor(healthy=healthy, frozen_samples=4)
-    policy.reset({})
+def _feed(policy, readings: list[tuple[float, float]]) -> np.ndarray:
+    """The moves (°C) of ``policy`` fed observations with these loop readings."""
+    healthy = policy.healthy
     obs = np.zeros(len(CLOSED_LOOP_CHANNELS))
-    obs[_SP] = healthy  # the program's set points, the last move 0
-    rng = np.random.default_rng(0)
-    actions = []
-    for k in range(12):
+    moves = []
+    for rx, rg1 in readings:
         o = obs.copy()
-        o[_RX] = 540.0 + rng.normal()
-        o[_RG1] = 687.5 if 3 <= k < 9 else 690.0 + rng.normal()
-        o[_SP] = healthy + (actions[-1] * SETPOINT_ACTION_SCALE if actions else 0.0)
-        actions.append(np.asarray(policy.act(o, {}), dtype=np.float64))
-    moves = np.array(actions) * SETPOINT_ACTION_SCALE
-    np.testing.assert_allclose(moves[:6], 0.0, atol=1e-4)  # 4 equal readings: samples 3..6
-    np.testing.assert_allclose(moves[6:9, 1], -2.5, atol=1e-4)  # to the frozen 687.5
-    np.testing.assert_allclose(moves[9:], 0.0, atol=1e-4)  # it moves again: released
-    np.testing.assert_allclose(moves[:, 0], 0.0, atol=1e-4)
+        o[_RX], o[_RG1] = rx, rg1
+        o[_SP] = healthy + (moves[-1] if moves else 0.0)
+        moves.append(np.asarray(policy.act(o, {}), dtype=np.float64) * SETPOINT_ACTION_SCALE)
+    return np.array(moves)
+
+
+def _flat_sensor(value: tuple[float, float]) -> SoftSensor:
+    """A soft sensor that always answers ``value`` (intercept only)."""
+    coef = np.zeros((len(SOFT_SENSOR_INPUTS) + 1, 2))
+    coef[-1] = value
+    return SoftSensor(coef)
+
+
+def test_sensor_policy_judges_a_frozen_reading_and_releases_it():
+    healthy = np.array([540.0, 690.0])
+    policy = SensorCorrectingSupervisor(
+        healthy=healthy, frozen_samples=4, soft_sensor=_flat_sensor((540.0, 690.0))
+    )
+    policy.reset({})
+    rng = np.random.default_rng(0)
+    judged = []
+    readings = []
+    for k in range(12):
+        rg1 = 687.5 if 3 <= k < 9 else 690.0 + rng.normal()
+        readings.append((540.0 + rng.normal(), rg1))
+    for r in readings:
+        _feed(policy, [r])
+        judged.append(policy.judged.copy())
+    judged = np.array(judged)
+    # four equal readings from sample 3: judged at samples 6, 7, 8, released at 9
+    assert judged[:, 1].tolist() == [False] * 6 + [True] * 3 + [False] * 3
+    assert not judged[:, 0].any()
+
+
+def test_sensor_policy_takes_a_bias_out_through_the_set_point():
+    healthy = np.array([540.0, 690.0])
+    policy = SensorCorrectingSupervisor(
+        healthy=healthy,
+        arm_after=0,
+        window=10,
+        limit_C=3.0,
+        soft_sensor=_flat_sensor((540.0, 690.0)),
+    )
+    policy.reset({})
+    rng = np.random.default_rng(1)
+    readings = [(540.0 + 0.1 * rng.normal(), 695.0 + 0.1 * rng.normal()) for _ in range(40)]
+    moves = _feed(policy, readings)
+    assert policy.judged.tolist() == [False, True]
+    # the T_rg1 loop's set point is the optimum plus the reading's error (5 °C)
+    assert moves[-1][1] == pytest.approx(5.0, abs=0.3)
+    assert abs(moves[-1][0]) < 0.3
 
 
 def test_sensor_policy_refuses_a_short_window():
     with pytest.raises(ValueError, match="frozen_samples=1"):
-        SensorCorrectingSupervisor(healthy=np.zeros(2), frozen_samples=1)
+        SensorCorrectingSupervisor(
+            healthy=np.zeros(2), frozen_samples=1, soft_sensor=_flat_sensor((0.0, 0.0))
+        )
+
+
+def test_soft_sensor_tracks_the_true_temperatures():
+    sensor = SoftSensor.fit(seeds=[1000], n_steps=1500)
+    env = gym.make("FCC-control-v0", scenario="nominal")
+    obs, info = env.reset(seed=5001)
+    errors = []
+    for _ in range(600):
+        obs, _, _, _, info = env.step(np.zeros(2))
+        errors.append(sensor.estimate(obs) - (info["T_rx"], info["state"][4]))
+    rms = np.sqrt(np.mean(np.square(errors), axis=0))
+    assert rms[0] < 4.0 and rms[1] < 3.0, rms  # 1.7 and 1.0 °C fitted on 4 episodes
