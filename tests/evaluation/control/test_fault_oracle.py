@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 import fcc_env  # noqa: F401 (registers the ids)
+from diagnosers.detection import Decision
 from evaluation.control.fault_oracle import FaultOracle
 from evaluation.control.sensor_policy import (
     SOFT_SENSOR_INPUTS,
@@ -168,3 +169,40 @@ def test_soft_sensor_tracks_the_true_temperatures():
         errors.append(sensor.estimate(obs) - (info["T_rx"], info["state"][4]))
     rms = np.sqrt(np.mean(np.square(errors), axis=0))
     assert rms[0] < 4.0 and rms[1] < 3.0, rms  # 1.7 and 1.0 °C fitted on 4 episodes
+
+
+class _NamesSensorBias:
+    """A stand-in diagnoser: alarms from its third sample, naming ``sensor-bias``."""
+
+    def __init__(self) -> None:
+        self.n = 0
+
+    def reset(self) -> None:
+        self.n = 0
+
+    def update(self, y: np.ndarray) -> Decision:
+        self.n += 1
+        z = np.zeros(1)
+        name = "sensor-bias" if self.n >= 3 else ""
+        return Decision(self.n >= 3, z, z - 1.0, z + 1.0, z, diagnosis=name)
+
+
+def test_a_diagnosis_of_a_sensor_fault_latches_the_loop_of_the_larger_residual():
+    healthy = np.array([540.0, 690.0])
+    policy = SensorCorrectingSupervisor(
+        healthy=healthy,
+        diagnoser=_NamesSensorBias(),
+        arm_after=0,
+        window=50,
+        limit_C=10.0,  # the residual test alone would not judge a 2 °C bias
+        soft_sensor=_flat_sensor((540.0, 690.0)),
+    )
+    policy.reset({})
+    rng = np.random.default_rng(2)
+    noisy = [(542.0 + 0.01 * rng.normal(), 690.0 + 0.01 * rng.normal()) for _ in range(32)]
+    _feed(policy, noisy[:2])
+    assert not policy.judged.any()  # no diagnosis yet
+    moves = _feed(policy, noisy[2:])
+    assert policy.judged.tolist() == [True, False]
+    assert moves[-1][0] == pytest.approx(2.0, abs=0.05)  # T_rx's error taken out
+    assert abs(moves[-1][1]) < 0.05
