@@ -17,8 +17,9 @@ on T_rx or T_rg1  the true temperature: ``info["y_clean"]`` and ``info["T_rx"]``
                   otherwise open its loop (the air holds while the regenerator drifts: 1 in 3
                   training seeds extinguished, the others up to 70,000 USD lost); for T_rx the
                   set-point range's top (545 °C, where the healthy optimum lies) clips the
-                  upward corrections, and a stuck T_rx ends in an afterburn under every policy
-                  measured (lab/control-catalogue.md)
+                  upward corrections: a loop with less than 2 °C of room either way keeps the
+                  healthy optimum (``correctable_loops``), as a one-sided rebuilt T_rx loop
+                  tripped more often than the stuck one left alone (lab/control-catalogue.md)
 any sensor fault  the healthy optimum: no controller reads those channels, the process does
 on another        not move
 channel
@@ -47,7 +48,7 @@ from typing import Any
 import numpy as np
 
 from evaluation.control.policies import SetpointPolicy
-from evaluation.control.setpoints import OperatingPoint, best_setpoints
+from evaluation.control.setpoints import OperatingPoint, best_setpoints, correctable_loops
 from fcc_env.control_draws import LOOP_CHANNELS
 from fcc_env.control_task import EconomicReward
 from fcc_env.params import INPUT_NAMES, MEASUREMENT_NAMES
@@ -140,6 +141,8 @@ class FaultOracle:
             if channel not in LOOP_CHANNELS:
                 return self._healthy
             loop = LOOP_CHANNELS.index(channel)
+            if not correctable_loops(self._healthy)[loop]:
+                return self._healthy
             target = self._healthy.copy()
             target[loop] += self._sensor_error[loop]
             return target

@@ -24,6 +24,10 @@ It judges a transmitter faulty three ways:
   is ``sensor``), the loop channel of the larger averaged residual is the faulty one.
 
 A judged loop stays rebuilt while the frozen or residual test holds; a diagnosis latches it.
+Only a loop whose optimum leaves room in its set-point range both ways is rebuilt
+(:func:`~evaluation.control.setpoints.correctable_loops`: the riser's optimum lies on its
+range's top, where the corrections upwards are clipped and a one-sided loop trips more often
+than the stuck one left alone).
 """
 
 from __future__ import annotations
@@ -36,7 +40,7 @@ import gymnasium as gym
 import numpy as np
 
 from evaluation.control.policies import ARM_AFTER, SetpointPolicy
-from evaluation.control.setpoints import best_setpoints
+from evaluation.control.setpoints import best_setpoints, correctable_loops
 from fcc_env.closed_loop import CLOSED_LOOP_CHANNELS
 from fcc_env.control_draws import LOOP_CHANNELS, FaultClass, fault_class
 from fcc_env.control_task import CONTROL_ENV_ID
@@ -120,6 +124,7 @@ class SensorCorrectingSupervisor:
     _error: np.ndarray = field(init=False, repr=False)
     _latched: np.ndarray = field(init=False, repr=False)
     _judged: np.ndarray = field(init=False, repr=False)
+    _correctable: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         if self.healthy is None:
@@ -133,6 +138,7 @@ class SensorCorrectingSupervisor:
                 f"window={self.window!r}, limit_C={self.limit_C!r}: allowed: window >= 1 "
                 "samples, limit_C > 0 (°C)"
             )
+        self._correctable = correctable_loops(self.healthy)
         self._policy = SetpointPolicy(self.name, lambda k, info: self._target())
 
     def reset(self, info: Mapping[str, Any]) -> None:
@@ -177,5 +183,6 @@ class SensorCorrectingSupervisor:
             if decision.alarm and _names_sensor_fault(str(decision.diagnosis)):
                 self._latched[int(np.argmax(np.abs(self._residual)))] = True
         frozen = self._repeats >= self.frozen_samples - 1
-        self._judged = frozen | (np.abs(self._residual) > self.limit_C) | self._latched
+        judged = frozen | (np.abs(self._residual) > self.limit_C) | self._latched
+        self._judged = judged & self._correctable
         return self._policy.act(obs, info)

@@ -37,6 +37,7 @@ from fcc_env.scenarios import EpisodeFault
 __all__ = [
     "OperatingPoint",
     "best_setpoints",
+    "correctable_loops",
     "operating_point",
     "steady_operation",
     "total_inventory_kg",
@@ -44,6 +45,8 @@ __all__ = [
 
 # holdups in the state (spec §1): reactor, stage 1, stage 2, well
 _HOLDUPS = (0, 2, 5, 8)
+#: °C a loop's set point needs inside its range, on both sides, for a supervisor to correct it
+MIN_ROOM_C = 2.0
 #: USD/h per °C of set point outside its range in the search (steep next to any margin slope)
 _RANGE_PENALTY_USD_PER_C_H = 1e4
 
@@ -182,3 +185,17 @@ def best_setpoints(
     point = operating_point(p, z, economics, reading_offset_C)
     assert point is not None
     return point
+
+
+def correctable_loops(setpoints: np.ndarray, min_room_C: float = MIN_ROOM_C) -> np.ndarray:
+    """Which loops (T_rx, T_rg1) a supervisor can correct through their set points about
+    ``setpoints`` (°C): those with ``min_room_C`` inside the range on both sides. At the healthy
+    optimum the riser's set point is on its range's top (545 °C): a correction upwards is
+    clipped, so a loop rebuilt there could only push one way (on a stuck T_rx transmitter that
+    tripped 16 of 20 validation episodes, against 13 of 20 left alone: lab/control-catalogue.md).
+    """
+    names = ("T_rx_sp", "T_rg1_sp")
+    low = np.array([SETPOINT_RANGES[n].low for n in names])
+    high = np.array([SETPOINT_RANGES[n].high for n in names])
+    sp = np.asarray(setpoints, dtype=np.float64)
+    return (sp - low >= min_room_C) & (high - sp >= min_room_C)

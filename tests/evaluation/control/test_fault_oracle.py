@@ -206,3 +206,11 @@ def test_a_diagnosis_of_a_sensor_fault_latches_the_loop_of_the_larger_residual()
     assert policy.judged.tolist() == [True, False]
     assert moves[-1][0] == pytest.approx(2.0, abs=0.05)  # T_rx's error taken out
     assert abs(moves[-1][1]) < 0.05
+
+
+def test_correctable_loops_need_room_on_both_sides_of_the_range():
+    from evaluation.control.setpoints import correctable_loops
+
+    assert correctable_loops(np.array([544.9, 682.8])).tolist() == [False, True]
+    assert correctable_loops(np.array([530.0, 665.5])).tolist() == [True, False]
+    assert correctable_loops(np.array([530.0, 700.0]), min_room_C=6.0).tolist() == [True, False]
