@@ -110,3 +110,11 @@ def test_bad_catalogue_is_refused():
         gym.make("FCC-control-v0", catalogue="everything")
     with pytest.raises(ValueError, match="fault_time"):
         gym.make("FCC-control-v0", catalogue="all", fault_time=1500)
+
+
+def test_the_native_vector_env_refuses_the_whole_catalogue_by_name():
+    with pytest.raises(ValueError, match="vectorization_mode='sync'"):
+        gym.make_vec("FCC-control-v0", 2, vectorization_mode="vector_entry_point", catalogue="all")
+    sync = gym.make_vec("FCC-control-v0", 2, vectorization_mode="sync", catalogue="all")
+    sync.reset(seed=[5000, 5003])
+    assert sync.envs[1].unwrapped.plant.fault.scenario == "f2"  # seed 5003's draw
