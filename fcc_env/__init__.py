@@ -22,6 +22,7 @@ The modules, by job:
   linearised closed loop's eigenvalues; :mod:`~fcc_env.closed_loop_report` and
   :mod:`~fcc_env.closed_loop_figures`: the closed-loop report (responses, masking, terminations);
 - :mod:`~fcc_env.control_task`: ``FCC-control-v0``, the closed loop with an economic reward;
+  :mod:`~fcc_env.control_draws`: what its random episodes draw (the paper's faults or the whole catalogue, by fault class);
 - :mod:`~fcc_env.vector_env`, :mod:`~fcc_env.control_vector`: native vector envs (N episodes in
   one compiled loop) of ``FCC-v0``/``FCC-closedloop-v0`` and of ``FCC-control-v0``;
 - :mod:`~fcc_env.plotting`, :mod:`~fcc_env.render`: figures and the env's ``rgb_array`` frame;

@@ -21,6 +21,8 @@ from typing import Any
 import numpy as np
 from gymnasium.vector import AutoresetMode, VectorEnv
 
+from fcc_common.validation import invalid
+from fcc_env.control_draws import catalogue_option
 from fcc_env.control_task import (
     CONTROL_ENV_ID,
     REWARD_TERMS,
@@ -60,9 +62,18 @@ class FCCControlVectorEnv(VectorEnv):
         regulatory: Any = True,
         max_episode_steps: int | None = DEFAULT_N_SAMPLES - 1,
         render_mode: str | None = None,
+        catalogue: str = "paper",
         **kwargs: Any,
     ) -> None:
         self.economics = EconomicReward.from_option(economics)
+        if catalogue_option(catalogue) != "paper":
+            raise invalid(
+                "catalogue",
+                catalogue,
+                "'paper' on the native vector env",
+                "its compiled loop carries no sensor or actuator fault; for catalogue='all' use "
+                "gym.make_vec(..., vectorization_mode='sync', catalogue='all')",
+            )
         self.plant = FCCVectorEnv(
             num_envs,
             max_episode_steps=max_episode_steps,

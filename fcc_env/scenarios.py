@@ -268,7 +268,8 @@ class FaultSpec:
             ``nominal`` and the registered faults, onset uniform in the middle half of the
             horizon, magnitude uniform in [0.5, 1.5] × the fault's default; explicit
             ``onset``/``magnitude`` override the draws; the draw leaves out the sensor and
-            actuator faults), or ``"concurrent"`` (two faults: :attr:`parts`).
+            actuator faults, which ``FCC-control-v0``'s ``catalogue="all"`` draws:
+            :mod:`fcc_env.control_draws`), or ``"concurrent"`` (two faults: :attr:`parts`).
         onset: sample at which the fault starts (default: the fault's paper onset).
         magnitude: relative size of the change, ≥ 0 (default: the fault's paper magnitude).
         profile: ``"abrupt"`` (a step) or ``"incipient"`` (a linear ramp).

@@ -4,6 +4,10 @@
 ``setpoints``         the best fixed set points of a plant, healthy or faulty (steady-state search)
 ``policies``          the baselines: the program, fixed set points, the oracle that knows the fault,
                       the diagnosis-driven supervisor
+``fault_oracle``      the oracle of the whole catalogue: what it does for each process, sensor
+                      and actuator fault (the study's reference)
+``sensor_policy``     the supervisor that corrects a loop's set point for a stuck or biased
+                      transmitter (a frozen-reading check; a diagnoser that names a sensor fault)
 ``posterior_policy``  the supervisor on a fault posterior (``mmae``): the candidate set points of
                       highest expected return, from a table of returns per hypothesis
 ``policy_registry``   the policies by name: :func:`register_policy`, :func:`make_policy`,

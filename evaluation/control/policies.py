@@ -10,8 +10,9 @@ recovers the program's as "shown − last move" and moves by the difference
 * :class:`ProgramPolicy`: the action 0, the operating program as it is.
 * :func:`fixed_setpoints`: the best steady set points of the healthy plant
   (:func:`evaluation.control.setpoints.best_setpoints`), held throughout.
-* :func:`oracle`: knows the episode's fault and its onset (``info`` at reset: what no agent may
-  read) and moves, from the onset, to the best set points of the faulty plant.
+* the oracle (:class:`evaluation.control.fault_oracle.FaultOracle`): knows the episode's fault
+  and its onset (``info`` at reset: what no agent may read) and moves, from the onset, to the
+  best set points of the faulty plant (for a sensor or actuator fault, its module says what).
 * :class:`DiagnosisSupervisor`: a fitted diagnoser reads the observation sample by sample
   (``update``); from its first alarm the policy moves to the best set points of the fault the
   diagnoser names (an isolator), or, from a detector that names none, to the set points best on
@@ -27,11 +28,11 @@ from typing import Any, NamedTuple, Protocol
 
 import numpy as np
 
-from evaluation.control.setpoints import OperatingPoint, best_setpoints
+from evaluation.control.setpoints import best_setpoints
 from fcc_env.closed_loop import CLOSED_LOOP_CHANNELS
 from fcc_env.control_task import EconomicReward
 from fcc_env.env import SETPOINT_ACTION_SCALE
-from fcc_env.scenarios import NOMINAL, EpisodeFault, FaultSpec, fault_names
+from fcc_env.scenarios import FaultSpec, fault_names
 
 __all__ = [
     "ARM_AFTER",
@@ -42,7 +43,6 @@ __all__ = [
     "SupervisorEvent",
     "fault_setpoints",
     "fixed_setpoints",
-    "oracle",
     "robust_setpoints",
 ]
 
@@ -99,25 +99,6 @@ def fixed_setpoints(economics: EconomicReward | None = None) -> SetpointPolicy:
     """The best steady set points of the healthy plant, held whatever happens."""
     best = best_setpoints(economics=economics).setpoints
     return SetpointPolicy("best fixed set points (healthy plant)", lambda k, info: best)
-
-
-def oracle(economics: EconomicReward | None = None) -> SetpointPolicy:
-    """Knows the fault and its onset: the healthy optimum before, the faulty plant's after."""
-    healthy = best_setpoints(economics=economics).setpoints
-    cache: dict[tuple[str, float], OperatingPoint] = {}
-
-    def target(k: int, info: Mapping[str, Any]) -> np.ndarray:
-        onset = info.get("fault_time")
-        if info.get("scenario") in (None, NOMINAL) or onset is None or k < onset:
-            return healthy
-        key = (str(info["scenario"]), round(float(info["fault_magnitude"]), 4))
-        if key not in cache:
-            spec = FaultSpec(scenario=key[0], magnitude=key[1], onset=int(onset))
-            fault: EpisodeFault = spec.resolve(horizon=int(onset) + 1)
-            cache[key] = best_setpoints(fault, economics=economics)
-        return cache[key].setpoints
-
-    return SetpointPolicy("oracle (knows the fault and its onset)", target)
 
 
 #: Samples after an episode's start before a supervisor acts on its diagnoser (50 min at 10 s):

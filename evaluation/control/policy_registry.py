@@ -75,8 +75,13 @@ BUILTIN_POLICIES: tuple[PolicySpec, ...] = (
     ),
     PolicySpec(
         "oracle",
-        "evaluation.control.policies:oracle",
+        "evaluation.control.fault_oracle:FaultOracle",
         "knows the fault and its onset: the reference, always the last row",
+    ),
+    PolicySpec(
+        "sensor-correcting",
+        "evaluation.control.sensor_policy:SensorCorrectingSupervisor",
+        "the healthy optimum, a loop's set point corrected for a stuck or biased transmitter",
     ),
     PolicySpec(
         "supervisor",

@@ -35,7 +35,9 @@ from evaluation.control.policies import (
 from evaluation.metrics.intervals import Interval, bootstrap_ci
 from fcc_common.progress import progress_bar
 from fcc_env.closed_loop import CLOSED_LOOP_CHANNELS
+from fcc_env.control_draws import FaultClass, fault_class
 from fcc_env.control_task import CONSTRAINT_TERMS, CONTROL_ENV_ID
+from fcc_env.faults import RANDOM_SCENARIO
 from fcc_env.plant import PlantConfig
 from fcc_env.scenarios import fault_names, scenario_names
 
@@ -44,6 +46,7 @@ __all__ = [
     "EpisodeScore",
     "PolicySummary",
     "StudyResults",
+    "class_summaries",
     "fault_traces",
     "operated_episodes",
     "run_episode",
@@ -110,6 +113,8 @@ def run_episode(
     env = gym.make(CONTROL_ENV_ID, scenario=scenario, **env_kwargs)
     obs, info = env.reset(seed=seed)
     policy.reset(info)
+    if scenario == RANDOM_SCENARIO:  # a drawn fault: the score names what was drawn
+        scenario = str(info["scenario"])
     if trace is not None:
         trace["onset"] = [info.get("fault_time")]
     total, inside, tripped, k = 0.0, 0, False, 0
@@ -126,6 +131,19 @@ def run_episode(
             break
     env.close()
     return EpisodeScore(policy.name, scenario, seed, total, tripped, inside / k, k)
+
+
+def class_summaries(
+    scores: Sequence[EpisodeScore], reference: str
+) -> dict[str, list[PolicySummary]]:
+    """:func:`summarise` per fault class (:class:`fcc_env.control_draws.FaultClass`, of each
+    episode's scenario), the classes in their order, only those with episodes."""
+    out = {}
+    for cls in FaultClass:
+        mine = [s for s in scores if fault_class(s.scenario) is cls]
+        if mine:
+            out[cls.value] = summarise(mine, reference=reference)
+    return out
 
 
 def summarise(scores: Sequence[EpisodeScore], reference: str) -> list[PolicySummary]:
@@ -158,9 +176,12 @@ def run_study(
     scenarios: Sequence[str],
     *,
     progress: bool | None = False,
+    **env_kwargs: Any,
 ) -> list[EpisodeScore]:
     """Every policy on every scenario and seed, in that order. ``progress``: a bar over the
-    episodes on standard error (``None``: when it is a terminal; :mod:`fcc_common.progress`)."""
+    episodes on standard error (``None``: when it is a terminal; :mod:`fcc_common.progress`).
+    ``env_kwargs`` go to ``gym.make`` (``catalogue="all"`` with the scenario ``"random"``: the
+    whole catalogue's draws, each score named by its drawn scenario)."""
     runs = [(p, sc, seed) for p in policies for sc in scenarios for seed in seeds]
     scores = []
     with progress_bar(
@@ -168,7 +189,7 @@ def run_study(
     ) as bar:
         for p, sc, seed in runs:
             bar.set_postfix_str(f"{p.name}, {sc}", refresh=False)
-            scores.append(run_episode(p, sc, seed, n_steps))
+            scores.append(run_episode(p, sc, seed, n_steps, **env_kwargs))
             bar.update()
     return scores
 
@@ -180,12 +201,13 @@ def study(
     scenarios: Sequence[str] | None = None,
     *,
     progress: bool | None = False,
+    **env_kwargs: Any,
 ) -> StudyResults:
-    """:func:`run_study` (``progress`` as there) and :func:`summarise`, against the last policy
-    (the oracle, in the command: the reference sits last in the table); ``scenarios`` default
-    to every registered one."""
+    """:func:`run_study` (``progress`` and ``env_kwargs`` as there) and :func:`summarise`,
+    against the last policy (the oracle, in the command: the reference sits last in the table);
+    ``scenarios`` default to every registered one."""
     scenarios = scenario_names() if scenarios is None else scenarios  # the registry, now
-    scores = run_study(policies, seeds, n_steps, scenarios, progress=progress)
+    scores = run_study(policies, seeds, n_steps, scenarios, progress=progress, **env_kwargs)
     reference = policies[-1].name
     return StudyResults(
         tuple(scores),

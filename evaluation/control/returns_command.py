@@ -11,6 +11,11 @@ Written to ``--out`` as ``control.csv`` and ``control.json``; the table is print
 bars (episodes run, the supervisors' training episodes) go to standard error when it is a
 terminal, or with ``--progress``; ``--no-progress`` turns them off.
 
+``--catalogue all`` runs draws of the whole fault catalogue instead (``FCC-control-v0``'s
+``catalogue="all"``: healthy, process, sensor and actuator faults, a class a quarter of the
+draws, :mod:`fcc_env.control_draws`): ``4 × --seeds`` episodes, one per test seed, and a table
+per fault class besides the overall one.
+
 ``--policies`` (default ``program,fixed``) names the registered policies that run first
 (:mod:`evaluation.control.policy_registry`; one of your own joins with ``--import MODULE``); the
 oracle runs last, as the reference. ``--diagnosers`` (default ``pca``) adds a diagnosis-driven
@@ -87,6 +92,13 @@ def build_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument("--seeds", type=int, default=20, help="test seeds per scenario (20)")
     parser.add_argument("--steps", type=int, default=3999, help="steps per episode (3999)")
+    parser.add_argument(
+        "--catalogue",
+        choices=("paper", "all"),
+        default="paper",
+        help="paper: each of f1-f4 at its paper size (the default); all: draws of the whole "
+        "catalogue, 4 x --seeds episodes, tabled per fault class",
+    )
     parser.add_argument("--out", type=out_path, default=Path("results/control"))
     parser.add_argument(
         "--diagnosers",
@@ -203,14 +215,23 @@ def _study(args: argparse.Namespace, extra_policies: Sequence[Policy] = ()) -> i
         raise ValueError(
             f"two policies share a name in the table: {shown}; give each policy its own name"
         )
+    env_kwargs = {}
+    seeds = range(args.seeds)
+    if args.catalogue == "all":
+        scenarios, env_kwargs, seeds = ["random"], {"catalogue": "all"}, range(4 * args.seeds)
+        if seeds.stop > most:
+            raise ValueError(f"--seeds {args.seeds} with --catalogue all: allowed 1..{most // 4}")
     results = returns.study(
-        policies, range(args.seeds), args.steps, scenarios, progress=args.progress
+        policies, seeds, args.steps, scenarios, progress=args.progress, **env_kwargs
     )
     traces = returns.fault_traces(policies, args.steps, seed=0, progress=args.progress)
     figures = returns_report.write_study(results, traces, args.out, trace_seed=0)
     print(returns_report.summary_table(results.summaries), end="")
+    if args.catalogue == "all":
+        for name, rows in returns.class_summaries(results.scores, results.reference).items():
+            print(f"\n{name} faults:\n" + returns_report.summary_table(rows), end="")
     print(
-        f"\n{len(results.scores)} episodes ({args.seeds} test seeds x {len(scenarios)} "
+        f"\n{len(results.scores)} episodes ({len(seeds)} test seeds x {len(scenarios)} "
         f"scenarios x {len(policies)} policies) in {time.perf_counter() - t0:.0f} s; wrote "
         f"{args.out} (control.csv, control.json, {len(figures)} figures)",
     )

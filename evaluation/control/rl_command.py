@@ -64,6 +64,12 @@ def main(argv: Sequence[str] | None = None) -> int:
     t.add_argument("--max-env-steps", type=int, default=None, help="stop earlier, at this many")
     t.add_argument("--torch-threads", type=int, default=d.torch_threads)
     t.add_argument("--val-seeds", type=int, default=2, help="validation seeds per scenario")
+    t.add_argument(
+        "--catalogue",
+        default=d.catalogue,
+        help="what the episodes draw: paper (f1-f4, the native vector env) or all (every "
+        "fault class, Python envs: slower)",
+    )
     t.add_argument("--out", type=out_path, required=True)
     add_progress_flag(t)
     e = sub.add_parser(
@@ -107,6 +113,7 @@ def _run(args: argparse.Namespace) -> int:
         reward_scale_usd=args.reward_scale,
         max_env_steps=args.max_env_steps,
         torch_threads=args.torch_threads,
+        catalogue=args.catalogue,
     )
     check_out_path("--out", args.out)
     require_sb3()

@@ -34,6 +34,7 @@ from evaluation.control.rl_policy import FORMAT, MLPPolicy
 from evaluation.control.rl_vec_env import require_sb3, sb3_vec_env
 from fcc_common.progress import progress_bar
 from fcc_common.validation import invalid
+from fcc_env.control_draws import catalogue_option
 from fcc_env.control_task import CONTROL_ENV_ID
 from fcc_env.scenarios import scenario_names
 from fcc_env.simulation import DEFAULT_MEMORY_BUDGET_BYTES
@@ -96,8 +97,12 @@ class PPOSettings:
     reward_scale_usd: float = REWARD_SCALE_USD
     max_env_steps: int | None = None
     torch_threads: int = 1
+    #: what the episodes draw (``FCC-control-v0``'s ``catalogue``): ``"all"`` steps Python envs
+    #: (``SyncVectorEnv``), as the native vector env carries no sensor or actuator fault
+    catalogue: str = "paper"
 
     def __post_init__(self) -> None:
+        catalogue_option(self.catalogue)
         if not 0 < self.minutes < math.inf:
             raise invalid("--minutes", self.minutes, "> 0, finite")
         if self.envs < 1:
@@ -266,7 +271,12 @@ def train(
         # numba's OpenMP workers spin-wait after each env step and starve torch's forward
         # passes (measured: 12 ms instead of 1 ms per step of 64 envs on two cores)
         numba.set_num_threads(1)
-        venv = gym.make_vec(CONTROL_ENV_ID, s.envs, vectorization_mode="vector_entry_point")
+        if s.catalogue == "paper":
+            venv = gym.make_vec(CONTROL_ENV_ID, s.envs, vectorization_mode="vector_entry_point")
+        else:
+            venv = gym.make_vec(
+                CONTROL_ENV_ID, s.envs, vectorization_mode="sync", catalogue=s.catalogue
+            )
         env = VecNormalize(sb3_vec_env(venv, s.reward_scale_usd), norm_reward=False, gamma=s.gamma)
         model = PPO(
             "MlpPolicy",

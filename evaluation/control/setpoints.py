@@ -37,6 +37,7 @@ from fcc_env.scenarios import EpisodeFault
 __all__ = [
     "OperatingPoint",
     "best_setpoints",
+    "correctable_loops",
     "operating_point",
     "steady_operation",
     "total_inventory_kg",
@@ -44,6 +45,8 @@ __all__ = [
 
 # holdups in the state (spec §1): reactor, stage 1, stage 2, well
 _HOLDUPS = (0, 2, 5, 8)
+#: °C a loop's set point needs inside its range, on both sides, for a supervisor to correct it
+MIN_ROOM_C = 2.0
 #: USD/h per °C of set point outside its range in the search (steep next to any margin slope)
 _RANGE_PENALTY_USD_PER_C_H = 1e4
 
@@ -88,9 +91,17 @@ def steady_operation(params: FCCParams, u_F: float, R_ar: float) -> np.ndarray:
 
 
 def operating_point(
-    params: FCCParams, z: np.ndarray, economics: EconomicReward
+    params: FCCParams,
+    z: np.ndarray,
+    economics: EconomicReward,
+    reading_offset_C: tuple[float, float] = (0.0, 0.0),
 ) -> OperatingPoint | None:
-    """The steady operating point at ``z = (u_F, R_ar)``, or None where there is none."""
+    """The steady operating point at ``z = (u_F, R_ar)``, or None where there is none.
+
+    ``reading_offset_C``: how far the loops' transmitters (T_rx, T_rg1) read above the true
+    temperatures (a sensor bias): the set points that hold the point are the true temperatures
+    plus it, and the range an agent may ask for applies to them (it is the loop's reading the
+    regulatory layer compares with its set point)."""
     u_F, R_ar = (float(v) for v in z)
     try:
         x = steady_operation(params, u_F, R_ar)
@@ -99,7 +110,10 @@ def operating_point(
     u = NOMINAL_INPUTS.copy()
     u[0], u[1] = u_F, R_ar
     aux = rhs_aux(x, u, params)
-    setpoints = {"T_rx_sp": aux["T_rx"], "T_rg1_sp": float(x[4])}
+    setpoints = {
+        "T_rx_sp": aux["T_rx"] + float(reading_offset_C[0]),
+        "T_rg1_sp": float(x[4]) + float(reading_offset_C[1]),
+    }
     if not np.all(np.isfinite(x)):
         return None
     excess = sum(
@@ -125,18 +139,29 @@ def best_setpoints(
     fault: EpisodeFault | None = None,
     economics: EconomicReward | None = None,
     params: FCCParams | None = None,
+    *,
+    reading_offset_C: tuple[float, float] = (0.0, 0.0),
+    limits: np.ndarray | None = None,
 ) -> OperatingPoint:
     """The steady set points with the highest reward per hour for the plant ``params`` (default:
-    the declared plant) with ``fault`` at its full size (``None``: healthy)."""
+    the declared plant) with ``fault`` at its full size (``None``: healthy).
+
+    ``reading_offset_C``: the loops' transmitters read this much high (°C, T_rx and T_rg1;
+    :func:`operating_point`). ``limits``: the reachable ``(u_F, R_ar)`` box, shape ``(2, 2)``
+    (default :data:`~fcc_env.regulatory.ACTUATOR_LIMITS`): a weaker blower lowers the air's
+    ceiling, a stuck valve pins ``u_F`` (:mod:`evaluation.control.fault_oracle`)."""
     economics = EconomicReward() if economics is None else economics
     p = FCCParams() if params is None else params
     if fault is not None:
         p = fault.faulty_params(p)
-    lo, hi = ACTUATOR_LIMITS[:, 0], ACTUATOR_LIMITS[:, 1]
+    box = ACTUATOR_LIMITS if limits is None else np.asarray(limits, dtype=np.float64)
+    if box.shape != (2, 2) or not np.all(box[:, 0] < box[:, 1]):
+        raise ValueError(f"limits={box.tolist()}: allowed: [[u_F low, high], [R_ar low, high]]")
+    lo, hi = box[:, 0], box[:, 1]
 
     def cost(z: np.ndarray) -> float:
         z = np.clip(z, lo, hi)
-        point = operating_point(p, z, economics)
+        point = operating_point(p, z, economics, reading_offset_C)
         if point is None:
             return math.inf
         # an exterior penalty, not a wall: the optimum often lies on the range's edge
@@ -157,6 +182,20 @@ def best_setpoints(
     if not np.isfinite(res.fun):  # pragma: no cover - the declared plant always has one
         raise ValueError(f"no steady state with set points in range for fault {fault}")
     z = np.clip(res.x, lo, hi)
-    point = operating_point(p, z, economics)
+    point = operating_point(p, z, economics, reading_offset_C)
     assert point is not None
     return point
+
+
+def correctable_loops(setpoints: np.ndarray, min_room_C: float = MIN_ROOM_C) -> np.ndarray:
+    """Which loops (T_rx, T_rg1) a supervisor can correct through their set points about
+    ``setpoints`` (°C): those with ``min_room_C`` inside the range on both sides. At the healthy
+    optimum the riser's set point is on its range's top (545 °C): a correction upwards is
+    clipped, so a loop rebuilt there could only push one way (on a stuck T_rx transmitter that
+    tripped 16 of 20 validation episodes, against 13 of 20 left alone: lab/control-catalogue.md).
+    """
+    names = ("T_rx_sp", "T_rg1_sp")
+    low = np.array([SETPOINT_RANGES[n].low for n in names])
+    high = np.array([SETPOINT_RANGES[n].high for n in names])
+    sp = np.asarray(setpoints, dtype=np.float64)
+    return (sp - low >= min_room_C) & (high - sp >= min_room_C)

@@ -1,0 +1,121 @@
+"""What ``FCC-control-v0``'s random episodes draw from: the paper's faults or the whole catalogue.
+
+``gym.make("FCC-control-v0", catalogue="all")`` draws each episode's fault from every
+registered fault (issue 43 item 7): the control task then meets the faults a closed loop
+suffers (a biased or stuck thermocouple the loop follows, a sticking valve, a weak blower), not
+only the paper's process faults. ``catalogue="paper"`` (the default) keeps today's draw
+(:meth:`fcc_env.scenarios.FaultSpec.resolve`, ``scenario="random"``) bit for bit.
+
+The draw of ``"all"`` (:func:`draw_catalogue_fault`), in this order, each uniform:
+
+1. the fault **class** (:class:`FaultClass`): healthy, process (f1–f4 and any parameter fault
+   registered since), sensor, actuator. By class, not by scenario, so that each class carries
+   a quarter of the episodes and its value of information an interval of the same width (by
+   scenario, the five sensor faults would outweigh the one healthy plant five to one);
+2. the **scenario** within the class (read from the registry at each draw: a fault registered
+   since joins its class), but for the faults of :data:`LEFT_OUT`: a noisier or intermittent
+   transmitter moves no steady state, so no set point (the task's action) can answer it; its
+   cost falls on the loop's tuning, which the supervisory layer does not reach. They stay
+   fixed scenarios (``scenario="sensor-noise"``);
+3. a sensor fault's **channel**: a loop sensor (``T_rx`` or ``T_rg1``, the controlled
+   temperatures whose fault moves the true process) with probability 1/2, else one of the
+   other six measured channels. Drawn by channel alone, a loop sensor would come one time in
+   four, and the faults that matter to control would be the rare ones;
+4. the **onset**, in the middle half of the horizon, and the **size**, ``[0.5, 1.5] ×`` the
+   fault's default clipped at its validated largest size, as ``scenario="random"`` draws them.
+
+Every draw consumes the same numbers, so that the episode's noise never depends on the fault.
+The draw reads a generator of its own (the env spawns it from its ``np_random``): the plant's
+noise and program stay those of the same seed under any fixed fault.
+"""
+
+from __future__ import annotations
+
+from enum import StrEnum
+
+import numpy as np
+
+from fcc_common.validation import Options, check
+from fcc_env.faults import FAULTS, NOMINAL, fault_definition
+from fcc_env.scenarios import FaultSpec
+
+__all__ = [
+    "CATALOGUES",
+    "LEFT_OUT",
+    "LOOP_CHANNELS",
+    "FaultClass",
+    "catalogue_option",
+    "class_scenarios",
+    "draw_catalogue_fault",
+    "fault_class",
+]
+
+#: The catalogues a random episode draws from: the paper's faults (today's draw) or all.
+CATALOGUES: tuple[str, ...] = ("paper", "all")
+#: Registered faults the whole catalogue's draw leaves out (module docstring: why).
+LEFT_OUT: tuple[str, ...] = ("sensor-noise", "sensor-dropout")
+#: The measured channels the regulatory loops control (a fault there moves the true process).
+LOOP_CHANNELS: tuple[str, ...] = ("T_rx", "T_rg1")
+
+
+class FaultClass(StrEnum):
+    """What kind of fault an episode has (the control study's rows)."""
+
+    HEALTHY = "healthy"
+    PROCESS = "process"
+    SENSOR = "sensor"
+    ACTUATOR = "actuator"
+
+
+def catalogue_option(value: object) -> str:
+    """``value`` if it names a catalogue of :data:`CATALOGUES`, else a clear refusal."""
+    return str(check("catalogue", value, Options(CATALOGUES, why="what scenario='random' draws")))
+
+
+def fault_class(scenario: str) -> FaultClass:
+    """The class of ``scenario`` (``"nominal"`` or a registered fault), read from its
+    definition: a transmitter is a sensor fault, a device an actuator fault, the rest change
+    the plant's parameters."""
+    if scenario == NOMINAL:
+        return FaultClass.HEALTHY
+    d = fault_definition(scenario)
+    if d.sensor is not None or d.channels:
+        return FaultClass.SENSOR
+    if d.actuator is not None:
+        return FaultClass.ACTUATOR
+    return FaultClass.PROCESS
+
+
+def class_scenarios() -> dict[FaultClass, tuple[str, ...]]:
+    """Every class's scenarios that the whole catalogue draws, from the registry as it is now
+    (registration order; without :data:`LEFT_OUT`)."""
+    out: dict[FaultClass, list[str]] = {c: [] for c in FaultClass}
+    for name in (NOMINAL, *FAULTS):
+        if name in LEFT_OUT:
+            continue
+        out[fault_class(name)].append(name)
+    return {c: tuple(v) for c, v in out.items()}
+
+
+def draw_catalogue_fault(rng: np.random.Generator, horizon: int) -> FaultSpec:
+    """One episode's fault from the whole catalogue (module docstring: the draw), as a
+    :class:`FaultSpec` with every field fixed."""
+    by_class = class_scenarios()
+    classes = [c for c in FaultClass if by_class[c]]
+    # a fixed number of draws, whatever comes out
+    u_class, u_scenario, u_loop, u_channel, u_scale = rng.random(5)
+    onset = int(rng.integers(horizon // 4, max(horizon // 4 + 1, 3 * horizon // 4)))
+    cls = classes[int(u_class * len(classes))]
+    names = by_class[cls]
+    scenario = names[int(u_scenario * len(names))]
+    if scenario == NOMINAL:
+        return FaultSpec(scenario=NOMINAL)
+    d = fault_definition(scenario)
+    magnitude = min(d.default_magnitude * (0.5 + u_scale), d.max_magnitude)
+    channel = None
+    if d.channels:
+        loops = [c for c in LOOP_CHANNELS if c in d.channels]
+        others = [c for c in d.channels if c not in loops]
+        pool = loops if (u_loop < 0.5 and loops) or not others else others
+        channel = pool[int(u_channel * len(pool))]
+    return FaultSpec(scenario=scenario, onset=onset, magnitude=magnitude, channel=channel)

@@ -1,0 +1,144 @@
+"""The value of information per fault class on FCC-control-v0's whole catalogue (issue 43 item 7).
+
+Runs validation seeds (5000..) of ``gym.make("FCC-control-v0", catalogue="all")`` under three
+policies: the best fixed set points of the healthy plant (the fault-blind policy of the table:
+PPO on these draws could not be trained here, lab/control-catalogue.md says why), the
+sensor-correcting supervisor (its frozen-reading check; no diagnoser) and the oracle
+(:class:`evaluation.control.fault_oracle.FaultOracle`). Per episode it writes the drawn fault
+and the three returns to ``--out`` (JSON lines); ``--report`` reads such files and prints the
+table: per fault class, each policy's mean return, the value of information (oracle − fault-blind,
+paired by episode) and what the supervisor captures (supervisor − fault-blind), each with its
+95 % bootstrap interval.
+
+    python lab/control_catalogue.py --first 5000 --n 100 --out /tmp/voi_a.jsonl
+    python lab/control_catalogue.py --report /tmp/voi_a.jsonl /tmp/voi_b.jsonl
+    python lab/control_catalogue.py --loop-sensors --first 5000 --n 20 --out /tmp/loop.jsonl
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import time
+
+import gymnasium as gym
+import numpy as np
+
+import fcc_env  # noqa: F401 (registers the envs)
+from evaluation.control.policy_registry import make_policy
+from evaluation.metrics.intervals import bootstrap_ci
+from fcc_env.control_draws import LOOP_CHANNELS, FaultClass, fault_class
+
+POLICIES = ("fixed", "sensor-correcting", "oracle")
+
+
+#: ``--loop-sensors``: the sensor faults that reach the process, each at its default size and
+#: onset (sample 2000), on both loop transmitters
+LOOP_SENSOR_SCENARIOS = [
+    (f"sensor-{kind}", ch) for kind in ("bias", "drift", "stuck") for ch in LOOP_CHANNELS
+]
+
+
+def run(first: int, n: int, out: str, steps: int = 3999, loop_sensors: bool = False) -> None:
+    policies = {name: make_policy(name) for name in POLICIES}
+    cases = LOOP_SENSOR_SCENARIOS if loop_sensors else [None]
+    with open(out, "w") as f:
+        for seed, case in ((s, c) for s in range(first, first + n) for c in cases):
+            t0 = time.process_time()
+            row: dict = {"seed": seed}
+            for name, policy in policies.items():
+                if case is None:
+                    env = gym.make("FCC-control-v0", catalogue="all")
+                else:
+                    env = gym.make("FCC-control-v0", scenario=case[0], fault_channel=case[1])
+                obs, info = env.reset(seed=seed)
+                policy.reset(info)
+                fault = env.unwrapped.plant.fault
+                row.update(
+                    scenario=fault.scenario,
+                    channel=fault.channel,
+                    magnitude=fault.magnitude,
+                    onset=fault.onset,
+                )
+                total, tripped = 0.0, False
+                for _ in range(steps):
+                    obs, reward, terminated, truncated, info = env.step(policy.act(obs, info))
+                    total += float(reward)
+                    if terminated or truncated:
+                        tripped = bool(terminated)
+                        break
+                row[name] = total
+                row[name + "_trip"] = tripped
+                env.close()
+            row["cpu_s"] = round(time.process_time() - t0, 2)
+            f.write(json.dumps(row) + "\n")
+            f.flush()
+
+
+def _ci(values) -> str:
+    if len(values) < 2:
+        return "n/a"
+    iv = bootstrap_ci(list(values))
+    return f"{iv.estimate:,.0f} [{iv.low:,.0f}, {iv.high:,.0f}]"
+
+
+def report(paths: list[str]) -> None:
+    by_seed: dict[tuple, dict] = {}
+    for p in paths:  # an episode run twice (overlapping ranges) counts once
+        for line in open(p):
+            r = json.loads(line)
+            by_seed.setdefault((r["seed"], r["scenario"], r["channel"]), r)
+    rows = [by_seed[k] for k in sorted(by_seed)]
+    groups: dict[str, list[dict]] = {c.value: [] for c in FaultClass}
+    for r in rows:
+        groups[fault_class(r["scenario"]).value].append(r)
+    loop = [r for r in groups["sensor"] if r["channel"] in LOOP_CHANNELS]
+    groups["sensor, loop channel"] = loop
+    for kind in ("stuck", "bias", "drift"):
+        for ch in LOOP_CHANNELS:
+            groups[f"sensor-{kind} on {ch}"] = [
+                r for r in loop if r["scenario"] == f"sensor-{kind}" and r["channel"] == ch
+            ]
+    groups["sensor, other channels"] = [
+        r for r in groups["sensor"] if r["channel"] not in LOOP_CHANNELS
+    ]
+    for sc in ("valve-stiction", "valve-bias", "valve-stuck", "blower-capacity"):
+        groups[sc] = [r for r in groups["actuator"] if r["scenario"] == sc]
+    groups["all"] = rows
+    print(
+        "| class | n | fault-blind (best fixed) | oracle | sensor-correcting | value of "
+        "information (oracle − blind) | captured (sensor-correcting − blind) | trips b/s/o |"
+    )
+    print("|---|---|---|---|---|---|---|---|")
+    for name, g in groups.items():
+        if not g:
+            continue
+        blind = np.array([r["fixed"] for r in g])
+        orc = np.array([r["oracle"] for r in g])
+        sup = np.array([r["sensor-correcting"] for r in g])
+        trips = "/".join(str(sum(r[p + "_trip"] for r in g)) for p in POLICIES)
+        print(
+            f"| {name} | {len(g)} | {_ci(blind)} | {_ci(orc)} | {_ci(sup)} | "
+            f"{_ci(orc - blind)} | {_ci(sup - blind)} | {trips} |"
+        )
+    print(f"\n{len(rows)} episodes, {sum(r['cpu_s'] for r in rows):.0f} CPU s")
+
+
+if __name__ == "__main__":
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--first", type=int, default=5000)
+    ap.add_argument("--n", type=int, default=50)
+    ap.add_argument("--out", default="/tmp/control_catalogue.jsonl")
+    ap.add_argument("--report", nargs="*")
+    ap.add_argument(
+        "--loop-sensors",
+        action="store_true",
+        help="the six loop-sensor faults at their default size on each seed, not the draws",
+    )
+    a = ap.parse_args()
+    if a.report:
+        report(a.report)
+    else:
+        if a.first < 5000:
+            raise SystemExit(f"--first {a.first}: validation seeds only (5000..)")
+        run(a.first, a.n, a.out, loop_sensors=a.loop_sensors)
