@@ -22,6 +22,7 @@ The rooms (the contract, the registry and the presets at the top; the parts belo
 ``filters/``           state estimators of the FCC model: the unscented Kalman filter's
                        innovations, state and disturbance estimates, and the grey-box
                        detector ``ukf-glr`` on them
+``sensors/``           sensor validation by analytical redundancy: ``sensor-validation``
 =====================  ===========================================================================
 
 >>> import diagnosers
@@ -46,6 +47,7 @@ from diagnosers import (
     filters,  # noqa: F401  (registers ukf-glr)
     isolation,  # noqa: F401  (registers lrgf-iso, lrgf-lda, mmae)
     lrgf,  # noqa: F401  (registers lrgf-mem, lrgf-glr and their presets)
+    sensors,  # noqa: F401  (registers sensor-validation)
 )
 
 __all__ = [
