@@ -21,7 +21,7 @@ Three checks, each a normalised statistic with its limit at 1 (:func:`decide_run
 
 **Which sensor** (no hold, no noise): among the leave-out filters, the one that is consistent
 and whose left-out sensor disagrees most with its prediction: the largest
-``z_c / max(M_{c+1} / limit, 0.05)``, ``z_c`` the EWMA of sensor ``c``'s dedicated residual
+``z_c / max(M_{c+1} / limit, 0.01)``, ``z_c`` the EWMA of sensor ``c``'s dedicated residual
 over its healthy limit. Why not the least inconsistent filter alone: leaving out an input read
 directly (T_fp) lets that filter explain an offset of another sensor (T_rx) by a change of the
 unread input, so two filters stay consistent; the dedicated residual tells them apart.
@@ -194,7 +194,7 @@ def decide_run(
             continue
         c_best, v_best = 0, -1.0
         for h in range(1, H):
-            v = abs(ded_fast[h - 1]) / lim_e[h - 1] / max(CONS[k, h], 0.05)
+            v = abs(ded_fast[h - 1]) / lim_e[h - 1] / max(CONS[k, h], 0.01)
             if v > v_best:
                 v_best, c_best = v, h - 1
         CHANNEL[k] = c_best
