@@ -30,7 +30,9 @@ unread input, so two filters stay consistent; the dedicated residual tells them 
 between held ones, decaying count ``> 0.5``) are a dropout, an unbroken hold stuck; a noise
 check over its limit is noise; otherwise the dedicated residual since the alarm began decides
 between a bias and a drift: a drift once its least-squares slope's t statistic passes
-``t_drift`` (the sign of its level); else a bias once ``settle`` samples passed without a
+``t_drift`` (the sign of its level) and the growth it fits since the alarm is over half the
+level (a bias's residual wanders slowly with the model's error, and over thousands of samples
+any slow wander's slope is "significant"); else a bias once ``settle`` samples passed without a
 slope; before that, a bias if the residual's mean since the alarm is ``step_ratio`` times its
 slow EWMA (rate 0.01) just before the alarm (a step: nothing before it), else a drift (a ramp
 was already growing before it crossed a limit).
@@ -208,7 +210,8 @@ def decide_run(
             sxy = sje - sj * s1 / n
             rss = max(s2 - s1 * s1 / n - sxy * sxy / sxx, 1e-12)
             t = (sxy / sxx) / math.sqrt(rss / (n - 2.0) / sxx)
-            if abs(t) >= t_drift and (t > 0.0) == (mean > 0.0):
+            growth = abs(sxy / sxx) * n
+            if abs(t) >= t_drift and (t > 0.0) == (mean > 0.0) and growth > 0.5 * abs(mean):
                 kind = _DRIFT
             elif n < settle and abs(mean) < step_ratio * abs(pre[c_best]):
                 kind = _DRIFT
