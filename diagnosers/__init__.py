@@ -26,6 +26,7 @@ The rooms (the contract, the registry and the presets at the top; the parts belo
                        detector ``ukf-glr`` on them
 ``loops/``             control-loop monitors on a loop's own records: ``oscillation-acf``,
                        ``stiction-ccf``
+``sensors/``           sensor validation by analytical redundancy: ``sensor-validation``
 =====================  ===========================================================================
 
 >>> import diagnosers
@@ -51,6 +52,7 @@ from diagnosers import (
     isolation,  # noqa: F401  (registers lrgf-iso, lrgf-lda, mmae)
     loops,  # noqa: F401  (registers oscillation-acf, stiction-ccf)
     lrgf,  # noqa: F401  (registers lrgf-mem, lrgf-glr and their presets)
+    sensors,  # noqa: F401  (registers sensor-validation)
 )
 
 __all__ = [
