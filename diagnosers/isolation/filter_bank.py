@@ -107,8 +107,14 @@ def bank_run(
 
 
 @njit_kernel
-def mmae_run(LOGLIK, NIS, p, ring, best, pos, eps, POST, WIN) -> int:
+def mmae_run(LOGLIK, NIS, p, ring, best, pos, eps, leave, POST, WIN) -> int:
     """The posterior and the persistent window NIS of samples ``LOGLIK``/``NIS`` (T, H).
+
+    The switching prior (column 0 nominal): from nominal to each fault ``eps / H``; from a fault
+    to each other hypothesis ``leave`` (``eps / H``: every hypothesis alike, a plain MMAE
+    switching term; smaller: the evidence a fault gathered is not forgotten when the filters
+    stop telling the hypotheses apart, see :class:`~diagnosers.isolation.mmae.MMAE`'s
+    ``fault_leave_prob``).
 
     State carried between calls (in place): ``p`` (H,) the posterior, ``ring`` (W, H) the last W
     samples' NIS, ``best`` (W,) the last W window values; ``pos`` the samples seen so far
@@ -120,13 +126,21 @@ def mmae_run(LOGLIK, NIS, p, ring, best, pos, eps, POST, WIN) -> int:
     """
     H, W = p.shape[0], ring.shape[0]
     acc = np.empty(H)
+    jump = eps / H  # from nominal to each fault
     for k in range(LOGLIK.shape[0]):
         top = -np.inf
         for h in range(H):
             top = max(top, LOGLIK[k, h])
+        faulty = 0.0
+        for h in range(1, H):
+            faulty += p[h]
+        p0 = p[0]
+        p[0] = p0 * (1.0 - jump * (H - 1)) + leave * faulty
+        for h in range(1, H):
+            p[h] = p[h] * (1.0 - leave * (H - 1)) + jump * p0 + leave * (faulty - p[h])
         total = 0.0
         for h in range(H):
-            p[h] = ((1.0 - eps) * p[h] + eps / H) * math.exp(LOGLIK[k, h] - top)
+            p[h] *= math.exp(LOGLIK[k, h] - top)
             total += p[h]
         for h in range(H):
             p[h] /= total

@@ -94,6 +94,7 @@ class MMAE(Diagnoser):
     CONSTRAINTS: ClassVar[dict[str, Any]] = {
         "noise_scale": Real(0, 10, closed="right"),
         "switch_prob": Real(0, 0.5, closed="neither"),
+        "fault_leave_prob": (Real(0, 0.5, closed="left"), None),
         "tracking_rate": Real(0, 1, closed="right"),
         "fault_initial_std": Real(0, 1, closed="right"),
         "alarm_level": Real(0, 1, closed="neither"),
@@ -104,6 +105,7 @@ class MMAE(Diagnoser):
         "params": None,
         "noise_scale": 1.0,
         "switch_prob": 1e-5,
+        "fault_leave_prob": None,
         "tracking_rate": 0.02,
         "fault_initial_std": 0.01,
         "alarm_level": 0.9,
@@ -115,6 +117,7 @@ class MMAE(Diagnoser):
     params: FCCParams | dict[str, float] | None
     noise_scale: float
     switch_prob: float
+    fault_leave_prob: float | None
     tracking_rate: float
     fault_initial_std: float
     alarm_level: float
@@ -126,6 +129,13 @@ class MMAE(Diagnoser):
             {k: v for k, v in self.get_params().items() if k in self.CONSTRAINTS}, self.CONSTRAINTS
         )
         self.model_params()
+
+    def leave_value(self) -> float:
+        """The probability per sample that a fault switches to each other hypothesis
+        (``fault_leave_prob``, or ``switch_prob / H`` like any other switch when it is None)."""
+        if self.fault_leave_prob is not None:
+            return float(self.fault_leave_prob)
+        return self.switch_prob / len(self.hypotheses_)
 
     def model_params(self) -> FCCParams:
         """The :class:`~fcc_env.FCCParams` the filters use (``params`` resolved)."""
@@ -229,7 +239,16 @@ class MMAE(Diagnoser):
         T, H = loglik.shape
         post, win = np.empty((T, H)), np.empty(T)
         self._pos = mmae_run(
-            loglik, nis, self._p, self._ring, self._best, self._pos, self.switch_prob, post, win
+            loglik,
+            nis,
+            self._p,
+            self._ring,
+            self._best,
+            self._pos,
+            self.switch_prob,
+            self.leave_value(),
+            post,
+            win,
         )
         p_fault = 1.0 - post[:, 0]
         warm = np.isnan(win)

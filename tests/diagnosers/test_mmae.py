@@ -69,10 +69,10 @@ def test_posterior_and_window_nis_against_direct_formulas() -> None:
     nis = rng.chisquare(8, (T, H))
     p = np.array([0.7, 0.1, 0.1, 0.1])
     post, win = np.empty((T, H)), np.empty(T)
-    pos = mmae_run(loglik, nis, p.copy(), np.zeros((W, H)), np.zeros(W), 0, eps, post, win)
+    pos = mmae_run(loglik, nis, p.copy(), np.zeros((W, H)), np.zeros(W), 0, eps, eps / H, post, win)
     assert pos == T
     q = p.copy()
-    for k in range(T):
+    for k in range(T):  # leave = eps / H: the plain switching term
         logq = np.log((1 - eps) * q + eps / H) + loglik[k]
         q = np.exp(logq - logq.max())
         q /= q.sum()
@@ -85,10 +85,32 @@ def test_posterior_and_window_nis_against_direct_formulas() -> None:
     # two calls carry the state: the same as one
     post2, win2 = np.empty((T, H)), np.empty(T)
     p2, ring, best = p.copy(), np.zeros((W, H)), np.zeros(W)
-    pos = mmae_run(loglik[:25], nis[:25], p2, ring, best, 0, eps, post2[:25], win2[:25])
-    mmae_run(loglik[25:], nis[25:], p2, ring, best, pos, eps, post2[25:], win2[25:])
+    pos = mmae_run(loglik[:25], nis[:25], p2, ring, best, 0, eps, eps / H, post2[:25], win2[:25])
+    mmae_run(loglik[25:], nis[25:], p2, ring, best, pos, eps, eps / H, post2[25:], win2[25:])
     np.testing.assert_array_equal(post2, post)
     np.testing.assert_array_equal(win2, win)
+
+
+def test_posterior_with_a_slower_fault_leave_against_the_transition_matrix() -> None:
+    """A fault's switch to another hypothesis (``leave``) apart from nominal's: the
+    recursion equals the prior through the Markov chain's transition matrix, then Bayes."""
+    rng = np.random.default_rng(1)
+    T, H, W, eps, leave = 40, 4, 5, 0.03, 1e-4
+    loglik = rng.normal(-10.0, 3.0, (T, H))
+    A = np.full((H, H), leave)  # A[i, j]: from i to j
+    A[0, :] = eps / H
+    np.fill_diagonal(A, 0.0)
+    np.fill_diagonal(A, 1.0 - A.sum(axis=1))
+    p = np.array([0.6, 0.2, 0.1, 0.1])
+    post, win = np.empty((T, H)), np.empty(T)
+    mmae_run(
+        loglik, np.ones((T, H)), p.copy(), np.zeros((W, H)), np.zeros(W), 0, eps, leave, post, win
+    )
+    q = p.copy()
+    for k in range(T):
+        q = (q @ A) * np.exp(loglik[k] - loglik[k].max())
+        q /= q.sum()
+        np.testing.assert_allclose(post[k], q, rtol=1e-12)
 
 
 def test_mmae_isolates_a_fault_and_stays_quiet_before_it(
