@@ -72,31 +72,12 @@ def bank_run(
         n = Ms[h].shape[0]
         ws = workspace(n, ny, n_scratch)
         post, post_sd = np.empty(n), np.empty(n)
-        model, m, P, q, w = models[h], Ms[h], Ps[h], qs[h], wts[h]
+        fixed = (qs[h], r_abs, r_rel, gate_idx, gate_lin, gate, wts[h])
         Ls = ws[5]
         for k in range(Y.shape[0]):
             white = WHITE[k, h]
-            status = fcc_sample(
-                model,
-                m,
-                P,
-                Y[k],
-                q,
-                r_abs,
-                r_rel,
-                gate_idx,
-                gate_lin,
-                gate,
-                w,
-                ws,
-                innov,
-                stdz,
-                white,
-                S,
-                post,
-                post_sd,
-                jumps,
-            )
+            out = (innov, stdz, white, S, post, post_sd, jumps)
+            status = fcc_sample(models[h], Ms[h], Ps[h], Y[k], fixed, ws, out)
             if status & 1:  # skipped: no evidence either way
                 LOGLIK[k, h] = 0.0
                 continue
