@@ -8,7 +8,8 @@ the study's episodes (every scenario; the oracle always, last) on validation see
 to JSON; ``summary S1.json S2.json ...`` pools chunks and prints the loss against the oracle,
 overall and per scenario (the record: ``lab/posterior_supervisor.md``). ``--policies`` may name
 ``iso`` for the supervisor on ``lrgf-iso`` around ``lrgf-glr-closed`` (trained as the command
-trains it); ``--mmae '{"tracking_rate": 0.01}'`` gives ``posterior:N``'s mmae hyperparameters.
+trains it); ``posterior:N:M``: trusted after N samples, margin M USD/h (default 20);
+``--mmae '{"tracking_rate": 0.01}'`` gives ``posterior:N``'s mmae hyperparameters.
 """
 
 from __future__ import annotations
@@ -42,7 +43,12 @@ def main(argv: list[str]) -> None:
         policies = [
             make_policy("supervisor", name="lrgf-iso", params={"detector_name": "lrgf-glr-closed"})
             if n == "iso"
-            else make_policy("posterior", trust_after=int(n.split(":")[1]), params=mmae)
+            else make_policy(
+                "posterior",
+                trust_after=int(n.split(":")[1]),
+                params=mmae,
+                margin_usd_per_h=float([*n.split(":"), "20"][2]),
+            )
             if n.startswith("posterior:")
             else make_policy(n)
             for n in names

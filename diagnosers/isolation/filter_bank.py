@@ -88,7 +88,30 @@ def bank_run(
 
 
 @njit_kernel
-def mmae_run(LOGLIK, NIS, p, ring, best, pos, eps, leave, POST, WIN) -> int:
+def _mmae_step(loglik, p, jump, leave, out) -> None:
+    """One sample's switching prior and Bayes update of ``p`` (in place; copied to ``out``)."""
+    H = p.shape[0]
+    top = -np.inf
+    for h in range(H):
+        top = max(top, loglik[h])
+    faulty = 0.0
+    for h in range(1, H):
+        faulty += p[h]
+    p0 = p[0]
+    p[0] = p0 * (1.0 - jump * (H - 1)) + leave * faulty
+    for h in range(1, H):
+        p[h] = p[h] * (1.0 - leave * (H - 1)) + jump * p0 + leave * (faulty - p[h])
+    total = 0.0
+    for h in range(H):
+        p[h] *= math.exp(loglik[h] - top)
+        total += p[h]
+    for h in range(H):
+        p[h] /= total
+        out[h] = p[h]
+
+
+@njit_kernel
+def mmae_run(LOGLIK, NIS, p, ring, best, pos, eps, leave, hold, POST, WIN) -> int:
     """The posterior and the persistent window NIS of samples ``LOGLIK``/``NIS`` (T, H).
 
     The switching prior (column 0 nominal): from nominal to each fault ``eps / H``; from a fault
@@ -96,6 +119,9 @@ def mmae_run(LOGLIK, NIS, p, ring, best, pos, eps, leave, POST, WIN) -> int:
     switching term; smaller: the evidence a fault gathered is not forgotten when the filters
     stop telling the hypotheses apart, see :class:`~diagnosers.isolation.mmae.MMAE`'s
     ``fault_leave_prob``).
+
+    The posterior holds (``POST`` repeats ``p``) while fewer than ``hold`` samples have been
+    seen: the filters' start-up, whose innovations are no evidence for a hypothesis.
 
     State carried between calls (in place): ``p`` (H,) the posterior, ``ring`` (W, H) the last W
     samples' NIS, ``best`` (W,) the last W window values; ``pos`` the samples seen so far
@@ -109,23 +135,11 @@ def mmae_run(LOGLIK, NIS, p, ring, best, pos, eps, leave, POST, WIN) -> int:
     acc = np.empty(H)
     jump = eps / H  # from nominal to each fault
     for k in range(LOGLIK.shape[0]):
-        top = -np.inf
-        for h in range(H):
-            top = max(top, LOGLIK[k, h])
-        faulty = 0.0
-        for h in range(1, H):
-            faulty += p[h]
-        p0 = p[0]
-        p[0] = p0 * (1.0 - jump * (H - 1)) + leave * faulty
-        for h in range(1, H):
-            p[h] = p[h] * (1.0 - leave * (H - 1)) + jump * p0 + leave * (faulty - p[h])
-        total = 0.0
-        for h in range(H):
-            p[h] *= math.exp(LOGLIK[k, h] - top)
-            total += p[h]
-        for h in range(H):
-            p[h] /= total
-            POST[k, h] = p[h]
+        if pos < hold:
+            for h in range(H):
+                POST[k, h] = p[h]
+        else:
+            _mmae_step(LOGLIK[k], p, jump, leave, POST[k])
         slot = pos % W
         for h in range(H):
             ring[slot, h] = NIS[k, h]
@@ -218,6 +232,25 @@ class FilterBank:
         """Every filter's initial prior: ``(means, covariances)``, one entry per hypothesis."""
         pairs = [e.initial_prior(1) for e in self.estimators]
         return tuple(m[0].copy() for m, _ in pairs), tuple(P[0].copy() for _, P in pairs)
+
+    def restart_faults(self, Ms: tuple[np.ndarray, ...], Ps: tuple[np.ndarray, ...]) -> None:
+        """Every fault filter from the healthy filter's estimate (in place): its shared states'
+        mean and covariance, and its parameters back at their prior (the given values, the
+        prior covariance, no correlation with the states).
+
+        Why: the filters start at the steady state of the nominal inputs, and a plant run at
+        other set points (the closed-loop study's) is far from it; over that start-up a fault
+        filter's free parameter absorbs the offset (f1's ρ_b did, for 400-1600 samples), and a
+        posterior that forgets slowly keeps that belief. Restarting the fault filters from the
+        healthy one once it has converged leaves them only the innovations after it."""
+        n0 = Ms[0].shape[0]
+        for h in range(1, len(Ms)):
+            m0, P0 = self.estimators[h].initial_prior(1)
+            Ms[h][:n0] = Ms[0]
+            Ms[h][n0:] = m0[0, n0:]
+            Ps[h][...] = 0.0
+            Ps[h][:n0, :n0] = Ps[0]
+            Ps[h][n0:, n0:] = P0[0, n0:, n0:]
 
     def run(
         self, Ms: tuple[np.ndarray, ...], Ps: tuple[np.ndarray, ...], Y: np.ndarray
