@@ -8,7 +8,8 @@ the study's episodes (every scenario; the oracle always, last) on validation see
 to JSON; ``summary S1.json S2.json ...`` pools chunks and prints the loss against the oracle,
 overall and per scenario (the record: ``lab/posterior_supervisor.md``). ``--policies`` may name
 ``iso`` for the supervisor on ``lrgf-iso`` around ``lrgf-glr-closed`` (trained as the command
-trains it); ``posterior:N:M``: trusted after N samples, margin M USD/h (default 20);
+trains it); ``posterior:N:M:B``: trusted after N samples, margin M USD/h (default 20), margin B
+back to the healthy set points (default: none);
 ``--mmae '{"tracking_rate": 0.01}'`` gives ``posterior:N``'s mmae hyperparameters.
 """
 
@@ -48,6 +49,7 @@ def main(argv: list[str]) -> None:
                 trust_after=int(n.split(":")[1]),
                 params=mmae,
                 margin_usd_per_h=float([*n.split(":"), "20"][2]),
+                home_margin_usd_per_h=(float(n.split(":")[3]) if len(n.split(":")) > 3 else None),
             )
             if n.startswith("posterior:")
             else make_policy(n)

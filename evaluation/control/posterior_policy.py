@@ -19,6 +19,10 @@ the faults' set points, and a confident one the fault's own.
 A switch needs the expected gain to exceed ``margin_usd_per_h`` (hysteresis): with a
 posterior that wavers between two hypotheses whose best choices differ, the set points would
 otherwise move with the noise, and each move costs a transient the table does not count.
+A move back to the healthy set points may have its own, smaller margin
+(``home_margin_usd_per_h``): the set points a fault calls for cost the other plants only a
+few USD/h (f1's about 3), less than the margin, so without it one moment of doubt (f4's
+first samples look like f1) held f1's set points to the end of the episode.
 """
 
 from __future__ import annotations
@@ -92,15 +96,24 @@ def expected_returns(posterior: np.ndarray, table: np.ndarray) -> np.ndarray:
 
 
 def best_candidate(
-    posterior: np.ndarray, table: np.ndarray, current: int | None = None, margin: float = 0.0
+    posterior: np.ndarray,
+    table: np.ndarray,
+    current: int | None = None,
+    margin: float = 0.0,
+    home: int | None = None,
+    home_margin: float | None = None,
 ) -> int:
     """The column of ``table`` with the highest expected return under ``posterior``; it
-    replaces ``current`` only if it earns more than ``margin`` USD/h above it."""
+    replaces ``current`` only if it earns more than ``margin`` USD/h above it. Failing that,
+    column ``home`` (the healthy set points) replaces ``current`` if it earns more than
+    ``home_margin`` above it (None: no such move)."""
     e = expected_returns(posterior, table)
     best = int(np.argmax(e))
-    if current is not None and e[best] - e[current] <= margin:
-        return current
-    return best
+    if current is None or e[best] - e[current] > margin:
+        return best
+    if home is not None and home_margin is not None and e[home] - e[current] > home_margin:
+        return home
+    return current
 
 
 @dataclass
@@ -124,6 +137,7 @@ class PosteriorSupervisor:
     table: Mapping[str, Mapping[str, float]]
     candidates: Mapping[str, np.ndarray]
     margin_usd_per_h: float = 20.0
+    home_margin_usd_per_h: float | None = None
     arm_after: int = ARM_AFTER
     trust_after: int = 0
     history: list[SupervisorEvent] = field(init=False, default_factory=list)
@@ -167,7 +181,14 @@ class PosteriorSupervisor:
         post = np.asarray(decision.posterior, dtype=np.float64)
         if self._k <= self.arm_after + self.trust_after:
             post = np.eye(len(post))[0]  # the filters' start-up: the prior, healthy
-        self._current = best_candidate(post, self._R, self._current, self.margin_usd_per_h)
+        self._current = best_candidate(
+            post,
+            self._R,
+            self._current,
+            self.margin_usd_per_h,
+            self._names.index("healthy"),
+            self.home_margin_usd_per_h,
+        )
         likely = str(self.diagnoser.hypotheses_[int(np.argmax(post))])
         self._record(
             SupervisorEvent(self._k, bool(decision.alarm), likely, self._names[self._current])
@@ -228,6 +249,7 @@ def posterior_supervisor(
     n_train_steps: int = 2000,
     table: Mapping[str, Mapping[str, float]] | None = None,
     margin_usd_per_h: float = 20.0,
+    home_margin_usd_per_h: float | None = None,
     params: dict[str, Any] | None = None,
     trust_after: int = 1200,
 ) -> PosteriorSupervisor:
@@ -261,5 +283,6 @@ def posterior_supervisor(
         table,
         candidate_setpoints(),
         margin_usd_per_h,
+        home_margin_usd_per_h,
         trust_after=trust_after,
     )
