@@ -14,10 +14,14 @@ posterior after sample k − 1 and ``ℓ_h`` hypothesis h's innovation log-likel
 
     p⁻ = (1 − ε) p + ε / H,        p_h ∝ p⁻_h exp(ℓ_h).
 
-The ``ε / H`` term (``switch_prob``) is the probability that the plant switches hypothesis within
-a sample; without it the posterior of a long healthy run would pin the fault hypotheses at 0 and
-never move when a fault begins (it is a floor: no hypothesis falls below about ``ε / H`` before
-its likelihood). Why not IMM: IMM mixes the filters' states at every sample, which needs a common
+(with ``leave = ε / H``; in general nominal switches to each fault with ``ε / H`` and a fault to
+each other hypothesis with ``leave``, see :func:`mmae_run`). The ``ε / H`` term
+(``switch_prob``) is the probability that the plant switches hypothesis within a sample;
+without it the posterior of a long healthy run would pin the fault hypotheses at 0 and never
+move when a fault begins (it is a floor: no hypothesis falls below about ``ε / H`` before its
+likelihood). The same floor caps every log-odds at about ``log(H / ε)``, so a posterior with
+``leave = ε / H`` forgets the evidence of a fault's onset once the filters stop telling the
+hypotheses apart; ``mmae`` makes ``leave`` far smaller. Why not IMM: IMM mixes the filters' states at every sample, which needs a common
 state; here the fault filters carry extra parameter states, and mixing the healthy filter with
 them would let a fault's parameter leak into the healthy hypothesis. The bank's filters stay
 independent, so they can run as one batched call.
