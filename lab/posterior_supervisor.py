@@ -8,7 +8,9 @@ the study's episodes (every scenario; the oracle always, last) on validation see
 to JSON; ``summary S1.json S2.json ...`` pools chunks and prints the loss against the oracle,
 overall and per scenario (the record: ``lab/posterior_supervisor.md``). ``--policies`` may name
 ``iso`` for the supervisor on ``lrgf-iso`` around ``lrgf-glr-closed`` (trained as the command
-trains it).
+trains it); ``posterior:N:M:B``: trusted after N samples, margin M USD/h (default 20), margin B
+back to the healthy set points (default: none);
+``--mmae '{"tracking_rate": 0.01}'`` gives ``posterior:N``'s mmae hyperparameters.
 """
 
 from __future__ import annotations
@@ -37,11 +39,18 @@ def main(argv: list[str]) -> None:
         seeds = [int(s) for s in argv[argv.index("--seeds") + 1].split(",")]
         names = argv[argv.index("--policies") + 1].split(",")
         out = argv[argv.index("--out") + 1]
+        mmae = json.loads(argv[argv.index("--mmae") + 1]) if "--mmae" in argv else None
         t = time.process_time()
         policies = [
             make_policy("supervisor", name="lrgf-iso", params={"detector_name": "lrgf-glr-closed"})
             if n == "iso"
-            else make_policy("posterior", trust_after=int(n.split(":")[1]))
+            else make_policy(
+                "posterior",
+                trust_after=int(n.split(":")[1]),
+                params=mmae,
+                margin_usd_per_h=float([*n.split(":"), "20"][2]),
+                home_margin_usd_per_h=(float(n.split(":")[3]) if len(n.split(":")) > 3 else None),
+            )
             if n.startswith("posterior:")
             else make_policy(n)
             for n in names

@@ -137,29 +137,16 @@ def fcc_measure(z, obs, model, x, u, p, out) -> None:
 
 
 @njit_kernel
-def fcc_sample(
-    model,
-    m,
-    P,
-    y,
-    q,
-    r_abs,
-    r_rel,
-    gate_idx,
-    gate_lin,
-    gate,
-    w,
-    ws,
-    innov,
-    stdz,
-    white,
-    S,
-    post,
-    post_sd,
-    jumps,
-) -> int:
+def fcc_sample(model, m, P, y, fixed, ws, out) -> int:
     """One sample of one episode (:mod:`diagnosers.filters.ukf_kernels`' order): ``m``, ``P``
-    go from this sample's prior to the next one's; returns the status bits."""
+    go from this sample's prior to the next one's; returns the status bits.
+
+    ``fixed``: ``(q, r_abs, r_rel, gate_idx, gate_lin, gate, w)``, what stays the same from
+    sample to sample; ``out``: ``(innov, stdz, white, S, post, post_sd, jumps)``, this
+    sample's outputs (one tuple each, so that every caller, the bank of hypotheses
+    :func:`diagnosers.isolation.filter_bank.bank_run` too, passes the same two names)."""
+    q, r_abs, r_rel, gate_idx, gate_lin, gate, w = fixed
+    innov, stdz, white, S, post, post_sd, jumps = out
     X, FX, HY = ws[1], ws[2], ws[3]
     x, u, p = work_vectors(model, ws[9])
     status = update_prepare(m, P, y, r_abs, r_rel, gate_idx, gate_lin, gate, w, ws, jumps)
@@ -206,22 +193,11 @@ def fcc_filter_batch(
     sample's innovation covariance overwrites the last (kept only for the whitening)."""
     n, ny = M.shape[1], r_abs.shape[0]
     keep_s = S.shape[1] == Y.shape[1]
+    fixed = (q, r_abs, r_rel, gate_idx, gate_lin, gate, w)
     for b in numba.prange(Y.shape[0]):
         ws = workspace(n, ny, n_scratch)
         for k in range(Y.shape[1]):
-            STATUS[b, k] = fcc_sample(
-                model,
-                M[b],
-                P[b],
-                Y[b, k],
-                q,
-                r_abs,
-                r_rel,
-                gate_idx,
-                gate_lin,
-                gate,
-                w,
-                ws,
+            out = (
                 INNOV[b, k],
                 STDZ[b, k],
                 WHITE[b, k],
@@ -230,6 +206,7 @@ def fcc_filter_batch(
                 POST_SD[b, k],
                 JUMPS[b, k],
             )
+            STATUS[b, k] = fcc_sample(model, M[b], P[b], Y[b, k], fixed, ws, out)
 
 
 @njit_kernel
@@ -259,28 +236,10 @@ def fcc_filter_streams(
     costs more than it saves: its threads' barrier, on a busy machine, milliseconds)."""
     n, ny = M.shape[1], r_abs.shape[0]
     ws = workspace(n, ny, n_scratch)
+    fixed = (q, r_abs, r_rel, gate_idx, gate_lin, gate, w)
     for b in range(Y.shape[0]):
-        STATUS[b] = fcc_sample(
-            model,
-            M[b],
-            P[b],
-            Y[b],
-            q,
-            r_abs,
-            r_rel,
-            gate_idx,
-            gate_lin,
-            gate,
-            w,
-            ws,
-            INNOV[b],
-            STDZ[b],
-            WHITE[b],
-            S[b],
-            POST[b],
-            POST_SD[b],
-            JUMPS[b],
-        )
+        out = (INNOV[b], STDZ[b], WHITE[b], S[b], POST[b], POST_SD[b], JUMPS[b])
+        STATUS[b] = fcc_sample(model, M[b], P[b], Y[b], fixed, ws, out)
 
 
 @dataclass(frozen=True)

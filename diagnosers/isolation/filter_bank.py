@@ -14,10 +14,14 @@ posterior after sample k − 1 and ``ℓ_h`` hypothesis h's innovation log-likel
 
     p⁻ = (1 − ε) p + ε / H,        p_h ∝ p⁻_h exp(ℓ_h).
 
-The ``ε / H`` term (``switch_prob``) is the probability that the plant switches hypothesis within
-a sample; without it the posterior of a long healthy run would pin the fault hypotheses at 0 and
-never move when a fault begins (it is a floor: no hypothesis falls below about ``ε / H`` before
-its likelihood). Why not IMM: IMM mixes the filters' states at every sample, which needs a common
+(with ``leave = ε / H``; in general nominal switches to each fault with ``ε / H`` and a fault to
+each other hypothesis with ``leave``, see :func:`mmae_run`). The ``ε / H`` term
+(``switch_prob``) is the probability that the plant switches hypothesis within a sample;
+without it the posterior of a long healthy run would pin the fault hypotheses at 0 and never
+move when a fault begins (it is a floor: no hypothesis falls below about ``ε / H`` before its
+likelihood). The same floor caps every log-odds at about ``log(H / ε)``, so a posterior with
+``leave = ε / H`` forgets the evidence of a fault's onset once the filters stop telling the
+hypotheses apart; ``mmae`` makes ``leave`` far smaller. Why not IMM: IMM mixes the filters' states at every sample, which needs a common
 state; here the fault filters carry extra parameter states, and mixing the healthy filter with
 them would let a fault's parameter leak into the healthy hypothesis. The bank's filters stay
 independent, so they can run as one batched call.
@@ -72,31 +76,12 @@ def bank_run(
         n = Ms[h].shape[0]
         ws = workspace(n, ny, n_scratch)
         post, post_sd = np.empty(n), np.empty(n)
-        model, m, P, q, w = models[h], Ms[h], Ps[h], qs[h], wts[h]
+        fixed = (qs[h], r_abs, r_rel, gate_idx, gate_lin, gate, wts[h])
         Ls = ws[5]
         for k in range(Y.shape[0]):
             white = WHITE[k, h]
-            status = fcc_sample(
-                model,
-                m,
-                P,
-                Y[k],
-                q,
-                r_abs,
-                r_rel,
-                gate_idx,
-                gate_lin,
-                gate,
-                w,
-                ws,
-                innov,
-                stdz,
-                white,
-                S,
-                post,
-                post_sd,
-                jumps,
-            )
+            out = (innov, stdz, white, S, post, post_sd, jumps)
+            status = fcc_sample(models[h], Ms[h], Ps[h], Y[k], fixed, ws, out)
             if status & 1:  # skipped: no evidence either way
                 LOGLIK[k, h] = 0.0
                 continue
@@ -107,8 +92,40 @@ def bank_run(
 
 
 @njit_kernel
-def mmae_run(LOGLIK, NIS, p, ring, best, pos, eps, POST, WIN) -> int:
+def _mmae_step(loglik, p, jump, leave, out) -> None:
+    """One sample's switching prior and Bayes update of ``p`` (in place; copied to ``out``)."""
+    H = p.shape[0]
+    top = -np.inf
+    for h in range(H):
+        top = max(top, loglik[h])
+    faulty = 0.0
+    for h in range(1, H):
+        faulty += p[h]
+    p0 = p[0]
+    p[0] = p0 * (1.0 - jump * (H - 1)) + leave * faulty
+    for h in range(1, H):
+        p[h] = p[h] * (1.0 - leave * (H - 1)) + jump * p0 + leave * (faulty - p[h])
+    total = 0.0
+    for h in range(H):
+        p[h] *= math.exp(loglik[h] - top)
+        total += p[h]
+    for h in range(H):
+        p[h] /= total
+        out[h] = p[h]
+
+
+@njit_kernel
+def mmae_run(LOGLIK, NIS, p, ring, best, pos, eps, leave, hold, POST, WIN) -> int:
     """The posterior and the persistent window NIS of samples ``LOGLIK``/``NIS`` (T, H).
+
+    The switching prior (column 0 nominal): from nominal to each fault ``eps / H``; from a fault
+    to each other hypothesis ``leave`` (``eps / H``: every hypothesis alike, a plain MMAE
+    switching term; smaller: the evidence a fault gathered is not forgotten when the filters
+    stop telling the hypotheses apart, see :class:`~diagnosers.isolation.mmae.MMAE`'s
+    ``fault_leave_prob``).
+
+    The posterior holds (``POST`` repeats ``p``) while fewer than ``hold`` samples have been
+    seen: the filters' start-up, whose innovations are no evidence for a hypothesis.
 
     State carried between calls (in place): ``p`` (H,) the posterior, ``ring`` (W, H) the last W
     samples' NIS, ``best`` (W,) the last W window values; ``pos`` the samples seen so far
@@ -120,17 +137,13 @@ def mmae_run(LOGLIK, NIS, p, ring, best, pos, eps, POST, WIN) -> int:
     """
     H, W = p.shape[0], ring.shape[0]
     acc = np.empty(H)
+    jump = eps / H  # from nominal to each fault
     for k in range(LOGLIK.shape[0]):
-        top = -np.inf
-        for h in range(H):
-            top = max(top, LOGLIK[k, h])
-        total = 0.0
-        for h in range(H):
-            p[h] = ((1.0 - eps) * p[h] + eps / H) * math.exp(LOGLIK[k, h] - top)
-            total += p[h]
-        for h in range(H):
-            p[h] /= total
-            POST[k, h] = p[h]
+        if pos < hold:
+            for h in range(H):
+                POST[k, h] = p[h]
+        else:
+            _mmae_step(LOGLIK[k], p, jump, leave, POST[k])
         slot = pos % W
         for h in range(H):
             ring[slot, h] = NIS[k, h]
@@ -223,6 +236,25 @@ class FilterBank:
         """Every filter's initial prior: ``(means, covariances)``, one entry per hypothesis."""
         pairs = [e.initial_prior(1) for e in self.estimators]
         return tuple(m[0].copy() for m, _ in pairs), tuple(P[0].copy() for _, P in pairs)
+
+    def restart_faults(self, Ms: tuple[np.ndarray, ...], Ps: tuple[np.ndarray, ...]) -> None:
+        """Every fault filter from the healthy filter's estimate (in place): its shared states'
+        mean and covariance, and its parameters back at their prior (the given values, the
+        prior covariance, no correlation with the states).
+
+        Why: the filters start at the steady state of the nominal inputs, and a plant run at
+        other set points (the closed-loop study's) is far from it; over that start-up a fault
+        filter's free parameter absorbs the offset (f1's ρ_b did, for 400-1600 samples), and a
+        posterior that forgets slowly keeps that belief. Restarting the fault filters from the
+        healthy one once it has converged leaves them only the innovations after it."""
+        n0 = Ms[0].shape[0]
+        for h in range(1, len(Ms)):
+            m0, P0 = self.estimators[h].initial_prior(1)
+            Ms[h][:n0] = Ms[0]
+            Ms[h][n0:] = m0[0, n0:]
+            Ps[h][...] = 0.0
+            Ps[h][:n0, :n0] = Ps[0]
+            Ps[h][n0:, n0:] = P0[0, n0:, n0:]
 
     def run(
         self, Ms: tuple[np.ndarray, ...], Ps: tuple[np.ndarray, ...], Y: np.ndarray

@@ -65,17 +65,32 @@ class MMAE(Diagnoser):
             posterior's floor, about ε/H), in (0, 0.5); default 1e-5. Larger: a faster move to
             a fault, and a posterior that believes the healthy hypothesis less.
         tracking_rate: how fast a fault filter follows its fault's size, 1 / samples, in
-            (0, 1]; default 0.02 (about 50 samples). Each fault's parameter walk is set from it
+            (0, 1]; default 0.01 (about 100 samples). Each fault's parameter walk is set from it
             in ``fit`` (:func:`~diagnosers.isolation.filter_bank.calibrate_walks`, on the first
             healthy training episode), so that every fault filter tracks as fast and pays as
             much for its freedom on healthy data. Larger: sooner, and a posterior that leans
             less on the healthy hypothesis.
+        fault_leave_prob: the probability per sample that a fault hypothesis switches to each
+            other hypothesis, nominal included, in [0, 0.5), or None for ``switch_prob / H``
+            (every switch alike, a plain MMAE); default 1e-12. Why smaller than the switches
+            out of nominal: an abrupt fault does not heal, and a few hundred samples after its
+            onset the healthy filter's input walks (R_ar, T_fp) explain a small weir fault
+            as well as the f2 filter does; with the plain term the posterior then forgot the
+            evidence of the onset within some 600 samples (its odds were capped at about
+            ``log(H / switch_prob)``) and f2 at 3 % went back to "not alarmed"
+            (``lab/mmae-lab.md``). Larger: a posterior that follows a fault that ends.
         fault_initial_std: the fault parameters' prior std, relative, in (0, 1]; default 0.01.
         alarm_level: alarm when ``1 − P(nominal)`` exceeds it, in (0, 1); default 0.9.
 
     The defaults were chosen on validation seeds 5000-5009 of the ``small`` track
     (``lab/mmae-lab.md``).
         window: samples of the window NIS, in [10, 10000]; default 100.
+        settle: samples after a ``reset`` during which the posterior holds its prior (the
+            filters converge from the nominal steady state); at its end every fault filter
+            restarts from the healthy filter's estimate
+            (:meth:`~diagnosers.isolation.filter_bank.FilterBank.restart_faults`), in
+            [0, 100000]; default 0 (no restart: a record that starts at the nominal steady
+            state, as the tracks' do). For a plant run at other set points (the control study).
         unknown_alpha: tail of the window NIS's χ²(8 · window) limit, in (0, 0.5); default 1e-4.
 
     Attributes:
@@ -94,20 +109,24 @@ class MMAE(Diagnoser):
     CONSTRAINTS: ClassVar[dict[str, Any]] = {
         "noise_scale": Real(0, 10, closed="right"),
         "switch_prob": Real(0, 0.5, closed="neither"),
+        "fault_leave_prob": (Real(0, 0.5, closed="left"), None),
         "tracking_rate": Real(0, 1, closed="right"),
         "fault_initial_std": Real(0, 1, closed="right"),
         "alarm_level": Real(0, 1, closed="neither"),
         "window": Integer(10, 10_000),
+        "settle": Integer(0, 100_000),
         "unknown_alpha": Real(0, 0.5, closed="neither"),
     }
     DEFAULTS: ClassVar[dict[str, Any]] = {
         "params": None,
         "noise_scale": 1.0,
         "switch_prob": 1e-5,
-        "tracking_rate": 0.02,
+        "fault_leave_prob": 1e-12,
+        "tracking_rate": 0.01,
         "fault_initial_std": 0.01,
         "alarm_level": 0.9,
         "window": 100,
+        "settle": 0,
         "unknown_alpha": 1e-4,
     }
     __init__ = keyword_init(DEFAULTS)
@@ -115,10 +134,12 @@ class MMAE(Diagnoser):
     params: FCCParams | dict[str, float] | None
     noise_scale: float
     switch_prob: float
+    fault_leave_prob: float | None
     tracking_rate: float
     fault_initial_std: float
     alarm_level: float
     window: int
+    settle: int
     unknown_alpha: float
 
     def _validate_params(self) -> None:
@@ -126,6 +147,13 @@ class MMAE(Diagnoser):
             {k: v for k, v in self.get_params().items() if k in self.CONSTRAINTS}, self.CONSTRAINTS
         )
         self.model_params()
+
+    def leave_value(self) -> float:
+        """The probability per sample that a fault switches to each other hypothesis
+        (``fault_leave_prob``, or ``switch_prob / H`` like any other switch when it is None)."""
+        if self.fault_leave_prob is not None:
+            return float(self.fault_leave_prob)
+        return self.switch_prob / len(self.hypotheses_)
 
     def model_params(self) -> FCCParams:
         """The :class:`~fcc_env.FCCParams` the filters use (``params`` resolved)."""
@@ -199,9 +227,25 @@ class MMAE(Diagnoser):
         self._ring = np.zeros((self.window, H))
         self._best = np.zeros(self.window)
         self._pos = 0
+        self._seen = 0
+
+    def _filter(self, Y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The bank on ``Y`` (T, channels) from its state, restarting the fault filters when
+        ``settle`` samples have been seen (the same point whether streamed or in one call)."""
+        cut = min(max(self.settle - self._seen, 0), Y.shape[0])
+        if self.settle == 0 or self._seen >= self.settle:
+            out = self.bank_.run(self._M, self._P, Y)
+        else:
+            first = self.bank_.run(self._M, self._P, Y[:cut])
+            if self._seen + cut == self.settle:
+                self.bank_.restart_faults(self._M, self._P)
+            rest = self.bank_.run(self._M, self._P, Y[cut:])
+            out = tuple(np.concatenate([a, b]) for a, b in zip(first, rest, strict=True))
+        self._seen += Y.shape[0]
+        return out[0], out[1]
 
     def _run(self, Y: np.ndarray) -> Detection:
-        white, loglik = self.bank_.run(self._M, self._P, Y)
+        white, loglik = self._filter(Y)
         return self.decide(loglik, np.sum(white * white, axis=2), white[:, 0, :])
 
     def decide(self, loglik: np.ndarray, nis: np.ndarray, residual: np.ndarray) -> Detection:
@@ -229,7 +273,17 @@ class MMAE(Diagnoser):
         T, H = loglik.shape
         post, win = np.empty((T, H)), np.empty(T)
         self._pos = mmae_run(
-            loglik, nis, self._p, self._ring, self._best, self._pos, self.switch_prob, post, win
+            loglik,
+            nis,
+            self._p,
+            self._ring,
+            self._best,
+            self._pos,
+            self.switch_prob,
+            self.leave_value(),
+            self.settle,
+            post,
+            win,
         )
         p_fault = 1.0 - post[:, 0]
         warm = np.isnan(win)
@@ -246,7 +300,7 @@ class MMAE(Diagnoser):
     def _update(self, y: np.ndarray) -> Decision:
         # one sample without a whole Detection around it: its checks cost as much as the
         # bank's Python side (bench.bank_speed); the same arrays as decide's
-        white, loglik = self.bank_.run(self._M, self._P, y[None, :])
+        white, loglik = self._filter(y[None, :])
         post, signal, upper, alarm, diagnosis = self._decide_arrays(
             loglik, np.sum(white * white, axis=2)
         )

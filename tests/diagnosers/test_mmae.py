@@ -26,8 +26,7 @@ def fault_episode() -> Episode:
     return Episode.from_batch(fcc_env.simulate_episodes([5001], 2200, fault=spec))[0]
 
 
-@pytest.fixture(scope="module")
-def fitted() -> diagnosers.Diagnoser:
+def _tiny_training() -> list[Episode]:
     """mmae learns nothing but its classes from data: tiny labelled episodes do."""
     healthy = Episode.from_batch(fcc_env.simulate_episodes([1000], 600))
     faulty = [
@@ -36,7 +35,12 @@ def fitted() -> diagnosers.Diagnoser:
         )[0]
         for f in fcc_env.PAPER_FAULTS
     ]
-    return diagnosers.make("mmae").fit(healthy + faulty)
+    return healthy + faulty
+
+
+@pytest.fixture(scope="module")
+def fitted() -> diagnosers.Diagnoser:
+    return diagnosers.make("mmae").fit(_tiny_training())
 
 
 def test_bank_equals_its_filters_and_scipy_density() -> None:
@@ -69,10 +73,12 @@ def test_posterior_and_window_nis_against_direct_formulas() -> None:
     nis = rng.chisquare(8, (T, H))
     p = np.array([0.7, 0.1, 0.1, 0.1])
     post, win = np.empty((T, H)), np.empty(T)
-    pos = mmae_run(loglik, nis, p.copy(), np.zeros((W, H)), np.zeros(W), 0, eps, post, win)
+    pos = mmae_run(
+        loglik, nis, p.copy(), np.zeros((W, H)), np.zeros(W), 0, eps, eps / H, 0, post, win
+    )
     assert pos == T
     q = p.copy()
-    for k in range(T):
+    for k in range(T):  # leave = eps / H: the plain switching term
         logq = np.log((1 - eps) * q + eps / H) + loglik[k]
         q = np.exp(logq - logq.max())
         q /= q.sum()
@@ -85,10 +91,34 @@ def test_posterior_and_window_nis_against_direct_formulas() -> None:
     # two calls carry the state: the same as one
     post2, win2 = np.empty((T, H)), np.empty(T)
     p2, ring, best = p.copy(), np.zeros((W, H)), np.zeros(W)
-    pos = mmae_run(loglik[:25], nis[:25], p2, ring, best, 0, eps, post2[:25], win2[:25])
-    mmae_run(loglik[25:], nis[25:], p2, ring, best, pos, eps, post2[25:], win2[25:])
+    pos = mmae_run(loglik[:25], nis[:25], p2, ring, best, 0, eps, eps / H, 0, post2[:25], win2[:25])
+    mmae_run(loglik[25:], nis[25:], p2, ring, best, pos, eps, eps / H, 0, post2[25:], win2[25:])
     np.testing.assert_array_equal(post2, post)
     np.testing.assert_array_equal(win2, win)
+
+
+@pytest.mark.parametrize("hold", [0, 6])
+def test_posterior_with_a_slower_fault_leave_against_the_transition_matrix(hold: int) -> None:
+    """A fault's switch to another hypothesis (``leave``) apart from nominal's: the
+    recursion equals the prior through the Markov chain's transition matrix, then Bayes;
+    for the first ``hold`` samples the posterior is the prior, unchanged."""
+    rng = np.random.default_rng(1)
+    T, H, W, eps, leave = 40, 4, 5, 0.03, 1e-4
+    loglik = rng.normal(-10.0, 3.0, (T, H))
+    A = np.full((H, H), leave)  # A[i, j]: from i to j
+    A[0, :] = eps / H
+    np.fill_diagonal(A, 0.0)
+    np.fill_diagonal(A, 1.0 - A.sum(axis=1))
+    p = np.array([0.6, 0.2, 0.1, 0.1])
+    post, win = np.empty((T, H)), np.empty(T)
+    ring, best = np.zeros((W, H)), np.zeros(W)
+    mmae_run(loglik, np.ones((T, H)), p.copy(), ring, best, 0, eps, leave, hold, post, win)
+    q = p.copy()
+    for k in range(T):
+        if k >= hold:
+            q = (q @ A) * np.exp(loglik[k] - loglik[k].max())
+            q /= q.sum()
+        np.testing.assert_allclose(post[k], q, rtol=1e-12)
 
 
 def test_mmae_isolates_a_fault_and_stays_quiet_before_it(
@@ -147,3 +177,29 @@ def test_params_and_their_errors(fitted: diagnosers.Diagnoser, tmp_path) -> None
         obj.save(tmp_path / "m")
     for est in obj.bank_.estimators:  # every filter runs on the given parameters
         np.testing.assert_array_equal(est.filter_model.model[2], p.as_array())
+
+
+def test_settle_restarts_the_fault_filters_alike_streamed_or_batch() -> None:
+    """``settle``: the posterior holds its prior, then every fault filter restarts from the
+    healthy filter's estimate; a stream reaches that point sample by sample as one call does."""
+    m = diagnosers.make("mmae", settle=40).fit(_tiny_training())
+    ep = Episode.from_batch(fcc_env.simulate_episodes([5002], 120))[0]
+    y = ep.y
+    batch = m.detect(ep)
+    assert batch.posterior is not None
+    np.testing.assert_array_equal(batch.posterior[:40], np.tile(batch.posterior[0], (40, 1)))
+    m.reset()
+    streamed = np.array([m.update(y[k]).posterior for k in range(len(y))])
+    np.testing.assert_array_equal(streamed, batch.posterior)
+    # at the restart each fault filter takes the healthy filter's states, its parameter at prior
+    bank = m.bank_
+    Ms, Ps = bank.start()
+    bank.run(Ms, Ps, y[:40])
+    bank.restart_faults(Ms, Ps)
+    n0 = Ms[0].shape[0]
+    for h in range(1, len(Ms)):
+        np.testing.assert_array_equal(Ms[h][:n0], Ms[0])
+        np.testing.assert_array_equal(Ps[h][:n0, :n0], Ps[0])
+        m0, P0 = bank.estimators[h].initial_prior(1)
+        np.testing.assert_array_equal(Ps[h][n0:, n0:], P0[0, n0:, n0:])
+        assert not Ps[h][:n0, n0:].any()

@@ -44,6 +44,22 @@ def test_a_switch_needs_more_than_the_margin():
     assert best_candidate(p, R, current=2, margin=9.9) == 0
 
 
+def test_a_move_home_has_its_own_margin():
+    # (0.85, 0.15): 85, 15, 80. From B, A (the best, home) gains 70: at margin 75 a move
+    # only by the home margin
+    p = np.array([0.85, 0.15])
+    assert best_candidate(p, R, current=1, margin=75.0) == 1
+    assert best_candidate(p, R, current=1, margin=75.0, home=0, home_margin=69.9) == 0
+    assert best_candidate(p, R, current=1, margin=75.0, home=0, home_margin=70.0) == 1
+    # the home move when the best is another column: (0.9, 0.1) gives 81, 10, 85.5; from B,
+    # C gains 75.5 (a move at margin 75, blocked at 90); home A gains 71: taken at margin 5
+    p = np.array([0.9, 0.1])
+    R2 = np.array([[90.0, 0.0, 95.0], [0.0, 100.0, 0.0]])
+    assert best_candidate(p, R2, current=1, margin=75.0) == 2
+    assert best_candidate(p, R2, current=1, margin=90.0, home=0, home_margin=5.0) == 0
+    assert best_candidate(p, R, current=0, margin=75.0, home=0, home_margin=0.0) == 0
+
+
 @pytest.mark.parametrize("p", [np.array([0.5]), np.array([-0.1, 1.1]), np.zeros(2)])
 def test_a_bad_posterior_is_refused(p):
     with pytest.raises(ValueError, match="posterior"):
