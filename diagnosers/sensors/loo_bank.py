@@ -63,27 +63,9 @@ def loo_bank_run(
     k2 = LEAVE_OUT_FACTOR * LEAVE_OUT_FACTOR
     for k in range(Y.shape[0]):
         for h in range(H):
-            status = fcc_sample(
-                model,
-                Ms[h],
-                Ps[h],
-                Y[k],
-                q,
-                R_abs[h],
-                R_rel[h],
-                gate_idx,
-                gate_lin,
-                gate,
-                w,
-                ws,
-                innov,
-                stdz,
-                WHITE[k, h],
-                S,
-                post,
-                post_sd,
-                jumps,
-            )
+            fixed = (q, R_abs[h], R_rel[h], gate_idx, gate_lin, gate, w)
+            out = (innov, stdz, WHITE[k, h], S, post, post_sd, jumps)
+            status = fcc_sample(model, Ms[h], Ps[h], Y[k], fixed, ws, out)
             if h == 0:
                 continue
             c = h - 1
