@@ -258,12 +258,18 @@ _SHAPE_NAMES = {"center": "centre", "scale": "scale", "lag_s": "time constant"}
 def shape_slots(form: FormCandidate) -> list[tuple[int, int, str]]:
     """The shape parameters of ``form``: (term, factor, ``Factor`` field) of every centre of a
     nonlinear factor or of a product's linear factor, every scale of a tanh or exp, and every
-    lag's time constant. A form's coefficients do not reach these (they are nonlinear)."""
+    lag's time constant; and, in a form without a constant term, the centre of its first linear
+    term (the form's offset: without it, a saturation's centre would have to stand in for the
+    offset). A form's coefficients do not reach these (they are nonlinear in them)."""
     out: list[tuple[int, int, str]] = []
+    # without a constant term, the first linear term's centre is the form's offset
+    offset = not any(not t.factors for t in form.terms)
     for i, t in enumerate(form.terms):
         for j, f in enumerate(t.factors):
-            if f.fn in _CENTERED or (f.fn == "lin" and len(t.factors) > 1):
+            lin_offset = offset and f.fn == "lin" and len(t.factors) == 1
+            if f.fn in _CENTERED or (f.fn == "lin" and len(t.factors) > 1) or lin_offset:
                 out.append((i, j, "center"))
+                offset = offset and not lin_offset
             if f.fn in ("tanh", "exp"):
                 out.append((i, j, "scale"))
             if f.lag_s > 0:
