@@ -123,11 +123,11 @@ NEW = [
 ]
 
 
-def run_effect(eff, seed: int) -> dict:
+def run_effect(eff, seed: int, forms: str = "auto") -> dict:
     data = d.from_batch(fcc_env.simulate_episodes([seed], N, plant_effects=[eff]))
     floor = d.heldout_rmse(d.from_batch(fcc_env.simulate_episodes([seed], N)))
     t0 = time.process_time()
-    rep = d.discover(data, max_effects=3, plots=False).to_json()
+    rep = d.discover(data, max_effects=3, forms=forms, plots=False).to_json()
     cpu = time.process_time() - t0
     gap = {c: rep["rmse_before"][c] - floor[c] for c in floor}
     ch = max(gap, key=gap.get)
@@ -155,6 +155,7 @@ def main() -> None:
     ap.add_argument("which", choices=["dev", "val", "new", "clean", "timing"])
     ap.add_argument("--seeds", default=None)
     ap.add_argument("--only", default=None, help="indices of the set's effects, e.g. 0,2")
+    ap.add_argument("--forms", default="auto", choices=["auto", "always"])
     a = ap.parse_args()
     if a.which in ("dev", "val", "new"):
         effects = {"dev": DEV, "val": VAL, "new": NEW}[a.which]
@@ -163,7 +164,7 @@ def main() -> None:
         seeds = [int(s) for s in (a.seeds or ("1000" if a.which == "dev" else "5000")).split(",")]
         for seed in seeds:
             for eff in effects:
-                print(json.dumps(run_effect(eff, seed), ensure_ascii=False), flush=True)
+                print(json.dumps(run_effect(eff, seed, a.forms), ensure_ascii=False), flush=True)
     elif a.which == "clean":
         seeds = [int(s) for s in (a.seeds or "1000,1001,1002,1003,1004").split(",")]
         for seed in seeds:
