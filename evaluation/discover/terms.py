@@ -98,7 +98,7 @@ class Factor:
 
     def text(self) -> str:
         """The factor in natural units, without its scale where the scale is a pure factor."""
-        z = self.signal if self.lag_s == 0 else f"lag{self.lag_s:g}s({self.signal})"
+        z = self.signal if self.lag_s == 0 else f"lag{round(self.lag_s, 1):g}s({self.signal})"
         dz = z if self.center == 0 else f"({z} − {_num(self.center)})"
         if self.fn in _POWER:
             p = _POWER[self.fn]
