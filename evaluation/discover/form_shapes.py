@@ -85,14 +85,14 @@ def shape_parameters(form: FormCandidate) -> tuple[Shape, ...]:
 def with_shapes(
     form: FormCandidate, shapes: Sequence[Shape], u: np.ndarray, form_id: str | None = None
 ) -> FormCandidate:
-    """``form`` with its shape parameters at ``u``. ``form_id`` None: an id naming the exact
-    values (model caches key on ids, and the readable id rounds the values)."""
+    """``form`` with its shape parameters at ``u``. ``form_id`` None: an id naming every exact
+    shape value (model caches key on ids, and the readable id rounds the values)."""
     facs = [list(t.factors) for t in form.terms]
     for s, v in zip(shapes, u, strict=True):
         facs[s.term][s.factor] = dataclasses.replace(facs[s.term][s.factor], **{s.kind: s.value(v)})
     terms = tuple(Term(tuple(f)) for f in facs)
     if form_id is None:
-        exact = ";".join(repr(float(v)) for v in u)
+        exact = ";".join(f"{f.center!r},{f.scale!r},{f.lag_s!r}" for t in terms for f in t.factors)
         form_id = f"{FormCandidate(form.target, terms, form.params).id}|{exact}"
     return FormCandidate(form.target, terms, form.params, form_id)
 
