@@ -123,11 +123,11 @@ NEW = [
 ]
 
 
-def run_effect(eff, seed: int, forms: str = "auto") -> dict:
+def run_effect(eff, seed: int, forms: str = "auto", search=None) -> dict:
     data = d.from_batch(fcc_env.simulate_episodes([seed], N, plant_effects=[eff]))
     floor = d.heldout_rmse(d.from_batch(fcc_env.simulate_episodes([seed], N)))
     t0 = time.process_time()
-    rep = d.discover(data, max_effects=3, forms=forms, plots=False).to_json()
+    rep = d.discover(data, max_effects=3, forms=forms, form_search=search, plots=False).to_json()
     cpu = time.process_time() - t0
     gap = {c: rep["rmse_before"][c] - floor[c] for c in floor}
     ch = max(gap, key=gap.get)
@@ -156,6 +156,8 @@ def main() -> None:
     ap.add_argument("--seeds", default=None)
     ap.add_argument("--only", default=None, help="indices of the set's effects, e.g. 0,2")
     ap.add_argument("--forms", default="auto", choices=["auto", "always"])
+    ap.add_argument("--exp", action="store_true", help="exp factors in the library too")
+    ap.add_argument("--fixed-shapes", action="store_true", help="FormSearch(fit_shapes=False)")
     a = ap.parse_args()
     if a.which in ("dev", "val", "new"):
         effects = {"dev": DEV, "val": VAL, "new": NEW}[a.which]
@@ -164,7 +166,12 @@ def main() -> None:
         seeds = [int(s) for s in (a.seeds or ("1000" if a.which == "dev" else "5000")).split(",")]
         for seed in seeds:
             for eff in effects:
-                print(json.dumps(run_effect(eff, seed, a.forms), ensure_ascii=False), flush=True)
+                search = d.FormSearch(
+                    library=d.TermLibrary(functions=("lin", "sq", "tanh", *("exp",) * a.exp)),
+                    fit_shapes=not a.fixed_shapes,
+                )
+                out = run_effect(eff, seed, a.forms, search)
+                print(json.dumps(out, ensure_ascii=False), flush=True)
     elif a.which == "clean":
         seeds = [int(s) for s in (a.seeds or "1000,1001,1002,1003,1004").split(",")]
         for seed in seeds:
