@@ -281,7 +281,10 @@ def equation(form: FormCandidate, theta: Sequence[float]) -> dict[str, object]:
     """The fitted form as text and parts: ``"dT_rg2/dt [°C/s] += −1.2e-05·(T_rg2 − 25.02)"``.
 
     Coefficients are given per natural unit of their term (``θ_k / scale^p``); a constant and a
-    linear term of the same signal are merged into ``a·(z − z₀)``.
+    linear term of the same signal are merged into ``a·(z − z₀)``. ``shapes`` lists the value
+    and unit of every shape parameter (:func:`shape_slots`): fitted where the search kept its
+    shape fit, else as the library built it (a signal's training mean and sd, a lag's time
+    constant).
     """
     th = np.asarray(theta, float)
     coef = [float(c / t.natural_scale()) for c, t in zip(th, form.terms, strict=True)]
