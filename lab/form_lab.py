@@ -5,6 +5,8 @@
 * ``dev``: effects used while building the search (seeds 1000+);
 * ``val``: the four held-out effects of tests/evaluation/discover/test_discover_forms.py
   (seeds 5000+), run once at the end;
+* ``new``: four more effects outside the library, built to check generality (seeds 5000+), never
+  tuned on;
 * ``clean``: clean data with ``forms="always"`` (the search forced to run): nothing may be proposed;
 * ``timing``: the loop on a 4-episode dataset, CPU time (the machine is shared: wall time is not
   a measure here).
@@ -83,11 +85,49 @@ VAL = [
 ]
 
 
-def run_effect(eff, seed: int) -> dict:
+class LaggedReading:
+    """A channel read with another signal's first-order lag mixed in (a measurement hook with its
+    own filter state, reset at t = 0): y[j] += g·(lag_tau(y[src]) − c)."""
+
+    def __init__(self, name, channel, source, gain, tau_s, c, dt=10.0):
+        self.name, self.g, self.c = name, gain, c
+        self.j = fcc_env.MEASUREMENT_NAMES.index(channel)
+        self.src = fcc_env.MEASUREMENT_NAMES.index(source)
+        self.a = float(np.exp(-dt / tau_s))
+        self.state = None
+
+    def measure(self, t, y):
+        out = np.array(y, dtype=float, copy=True)
+        v = out[..., self.src]
+        self.state = (
+            v.copy() if t == 0 or self.state is None else self.a * self.state + (1 - self.a) * v
+        )
+        out[..., self.j] += self.g * (self.state - self.c)
+        return out
+
+
+#: Effects built for checking generality (issue 46, forms2): nothing was tuned on them.
+NEW = [
+    Saturation("saturation: T_dg read as 712 + 5·tanh((T_dg − 712)/5)", "T_dg", 712.0, 5.0),
+    StateTerm(
+        "exponential loss: dT_rg2/dt −= 2e-3·exp((T_rg2 − 716)/12)",
+        lambda x, u: (7, -2e-3 * np.exp((x[..., 7] - 716.0) / 12.0)),
+    ),
+    LaggedReading(
+        "lagged reading: T_rx += 0.6·(lag900s(T_ar) − 198)", "T_rx", "T_ar", 0.6, 900.0, 198.0
+    ),
+    StateTerm(
+        "product: dT_d1/dt += 3e-5·(T_rg1 − 680)·(T_fp − 230)",
+        lambda x, u: (9, 3e-5 * (x[..., 4] - 680.0) * (u[..., 3] - 230.0)),
+    ),
+]
+
+
+def run_effect(eff, seed: int, forms: str = "auto", search=None) -> dict:
     data = d.from_batch(fcc_env.simulate_episodes([seed], N, plant_effects=[eff]))
     floor = d.heldout_rmse(d.from_batch(fcc_env.simulate_episodes([seed], N)))
     t0 = time.process_time()
-    rep = d.discover(data, max_effects=3, plots=False).to_json()
+    rep = d.discover(data, max_effects=3, forms=forms, form_search=search, plots=False).to_json()
     cpu = time.process_time() - t0
     gap = {c: rep["rmse_before"][c] - floor[c] for c in floor}
     ch = max(gap, key=gap.get)
@@ -103,6 +143,7 @@ def run_effect(eff, seed: int) -> dict:
         "after": round(rep["rmse_after"][ch], 3),
         "ratio_to_floor": round(rep["rmse_after"][ch] / floor[ch], 3),
         "effects": [e.get("equation", {}).get("text", e["id"]) for e in rep["effects"]],
+        "shapes": [e["equation"]["shapes"] for e in forms],
         "library_tried_first": [r["accepted"] for r in rep["rounds"] if r.get("kind") != "form"],
         "ok": ok,
         "cpu_s": round(cpu, 1),
@@ -111,15 +152,26 @@ def run_effect(eff, seed: int) -> dict:
 
 def main() -> None:
     ap = argparse.ArgumentParser()
-    ap.add_argument("which", choices=["dev", "val", "clean", "timing"])
+    ap.add_argument("which", choices=["dev", "val", "new", "clean", "timing"])
     ap.add_argument("--seeds", default=None)
+    ap.add_argument("--only", default=None, help="indices of the set's effects, e.g. 0,2")
+    ap.add_argument("--forms", default="auto", choices=["auto", "always"])
+    ap.add_argument("--exp", action="store_true", help="exp factors in the library too")
+    ap.add_argument("--fixed-shapes", action="store_true", help="FormSearch(fit_shapes=False)")
     a = ap.parse_args()
-    if a.which in ("dev", "val"):
-        effects = DEV if a.which == "dev" else VAL
+    if a.which in ("dev", "val", "new"):
+        effects = {"dev": DEV, "val": VAL, "new": NEW}[a.which]
+        if a.only is not None:
+            effects = [effects[int(i)] for i in a.only.split(",")]
         seeds = [int(s) for s in (a.seeds or ("1000" if a.which == "dev" else "5000")).split(",")]
         for seed in seeds:
             for eff in effects:
-                print(json.dumps(run_effect(eff, seed), ensure_ascii=False), flush=True)
+                search = d.FormSearch(
+                    library=d.TermLibrary(functions=("lin", "sq", "tanh", *("exp",) * a.exp)),
+                    fit_shapes=not a.fixed_shapes,
+                )
+                out = run_effect(eff, seed, a.forms, search)
+                print(json.dumps(out, ensure_ascii=False), flush=True)
     elif a.which == "clean":
         seeds = [int(s) for s in (a.seeds or "1000,1001,1002,1003,1004").split(",")]
         for seed in seeds:

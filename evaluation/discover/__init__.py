@@ -22,6 +22,8 @@ The package, one room per concern:
 ``form_search``           :class:`FormSearch`, :func:`form_round`: a form when no library effect
                           explains the residual (PySINDy's STLSQ over simulated sensitivities,
                           the held-out gate, a stability check)
+``form_shapes``           :func:`refine_shapes`: a selected form's centres, scales and time
+                          constants fitted with its coefficients (simulation error, bounded)
 ``scoring``               :func:`heldout_comparison`, :func:`structure_statistics`
 ``drift``                 the unmeasured feed-coking drift of closed-loop data, estimated by the
                           state estimator, gated, and fed to the model before the search
@@ -67,6 +69,7 @@ from evaluation.discover.data import (
 )
 from evaluation.discover.fitting import ar1_inflation, fit_effects
 from evaluation.discover.form_search import FormSearch, form_round, stability
+from evaluation.discover.form_shapes import refine_shapes, shape_parameters, with_shapes
 from evaluation.discover.loop import TRAIN_FRACTION_RANGE, discover, heldout_rmse
 from evaluation.discover.physics_model import (
     PHYSICS_INPUT_CHANNELS,
@@ -94,6 +97,7 @@ from evaluation.discover.terms import (
     equation,
     form_from_json,
     form_to_json,
+    shape_slots,
 )
 
 __all__ = [
@@ -142,6 +146,10 @@ __all__ = [
     "main",
     "missing_input_candidates",
     "noise_levels",
+    "refine_shapes",
+    "shape_parameters",
+    "shape_slots",
     "stability",
     "structure_statistics",
+    "with_shapes",
 ]

@@ -43,6 +43,8 @@ def factor_value(fn: int, v: float) -> float:
         return math.tanh(v)
     if fn == 4:
         return max(v, 0.0)
+    if fn == 6:
+        return math.exp(v)
     return abs(v)
 
 
@@ -241,6 +243,7 @@ def _np_fn(fn: int, v: np.ndarray) -> np.ndarray:
         np.tanh,
         lambda a: np.maximum(a, 0.0),
         np.abs,
+        np.exp,
     ][fn](v)
 
 

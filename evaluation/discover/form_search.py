@@ -41,6 +41,7 @@ from evaluation.discover.base import Candidate, FitResult, ParamInfo
 from evaluation.discover.corrected_sim import term_values, with_lags
 from evaluation.discover.data import TABLE1, MeasuredData
 from evaluation.discover.fitting import ar1_inflation, fit_effects
+from evaluation.discover.form_shapes import refine_shapes
 from evaluation.discover.scoring import heldout_comparison
 from evaluation.discover.terms import (
     N_BASE_SIGNALS,
@@ -82,7 +83,10 @@ class FormSearch:
     measurement of each channel with structure left is always searched too; ``optimizer``:
     ``"stlsq"`` or ``"sr3"``; ``n_fit``: how many (equation, support) pairs are fitted by
     simulation and tested on the held-out part (the Bonferroni count); ``stride``: every
-    ``stride``-th training sample enters the selection regression.
+    ``stride``-th training sample enters the selection regression; ``fit_shapes``: fit the
+    selected terms' shape parameters (centres, scales, time constants:
+    :mod:`~evaluation.discover.form_shapes`) with the coefficients, kept where they lower the
+    training error by more than ln N per shape parameter.
     """
 
     library: TermLibrary = field(default_factory=TermLibrary)
@@ -91,12 +95,15 @@ class FormSearch:
     optimizer: str = "stlsq"
     n_fit: int = 6
     stride: int = 2
+    fit_shapes: bool = True
 
     def __post_init__(self) -> None:
         check("max_terms", self.max_terms, MAX_TERMS)
         check("optimizer", self.optimizer, Options(OPTIMIZERS))
         check("n_fit", self.n_fit, Integer(1, 50))
         check("stride", self.stride, Integer(1, 50))
+        if not isinstance(self.fit_shapes, bool):
+            raise invalid("fit_shapes", self.fit_shapes, "True or False")
         for t in self.targets:
             check("target", t, Options(tuple(STATE_TARGETS)))
         if not isinstance(self.library, TermLibrary):
@@ -229,15 +236,33 @@ def form_round(
     proposals = [p for p in proposals if p[0] > 0][: search.n_fit]
     rows: list[dict[str, Any]] = []
     n_hold = T - n_train
+    # per shape parameter, the training error must fall by more than this (ln N, AR(1)-inflated)
+    shape_pen = math.log(e0[:, :n_train].size) * infl
     for lin_score, form, x in progress_bar(proposals, desc="forms", unit="form", progress=progress):
         th0 = np.concatenate([theta, x])
         free = np.r_[np.zeros(theta.size, bool), np.ones(x.size, bool)]
         fit = fit_effects(model, data, [*effects, form], th0, free, Y, n_train, sqrt_w, grid=False)
+        shaped = None
+        if search.fit_shapes:
+            c = fit.theta[theta.size :]
+            ref = refine_shapes(model, data, effects, theta, form, c, Y, n_train, sqrt_w)
+            if ref is not None and fit.cost - ref[1].cost > ref[2]["n_shapes"] * shape_pen:
+                form, fit, shaped = ref
         e1 = Y - model.predict(data, [*effects, form], fit.theta[None], T)[0]
         cmp = heldout_comparison(e0[:, n_train:], e1[:, n_train:], sqrt_w, block_len)
-        k = len(form.terms)
+        # the ln N penalty counts every fitted parameter: coefficients and shapes
+        k = len(form.terms) + (shaped["n_shapes"] if shaped else 0)
         score = (cmp["sse0"] - cmp["sse1"]) - k * math.log(data.n_episodes * n_hold)
-        rows.append({"form": form, "fit": fit, "score": score, "train_score": lin_score, **cmp})
+        rows.append(
+            {
+                "form": form,
+                "fit": fit,
+                "score": score,
+                "train_score": lin_score,
+                "shapes_fitted": shaped,
+                **cmp,
+            }
+        )
     thresh = alpha / max(1, len(rows))
     for row in rows:
         row["significant"] = bool(

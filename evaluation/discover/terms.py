@@ -42,6 +42,7 @@ __all__ = [
     "equation",
     "form_from_json",
     "form_to_json",
+    "shape_slots",
 ]
 
 #: Model signals a factor may use: the 11 states (measured temperatures under their Table 1
@@ -66,7 +67,15 @@ N_BASE_SIGNALS = len(SIGNALS)
 #: State equations a form may enter (state name → index in the state vector).
 STATE_TARGETS: dict[str, int] = {s: i for i, s in enumerate(SIGNALS[:11])}
 #: Function codes of a factor (the compiled kernel's switch).
-FUNCTIONS: dict[str, int] = {"lin": 0, "sq": 1, "cube": 2, "tanh": 3, "pos": 4, "abs": 5}
+FUNCTIONS: dict[str, int] = {
+    "lin": 0,
+    "sq": 1,
+    "cube": 2,
+    "tanh": 3,
+    "pos": 4,
+    "abs": 5,
+    "exp": 6,
+}
 _POWER = {"lin": 1, "sq": 2, "cube": 3}
 
 
@@ -89,13 +98,15 @@ class Factor:
 
     def text(self) -> str:
         """The factor in natural units, without its scale where the scale is a pure factor."""
-        z = self.signal if self.lag_s == 0 else f"lag{self.lag_s:g}s({self.signal})"
+        z = self.signal if self.lag_s == 0 else f"lag{round(self.lag_s, 1):g}s({self.signal})"
         dz = z if self.center == 0 else f"({z} − {_num(self.center)})"
         if self.fn in _POWER:
             p = _POWER[self.fn]
             return dz if p == 1 else f"{dz}{'²' if p == 2 else '³'}"
-        if self.fn == "tanh":
-            return f"tanh({dz}/{_num(self.scale)})"
+        if self.fn in ("tanh", "exp"):  # the scale is part of the shape: shown with its unit
+            u = SIGNAL_UNITS[self.signal]
+            dz = z if self.center == 0 else f"({z} − {_num(self.center)} {u})"
+            return f"{self.fn}({dz}/{_num(self.scale)} {u})"
         if self.fn == "pos":
             return f"max({dz}, 0)"
         return f"|{dz}|"
@@ -104,13 +115,13 @@ class Factor:
         """What ``θ`` must be divided by to multiply :meth:`text` instead of the scaled factor."""
         if self.fn in _POWER:
             return self.scale ** _POWER[self.fn]
-        return 1.0 if self.fn == "tanh" else self.scale
+        return 1.0 if self.fn in ("tanh", "exp") else self.scale
 
     def unit(self) -> str:
         u = SIGNAL_UNITS[self.signal]
         if self.fn in _POWER and _POWER[self.fn] > 1:
             return f"{u}{'²' if _POWER[self.fn] == 2 else '³'}"
-        return "" if self.fn == "tanh" else u
+        return "" if self.fn in ("tanh", "exp") else u
 
 
 @dataclass(frozen=True)
@@ -239,11 +250,41 @@ class FormCandidate:
         return u if self.is_measurement else f"{u}/s"
 
 
+#: Functions whose centre sets the shape (for "exp" the centre only rescales the coefficient).
+_CENTERED = ("tanh", "sq", "cube", "pos", "abs")
+_SHAPE_NAMES = {"center": "centre", "scale": "scale", "lag_s": "time constant"}
+
+
+def shape_slots(form: FormCandidate) -> list[tuple[int, int, str]]:
+    """The shape parameters of ``form``: (term, factor, ``Factor`` field) of every centre of a
+    nonlinear factor or of a product's linear factor, every scale of a tanh or exp, and every
+    lag's time constant; and, in a form without a constant term, the centre of its first linear
+    term (the form's offset: without it, a saturation's centre would have to stand in for the
+    offset). A form's coefficients do not reach these (they are nonlinear in them)."""
+    out: list[tuple[int, int, str]] = []
+    # without a constant term, the first linear term's centre is the form's offset
+    offset = not any(not t.factors for t in form.terms)
+    for i, t in enumerate(form.terms):
+        for j, f in enumerate(t.factors):
+            lin_offset = offset and f.fn == "lin" and len(t.factors) == 1
+            if f.fn in _CENTERED or (f.fn == "lin" and len(t.factors) > 1) or lin_offset:
+                out.append((i, j, "center"))
+                offset = offset and not lin_offset
+            if f.fn in ("tanh", "exp"):
+                out.append((i, j, "scale"))
+            if f.lag_s > 0:
+                out.append((i, j, "lag_s"))
+    return out
+
+
 def equation(form: FormCandidate, theta: Sequence[float]) -> dict[str, object]:
     """The fitted form as text and parts: ``"dT_rg2/dt [°C/s] += −1.2e-05·(T_rg2 − 25.02)"``.
 
     Coefficients are given per natural unit of their term (``θ_k / scale^p``); a constant and a
-    linear term of the same signal are merged into ``a·(z − z₀)``.
+    linear term of the same signal are merged into ``a·(z − z₀)``. ``shapes`` lists the value
+    and unit of every shape parameter (:func:`shape_slots`): fitted where the search kept its
+    shape fit, else as the library built it (a signal's training mean and sd, a lag's time
+    constant).
     """
     th = np.asarray(theta, float)
     coef = [float(c / t.natural_scale()) for c, t in zip(th, form.terms, strict=True)]
@@ -271,6 +312,18 @@ def equation(form: FormCandidate, theta: Sequence[float]) -> dict[str, object]:
 
     body = " ".join(part(k, c, txt) for k, (c, txt, _) in enumerate(parts))
     unit = form.rate_unit
+    shapes = []
+    for i, j, kind in shape_slots(form):
+        f = form.terms[i].factors[j]
+        shapes.append(
+            {
+                "term": form.terms[i].text(),
+                "signal": f.signal,
+                "parameter": _SHAPE_NAMES[kind],
+                "value": float(getattr(f, kind)),
+                "unit": "s" if kind == "lag_s" else SIGNAL_UNITS[f.signal],
+            }
+        )
     return {
         "text": f"{lhs} [{unit}] += {body}",
         "enters": (
@@ -283,6 +336,7 @@ def equation(form: FormCandidate, theta: Sequence[float]) -> dict[str, object]:
             {"term": txt, "coefficient": c, "unit": f"{unit} per {u}" if u else unit}
             for c, txt, u in parts
         ],
+        "shapes": shapes,
     }
 
 

@@ -216,14 +216,13 @@ def test_a_coupling_outside_the_library_is_found_as_a_form(tmp_path):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(
-    strict=True,
-    reason="measured 2026-11-28 (lab/form_lab.md): 2 of 4; the T_d1 coupling is mimicked by two "
-    "afterburn factors (no structure left), the saturation's form reaches 1.43x the floor",
-)
 def test_out_of_library_effects_goal():
     """Issue 46's goal: ≥ 3 of 4 hidden effects get a form with at most 3 terms whose held-out
-    RMSE on the affected channel is within 1.3× the noise floor (lab/form_lab.py val)."""
+    RMSE on the affected channel is within 1.3× the noise floor (lab/form_lab.py val).
+
+    Measured 2026-11-28 with fitted shapes (lab/form_lab.md): 3 of 4 (quadratic loss 1.005×,
+    saturation 0.999×, product 1.003× the floor); the T_d1 coupling is explained to 1.02× the
+    floor by two afterburn factors of the library, so no form is searched for it."""
     ok = []
     for name, eff in HIDDEN.items():
         seed = 5000
