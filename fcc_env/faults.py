@@ -49,10 +49,11 @@ value (stuck, dropout) lives with its episode, never in a shared hook; its ``rea
 takes the sample's noise-free measurements and the noise's standard-normal draws and returns
 both as the transmitter delivers them, with the dropout flag. Their magnitudes are in the
 kind's own unit (°C, °C per hour, a multiple of the noise std, a probability), so their
-``max_magnitude`` is not bound by :data:`MAX_FAULT_MAGNITUDE`. The catalogue-wide lists
-(:func:`fault_names`, :func:`scenario_names`, ``scenario="random"``'s draw, the tracks'
-defaults, the control study, the closed-loop report) leave them out until the study that
-covers them (issue 43 items 4, 5 and 7): ``fault_names(with_channel=True)`` lists them too.
+``max_magnitude`` is not bound by :data:`MAX_FAULT_MAGNITUDE`. The process-fault lists
+(:func:`fault_names`, :func:`scenario_names`, ``scenario="random"``'s draw, the process
+tracks' defaults, the control study's default, the closed-loop report) leave them out;
+``fault_names(include_path_faults=True)`` lists them too, and the tracks ``sensor``,
+``actuator`` and ``concurrent`` and the control task's ``catalogue="all"`` use that list.
 
 **Actuator faults** (:mod:`fcc_env.actuator_faults`: ``valve-stiction``, ``valve-bias``,
 ``valve-stuck``, ``blower-capacity``) act on one input, their ``actuator_input`` (``u_F`` or
@@ -62,8 +63,8 @@ covers them (issue 43 items 4, 5 and 7): ``fault_names(with_channel=True)`` list
 action's in open loop) and returns those the process receives. ``needs_loop`` marks a fault
 that only shows while a controller moves the actuator (a stuck or sticking valve): a plant
 whose regulatory layer leaves that loop open refuses it by name. Their magnitudes are in
-their own unit too (``magnitude_unit``), and the catalogue-wide lists leave them out like the
-channel faults (``fault_names(with_channel=True)`` lists every registered fault).
+their own unit too (``magnitude_unit``), and the process-fault lists leave them out like the
+channel faults (``fault_names(include_path_faults=True)`` lists every registered fault).
 
 **Concurrent faults** (``concurrent``, a reserved scenario name like ``random``, not a
 registry entry): two registered faults, each a whole
@@ -372,18 +373,19 @@ def has_own_unit(name: str) -> bool:
     return d is not None and own_unit(d)
 
 
-def fault_names(with_channel: bool = False) -> tuple[str, ...]:
-    """The registered faults' names, in registration order (the paper's first): the lists
-    every catalogue-wide loop reads, without the channel and actuator faults unless
-    ``with_channel`` (module docstring: the closed-loop faults of issue 43 wait for their
-    study)."""
-    return tuple(n for n in FAULTS if with_channel or not has_own_unit(n))
+def fault_names(include_path_faults: bool = False) -> tuple[str, ...]:
+    """The registered faults' names, in registration order (the paper's first): the process
+    faults, which the catalogue-wide lists read, and with ``include_path_faults`` the faults on
+    the measurement and actuator paths too (the sensor and actuator faults: every registered
+    fault; the tracks ``sensor``, ``actuator`` and ``concurrent`` and the control task's
+    ``catalogue="all"`` draw them)."""
+    return tuple(n for n in FAULTS if include_path_faults or not has_own_unit(n))
 
 
-def scenario_names(with_channel: bool = False) -> tuple[str, ...]:
+def scenario_names(include_path_faults: bool = False) -> tuple[str, ...]:
     """``nominal`` and the registered faults of :func:`fault_names`: the scenarios an episode
-    can have (``scenario="random"`` draws among those without ``with_channel``)."""
-    return (NOMINAL, *fault_names(with_channel))
+    can have (``scenario="random"`` draws among those without ``include_path_faults``)."""
+    return (NOMINAL, *fault_names(include_path_faults))
 
 
 #: What an isolator answers when it will not name the fault(s).

@@ -454,7 +454,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     parser.add_argument(
         "--scenario",
         default="nominal",
-        help=f"one of {list(scenario_names(with_channel=True))} or 'random'",
+        help=f"one of {list(scenario_names(include_path_faults=True))} or 'random'",
     )
     parser.add_argument("--seeds", default="0", help="seeds, e.g. '0-9,20' (default 0)")
     parser.add_argument(

@@ -93,7 +93,9 @@ RAMP_SAMPLES_RANGE = Integer(1, why="samples an incipient fault takes to reach i
 def scenario_options() -> Options:
     """Allowed scenario names now: every registered one, ``"random"`` (draws one per
     episode) and ``"concurrent"`` (two of them, :attr:`FaultSpec.parts`)."""
-    return Options([*scenario_names(with_channel=True), RANDOM_SCENARIO, CONCURRENT_SCENARIO])
+    return Options(
+        [*scenario_names(include_path_faults=True), RANDOM_SCENARIO, CONCURRENT_SCENARIO]
+    )
 
 
 def fault_channel_options(scenario: str) -> Options:
@@ -463,7 +465,7 @@ def _checked_parts(spec: FaultSpec) -> tuple[FaultSpec, ...]:
     )
     if isinstance(parts, FaultSpec) or not isinstance(parts, tuple | list) or len(parts) != 2:
         raise invalid("parts", parts, "a tuple of two FaultSpec of registered faults", example)
-    names = fault_names(with_channel=True)
+    names = fault_names(include_path_faults=True)
     for p in parts:
         if not isinstance(p, FaultSpec):
             raise invalid("parts", p, "a FaultSpec of a registered fault", example)

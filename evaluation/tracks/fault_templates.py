@@ -61,7 +61,7 @@ class FaultTemplate:
     """One column of a track: a fault spec whose size, onset and channel the seed draws.
 
     Attributes:
-        scenario: a registered fault (:func:`fcc_env.fault_names` ``(with_channel=True)``:
+        scenario: a registered fault (:func:`fcc_env.fault_names` ``(include_path_faults=True)``:
             the paper's, the sensor and the actuator faults) or ``"concurrent"``.
         magnitude: the size's distribution, in the fault's own unit (its
             ``magnitude_unit``), within ``[0, max_magnitude]``; ``None``: its default size.
@@ -83,7 +83,7 @@ class FaultTemplate:
 
     def __post_init__(self) -> None:
         set_ = object.__setattr__
-        options = Options([*fault_names(with_channel=True), CONCURRENT_SCENARIO])
+        options = Options([*fault_names(include_path_faults=True), CONCURRENT_SCENARIO])
         set_(self, "scenario", str(check("scenario", self.scenario, options)))
         if self.scenario == CONCURRENT_SCENARIO:
             self._check_concurrent()

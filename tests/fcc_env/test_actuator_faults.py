@@ -37,7 +37,7 @@ def test_they_are_registered_scenarios_outside_the_catalogue_lists() -> None:
     assert tuple(fcc_env.ACTUATOR_FAULTS) == NAMES
     for name in NAMES:
         assert fcc_env.FAULTS[name] is fcc_env.ACTUATOR_FAULTS[name]
-        assert name in fcc_env.fault_names(with_channel=True)
+        assert name in fcc_env.fault_names(include_path_faults=True)
         assert name not in fcc_env.fault_names()  # random, the tracks, the studies: not yet
         d = fcc_env.FAULTS[name]
         assert d.actuator_input == ("R_ar" if name == "blower-capacity" else "u_F")

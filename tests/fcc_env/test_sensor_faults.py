@@ -39,10 +39,10 @@ def _pair(kind: str, channel: str = "T_rg2"):
 def test_the_registry_holds_them_apart_from_the_catalogue_lists() -> None:
     kinds = tuple(f"sensor-{k}" for k in SIZES)
     assert fcc_env.fault_names() == fcc_env.PAPER_FAULTS  # the tracks, random, the studies
-    every = fcc_env.fault_names(with_channel=True)
+    every = fcc_env.fault_names(include_path_faults=True)
     assert every[:4] == fcc_env.PAPER_FAULTS and tuple(n for n in every if n in kinds) == kinds
     assert set(every) == {*fcc_env.PAPER_FAULTS, *kinds, *fcc_env.ACTUATOR_FAULTS}
-    assert fcc_env.scenario_names(with_channel=True)[1:] == every
+    assert fcc_env.scenario_names(include_path_faults=True)[1:] == every
     rng = np.random.default_rng(0)
     drawn = {FaultSpec(scenario="random").resolve(1000, rng).scenario for _ in range(100)}
     assert drawn == {"nominal", *fcc_env.PAPER_FAULTS}
