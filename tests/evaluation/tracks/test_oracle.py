@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import math
 import shutil
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -40,6 +41,18 @@ from fcc_env.scenarios import FaultSpec
 TINY = TRACKS["paper"].replace(n_healthy=2, n_faulty=1, n_train=2, n_validation=4)
 #: the reference rows that take seconds (the directional, filter and GLR rows take tens)
 FAST_REFERENCES = (OracleConfig(), OracleConfig(inputs="measured"), OracleConfig(stage="cusum"))
+#: the tiny run's calibration episodes for the rows that take 100 by default (directional and
+#: filter: their calibration is most of a run's cost); the rows and labels are the defaults'
+TINY_CALIBRATION = 20
+#: the tiny run's reference rows: every default row, calibrated on TINY_CALIBRATION episodes
+#: (the defaults themselves run in the slow variant of the model-sharing test below and in
+#: test_reference_runs.py's slow test)
+TINY_REFERENCES = tuple(
+    replace(c, n_calibration=TINY_CALIBRATION)
+    if len(c.calibration_seeds(TINY)) == DIRECTIONAL_CALIBRATION
+    else c
+    for c in DEFAULT_REFERENCES
+)
 
 
 def _noise_free_f2(data: TrackData, seed: int) -> Episode:
@@ -211,16 +224,23 @@ def test_track_rows_ratio_and_ranks() -> None:
 def tiny_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[TrackRun, Path]:
     """One run of the tiny paper track with every reference row, figures and a model cache
     (its directory is returned): the end-to-end test reads it, and the model-sharing test
-    starts from its cache instead of training the same model again (about 30 s a run)."""
+    starts from its cache instead of training the same model again (about 30 s a run). The rows
+    are TINY_REFERENCES: the directional and filter rows calibrate on 20 episodes, not 100."""
     root = tmp_path_factory.mktemp("tiny-run")
-    run = run_track(
-        TINY, ["limits"], root / "paper", workers=0, progress=False, model_cache=root / "models"
-    )
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(board, "DEFAULT_REFERENCES", TINY_REFERENCES)
+        run = run_track(
+            TINY, ["limits"], root / "paper", workers=0, progress=False, model_cache=root / "models"
+        )
     return run, root
 
 
-def test_run_track_end_to_end(tiny_run: tuple[TrackRun, Path]) -> None:
+def test_run_track_end_to_end(
+    tiny_run: tuple[TrackRun, Path], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr(board, "DEFAULT_REFERENCES", TINY_REFERENCES)  # the rows of tiny_run
     run, tmp_path = tiny_run
+    assert len(TINY_REFERENCES) == len(DEFAULT_REFERENCES) == 6
     labels = [r.label for r in run.rows]
     assert labels == [
         "limits",
@@ -333,8 +353,8 @@ def test_directional_row_is_lrgf_glr_stage_on_a_perfect_model(
         stage.update(ep.y[0])
     # the row's records carry its label and its measured-input variant runs end to end: the
     # tiny run's records of that row (run_references gives oracle_records' bits, see
-    # test_reference_runs), not a second calibration on 100 episodes
-    assert cfg in DEFAULT_REFERENCES
+    # test_reference_runs), not a second calibration
+    assert replace(cfg, n_calibration=TINY_CALIBRATION) in TINY_REFERENCES
     recs = [r for r in tiny_run[0].records if r.diagnoser == STAGE_LABEL]
     assert len(recs) == len(TINY.test_cells())
     assert all(r.t_dt <= 60 for r in recs if r.scenario == "f1")
