@@ -4,6 +4,9 @@ from __future__ import annotations
 
 import json
 import math
+import shutil
+from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -14,12 +17,13 @@ from diagnosers.stages.alarm import EWMA
 from evaluation.metrics.intervals import limit_ratio
 from evaluation.sweep.records import CellResult, summarize
 from evaluation.sweep.sources import simulate_loaded
-from evaluation.tracks import TRACKS
+from evaluation.tracks import TRACKS, board
 from evaluation.tracks.board import run_track
 from evaluation.tracks.board_tables import track_table, write_track
 from evaluation.tracks.filter_bound import FILTER_LABEL
 from evaluation.tracks.optimal import CUSUM_LABEL, GLR_LABEL
 from evaluation.tracks.oracle import (
+    DEFAULT_REFERENCES,
     DIRECTIONAL_CALIBRATION,
     MEASURED_INPUTS_LABEL,
     ORACLE_LABEL,
@@ -29,12 +33,26 @@ from evaluation.tracks.oracle import (
     PhysicalLimit,
     oracle_records,
 )
-from evaluation.tracks.rows import track_rows
+from evaluation.tracks.rows import TrackRun, track_rows
 from evaluation.tracks.track_data import TrackData
 from fcc_env.params import MEASUREMENT_NAMES
 from fcc_env.scenarios import FaultSpec
 
 TINY = TRACKS["paper"].replace(n_healthy=2, n_faulty=1, n_train=2, n_validation=4)
+#: the reference rows that take seconds (the directional, filter and GLR rows take tens)
+FAST_REFERENCES = (OracleConfig(), OracleConfig(inputs="measured"), OracleConfig(stage="cusum"))
+#: the tiny run's calibration episodes for the rows that take 100 by default (directional and
+#: filter: their calibration is most of a run's cost); the rows and labels are the defaults'
+TINY_CALIBRATION = 20
+#: the tiny run's reference rows: every default row, calibrated on TINY_CALIBRATION episodes
+#: (the defaults themselves run in the slow variant of the model-sharing test below and in
+#: test_reference_runs.py's slow test)
+TINY_REFERENCES = tuple(
+    replace(c, n_calibration=TINY_CALIBRATION)
+    if len(c.calibration_seeds(TINY)) == DIRECTIONAL_CALIBRATION
+    else c
+    for c in DEFAULT_REFERENCES
+)
 
 
 def _noise_free_f2(data: TrackData, seed: int) -> Episode:
@@ -202,8 +220,27 @@ def test_track_rows_ratio_and_ranks() -> None:
     assert a.worst_seed == 5
 
 
-def test_run_track_end_to_end(tmp_path) -> None:
-    run = run_track(TINY, ["limits"], tmp_path / "paper", workers=0, progress=False)
+@pytest.fixture(scope="module")
+def tiny_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[TrackRun, Path]:
+    """One run of the tiny paper track with every reference row, figures and a model cache
+    (its directory is returned): the end-to-end test reads it, and the model-sharing test
+    starts from its cache instead of training the same model again (about 30 s a run). The rows
+    are TINY_REFERENCES: the directional and filter rows calibrate on 20 episodes, not 100."""
+    root = tmp_path_factory.mktemp("tiny-run")
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(board, "DEFAULT_REFERENCES", TINY_REFERENCES)
+        run = run_track(
+            TINY, ["limits"], root / "paper", workers=0, progress=False, model_cache=root / "models"
+        )
+    return run, root
+
+
+def test_run_track_end_to_end(
+    tiny_run: tuple[TrackRun, Path], monkeypatch: pytest.MonkeyPatch
+) -> None:
+    monkeypatch.setattr(board, "DEFAULT_REFERENCES", TINY_REFERENCES)  # the rows of tiny_run
+    run, tmp_path = tiny_run
+    assert len(TINY_REFERENCES) == len(DEFAULT_REFERENCES) == 6
     labels = [r.label for r in run.rows]
     assert labels == [
         "limits",
@@ -242,12 +279,26 @@ def test_fault_spec_of_a_track_is_not_random_in_the_env() -> None:
     assert spec.onset is not None and spec.magnitude is not None
 
 
-def test_tracks_with_one_training_set_share_their_models(tmp_path) -> None:
-    cache = tmp_path / "models"
-    first = run_track(
-        TINY, ["limits"], tmp_path / "paper", workers=0, progress=False, figures=False,
-        model_cache=cache,
-    )  # fmt: skip
+@pytest.mark.parametrize(
+    "references",
+    [
+        pytest.param(FAST_REFERENCES, id="fast-rows"),
+        pytest.param(DEFAULT_REFERENCES, id="every-row", marks=pytest.mark.slow),
+    ],
+)
+def test_tracks_with_one_training_set_share_their_models(
+    tiny_run: tuple[TrackRun, Path],
+    tmp_path: Path,
+    monkeypatch: pytest.MonkeyPatch,
+    references: tuple[OracleConfig, ...],
+) -> None:
+    """The model cache is shared by tracks of one training set. The reference rows read no
+    trained model, so the default run computes only the rows that take seconds on the three
+    further tracks (the every-row variant, slow, computes them all: about 90 s more)."""
+    monkeypatch.setattr(board, "DEFAULT_REFERENCES", references)
+    first, root = tiny_run
+    cache = tmp_path / "models"  # a copy: each variant starts from the first track's models
+    shutil.copytree(root / "models", cache)
     small = TRACKS["small"].replace(n_healthy=1, n_faulty=1, n_train=2, n_validation=4)
     second = run_track(
         small, ["limits"], tmp_path / "small", workers=0, progress=False, figures=False,
@@ -271,7 +322,9 @@ def test_tracks_with_one_training_set_share_their_models(tmp_path) -> None:
     assert "Test seeds 100000–100001" in track_table(private)
 
 
-def test_directional_row_is_lrgf_glr_stage_on_a_perfect_model() -> None:
+def test_directional_row_is_lrgf_glr_stage_on_a_perfect_model(
+    tiny_run: tuple[TrackRun, Path],
+) -> None:
     """The third reference row: lrgf-glr's alarm stage (same code) on a perfect model's
     residual. With the true inputs the healthy residual is the measurement noise, so the stage's
     scale is the noise std; f3 cools the regenerator beds; a noise-free faulty episode alarms
@@ -298,7 +351,10 @@ def test_directional_row_is_lrgf_glr_stage_on_a_perfect_model() -> None:
     assert det.alarm[onset : onset + 20].any()
     with pytest.raises(NotImplementedError, match="whole episodes with detect"):
         stage.update(ep.y[0])
-    # the row's records carry its label and its measured-input variant runs end to end
-    recs = oracle_records(data, cfg)
-    assert {r.diagnoser for r in recs} == {STAGE_LABEL}
+    # the row's records carry its label and its measured-input variant runs end to end: the
+    # tiny run's records of that row (run_references gives oracle_records' bits, see
+    # test_reference_runs), not a second calibration
+    assert replace(cfg, n_calibration=TINY_CALIBRATION) in TINY_REFERENCES
+    recs = [r for r in tiny_run[0].records if r.diagnoser == STAGE_LABEL]
+    assert len(recs) == len(TINY.test_cells())
     assert all(r.t_dt <= 60 for r in recs if r.scenario == "f1")
