@@ -19,7 +19,9 @@ paired by episode) and what the supervisor captures (supervisor − fault-blind)
 ``--diagnoser NAME`` adds a fourth policy, ``sensor-correcting+NAME``: the same supervisor
 with registered diagnoser NAME streamed in it (fitted on training seeds by
 :func:`evaluation.control.sensor_policy.fit_sensor_diagnoser`); the report then adds its
-columns and its paired gain over the supervisor without it.
+columns and its paired gain over the supervisor without it. With ``--diagnoser-only`` that
+policy's frozen-reading and residual checks are off (``sensor-correcting+NAME only``): what the
+diagnosis alone judges.
 """
 
 from __future__ import annotations
@@ -53,12 +55,14 @@ def run(
     steps: int = 3999,
     loop_sensors: bool = False,
     diagnoser: str | None = None,
+    diagnoser_only: bool = False,
 ) -> None:
     policies = {name: make_policy(name) for name in POLICIES}
     if diagnoser:
-        policies[f"sensor-correcting+{diagnoser}"] = make_policy(
-            "sensor-correcting", diagnoser=diagnoser
-        )
+        # diagnosis only: the frozen and residual checks can never fire
+        off = {"frozen_samples": 10**9, "limit_C": 1e9} if diagnoser_only else {}
+        key = f"sensor-correcting+{diagnoser}" + (" only" if diagnoser_only else "")
+        policies[key] = make_policy("sensor-correcting", diagnoser=diagnoser, **off)
     cases = LOOP_SENSOR_SCENARIOS if loop_sensors else [None]
     with open(out, "w") as f:
         for seed, case in ((s, c) for s in range(first, first + n) for c in cases):
@@ -177,10 +181,22 @@ if __name__ == "__main__":
         default=None,
         help="a registered diagnoser streamed in a fourth policy, sensor-correcting+NAME",
     )
+    ap.add_argument(
+        "--diagnoser-only",
+        action="store_true",
+        help="the fourth policy judges by the diagnosis alone (frozen and residual checks off)",
+    )
     a = ap.parse_args()
     if a.report:
         report(a.report)
     else:
         if a.first < 5000:
             raise SystemExit(f"--first {a.first}: validation seeds only (5000..)")
-        run(a.first, a.n, a.out, loop_sensors=a.loop_sensors, diagnoser=a.diagnoser)
+        run(
+            a.first,
+            a.n,
+            a.out,
+            loop_sensors=a.loop_sensors,
+            diagnoser=a.diagnoser,
+            diagnoser_only=a.diagnoser_only,
+        )
