@@ -271,3 +271,22 @@ def test_correctable_loops_need_room_on_both_sides_of_the_range():
     assert correctable_loops(np.array([544.9, 682.8])).tolist() == [False, True]
     assert correctable_loops(np.array([530.0, 665.5])).tolist() == [True, False]
     assert correctable_loops(np.array([530.0, 700.0]), min_room_C=6.0).tolist() == [True, False]
+
+
+def test_a_closed_loop_reading_out_of_range_ends_the_episode_inside_the_space():
+    """Seed 5226's stuck T_rx at the best fixed set points drives a reading out of range at
+    sample 3590: the closed-loop
+    observation (11 channels) is clipped to its own space, not the open loop's 8 bounds."""
+    from evaluation.control.policies import fixed_setpoints
+
+    policy = fixed_setpoints()
+    env = gym.make("FCC-control-v0", scenario="sensor-stuck", fault_channel="T_rx")
+    obs, info = env.reset(seed=5226)
+    policy.reset(info)
+    for _ in range(3999):
+        obs, _, terminated, truncated, info = env.step(policy.act(obs, info))
+        if terminated or truncated:
+            break
+    env.close()
+    assert terminated and info["termination_reason"] == "measurement_out_of_range"
+    assert env.observation_space.contains(np.asarray(obs, dtype=np.float32))
