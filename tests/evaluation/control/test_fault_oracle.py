@@ -275,8 +275,8 @@ def test_correctable_loops_need_room_on_both_sides_of_the_range():
 
 def test_a_closed_loop_reading_out_of_range_ends_the_episode_inside_the_space():
     """Seed 5226's stuck T_rx at the best fixed set points drives a reading out of range at
-    sample 3590: the closed-loop
-    observation (11 channels) is clipped to its own space, not the open loop's 8 bounds."""
+    sample 3590: the closed-loop observation (11 channels) is clipped to its own space, not to
+    the open loop's 8 bounds (which raised a broadcast error)."""
     from evaluation.control.policies import fixed_setpoints
 
     policy = fixed_setpoints()
