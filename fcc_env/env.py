@@ -330,7 +330,8 @@ class FCCEnv(gym.Env):
         self._obs = self._make_obs(self._k)
         if reason is None and not self.observation_space.contains(self._obs):
             reason = "measurement_out_of_range"
-            self._obs = np.clip(self._obs, OBS_LOW, OBS_HIGH)
+            space = self.observation_space  # the 11 closed-loop bounds when closed loop
+            self._obs = np.clip(self._obs, space.low, space.high)
         self._terminated_reason = reason
         self._history.append(self._obs)
         return self._obs, 0.0, reason is not None, False, self._get_info()

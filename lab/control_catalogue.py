@@ -13,6 +13,15 @@ paired by episode) and what the supervisor captures (supervisor − fault-blind)
     python lab/control_catalogue.py --first 5000 --n 100 --out /tmp/voi_a.jsonl
     python lab/control_catalogue.py --report /tmp/voi_a.jsonl /tmp/voi_b.jsonl
     python lab/control_catalogue.py --loop-sensors --first 5000 --n 20 --out /tmp/loop.jsonl
+    python lab/control_catalogue.py --loop-sensors --diagnoser sensor-validation --first 5220 \
+        --n 5 --out /tmp/loop_sv.jsonl
+
+``--diagnoser NAME`` adds a fourth policy, ``sensor-correcting+NAME``: the same supervisor
+with registered diagnoser NAME streamed in it (fitted on training seeds by
+:func:`evaluation.control.sensor_policy.fit_sensor_diagnoser`); the report then adds its
+columns and its paired gain over the supervisor without it. With ``--diagnoser-only`` that
+policy's frozen-reading and residual checks are off (``sensor-correcting+NAME only``): what the
+diagnosis alone judges.
 """
 
 from __future__ import annotations
@@ -39,8 +48,21 @@ LOOP_SENSOR_SCENARIOS = [
 ]
 
 
-def run(first: int, n: int, out: str, steps: int = 3999, loop_sensors: bool = False) -> None:
+def run(
+    first: int,
+    n: int,
+    out: str,
+    steps: int = 3999,
+    loop_sensors: bool = False,
+    diagnoser: str | None = None,
+    diagnoser_only: bool = False,
+) -> None:
     policies = {name: make_policy(name) for name in POLICIES}
+    if diagnoser:
+        # diagnosis only: the frozen and residual checks can never fire
+        off = {"frozen_samples": 10**9, "limit_C": 1e9} if diagnoser_only else {}
+        key = f"sensor-correcting+{diagnoser}" + (" only" if diagnoser_only else "")
+        policies[key] = make_policy("sensor-correcting", diagnoser=diagnoser, **off)
     cases = LOOP_SENSOR_SCENARIOS if loop_sensors else [None]
     with open(out, "w") as f:
         for seed, case in ((s, c) for s in range(first, first + n) for c in cases):
@@ -121,6 +143,25 @@ def report(paths: list[str]) -> None:
             f"| {name} | {len(g)} | {_ci(blind)} | {_ci(orc)} | {_ci(sup)} | "
             f"{_ci(orc - blind)} | {_ci(sup - blind)} | {trips} |"
         )
+    extra = sorted({k for r in rows for k in r if k.startswith("sensor-correcting+")})
+    for key in (k for k in extra if not k.endswith("_trip")):
+        print(
+            f"\n| class | n | {key} | captured ({key} − blind) | {key} − sensor-correcting "
+            "| trips |"
+        )
+        print("|---|---|---|---|---|---|")
+        for name, g in groups.items():
+            g = [r for r in g if key in r]
+            if not g:
+                continue
+            blind = np.array([r["fixed"] for r in g])
+            sup = np.array([r["sensor-correcting"] for r in g])
+            diag = np.array([r[key] for r in g])
+            trips = sum(r[key + "_trip"] for r in g)
+            print(
+                f"| {name} | {len(g)} | {_ci(diag)} | {_ci(diag - blind)} | {_ci(diag - sup)} "
+                f"| {trips} |"
+            )
     print(f"\n{len(rows)} episodes, {sum(r['cpu_s'] for r in rows):.0f} CPU s")
 
 
@@ -135,10 +176,27 @@ if __name__ == "__main__":
         action="store_true",
         help="the six loop-sensor faults at their default size on each seed, not the draws",
     )
+    ap.add_argument(
+        "--diagnoser",
+        default=None,
+        help="a registered diagnoser streamed in a fourth policy, sensor-correcting+NAME",
+    )
+    ap.add_argument(
+        "--diagnoser-only",
+        action="store_true",
+        help="the fourth policy judges by the diagnosis alone (frozen and residual checks off)",
+    )
     a = ap.parse_args()
     if a.report:
         report(a.report)
     else:
         if a.first < 5000:
             raise SystemExit(f"--first {a.first}: validation seeds only (5000..)")
-        run(a.first, a.n, a.out, loop_sensors=a.loop_sensors)
+        run(
+            a.first,
+            a.n,
+            a.out,
+            loop_sensors=a.loop_sensors,
+            diagnoser=a.diagnoser,
+            diagnoser_only=a.diagnoser_only,
+        )

@@ -16,7 +16,9 @@ Healthy training records set the limits of the checks (their largest value times
 **What it says.** :attr:`Detection.diagnosis` is the fault's registry label, the kind
 (``sensor-bias``, ...): the tracks score a sensor fault by that name
 (:func:`fcc_env.faults.isolation_outcome`); the channel is a field of the fault of its own, and
-:meth:`SensorValidation.sensors` gives it per sample (``""`` while not alarmed).
+:meth:`SensorValidation.sensors` gives it per sample (``""`` while not alarmed), and
+:attr:`SensorValidation.named_sensor` after each streamed :meth:`update` (a supervisor that
+rebuilds a loop needs the channel, not only the kind).
 ``Detection.residual`` holds each sensor's reading less its leave-out filter's prediction, in
 standard deviations. ``class_scores`` is 1 for the kind said and 0 for the others: the rule
 decides, it does not weigh (no posterior either).
@@ -201,6 +203,7 @@ class SensorValidation(Diagnoser):
 
     # ---- detection -----------------------------------------------------------------------------
     def _reset(self) -> None:
+        self._named = ""
         self._M, self._P = self.bank_.start()
         self._state = new_state(self.bank_.n_filters, self.bank_.n_channels)
 
@@ -289,9 +292,16 @@ class SensorValidation(Diagnoser):
         finally:
             self._reset()
 
+    @property
+    def named_sensor(self) -> str:
+        """The sensor named at the last :meth:`update` (``""`` while not alarmed, or before any
+        update since :meth:`reset`): the streaming twin of :meth:`sensors`."""
+        return getattr(self, "_named", "")
+
     def _update(self, y: np.ndarray) -> Decision:
         signal, _, kind, channel, ded = self._checks(y[None, :])
-        diagnosis, scores, _ = self._labels(kind, channel)
+        diagnosis, scores, sensors = self._labels(kind, channel)
+        self._named = str(sensors[0])
         return Decision(
             alarm=bool(kind[0] > 0),
             signal=signal[0],

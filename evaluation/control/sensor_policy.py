@@ -21,7 +21,11 @@ It judges a transmitter faulty three ways:
 * **a diagnosis**, from any registered ``diagnoser`` streamed sample by sample from
   ``arm_after`` (as :class:`~evaluation.control.policies.DiagnosisSupervisor` streams it): when it
   alarms and names a sensor fault (:func:`fcc_env.control_draws.fault_class` of its diagnosis
-  is ``sensor``), the loop channel of the larger averaged residual is the faulty one.
+  is ``sensor``), the channel it names is the faulty one: a diagnoser that names the sensor
+  while streaming (``named_sensor`` after each ``update``, as ``sensor-validation``'s) is taken
+  at its word (a sensor off the loops rebuilds nothing); one that names only the kind leaves
+  the choice to the loop of the larger averaged residual. ``diagnoser`` may be a registered
+  name: it is then fitted by :func:`fit_sensor_diagnoser`.
 
 A judged loop stays rebuilt while the frozen or residual test holds; a diagnosis latches it.
 Only a loop whose optimum leaves room in its set-point range both ways is rebuilt
@@ -48,7 +52,13 @@ from fcc_env.env import SETPOINT_ACTION_SCALE
 from fcc_env.faults import FAULTS
 from fcc_env.regulatory import SETPOINT_RANGES
 
-__all__ = ["SOFT_SENSOR_INPUTS", "SOFT_SENSOR_SEEDS", "SensorCorrectingSupervisor", "SoftSensor"]
+__all__ = [
+    "SOFT_SENSOR_INPUTS",
+    "SOFT_SENSOR_SEEDS",
+    "SensorCorrectingSupervisor",
+    "SoftSensor",
+    "fit_sensor_diagnoser",
+]
 
 _T_RG1_STATE = 4  # the stage-1 bed temperature in the state (spec §1)
 
@@ -103,6 +113,33 @@ def _names_sensor_fault(diagnosis: str) -> bool:
     return diagnosis in FAULTS and fault_class(diagnosis) is FaultClass.SENSOR
 
 
+#: the diagnoser's training episodes: healthy ones (its limits) and one per sensor-fault kind
+#: (its labels); training seeds only
+DIAGNOSER_SEEDS = range(1000, 1003)
+
+
+def fit_sensor_diagnoser(
+    name: str,
+    seeds: Sequence[int] = DIAGNOSER_SEEDS,
+    n_steps: int = 3999,
+    params: Mapping[str, Any] | None = None,
+) -> Any:
+    """Registered diagnoser ``name`` fitted on episodes run at the healthy optimum (the operation
+    it will monitor): healthy ones on ``seeds`` and, on the first seed, one per sensor-fault
+    kind at its default size (a diagnoser learns which kinds it names from those labels)."""
+    from diagnosers import make
+    from evaluation.control.policies import fixed_setpoints
+    from evaluation.control.returns import operated_episodes
+
+    if not seeds:
+        raise ValueError(f"seeds={seeds!r}: allowed: at least one training seed (1000..)")
+    fixed = fixed_setpoints()
+    train = operated_episodes(fixed, "nominal", seeds, n_steps)
+    for fault in (f for f in FAULTS if fault_class(f) is FaultClass.SENSOR):
+        train += operated_episodes(fixed, fault, seeds[:1], n_steps)
+    return make(name, **dict(params or {})).fit(train)
+
+
 @dataclass
 class SensorCorrectingSupervisor:
     """The healthy optimum; a loop judged to have a faulty transmitter runs on the soft
@@ -131,6 +168,9 @@ class SensorCorrectingSupervisor:
             self.healthy = best_setpoints().setpoints
         if self.soft_sensor is None:
             self.soft_sensor = SoftSensor.fit()
+        if isinstance(self.diagnoser, str):
+            self.name = f"{self.name} + {self.diagnoser}"
+            self.diagnoser = fit_sensor_diagnoser(self.diagnoser)
         if int(self.frozen_samples) < 2:
             raise ValueError(f"frozen_samples={self.frozen_samples!r}: allowed: an integer >= 2")
         if int(self.window) < 1 or not self.limit_C > 0:
@@ -181,7 +221,11 @@ class SensorCorrectingSupervisor:
                 self.diagnoser.reset()  # its training records start here
             decision = self.diagnoser.update(y)
             if decision.alarm and _names_sensor_fault(str(decision.diagnosis)):
-                self._latched[int(np.argmax(np.abs(self._residual)))] = True
+                named = str(getattr(self.diagnoser, "named_sensor", ""))
+                if named in LOOP_CHANNELS:
+                    self._latched[LOOP_CHANNELS.index(named)] = True
+                elif not named:
+                    self._latched[int(np.argmax(np.abs(self._residual)))] = True
         frozen = self._repeats >= self.frozen_samples - 1
         judged = frozen | (np.abs(self._residual) > self.limit_C) | self._latched
         self._judged = judged & self._correctable

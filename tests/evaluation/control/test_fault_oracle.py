@@ -13,6 +13,7 @@ from evaluation.control.sensor_policy import (
     SOFT_SENSOR_INPUTS,
     SensorCorrectingSupervisor,
     SoftSensor,
+    fit_sensor_diagnoser,
 )
 from evaluation.control.setpoints import best_setpoints, operating_point
 from fcc_env.closed_loop import CLOSED_LOOP_CHANNELS
@@ -208,9 +209,84 @@ def test_a_diagnosis_of_a_sensor_fault_latches_the_loop_of_the_larger_residual()
     assert abs(moves[-1][1]) < 0.05
 
 
+class _NamesSensor(_NamesSensorBias):
+    """A stand-in that also names the sensor while streaming (as ``sensor-validation``)."""
+
+    def __init__(self, sensor: str) -> None:
+        super().__init__()
+        self.sensor = sensor
+
+    @property
+    def named_sensor(self) -> str:
+        return self.sensor if self.n >= 3 else ""
+
+
+@pytest.mark.parametrize(("sensor", "judged"), [("T_rg1", [False, True]), ("T_ar", [False, False])])
+def test_a_named_sensor_is_taken_at_its_word_over_the_larger_residual(sensor, judged):
+    healthy = np.array([540.0, 690.0])
+    policy = SensorCorrectingSupervisor(
+        healthy=healthy,
+        diagnoser=_NamesSensor(sensor),
+        arm_after=0,
+        window=50,
+        limit_C=10.0,
+        soft_sensor=_flat_sensor((540.0, 690.0)),
+    )
+    policy.reset({})
+    rng = np.random.default_rng(3)
+    # T_rx's residual is the larger (2 °C against 0.5 °C): the named channel decides
+    _feed(policy, [(542.0 + 0.01 * rng.normal(), 690.5 + 0.01 * rng.normal()) for _ in range(20)])
+    assert policy.judged.tolist() == judged
+
+
+@pytest.mark.slow
+def test_sensor_validation_judges_a_stuck_t_rg1_transmitter_in_the_loop():
+    """The real diagnoser, its frozen and residual checks off: the judgment is the diagnosis."""
+    diagnoser = fit_sensor_diagnoser("sensor-validation", seeds=range(1000, 1001))
+    policy = SensorCorrectingSupervisor(
+        diagnoser=diagnoser,
+        frozen_samples=10**9,
+        limit_C=1e9,
+        soft_sensor=_flat_sensor((540.0, 690.0)),
+    )
+    env = gym.make("FCC-control-v0", scenario="sensor-stuck", fault_channel="T_rg1")
+    obs, info = env.reset(seed=5220)
+    policy.reset(info)
+    onset = env.unwrapped.plant.fault.onset
+    judged = []
+    for _ in range(onset + 200):
+        obs, _, terminated, truncated, info = env.step(policy.act(obs, info))
+        judged.append(policy.judged)
+        assert not (terminated or truncated)
+    env.close()
+    judged = np.array(judged)
+    assert not judged[: onset - 1].any()  # no false judgment before the fault
+    assert judged[-1].tolist() == [False, True]
+    assert diagnoser.named_sensor == "T_rg1"
+
+
 def test_correctable_loops_need_room_on_both_sides_of_the_range():
     from evaluation.control.setpoints import correctable_loops
 
     assert correctable_loops(np.array([544.9, 682.8])).tolist() == [False, True]
     assert correctable_loops(np.array([530.0, 665.5])).tolist() == [True, False]
     assert correctable_loops(np.array([530.0, 700.0]), min_room_C=6.0).tolist() == [True, False]
+
+
+def test_a_closed_loop_reading_out_of_range_ends_the_episode_inside_the_space():
+    """Seed 5226's stuck T_rx at the best fixed set points drives a reading out of range at
+    sample 3590: the closed-loop observation (11 channels) is clipped to its own space, not to
+    the open loop's 8 bounds (which raised a broadcast error)."""
+    from evaluation.control.policies import fixed_setpoints
+
+    policy = fixed_setpoints()
+    env = gym.make("FCC-control-v0", scenario="sensor-stuck", fault_channel="T_rx")
+    obs, info = env.reset(seed=5226)
+    policy.reset(info)
+    for _ in range(3999):
+        obs, _, terminated, truncated, info = env.step(policy.act(obs, info))
+        if terminated or truncated:
+            break
+    env.close()
+    assert terminated and info["termination_reason"] == "measurement_out_of_range"
+    assert env.observation_space.contains(np.asarray(obs, dtype=np.float32))
