@@ -78,7 +78,9 @@ def resolve_options(
     """Fill defaults (``--quick`` or full) and check names against the allowed sets."""
     # imported here, after parsing, so that --help and argparse's refusals answer at once
     import fcc_env
+    from diagnosers.range_guard import RangeGuard
     from diagnosers.registry import available, diagnoser_class
+    from diagnosers.stages.operating_range import SETPOINT_CHANNELS
     from evaluation.leaderboard.paper import LeaderboardOptions
     from evaluation.sweep.dataset_loaders import load_external
     from evaluation.tracks.board import applicable
@@ -118,6 +120,10 @@ def resolve_options(
         allowed = [tf.key for tf in data.test_files]
         # a detector whose relations name channels the data lack is dropped before training
         # (named by the user: refused), with the data set's own relations where it gives some
+        if args.diagnosers is None and not set(SETPOINT_CHANNELS) & set(data.channels):
+            # a novelty variant is its base plus a flag on the set points: without them it
+            # would repeat its base's row (and its base is in the list), so it is left out
+            diags = tuple(d for d in diags if not issubclass(diagnoser_class(d), RangeGuard))
         keep, skipped = applicable(diags, data.channels, f"on {args.external}", ext_params)
         if skipped and args.diagnosers is not None:
             parser.error("; ".join(skipped) + " (declare its relations in the manifest)")
