@@ -33,6 +33,7 @@ __all__ = [
     "OPEN_LOOP_AIR_WALK_STD_REL",
     "UKF_RANGES",
     "UKFConfig",
+    "model_params",
 ]
 
 #: Random-walk std of the true air flow per sample, relative to the flow, in open loop: the
@@ -186,3 +187,17 @@ class UKFConfig:
         if self.air_walk_std_rel is not None:
             return float(self.air_walk_std_rel)
         return CLOSED_LOOP_AIR_WALK_STD_REL if self.closed_loop else OPEN_LOOP_AIR_WALK_STD_REL
+
+
+def model_params(params: FCCParams | dict[str, Any] | None) -> FCCParams:
+    """The model parameters a grey-box diagnoser's ``params`` hyperparameter names: ``None``
+    (the specification's nominal :class:`~fcc_env.FCCParams`), an ``FCCParams``, or a dict of
+    field values replacing the nominal ones (a fitted set, JSON-friendly for ``get_params``)."""
+    if params is None or isinstance(params, FCCParams):
+        return FCCParams() if params is None else params
+    if not isinstance(params, dict) or not set(params) <= set(PARAM_FIELDS):
+        raise invalid("params", params, f"None, an FCCParams, or a dict of {list(PARAM_FIELDS)}")
+    try:
+        return dataclasses.replace(FCCParams(), **{k: float(v) for k, v in params.items()})
+    except (TypeError, ValueError) as e:
+        raise invalid("params", params, "FCCParams field values (numbers)", str(e)) from e

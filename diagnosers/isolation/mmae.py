@@ -23,7 +23,6 @@ most probable fault.
 
 from __future__ import annotations
 
-import dataclasses
 import os
 from pathlib import Path
 from typing import Any, ClassVar
@@ -36,13 +35,14 @@ from diagnosers.detection import NO_DIAGNOSIS, UNKNOWN, Decision, Detection
 from diagnosers.diagnoser import Diagnoser
 from diagnosers.episode.record import Episode
 from diagnosers.filters import UKFConfig
+from diagnosers.filters.ukf_config import model_params
 from diagnosers.isolation.filter_bank import FilterBank, calibrate_walks, mmae_run
 from diagnosers.presets import keyword_init
 from diagnosers.registry import register
-from fcc_common.validation import Integer, Real, check_params, invalid
+from fcc_common.validation import Integer, Real, check_params
 from fcc_env.closed_loop import CLOSED_LOOP_CHANNELS
 from fcc_env.faults import FAULTS
-from fcc_env.params import MEASUREMENT_NAMES, PARAM_FIELDS, FCCParams
+from fcc_env.params import MEASUREMENT_NAMES, FCCParams
 
 __all__ = ["CALIBRATION_SAMPLES", "MMAE"]
 
@@ -157,15 +157,7 @@ class MMAE(Diagnoser):
 
     def model_params(self) -> FCCParams:
         """The :class:`~fcc_env.FCCParams` the filters use (``params`` resolved)."""
-        p = self.params
-        if p is None or isinstance(p, FCCParams):
-            return FCCParams() if p is None else p
-        if not isinstance(p, dict) or not set(p) <= set(PARAM_FIELDS):
-            raise invalid("params", p, f"None, an FCCParams, or a dict of {list(PARAM_FIELDS)}")
-        try:
-            return dataclasses.replace(FCCParams(), **{k: float(v) for k, v in p.items()})
-        except (TypeError, ValueError) as e:
-            raise invalid("params", p, "FCCParams field values (numbers)", str(e)) from e
+        return model_params(self.params)
 
     # ---- fitting -------------------------------------------------------------------------------
     def _fit(self, episodes: list[Episode]) -> None:

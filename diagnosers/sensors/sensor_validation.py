@@ -29,7 +29,6 @@ decides, it does not weigh (no posterior either).
 
 from __future__ import annotations
 
-import dataclasses
 from typing import Any, ClassVar
 
 import numpy as np
@@ -39,13 +38,14 @@ from diagnosers.detection import NO_DIAGNOSIS, UNKNOWN, Decision, Detection
 from diagnosers.diagnoser import Diagnoser
 from diagnosers.episode.record import Episode
 from diagnosers.filters import UKFConfig
+from diagnosers.filters.ukf_config import model_params
 from diagnosers.presets import keyword_init
 from diagnosers.registry import register
 from diagnosers.sensors.loo_bank import LeaveOneOutBank
 from diagnosers.sensors.sensor_checks import KINDS, decide_run, new_state
-from fcc_common.validation import Integer, Real, check_params, invalid
+from fcc_common.validation import Integer, Real, check_params
 from fcc_env.closed_loop import CLOSED_LOOP_CHANNELS
-from fcc_env.params import MEASUREMENT_NAMES, PARAM_FIELDS, FCCParams
+from fcc_env.params import MEASUREMENT_NAMES, FCCParams
 
 __all__ = ["SensorValidation"]
 
@@ -131,15 +131,7 @@ class SensorValidation(Diagnoser):
 
     def model_params(self) -> FCCParams:
         """The :class:`~fcc_env.FCCParams` the filters use (``params`` resolved)."""
-        p = self.params
-        if p is None:
-            return FCCParams()
-        if not isinstance(p, dict) or not set(p) <= set(PARAM_FIELDS):
-            raise invalid("params", p, f"None or a dict of {list(PARAM_FIELDS)}")
-        try:
-            return dataclasses.replace(FCCParams(), **{k: float(v) for k, v in p.items()})
-        except (TypeError, ValueError) as e:
-            raise invalid("params", p, "FCCParams field values (numbers)", str(e)) from e
+        return model_params(self.params)
 
     # ---- fitting -------------------------------------------------------------------------------
     def _fit(self, episodes: list[Episode]) -> None:
