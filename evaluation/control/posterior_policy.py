@@ -40,7 +40,7 @@ from evaluation.control.policies import (
     fault_setpoints,
     fixed_setpoints,
 )
-from fcc_common.validation import invalid
+from fcc_common.validation import Real, check, invalid
 from fcc_env.scenarios import NOMINAL
 
 __all__ = [
@@ -127,8 +127,8 @@ class PosteriorSupervisor:
     :class:`~evaluation.control.policies.DiagnosisSupervisor` (the start-up move is not what
     the diagnoser was trained on). ``history``: each change of alarm, most probable
     hypothesis or target. ``home_margin_usd_per_h``: the margin of a move back to the
-    ``"healthy"`` candidate (None: ``margin_usd_per_h``, like any move). ``trust_after``: samples after the arming during which the posterior
-    is not acted on (the prior, healthy, stands in): ``mmae``'s filters start at the steady
+    ``"healthy"`` candidate (None: ``margin_usd_per_h``, like any move). ``trust_after``:
+    samples after the arming during which the posterior is not acted on (the prior, healthy, stands in): ``mmae``'s filters start at the steady
     state of the nominal inputs, not of the set points in force, and its posterior names f1
     for 400-1600 samples after a reset on healthy episodes (``lab/posterior_supervisor.md``).
     """
@@ -149,6 +149,9 @@ class PosteriorSupervisor:
     _current: int = field(init=False, repr=False, default=0)
 
     def __post_init__(self) -> None:
+        check("margin_usd_per_h", self.margin_usd_per_h, Real(0.0, why="USD/h"))
+        if self.home_margin_usd_per_h is not None:
+            check("home_margin_usd_per_h", self.home_margin_usd_per_h, Real(0.0, why="USD/h"))
         hyps = list(self.diagnoser.hypotheses_)
         missing = [h for h in hyps if h not in self.table]
         self._names = list(self.candidates)

@@ -124,3 +124,12 @@ def test_the_posterior_is_not_acted_on_before_trust_after():
     run_episode(sup, "nominal", 5000, 60)
     # the stub names f1 from its 6th update (k = 16), acted on from k = 10 + 30 + 1
     assert next((e.k, e.target) for e in sup.history if e.target == "f1") == (41, "f1")
+
+
+@pytest.mark.parametrize(
+    ("field", "value"), [("margin_usd_per_h", -1.0), ("home_margin_usd_per_h", float("nan"))]
+)
+def test_a_bad_margin_is_refused_by_name(field: str, value: float) -> None:
+    # the margins are checked before the diagnoser is read, so no fitted bank is needed
+    with pytest.raises(ValueError, match=rf"{field}=(-1\.0|nan) is outside the allowed range"):
+        PosteriorSupervisor("posterior", None, {}, {}, **{field: value})
