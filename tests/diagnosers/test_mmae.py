@@ -164,6 +164,10 @@ def test_params_and_their_errors(fitted: diagnosers.Diagnoser, tmp_path) -> None
         diagnosers.make("mmae", params={"not_a_field": 1.0}).validate_params()
     with pytest.raises(ValueError, match=r"switch_prob=0\.7"):
         diagnosers.make("mmae", switch_prob=0.7).validate_params()
+    with pytest.raises(ValueError, match=r"fault_leave_prob=0\.6"):
+        diagnosers.make("mmae", fault_leave_prob=0.6).validate_params()
+    with pytest.raises(ValueError, match=r"settle=-1"):
+        diagnosers.make("mmae", settle=-1).validate_params()
     p = dataclasses.replace(fcc_env.FCCParams(), k_sigma=2.6)
     obj = diagnosers.make("mmae", params=p)
     assert obj.model_params() is p
