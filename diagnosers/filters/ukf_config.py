@@ -19,7 +19,8 @@ from dataclasses import dataclass
 from typing import Any
 
 from fcc_common.validation import Boolean, OptionSequence, Real, check, invalid
-from fcc_env.params import PARAM_FIELDS, FCCParams
+from fcc_env.closed_loop import CLOSED_LOOP_CHANNELS
+from fcc_env.params import MEASUREMENT_NAMES, PARAM_FIELDS, FCCParams
 from fcc_env.plant import (
     DEFAULT_SAMPLE_TIME_S,
     NOISE_SCALE_RANGE,
@@ -33,6 +34,7 @@ __all__ = [
     "OPEN_LOOP_AIR_WALK_STD_REL",
     "UKF_RANGES",
     "UKFConfig",
+    "check_fcc_channels",
     "model_params",
 ]
 
@@ -201,3 +203,13 @@ def model_params(params: FCCParams | dict[str, Any] | None) -> FCCParams:
         return dataclasses.replace(FCCParams(), **{k: float(v) for k, v in params.items()})
     except (TypeError, ValueError) as e:
         raise invalid("params", params, "FCCParams field values (numbers)", str(e)) from e
+
+
+def check_fcc_channels(name: str, channels: tuple[str, ...]) -> None:
+    """Refuse ``channels`` unless they are the FCC's measured channels in the plant's order,
+    open loop or closed loop: a filter of the published model reads each by its position."""
+    if channels not in (MEASUREMENT_NAMES, CLOSED_LOOP_CHANNELS):
+        raise ValueError(
+            f"{name} reads the FCC's measured channels in order: {list(MEASUREMENT_NAMES)} (open "
+            f"loop) or {list(CLOSED_LOOP_CHANNELS)} (closed loop); got {list(channels)}"
+        )

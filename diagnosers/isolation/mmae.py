@@ -35,14 +35,14 @@ from diagnosers.detection import NO_DIAGNOSIS, UNKNOWN, Decision, Detection
 from diagnosers.diagnoser import Diagnoser
 from diagnosers.episode.record import Episode
 from diagnosers.filters import UKFConfig
-from diagnosers.filters.ukf_config import model_params
+from diagnosers.filters.ukf_config import check_fcc_channels, model_params
 from diagnosers.isolation.filter_bank import FilterBank, calibrate_walks, mmae_run
 from diagnosers.presets import keyword_init
 from diagnosers.registry import register
 from fcc_common.validation import Integer, Real, check_params
 from fcc_env.closed_loop import CLOSED_LOOP_CHANNELS
 from fcc_env.faults import FAULTS
-from fcc_env.params import MEASUREMENT_NAMES, FCCParams
+from fcc_env.params import FCCParams
 
 __all__ = ["CALIBRATION_SAMPLES", "MMAE"]
 
@@ -183,11 +183,7 @@ class MMAE(Diagnoser):
         self._finish()
 
     def _check_channels(self) -> None:
-        if self.channels_ not in (MEASUREMENT_NAMES, CLOSED_LOOP_CHANNELS):
-            raise ValueError(
-                f"mmae reads the FCC's measured channels in order: {list(MEASUREMENT_NAMES)} (open "
-                f"loop) or {list(CLOSED_LOOP_CHANNELS)} (closed loop); got {list(self.channels_)}"
-            )
+        check_fcc_channels("mmae", self.channels_)
 
     def _config(self) -> UKFConfig:
         return UKFConfig(

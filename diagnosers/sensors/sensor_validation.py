@@ -38,7 +38,7 @@ from diagnosers.detection import NO_DIAGNOSIS, UNKNOWN, Decision, Detection
 from diagnosers.diagnoser import Diagnoser
 from diagnosers.episode.record import Episode
 from diagnosers.filters import UKFConfig
-from diagnosers.filters.ukf_config import model_params
+from diagnosers.filters.ukf_config import check_fcc_channels, model_params
 from diagnosers.presets import keyword_init
 from diagnosers.registry import register
 from diagnosers.sensors.loo_bank import LeaveOneOutBank
@@ -163,12 +163,7 @@ class SensorValidation(Diagnoser):
         self._finish()
 
     def _build(self) -> None:
-        if self.channels_ not in (MEASUREMENT_NAMES, CLOSED_LOOP_CHANNELS):
-            raise ValueError(
-                f"sensor-validation reads the FCC's measured channels in order: "
-                f"{list(MEASUREMENT_NAMES)} (open loop) or {list(CLOSED_LOOP_CHANNELS)} (closed "
-                f"loop); got {list(self.channels_)}"
-            )
+        check_fcc_channels("sensor-validation", self.channels_)
         config = UKFConfig(
             noise_scale=self.noise_scale,
             sample_time_s=self.sample_time_s_,
