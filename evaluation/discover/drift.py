@@ -148,26 +148,23 @@ def _finite(x: float) -> float | None:
     return float(x) if np.isfinite(x) else None
 
 
-def filter_coking(data: MeasuredData, table1: np.ndarray | None = None) -> np.ndarray:
+def filter_coking(data: MeasuredData) -> np.ndarray:
     """The closed-loop state estimator's causal f_coke estimate (n_episodes, n_samples).
 
     The estimator reads Table 1 and the valve command (``cmd_u_F``); the set-point channels of
     a closed-loop observation are not read by it and are passed as zeros. Its parameters are
-    the declared model's (:class:`fcc_env.FCCParams` defaults), never the plant's. ``table1``
-    (B, n_samples, 8; B a multiple of the episodes, episode ``b % n_episodes`` giving the
-    valve command) replaces the recorded Table 1 channels: the filter run on altered data.
+    the declared model's (:class:`fcc_env.FCCParams` defaults), never the plant's.
     """
     from diagnosers.filters import FCCStateEstimator, UKFConfig  # numba kernels: on demand
     from fcc_env.closed_loop import CLOSED_LOOP_CHANNELS
     from fcc_env.params import FCCParams
 
     data.require([*TABLE1, "cmd_u_F"], "the drift estimate")
-    if table1 is None:
-        table1 = data.stack(TABLE1)
-    B, T = table1.shape[:2]
-    obs = np.zeros((B, T, len(CLOSED_LOOP_CHANNELS)))
-    obs[:, :, : len(TABLE1)] = table1
-    obs[:, :, len(TABLE1)] = np.tile(data.channels["cmd_u_F"], (B // data.n_episodes, 1))
+    E, T = data.n_episodes, data.n_samples
+    obs = np.zeros((E, T, len(CLOSED_LOOP_CHANNELS)))
+    for i, c in enumerate(TABLE1):
+        obs[:, :, i] = data.channels[c]
+    obs[:, :, len(TABLE1)] = data.channels["cmd_u_F"]
     config = UKFConfig(closed_loop=True, estimate_coking=True, sample_time_s=data.sample_time_s)
     est = FCCStateEstimator(FCCParams(), config)
     return np.asarray(est.filter(obs, innovation_cov=False).state("f_coke"), np.float64)

@@ -33,8 +33,7 @@ from typing import Any
 import numpy as np
 
 from evaluation.discover.base import ParamInfo
-from evaluation.discover.data import MeasuredData
-from evaluation.discover.drift import SECONDS_PER_DAY, DriftEstimate
+from evaluation.discover.drift import SECONDS_PER_DAY
 from evaluation.discover.fitting import fit_effects
 from evaluation.discover.physics_model import PhysicsCandidate
 from evaluation.discover.selection import Accepted, FitContext
@@ -47,16 +46,13 @@ __all__ = [
     "DriftLine",
     "check_fit",
     "drift_line_candidate",
-    "drift_section",
     "fit_line",
     "line_summary",
 ]
 
 #: How the drift estimate is fed: ``"joint"`` with the correction line fitted with every
-#: candidate, ``"fixed"`` as it is (the loop before the joint fit), ``"refilter"`` as
-#: ``"joint"`` and the round's best candidates fitted again with the filter re-run without
-#: their effect (:mod:`evaluation.discover.drift_leak`).
-DRIFT_FITS = ("joint", "fixed", "refilter")
+#: candidate, ``"fixed"`` as it is (the loop before the joint fit).
+DRIFT_FITS = ("joint", "fixed")
 DRIFT_LINE_ID = "drift_line"
 _F_COKE = INPUT_NAMES.index("f_coke")
 #: Bounds of the correction: the program's drift is ±3 %; the largest leak measured was a level
@@ -129,14 +125,3 @@ def line_summary(theta: np.ndarray, stderr: np.ndarray, centre_s: float) -> dict
         **{n: float(v) for n, v in zip(names, theta, strict=True)},
         "stderr": {n: float(s) for n, s in zip(names, stderr, strict=True)},
     }
-
-
-def drift_section(
-    est: DriftEstimate, accepted: list[Accepted], data: MeasuredData
-) -> dict[str, Any]:
-    """The report's ``drift``: the estimate's summary and, with the joint fit, its line."""
-    out = est.summary(data.sample_time_s)
-    line = next((a for a in accepted if a.nuisance), None)
-    if line is not None:
-        out["line"] = line_summary(line.theta, line.stderr, data.n_samples * data.sample_time_s / 2)
-    return out

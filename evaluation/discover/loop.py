@@ -47,9 +47,8 @@ import numpy as np
 
 from evaluation.discover.base import Candidate, ModelAdapter
 from evaluation.discover.data import MeasuredData, load_measured
-from evaluation.discover.drift import apply_drift, check_mode, plot_drift
-from evaluation.discover.drift_joint import check_fit, drift_section, fit_line
-from evaluation.discover.drift_leak import drift_responses, rerank_rows
+from evaluation.discover.drift import DriftEstimate, apply_drift, check_mode, plot_drift
+from evaluation.discover.drift_joint import check_fit, fit_line, line_summary
 from evaluation.discover.fitting import fit_effects
 from evaluation.discover.form_search import FormSearch, form_round
 from evaluation.discover.physics_model import PhysicsModel
@@ -204,8 +203,7 @@ def discover(
     ctx = FitContext(model, data, Y, n_train, sqrt_w, block_len, alpha, min_rel_reduction)
 
     accepted: list[Accepted] = []
-    joint = est is not None and est.used and drift_fit in ("joint", "refilter")
-    refilter = joint and drift_fit == "refilter"
+    joint = est is not None and est.used and drift_fit == "joint"
     if joint:  # the baseline every candidate is tested against: the line fitted alone
         accepted.append(fit_line(ctx, T * data.sample_time_s / 2.0))
         line_effs, line_th = stacked(accepted)
@@ -222,17 +220,16 @@ def discover(
             if cid in excluded or any(a.cand.id == cid for a in accepted):
                 continue
             th0 = np.concatenate([th_acc, [p.typical for p in cand.params]])
-            rows.append(_trial(ctx, cid, cand, effs, th0, nuis, e0, grid=True))
+            scan = np.r_[np.zeros(th_acc.size, bool), np.ones(len(cand.params), bool)]
+            free = scan | np.r_[nuis, np.zeros(len(cand.params), bool)]
+            fit = fit_effects(model, data, [*effs, cand], th0, free, Y, n_train, sqrt_w, scan=scan)
+            e1 = Y - model.predict(data, [*effs, cand], fit.theta[None], T)[0]
+            cmp = heldout_comparison(e0[:, n_train:], e1[:, n_train:], sqrt_w, block_len)
+            k = len(cand.params)
+            score = (cmp["sse0"] - cmp["sse1"]) - k * math.log(data.n_episodes * n_hold)
+            rows.append({"id": cid, "cand": cand, "fit": fit, "score": score, **cmp, "k": k})
         if not rows:
             break
-        if refilter:  # the best few again, each with the filter re-run without its effect
-            top = rerank_rows(rows)
-            trials = [(r["cand"], float(r["fit"].theta[-1])) for r in top]
-            gs = drift_responses(ctx, effs, th_acc, trials, est.lag_samples) if top else []
-            for r, g in zip(top, gs, strict=True):
-                model.set_drift_response(r["id"], g)
-                r.update(_trial(ctx, r["id"], r["cand"], effs, r["fit"].theta, nuis, e0, False))
-                r["refiltered"] = True
         thresh = alpha / len(rows)
         for r in rows:
             r["significant"] = bool(
@@ -248,7 +245,6 @@ def discover(
                 "rel_reduction": finite_or_none(r["rel_reduction"]),
                 "p_value": finite_or_none(r["p_value"]),
                 "significant": r["significant"],
-                **({"refiltered": True} if r.get("refiltered") else {}),
             }
             for r in rows
         ]
@@ -260,9 +256,6 @@ def discover(
                 "accepted": sig[0]["id"] if sig else None,
             }
         )
-        for r in rows:  # a re-run kept only for the effect accepted
-            if r.get("refiltered") and not (sig and r is sig[0]):
-                model.set_drift_response(r["id"], None)
         if not sig:
             break
         win = sig[0]
@@ -431,7 +424,7 @@ def discover(
             "drift": drift,
             "drift_fit": drift_fit,
         },
-        drift=None if est is None else drift_section(est, accepted, data),
+        drift=None if est is None else _drift_section(est, accepted, data),
         note=note,
         elapsed_s=elapsed_s,
         plots=plot_files,
@@ -441,29 +434,15 @@ def discover(
     return report
 
 
-def _trial(
-    ctx: FitContext,
-    cid: str,
-    cand: Candidate,
-    effs: list[Candidate],
-    th0: np.ndarray,
-    nuis: np.ndarray,
-    e0: np.ndarray,
-    grid: bool,
+def _drift_section(
+    est: DriftEstimate, accepted: list[Accepted], data: MeasuredData
 ) -> dict[str, Any]:
-    """One candidate fitted on top of the model as it stands (``effs``, held at ``th0``'s first
-    values, the nuisance ones free) and scored on the held-out part against ``e0``."""
-    model, data, n_train, T = ctx.model, ctx.data, ctx.n_train, ctx.data.n_samples
-    k = len(cand.params)
-    scan = np.r_[np.zeros(nuis.size, bool), np.ones(k, bool)]
-    free = scan | np.r_[nuis, np.zeros(k, bool)]
-    fit = fit_effects(
-        model, data, [*effs, cand], th0, free, ctx.Y, n_train, ctx.sqrt_w, grid=grid, scan=scan
-    )
-    e1 = ctx.Y - model.predict(data, [*effs, cand], fit.theta[None], T)[0]
-    cmp = heldout_comparison(e0[:, n_train:], e1[:, n_train:], ctx.sqrt_w, ctx.block_len)
-    score = (cmp["sse0"] - cmp["sse1"]) - k * math.log(data.n_episodes * (T - n_train))
-    return {"id": cid, "cand": cand, "fit": fit, "score": score, **cmp, "k": k}
+    """The report's ``drift``: the estimate's summary and, with the joint fit, its line."""
+    out = est.summary(data.sample_time_s)
+    line = next((a for a in accepted if a.nuisance), None)
+    if line is not None:
+        out["line"] = line_summary(line.theta, line.stderr, data.n_samples * data.sample_time_s / 2)
+    return out
 
 
 def _form_table(table: dict[str, Any]) -> dict[str, Any]:

@@ -156,27 +156,6 @@ class PhysicsModel:
         self._U: np.ndarray | None = None
         self._data_id: int | None = None
         self._drift: np.ndarray | None = None
-        #: per candidate id: the drift estimate's response per unit of its parameter (E, T)
-        self._responses: dict[str, np.ndarray] = {}
-
-    def set_drift_response(self, cand_id: str, g: np.ndarray | None) -> None:
-        """Tell the model how the fed drift estimate moves with candidate ``cand_id``'s (single)
-        parameter: with the candidate at θ the fed f_coke is the estimate less
-        ``(θ − null)·g`` (``g`` (n_episodes, n_samples) per unit parameter;
-        :mod:`evaluation.discover.drift_leak`). None forgets it."""
-        if self._U is None:
-            raise RuntimeError("prepare() the model on the data before set_drift_response()")
-        if g is None:
-            self._responses.pop(cand_id, None)
-        else:
-            g = np.asarray(g, np.float64)
-            if g.shape != self._U.shape[:2] or not np.isfinite(g).all():
-                raise ValueError(
-                    f"the drift response of {cand_id!r} of shape {g.shape} must be finite and "
-                    f"match the data's (n_episodes, n_samples) = {self._U.shape[:2]}"
-                )
-            self._responses[cand_id] = g
-        self._cache.clear()
 
     def set_drift(self, f_coke: np.ndarray | None) -> None:
         """Feed the prepared data's episodes an estimated feed coking factor ``f_coke``
@@ -212,7 +191,6 @@ class PhysicsModel:
             U[:, :, 5] = self._drift  # re-prepared on the same data: the drift stays
         else:
             self._drift = None
-            self._responses = {}
         self._data_id = id(data)
         self._cache.clear()
 
@@ -227,8 +205,6 @@ class PhysicsModel:
 
     # -- simulation ------------------------------------------------------------------------------
     def _needs_sim(self, eff: Candidate) -> bool:
-        if eff.id in self._responses:  # its value moves the fed drift
-            return True
         if isinstance(eff, PhysicsCandidate):
             return eff.needs_simulation
         if isinstance(eff, FormCandidate):
@@ -266,15 +242,10 @@ class PhysicsModel:
             for eff, th in setting:
                 if isinstance(eff, FormCandidate):
                     continue
-                g = self._responses.get(eff.id)
-                if g is not None:
-                    U[:, :, 5] -= (float(th[0]) - eff.params[0].null) * g[:, :n]
                 values = {p.name: float(v) for p, v in zip(eff.params, th, strict=True)}
                 sensor = getattr(eff, "sensor", None)
                 if sensor is not None:
                     kind, ch = sensor
-                    if ch not in _INPUT_SLOT:  # on an output: applied after the simulation
-                        continue
                     j = _INPUT_SLOT[ch]
                     if kind == "sensor_bias":
                         U[:, :, j] -= values["bias"]
@@ -423,7 +394,7 @@ class PhysicsModel:
                         vals = term_values(table, Z)[..., cols]
                         Y[..., TABLE1.index(e.channel)] += vals @ thetas[b, slices[i]]
                     col += len(e.terms)
-                elif getattr(e, "sensor", None) is not None and e.sensor[1] not in _INPUT_SLOT:
+                elif i not in sim_idx:
                     Y = self._apply_output_effect(e, thetas[b, slices[i]], t, Y)
             result[b] = Y[..., out_idx]
         return result
