@@ -20,6 +20,8 @@ named is round 1's winner; the form search is measured apart (``--forms``).
                                                 # fitted with every candidate (drift_joint)
     PYTHONPATH=. python lab/discover_drift.py --forms [--drift off]  # the form search after the
                                                 # drift estimate (--drift off: before and after)
+    PYTHONPATH=. python lab/discover_drift.py --clean-defaults --clean 4  # clean records through
+                                                # the loop's defaults (forms, 3 effects)
 """
 
 from __future__ import annotations
@@ -133,6 +135,21 @@ def form_cases(modes: tuple[str, ...]) -> None:
             )
 
 
+def clean_defaults(seeds: list[int]) -> None:
+    """Clean records through the loop's defaults (library rounds, then a form when structure
+    remains; the joint drift fit): anything named on them is spurious."""
+    for seed in seeds:
+        t0 = time.process_time()
+        rep = d.discover(closed_data(None, seed), plots=False).to_json()
+        forms = [e["equation"]["text"] for e in rep["effects"] if e.get("equation")]
+        libs = [e["id"] for e in rep["effects"] if not e.get("equation")]
+        print(
+            f"| clean {seed} | library {libs} | forms {forms} | unexplained "
+            f"{rep['unexplained']} | {time.process_time() - t0:.0f} s |",
+            flush=True,
+        )
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cases", choices=("fast", "all"), default="all")
@@ -150,7 +167,15 @@ def main() -> None:
     )
     ap.add_argument("--clean", type=int, default=2, help="clean records (seeds 5000, 5001, ...)")
     ap.add_argument("--forms", action="store_true", help="the form search cases instead")
+    ap.add_argument(
+        "--clean-defaults",
+        action="store_true",
+        help="the --clean records through the loop's defaults (forms, 3 effects) instead",
+    )
     args = ap.parse_args()
+    if args.clean_defaults:
+        clean_defaults([SEED[0] + args.seed_offset + k for k in range(args.clean)])
+        return
     if args.forms:
         form_cases(("auto",) if args.drift == "auto" else ("off", "auto"))
         return

@@ -48,7 +48,7 @@ import numpy as np
 from evaluation.discover.base import Candidate, ModelAdapter
 from evaluation.discover.data import MeasuredData, load_measured
 from evaluation.discover.drift import DriftEstimate, apply_drift, check_mode, plot_drift
-from evaluation.discover.drift_joint import check_fit, fit_line, line_summary
+from evaluation.discover.drift_joint import changes_coking, check_fit, fit_line, line_summary
 from evaluation.discover.fitting import fit_effects
 from evaluation.discover.form_search import FormSearch, form_round
 from evaluation.discover.physics_model import PhysicsModel
@@ -205,6 +205,9 @@ def discover(
     accepted: list[Accepted] = []
     joint = est is not None and est.used and drift_fit == "joint"
     if joint:  # the baseline every candidate is tested against: the line fitted alone
+        for cid in [c for c, cand in pool.items() if changes_coking(cand)]:
+            del pool[cid]
+            skipped[cid] = "changes the coking factor over time: the fitted drift line's trend"
         accepted.append(fit_line(ctx, T * data.sample_time_s / 2.0))
         line_effs, line_th = stacked(accepted)
         E0 = Y - model.predict(data, line_effs, line_th[None], T)[0]

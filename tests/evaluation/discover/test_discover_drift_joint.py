@@ -12,6 +12,7 @@ from evaluation import discover as d
 from evaluation.discover.drift_joint import (
     DRIFT_LINE_ID,
     DriftLine,
+    changes_coking,
     check_fit,
     drift_line_candidate,
 )
@@ -43,6 +44,14 @@ def test_the_line_candidate_and_its_settings() -> None:
         drift_line_candidate(-1.0)
     with pytest.raises(ValueError, match="drift_fit"):
         check_fit("sometimes")
+
+
+def test_only_the_coking_rise_is_taken_for_the_line() -> None:
+    """With the line's trend free a candidate that moves f_coke over time is the line: not
+    offered (``feed_coking_drift`` named with the wrong sign otherwise, lab/discover_drift.md)."""
+    lib, _ = d.library_candidates()
+    assert [c for c, cand in lib.items() if changes_coking(cand)] == ["feed_coking_drift"]
+    assert changes_coking(drift_line_candidate(0.0))  # the line itself: the nuisance
 
 
 def test_nuisance_entries_are_fitted_but_never_findings() -> None:
