@@ -16,8 +16,12 @@ The naming is that of the library rounds (``forms="never"``, ``max_effects=1``):
 named is round 1's winner; the form search is measured apart (``--forms``).
 
     PYTHONPATH=. python lab/discover_drift.py --drift auto [--cases fast|all] [--floor]
+        [--drift-fit joint|fixed] [--seed-offset K]  # joint: the estimate's level and trend
+                                                # fitted with every candidate (drift_joint)
     PYTHONPATH=. python lab/discover_drift.py --forms [--drift off]  # the form search after the
                                                 # drift estimate (--drift off: before and after)
+    PYTHONPATH=. python lab/discover_drift.py --clean-defaults --clean 4  # clean records through
+                                                # the loop's defaults (forms, 3 effects)
 """
 
 from __future__ import annotations
@@ -77,10 +81,14 @@ def closed_data(effect, seed: int) -> d.MeasuredData:
     return d.from_batch(fcc_env.simulate_episodes([seed], N, plant=plant, plant_effects=effects))
 
 
-def run_case(text, pname, truth, seed: int, drift: str, floor: bool) -> str:
+def run_case(
+    text, pname, truth, seed: int, drift: str, floor: bool, drift_fit: str = "joint"
+) -> str:
     t0 = time.process_time()
     data = closed_data(text, seed)
-    rep = d.discover(data, max_effects=1, plots=False, forms="never", drift=drift).to_json()
+    rep = d.discover(
+        data, max_effects=1, plots=False, forms="never", drift=drift, drift_fit=drift_fit
+    ).to_json()
     named = rep["effects"][0]["id"] if rep["effects"] else "none"
     hidden = fx.parse(text).effect_id if isinstance(text, str) else None
     ok = "✓" if named == hidden or (hidden is None and named == "none") else "✗"
@@ -91,15 +99,19 @@ def run_case(text, pname, truth, seed: int, drift: str, floor: bool) -> str:
     drift_txt = (
         "" if dr is None else f"{dr['lag_samples']} | {dr['episodes'][0]['trend_per_day']:+.3f}"
     )
+    line = (dr or {}).get("line")
+    line_txt = "–" if line is None else f"{line['level']:+.4f}, {line['trend_per_day']:+.3f}"
     fl = ""
     if floor:
         clean = closed_data(None, seed)
-        fl_rep = d.discover(clean, max_effects=0, plots=False, forms="never", drift=drift)
+        fl_rep = d.discover(
+            clean, max_effects=0, plots=False, forms="never", drift=drift, drift_fit=drift_fit
+        )
         fl = f"{fl_rep.rmse_before[ch]:.3f}"
     label = text if isinstance(text, str) or text is None else type(text).__name__
     return (
         f"| {label} | {named} {ok} | {'' if est is None else f'{est:.3g} ({truth:g})'} | "
-        f"{drift_txt or '– | –'} | {ch} | {rep['rmse_before'][ch]:.3f} | "
+        f"{drift_txt or '– | –'} | {line_txt} | {ch} | {rep['rmse_before'][ch]:.3f} | "
         f"{rep['rmse_after'][ch]:.3f} | {fl} | {rep['unexplained']} | "
         f"{time.process_time() - t0:.0f} s |"
     )
@@ -123,28 +135,67 @@ def form_cases(modes: tuple[str, ...]) -> None:
             )
 
 
+def clean_defaults(seeds: list[int]) -> None:
+    """Clean records through the loop's defaults (library rounds, then a form when structure
+    remains; the joint drift fit): anything named on them is spurious."""
+    for seed in seeds:
+        t0 = time.process_time()
+        rep = d.discover(closed_data(None, seed), plots=False).to_json()
+        forms = [e["equation"]["text"] for e in rep["effects"] if e.get("equation")]
+        libs = [e["id"] for e in rep["effects"] if not e.get("equation")]
+        print(
+            f"| clean {seed} | library {libs} | forms {forms} | unexplained "
+            f"{rep['unexplained']} | {time.process_time() - t0:.0f} s |",
+            flush=True,
+        )
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--cases", choices=("fast", "all"), default="all")
     ap.add_argument("--drift", choices=("off", "auto"), default="auto")
     ap.add_argument("--floor", action="store_true")
+    ap.add_argument("--drift-fit", choices=("joint", "fixed"), default="joint")
+    ap.add_argument(
+        "--seed-offset",
+        type=int,
+        default=0,
+        help="added to the validation seeds 5000/5001 (e.g. 1000: fresh seeds 6000/6001)",
+    )
+    ap.add_argument(
+        "--only", default=None, help="comma-separated effect ids, 'sine', 'clean' to run (all)"
+    )
+    ap.add_argument("--clean", type=int, default=2, help="clean records (seeds 5000, 5001, ...)")
     ap.add_argument("--forms", action="store_true", help="the form search cases instead")
+    ap.add_argument(
+        "--clean-defaults",
+        action="store_true",
+        help="the --clean records through the loop's defaults (forms, 3 effects) instead",
+    )
     args = ap.parse_args()
+    if args.clean_defaults:
+        clean_defaults([SEED[0] + args.seed_offset + k for k in range(args.clean)])
+        return
     if args.forms:
         form_cases(("auto",) if args.drift == "auto" else ("off", "auto"))
         return
     cases = CASES + (SLOW_CASES if args.cases == "all" else [])
-    print(f"\n### closed loop, default program, drift {args.drift}\n")
+    only = None if args.only is None else set(args.only.split(","))
+    seeds = {k: v + args.seed_offset for k, v in SEED.items()}
+    opts = (args.drift, args.floor, args.drift_fit)
+    print(f"\n### closed loop, default program, drift {args.drift}, fit {args.drift_fit}\n")
     print(
         "| hidden effect | named first | estimate (truth) | drift lag | drift trend /day | "
-        "channel | RMSE before | RMSE after | floor | unexplained | CPU |"
+        "line level, trend /day | channel | RMSE before | RMSE after | floor | unexplained | CPU |"
     )
-    print("|---|---|---|---|---|---|---|---|---|---|---|")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     for text, pname, truth, seed in cases:
-        print(run_case(text, pname, truth, SEED[seed], args.drift, args.floor), flush=True)
-    print(run_case(SineOnStage2(), None, None, SEED[1], args.drift, args.floor), flush=True)
-    for seed in (0, 1):
-        print(run_case(None, None, None, SEED[seed], args.drift, args.floor), flush=True)
+        if only is None or fx.parse(text).effect_id in only:
+            print(run_case(text, pname, truth, seeds[seed], *opts), flush=True)
+    if only is None or "sine" in only:
+        print(run_case(SineOnStage2(), None, None, seeds[1], *opts), flush=True)
+    for k in range(args.clean if only is None or "clean" in only else 0):
+        print(run_case(None, None, None, SEED[0] + args.seed_offset + k, *opts), flush=True)
 
 
 if __name__ == "__main__":

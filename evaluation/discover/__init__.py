@@ -27,6 +27,10 @@ The package, one room per concern:
 ``scoring``               :func:`heldout_comparison`, :func:`structure_statistics`
 ``drift``                 the unmeasured feed-coking drift of closed-loop data, estimated by the
                           state estimator, gated, and fed to the model before the search
+``drift_joint``           the drift estimate's level and trend as nuisance parameters fitted with
+                          every candidate (``drift_fit="joint"``)
+``selection``             the accepted effects (a nuisance entry among them) and their joint
+                          re-fit and backward elimination
 ``loop``                  :func:`discover`
 ``report``                :class:`DiscoveryReport`, residual tests and plots of the report
 ``residual_tests``        whiteness, bias, drift and correlation tests of a residual
@@ -41,7 +45,9 @@ effects and forms are accepted into the model with ``--accept DIR/report.json``
 
 On closed-loop data (``MeasuredData.closed_loop``) the loop first estimates the unmeasured
 feed-coking drift and feeds it to the model as a known input (``drift="auto"``; the report's
-``drift`` section and ``drift.png`` show it; ``--drift off`` turns it off).
+``drift`` section and ``drift.png`` show it; ``--drift off`` turns it off). The estimate's level and trend are then
+fitted again with every candidate (``drift_fit="joint"``, ``--drift-fit``), so a level or trend
+that an effect leaked into the estimate goes back to the effect.
 
 Limitations (stated, not hidden): a first-order *sensor lag on a model input channel* (T_ar,
 T_fp) cannot be inverted without differentiating noise, so those candidates are not offered

@@ -1,6 +1,6 @@
 """Command line: ``python -m evaluation.discover (--data PATH.csv | --external DIR | --manifest
 DIR/dataset.json) --out DIR [--candidates id,id] [--train-fraction 0.6] [--max-effects 3]
-[--alpha 0.01] [--drift auto|estimate|off] [--no-plots] [--progress | --no-progress]``.
+[--alpha 0.01] [--drift auto|estimate|off] [--drift-fit joint|fixed] [--no-plots] [--progress | --no-progress]``.
 
 ``--data`` reads a dataset with this project's JSON sidecar (CSV or Parquet). ``--external`` and
 ``--manifest`` read a user's directory through its manifest
@@ -22,6 +22,7 @@ from typing import Any
 
 from evaluation.discover.arx import ARXModel
 from evaluation.discover.data import from_external
+from evaluation.discover.drift_joint import DRIFT_FITS
 from evaluation.discover.form_search import FormSearch
 from evaluation.discover.loop import discover
 from evaluation.discover.physics_model import (
@@ -101,6 +102,13 @@ def main(argv: Sequence[str] | None = None) -> int:
         help="estimate the unmeasured feed-coking drift first and feed it to the model: on "
         "closed-loop data (auto), always, or never",
     )
+    parser.add_argument(
+        "--drift-fit",
+        choices=DRIFT_FITS,
+        default="joint",
+        help="the drift estimate's level and trend fitted with every candidate (joint) or the "
+        "estimate fed as it is (fixed)",
+    )
     add_progress_flag(parser)
     return run_command(parser, _discover, argv)
 
@@ -129,6 +137,7 @@ def _discover(args: argparse.Namespace) -> int:
         forms=args.forms,
         form_search=FormSearch(max_terms=args.max_terms),
         drift=args.drift,
+        drift_fit=args.drift_fit,
     )
     for e in report.effects:
         if e.equation is not None:
@@ -144,6 +153,12 @@ def _discover(args: argparse.Namespace) -> int:
             print(
                 f"  drift (estimated f_coke, episode {i}): mean {ep['mean']:.4f} "
                 f"range {ep['min']:.4f}-{ep['max']:.4f}, trend {ep['trend_per_day']:+.4f}/day"
+            )
+        line = report.drift.get("line")
+        if line is not None:
+            print(
+                f"  drift line fitted with the effects: level {line['level']:+.4f}, "
+                f"trend {line['trend_per_day']:+.4f}/day"
             )
     print(f"unexplained structure: {report.unexplained} {list(report.unexplained_channels)}")
     print(f"wrote {Path(args.out) / REPORT_FILE} in {report.elapsed_s:.1f} s")

@@ -48,7 +48,9 @@ filter explains what it can with f_coke). An effect that itself changes f_coke
 shows in the report's ``trend_per_day``), not named. A catalyst deactivation leaks as a
 trend, a stage-1 afterburn factor as a level (f_coke 0.965 for a factor of 1.3): both were
 misnamed. Centring the estimate on 1 fixed the afterburn but named a T_fp bias on a clean
-record (the program's own mean level, 1 ± 0.005, was then missing), so it is not done.
+record (the program's own mean level, 1 ± 0.005, was then missing), so it is not done; instead
+the loop fits a correction line (level and trend) with every candidate
+(:mod:`evaluation.discover.drift_joint`), which takes the afterburn's leaked level back.
 """
 
 from __future__ import annotations

@@ -102,6 +102,7 @@ def fit_effects(
     *,
     grid: bool = True,
     max_iter: int = 25,
+    scan: np.ndarray | None = None,
 ) -> FitResult:
     """Simulation-error least squares of the ``free`` parameters on the first ``n_train`` samples.
 
@@ -110,8 +111,10 @@ def fit_effects(
     each residual evaluation simulates the trial point and its forward finite-difference
     perturbations as one batched ``predict`` call, and the Jacobian handed to the optimiser is
     taken from that same call. With ``grid`` the start is the best point of the parameters'
-    grids (one batched call). A model with its own ``fit`` method (a closed-form fit) is
-    delegated to.
+    grids (one batched call); ``scan`` (a mask like ``free``) limits the grid to those free
+    parameters, the other free ones start where they stand (a nuisance parameter fitted with
+    every candidate: its grid would multiply each candidate's). A model with its own ``fit``
+    method (a closed-form fit) is delegated to.
     """
     custom = getattr(model, "fit", None)
     if callable(custom):
@@ -128,7 +131,8 @@ def fit_effects(
         n_evals += rows.shape[0]
         return weighted_residuals(model, data, effects, rows, Y, n_train, sqrt_w)
 
-    if grid and fidx.size:
+    gidx = fidx if scan is None else np.flatnonzero(np.asarray(free, bool) & np.asarray(scan, bool))
+    if grid and gidx.size:
         axes = [
             sorted(
                 {
@@ -136,14 +140,14 @@ def fit_effects(
                     *(v for v in infos[i].grid or range_grid(infos[i]) if lo[i] <= v <= hi[i]),
                 }
             )
-            for i in fidx
+            for i in gidx
         ]
         if math.prod(len(a) for a in axes) <= MAX_GRID_ROWS:
             rows = np.tile(theta, (math.prod(len(a) for a in axes), 1))
-            rows[:, fidx] = np.array(list(itertools.product(*axes)), float)
+            rows[:, gidx] = np.array(list(itertools.product(*axes)), float)
         else:  # one parameter at a time, the others at their start values
             blocks = []
-            for j, a in zip(fidx, axes, strict=True):
+            for j, a in zip(gidx, axes, strict=True):
                 b = np.tile(theta, (len(a), 1))
                 b[:, j] = a
                 blocks.append(b)

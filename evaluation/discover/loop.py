@@ -1,10 +1,11 @@
 """The residual → missing-effect loop (:func:`discover`) over a pluggable declared model.
 
 0. *Drift*: on closed-loop data the unmeasured feed-coking drift is estimated first by the
-   state estimator and fed to the model as a known input when its fluctuation fits the held-out
-   part significantly better than a straight line (:mod:`evaluation.discover.drift`;
-   ``drift="off"`` turns it off); "the declared model" below
-   is then the model with the drift.
+   state estimator and fed to the model as a known input when it fluctuates (the gate of
+   :mod:`evaluation.discover.drift`; ``drift="off"`` turns it off); "the declared model" below
+   is then the model with the drift. With ``drift_fit="joint"`` a correction line of the
+   estimate (level and trend, :mod:`evaluation.discover.drift_joint`) is fitted on the model
+   alone (the baseline) and again with every candidate, re-fit and elimination step.
 1. *Residual*: the model is simulated on the measured inputs (output error, never one-step
    prediction); the residual of every output channel is split in time into a training part (the
    first ``train_fraction`` of every episode) and a held-out part (the rest).
@@ -39,7 +40,6 @@ import math
 import os
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -47,7 +47,8 @@ import numpy as np
 
 from evaluation.discover.base import Candidate, ModelAdapter
 from evaluation.discover.data import MeasuredData, load_measured
-from evaluation.discover.drift import apply_drift, check_mode, plot_drift
+from evaluation.discover.drift import DriftEstimate, apply_drift, check_mode, plot_drift
+from evaluation.discover.drift_joint import changes_coking, check_fit, fit_line, line_summary
 from evaluation.discover.fitting import fit_effects
 from evaluation.discover.form_search import FormSearch, form_round
 from evaluation.discover.physics_model import PhysicsModel
@@ -67,6 +68,15 @@ from evaluation.discover.scoring import (
     heldout_comparison,
     noise_levels,
     structure_statistics,
+)
+from evaluation.discover.selection import (
+    Accepted,
+    FitContext,
+    assign,
+    findings,
+    nuisance_mask,
+    refit_all,
+    stacked,
 )
 from evaluation.discover.terms import FormCandidate, equation, form_to_json
 from fcc_common.progress import progress_bar
@@ -91,30 +101,6 @@ FORM_MODES = ("auto", "always", "never")
 ALPHA = Real(0.0, 0.5, closed="neither")
 
 
-@dataclass(frozen=True)
-class _FitContext:
-    """What every joint re-fit of a run reads: the model, the data, the held-out split and the
-    weights, and the significance level of the block test (fixed for the run)."""
-
-    model: ModelAdapter
-    data: MeasuredData
-    Y: np.ndarray
-    n_train: int
-    sqrt_w: np.ndarray
-    block_len: int
-    alpha: float
-    min_rel: float
-
-
-@dataclass
-class _Accepted:
-    cand: Candidate
-    theta: np.ndarray
-    stderr: np.ndarray
-    round: int
-    stats: dict[str, float]
-
-
 def discover(
     data: MeasuredData | str | os.PathLike,
     *,
@@ -134,6 +120,7 @@ def discover(
     max_forms: int = 1,
     form_search: FormSearch | None = None,
     drift: str = "auto",
+    drift_fit: str = "joint",
 ) -> DiscoveryReport:
     """Run the residual → missing-effect loop and return the report (also written to ``out_dir``).
 
@@ -159,6 +146,10 @@ def discover(
             (:mod:`evaluation.discover.drift`): ``"auto"`` on closed-loop data
             (``data.closed_loop``), ``"estimate"`` always, ``"off"`` never; the report's
             ``drift`` section and ``drift.png`` show the estimate.
+        drift_fit: how the estimate is fed (:mod:`evaluation.discover.drift_joint`):
+            ``"joint"`` with a correction line (level and trend) fitted with every candidate,
+            so a level or trend an effect leaked into the estimate goes back to the effect;
+            ``"fixed"`` as it is.
 
     Returns:
         A frozen :class:`~evaluation.discover.report.DiscoveryReport`. Until the previous
@@ -172,6 +163,7 @@ def discover(
     forms = check("forms", forms, Options(FORM_MODES))
     max_forms = check("max_forms", max_forms, MAX_FORMS)
     drift = check_mode(drift)
+    drift_fit = check_fit(drift_fit)
     search = form_search if form_search is not None else FormSearch()
     if not isinstance(data, MeasuredData):
         data = load_measured(data)
@@ -208,14 +200,22 @@ def discover(
     sigma = noise_levels(E0[:, :n_train])
     sigma = np.where(sigma > 0, sigma, 1.0)
     sqrt_w = 1.0 / sigma
-    ctx = _FitContext(model, data, Y, n_train, sqrt_w, block_len, alpha, min_rel_reduction)
+    ctx = FitContext(model, data, Y, n_train, sqrt_w, block_len, alpha, min_rel_reduction)
 
-    accepted: list[_Accepted] = []
+    accepted: list[Accepted] = []
+    joint = est is not None and est.used and drift_fit == "joint"
+    if joint:  # the baseline every candidate is tested against: the line fitted alone
+        for cid in [c for c, cand in pool.items() if changes_coking(cand)]:
+            del pool[cid]
+            skipped[cid] = "changes the coking factor over time: the fitted drift line's trend"
+        accepted.append(fit_line(ctx, T * data.sample_time_s / 2.0))
+        line_effs, line_th = stacked(accepted)
+        E0 = Y - model.predict(data, line_effs, line_th[None], T)[0]
     excluded: set[str] = set()  # dropped by backward elimination: not offered again
     rounds: list[dict[str, Any]] = []
     for rnd in range(1, max_effects + 1):
-        effs = [a.cand for a in accepted]
-        th_acc = np.concatenate([a.theta for a in accepted]) if accepted else np.zeros(0)
+        effs, th_acc = stacked(accepted)
+        nuis = nuisance_mask(accepted)  # the drift line: free in every candidate's fit
         e0 = Y - model.predict(data, effs, th_acc[None], T)[0]
         rows = []
         desc = f"round {rnd}/{max_effects}"
@@ -223,8 +223,9 @@ def discover(
             if cid in excluded or any(a.cand.id == cid for a in accepted):
                 continue
             th0 = np.concatenate([th_acc, [p.typical for p in cand.params]])
-            free = np.r_[np.zeros(th_acc.size, bool), np.ones(len(cand.params), bool)]
-            fit = fit_effects(model, data, [*effs, cand], th0, free, Y, n_train, sqrt_w)
+            scan = np.r_[np.zeros(th_acc.size, bool), np.ones(len(cand.params), bool)]
+            free = scan | np.r_[nuis, np.zeros(len(cand.params), bool)]
+            fit = fit_effects(model, data, [*effs, cand], th0, free, Y, n_train, sqrt_w, scan=scan)
             e1 = Y - model.predict(data, [*effs, cand], fit.theta[None], T)[0]
             cmp = heldout_comparison(e0[:, n_train:], e1[:, n_train:], sqrt_w, block_len)
             k = len(cand.params)
@@ -262,8 +263,10 @@ def discover(
             break
         win = sig[0]
         k = win["k"]
+        if nuis.any():  # the line as fitted with the winner
+            assign(accepted, win["fit"].theta[:-k], win["fit"].stderr[:-k], nuisance_only=True)
         accepted.append(
-            _Accepted(
+            Accepted(
                 win["cand"],
                 win["fit"].theta[-k:],
                 win["fit"].stderr[-k:],
@@ -271,7 +274,7 @@ def discover(
                 {x: win[x] for x in ("score", "rel_reduction", "p_value")},
             )
         )
-        _refit_all(ctx, accepted, rounds[-1], excluded)
+        refit_all(ctx, accepted, rounds[-1], excluded)
 
     can_form = forms != "never" and callable(getattr(model, "signals", None))
     form_note = None
@@ -282,8 +285,7 @@ def discover(
             )
         can_form, form_note = False, "form search skipped: PySINDy is not installed ([forms])"
     for i in range(max_forms if can_form else 0):
-        effs = [a.cand for a in accepted]
-        th_acc = np.concatenate([a.theta for a in accepted]) if accepted else np.zeros(0)
+        effs, th_acc = stacked(accepted)
         e_now = Y - model.predict(data, effs, th_acc[None], T)[0]
         s_now = structure_statistics(e_now[:, n_train:], sigma)
         bad = (s_now["ratio"] > RATIO_LIMIT) | (s_now["lf"] > LF_LIMIT)
@@ -292,7 +294,8 @@ def discover(
         # library effects accepted while structure remains are provisional: the first form is
         # also searched on the declared model alone, and the better model (held-out, with a
         # ln N penalty per parameter) is kept
-        bases = [list(accepted), []] if i == 0 and accepted else [list(accepted)]
+        alone = [a for a in accepted if a.nuisance]  # the declared model (with its drift line)
+        bases = [list(accepted), alone] if i == 0 and findings(accepted) else [list(accepted)]
         pen = math.log(data.n_episodes * n_hold)
         # a form must beat the model as it stands (on the declared model alone too)
         crit_now = float(np.sum((e_now[:, n_train:] * sqrt_w) ** 2)) + th_acc.size * pen
@@ -337,7 +340,7 @@ def discover(
         k = len(form.params)
         row = next(r for r in table["candidates"] if r["form"] is form)
         accepted.append(
-            _Accepted(
+            Accepted(
                 form,
                 fit.theta[-k:],
                 fit.stderr[-k:],
@@ -345,10 +348,9 @@ def discover(
                 {x: row[x] for x in ("score", "rel_reduction", "p_value")},
             )
         )
-        _refit_all(ctx, accepted, rounds[-1], excluded)
+        refit_all(ctx, accepted, rounds[-1], excluded)
 
-    effs = [a.cand for a in accepted]
-    th_acc = np.concatenate([a.theta for a in accepted]) if accepted else np.zeros(0)
+    effs, th_acc = stacked(accepted)
     P1 = model.predict(data, effs, th_acc[None], T)[0]
     E1 = Y - P1
     s_before = structure_statistics(E0[:, n_train:], sigma)
@@ -357,7 +359,7 @@ def discover(
     unexplained = bool(bad.any())
     others = model.other_signals(data)
     note = None
-    if accepted and unexplained:
+    if findings(accepted) and unexplained:
         note = (
             "structure remains that the accepted effects do not explain; they improved the fit "
             "significantly but are not claimed to be its cause"
@@ -396,7 +398,7 @@ def discover(
                 equation=equation(a.cand, a.theta) if isinstance(a.cand, FormCandidate) else None,
                 form=form_to_json(a.cand) if isinstance(a.cand, FormCandidate) else None,
             )
-            for a in accepted
+            for a in findings(accepted)
         ),
         rmse_before=per_channel(chans, np.sqrt(np.mean(E0[:, n_train:] ** 2, axis=(0, 1)))),
         rmse_after=per_channel(chans, np.sqrt(np.mean(E1[:, n_train:] ** 2, axis=(0, 1)))),
@@ -423,8 +425,9 @@ def discover(
             "max_forms": max_forms,
             "max_terms": search.max_terms,
             "drift": drift,
+            "drift_fit": drift_fit,
         },
-        drift=None if est is None else est.summary(data.sample_time_s),
+        drift=None if est is None else _drift_section(est, accepted, data),
         note=note,
         elapsed_s=elapsed_s,
         plots=plot_files,
@@ -434,70 +437,15 @@ def discover(
     return report
 
 
-def _backward_elimination(ctx: _FitContext, accepted: list[_Accepted]) -> list[str]:
-    """Drop earlier effects made redundant by later ones (greedy forward selection's repair).
-
-    For each accepted effect but the newest, the others are re-fitted jointly without it; if the
-    held-out test no longer finds it significant (same level and minimum reduction as for
-    adding), it is removed and the others keep their re-fitted values.
-    """
-    model, data, Y, n_train, sqrt_w = ctx.model, ctx.data, ctx.Y, ctx.n_train, ctx.sqrt_w
-    dropped: list[str] = []
-    T = data.n_samples
-    for a in list(accepted[:-1]):
-        if len(accepted) < 2:
-            break
-        full_e = [x.cand for x in accepted]
-        full_th = np.concatenate([x.theta for x in accepted])
-        rest = [x for x in accepted if x is not a]
-        th = np.concatenate([x.theta for x in rest])
-        fit = fit_effects(
-            model,
-            data,
-            [x.cand for x in rest],
-            th,
-            np.ones(th.size, bool),
-            Y,
-            n_train,
-            sqrt_w,
-            grid=False,
-        )
-        e_without = Y - model.predict(data, [x.cand for x in rest], fit.theta[None], T)[0]
-        e_with = Y - model.predict(data, full_e, full_th[None], T)[0]
-        cmp = heldout_comparison(e_without[:, n_train:], e_with[:, n_train:], sqrt_w, ctx.block_len)
-        if cmp["p_value"] < ctx.alpha / len(accepted) and cmp["rel_reduction"] >= ctx.min_rel:
-            continue
-        accepted.remove(a)
-        dropped.append(a.cand.id)
-        j = 0
-        for x in rest:
-            n_p = len(x.cand.params)
-            x.theta, x.stderr = fit.theta[j : j + n_p], fit.stderr[j : j + n_p]
-            j += n_p
-    return dropped
-
-
-def _refit_all(
-    ctx: _FitContext, accepted: list[_Accepted], round_table: dict[str, Any], excluded: set[str]
-) -> None:
-    """Joint re-fit of everything accepted so far, then backward elimination (in place)."""
-    if len(accepted) < 2:
-        return
-    effs = [a.cand for a in accepted]
-    th = np.concatenate([a.theta for a in accepted])
-    free = np.ones(th.size, bool)
-    fit = fit_effects(
-        ctx.model, ctx.data, effs, th, free, ctx.Y, ctx.n_train, ctx.sqrt_w, grid=False
-    )
-    j = 0
-    for a in accepted:
-        n_p = len(a.cand.params)
-        a.theta, a.stderr = fit.theta[j : j + n_p], fit.stderr[j : j + n_p]
-        j += n_p
-    dropped = _backward_elimination(ctx, accepted)
-    if dropped:
-        round_table["dropped"] = dropped
-        excluded.update(dropped)
+def _drift_section(
+    est: DriftEstimate, accepted: list[Accepted], data: MeasuredData
+) -> dict[str, Any]:
+    """The report's ``drift``: the estimate's summary and, with the joint fit, its line."""
+    out = est.summary(data.sample_time_s)
+    line = next((a for a in accepted if a.nuisance), None)
+    if line is not None:
+        out["line"] = line_summary(line.theta, line.stderr, data.n_samples * data.sample_time_s / 2)
+    return out
 
 
 def _form_table(table: dict[str, Any]) -> dict[str, Any]:

@@ -121,7 +121,8 @@ class DiscoveryReport:
     note: str | None = None
     elapsed_s: float
     plots: tuple[str, ...] | None = None  # file names in the output folder
-    #: the estimated feed-coking drift (:meth:`evaluation.discover.drift.DriftEstimate.summary`)
+    #: the estimated feed-coking drift (:meth:`evaluation.discover.drift.DriftEstimate.summary`;
+    #: with the joint fit also ``line``: :func:`evaluation.discover.drift_joint.line_summary`)
     drift: Mapping[str, Any] | None = None
 
     def to_json(self) -> dict[str, Any]:
