@@ -1,0 +1,105 @@
+"""``valve-glr`` (diagnosers/loops/valve_glr.py): its GLRs against exact signals, the detector
+on a synthetic quasi-steady loop with a valve that sticks (the Choudhury et al. 2005 model of
+fcc_env/stiction.py) and on the closed-loop plant, and its contract."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import diagnosers
+import fcc_env
+from diagnosers import Episode
+from diagnosers.conformance import check_diagnoser
+from diagnosers.loops.valve_statistics import onset_statistics
+from fcc_env.stiction import StictionValve
+
+CHANNELS = ("T_rx", "u_F", "T_rg2", "T_fp")
+
+
+def test_the_stuck_glr_is_the_gaussian_llr_of_the_stuck_path() -> None:
+    rng = np.random.default_rng(0)
+    u = np.r_[np.zeros(40), np.cumsum(rng.normal(0.0, 1.0, 30))]
+    phi = -0.5 * (u[40:] - u[39])  # gain 0.5, stuck after sample 39
+    r = np.r_[np.zeros(40), phi]
+    s = onset_statistics(r, u, gain=0.5, sigma=0.2, reference=20, a_min=0.5)
+    # a = 1 fits exactly: the LLR is Σ φ² / (2 σ²), the onset 30 samples back
+    assert s.stuck == pytest.approx(np.sum(phi**2) / (2 * 0.04), rel=1e-9)
+    assert (s.since, s.size) == (30, 1.0)
+    # a model gain 5 % off fits a = 0.05 < a_min: no stuck valve, however large the move
+    off = onset_statistics(0.05 * r, u, gain=0.5, sigma=0.2, reference=20, a_min=0.5)
+    assert off.stuck == 0.0
+    # a step of size b after 10 samples: (Σ z)² / (2 σ² n (1 + n / reference))
+    step = np.r_[np.zeros(60), np.full(10, 0.3)]
+    b = onset_statistics(step, np.zeros(70), gain=0.5, sigma=0.2, reference=20, a_min=0.5)
+    assert b.bias == pytest.approx(3.0**2 / (2 * 0.04 * 10 * 1.5), rel=1e-9)
+    assert onset_statistics(r[:20], u[:20], gain=0.5, sigma=0.2, reference=20, a_min=0.5) == (
+        0.0,
+        0.0,
+        0.0,
+        0,
+    )
+
+
+def _loop(S: float = 0.0, onset: int | None = None, n: int = 2500, seed: int = 0) -> Episode:
+    """A quasi-steady loop shaped like the plant's T_rx loop (sample 10 s): T_rx = 0.25 °C per
+    kg/s of valve position + 0.6 T_rg2 (a slow walk) − 0.1 T_fp, noise 0.3 °C on each reading,
+    an integral-dominated PI law (Kc 0.26, Ts/τI 2.3) on the measurement, set-point steps of up
+    to ±6 °C every 300 samples, the valve sticking (S, J = S/2) from ``onset``."""
+    rng = np.random.default_rng(seed)
+    u, e_prev, t_rg2, t_fp, sp = 400.0, 0.0, 700.0, 200.0, 520.0
+    valve: StictionValve | None = None
+    out = np.empty((n, 4))
+    for k in range(n):
+        if k % 300 == 150:
+            sp = 520.0 + rng.uniform(-6.0, 6.0)
+        if onset is not None and k == onset:
+            valve = StictionValve(u)
+        position = u if valve is None else valve.move(u, S, S / 2)
+        t_rg2 += rng.normal(0.0, 0.05)
+        t_rx = 0.25 * position + 0.6 * t_rg2 - 0.1 * t_fp - 0.0
+        y = np.array([t_rx, u, t_rg2, t_fp]) + rng.normal(0.0, 0.3, 4) * [1, 0, 1, 1]
+        out[k] = y
+        e = sp - y[0]
+        u += 0.26 * (e - e_prev) + 0.6 * e  # the command for the next sample
+        e_prev = e
+    return Episode(out, channels=CHANNELS, sample_time_s=10.0)
+
+
+@pytest.fixture(scope="module")
+def synthetic() -> dict[str, list[Episode]]:
+    return {
+        "train": [_loop(seed=1), _loop(seed=2)],
+        "healthy": [_loop(seed=s, n=4000) for s in (10, 11, 12)],
+        "stuck": [_loop(S=20.0, onset=1500, seed=s) for s in (20, 21, 22)],
+    }
+
+
+def test_a_valve_that_sticks_is_found_within_tens_of_samples(synthetic) -> None:
+    d = diagnosers.make("valve-glr").fit(synthetic["train"])
+    assert d.gain_ == pytest.approx(0.25, rel=0.05)  # the loop's own gain, from healthy data
+    for ep in synthetic["healthy"]:
+        assert not d.detect(ep).alarm.any()
+    for ep in synthetic["stuck"]:
+        alarm = d.detect(ep).alarm
+        assert not alarm[:1500].any()
+        assert alarm[1500:1600].any()
+
+
+def test_it_keeps_the_contract(synthetic) -> None:
+    check_diagnoser(
+        diagnosers.make("valve-glr"), train=synthetic["train"], test=synthetic["stuck"][0]
+    )
+
+
+def test_bad_settings_and_records_are_refused_by_name(synthetic) -> None:
+    train = synthetic["train"]
+    with pytest.raises(ValueError, match=r"a_min=0.0 is outside the allowed range"):
+        diagnosers.make("valve-glr", a_min=0.0).fit(train)
+    with pytest.raises(ValueError, match=r"regressors=\['T_rx'\] is outside the allowed range"):
+        diagnosers.make("valve-glr", regressors=["T_rx"]).fit(train)
+    with pytest.raises(ValueError, match=r"missing \['T_d1'\]"):
+        diagnosers.make("valve-glr", regressors=["T_d1"]).fit(train)
+    open_loop = Episode.from_batch(fcc_env.simulate_episodes([1000], 300))
+    with pytest.raises(ValueError, match=r"missing \['u_F'\]"):
+        diagnosers.make("valve-glr").fit(open_loop)
