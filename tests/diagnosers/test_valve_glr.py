@@ -18,17 +18,17 @@ CHANNELS = ("T_rx", "u_F", "T_rg2", "T_fp")
 
 
 def test_the_stuck_glr_is_the_gaussian_llr_of_the_stuck_path() -> None:
-    rng = np.random.default_rng(0)
-    u = np.r_[np.zeros(40), np.cumsum(rng.normal(0.0, 1.0, 30))]
+    u = np.r_[np.zeros(40), 0.7 * np.arange(1.0, 31.0)]  # the command ramps from sample 40
     phi = -0.5 * (u[40:] - u[39])  # gain 0.5, stuck after sample 39
     r = np.r_[np.zeros(40), phi]
     s = onset_statistics(r, u, gain=0.5, sigma=0.2, reference=20, a_min=0.5)
-    # a = 1 fits exactly: the LLR is Σ φ² / (2 σ²), the onset 30 samples back
+    # a = 1 fits exactly at the true onset, where the GLR peaks: Σ φ² / (2 σ²), 30 samples back
     assert s.stuck == pytest.approx(np.sum(phi**2) / (2 * 0.04), rel=1e-9)
     assert (s.since, s.size) == (30, 1.0)
-    # a model gain 5 % off fits a = 0.05 < a_min: no stuck valve, however large the move
+    # a model gain 5 % off fits a = 0.05 < a_min: far below any limit, however large the move
+    # (an onset inside the ramp, whose reference mean the ramp moves, leaves a trace)
     off = onset_statistics(0.05 * r, u, gain=0.5, sigma=0.2, reference=20, a_min=0.5)
-    assert off.stuck == 0.0
+    assert off.stuck < 1.0 < 100.0 < s.stuck
     # a step of size b after 10 samples: (Σ z)² / (2 σ² n (1 + n / reference))
     step = np.r_[np.zeros(60), np.full(10, 0.3)]
     b = onset_statistics(step, np.zeros(70), gain=0.5, sigma=0.2, reference=20, a_min=0.5)
@@ -71,9 +71,10 @@ def _loop(S: float = 0.0, onset: int | None = None, n: int = 2500, seed: int = 0
 def synthetic() -> dict[str, list[Episode]]:
     return {
         "train": [_loop(seed=1), _loop(seed=2)],
-        "healthy": [_loop(seed=s, n=4000) for s in (10, 11, 12)],
+        "healthy": [_loop(seed=s, n=2400) for s in (10, 11, 12)],
         # the onset 20 samples before a set-point step, whose moves the valve does not pass
-        "stuck": [_loop(S=20.0, onset=1480, seed=s) for s in (20, 21, 22)],
+        "stuck": [_loop(S=20.0, onset=1480, n=1700, seed=s) for s in (20, 21, 22)],
+        "short": [_loop(S=20.0, onset=480, n=700, seed=23)],
     }
 
 
@@ -90,7 +91,7 @@ def test_a_valve_that_sticks_is_found_within_tens_of_samples(synthetic) -> None:
 
 @pytest.mark.parametrize("name", ["valve-glr", "valve-glr-partial"])
 def test_it_keeps_the_contract(name: str, synthetic) -> None:
-    check_diagnoser(diagnosers.make(name), train=synthetic["train"], test=synthetic["stuck"][0])
+    check_diagnoser(diagnosers.make(name), train=synthetic["train"], test=synthetic["short"][0])
 
 
 def test_the_partial_preset_is_the_family_with_a_lower_bound_on_the_share() -> None:
