@@ -25,7 +25,7 @@ The rooms (the contract, the registry and the presets at the top; the parts belo
                        innovations, state and disturbance estimates, and the grey-box
                        detector ``ukf-glr`` on them
 ``loops/``             control-loop monitors on a loop's own records: ``oscillation-acf``,
-                       ``stiction-ccf``
+                       ``stiction-ccf``, ``valve-glr``
 ``sensors/``           sensor validation by analytical redundancy: ``sensor-validation``
 =====================  ===========================================================================
 
@@ -50,7 +50,7 @@ from diagnosers import (
     classical,  # noqa: F401  (registers limits, pca, arx-band)
     filters,  # noqa: F401  (registers ukf-glr)
     isolation,  # noqa: F401  (registers lrgf-iso, lrgf-lda, mmae)
-    loops,  # noqa: F401  (registers oscillation-acf, stiction-ccf)
+    loops,  # noqa: F401  (registers oscillation-acf, stiction-ccf, valve-glr)
     lrgf,  # noqa: F401  (registers lrgf-mem, lrgf-glr and their presets)
     sensors,  # noqa: F401  (registers sensor-validation)
 )
