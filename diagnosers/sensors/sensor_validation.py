@@ -75,6 +75,9 @@ class SensorValidation(Diagnoser):
             a young fault is a bias (a step), in [1, 1000]; default 3.
         settle: samples of an alarm after which a fault without a slope is a bias, in
             [3, 100000]; default 300.
+        left_out_walk: the random-walk std of an input (R_ar, T_ar, T_fp) in the filter that
+            leaves its reading out, as a multiple of the estimator's, in [1, 1000]; default 1
+            (:class:`~diagnosers.sensors.loo_bank.LeaveOneOutBank`).
 
     Attributes:
         classes_: the sensor-fault kinds among the labelled training faults.
@@ -93,6 +96,7 @@ class SensorValidation(Diagnoser):
         "t_drift": Real(0, 100, closed="right"),
         "step_ratio": Real(1, 1000),
         "settle": Integer(3, 100_000),
+        "left_out_walk": Real(1, 1000),
     }
     DEFAULTS: ClassVar[dict[str, Any]] = {
         "params": None,
@@ -105,6 +109,7 @@ class SensorValidation(Diagnoser):
         "t_drift": 4.0,
         "step_ratio": 3.0,
         "settle": 300,
+        "left_out_walk": 1.0,
     }
     __init__ = keyword_init(DEFAULTS)
 
@@ -118,6 +123,7 @@ class SensorValidation(Diagnoser):
     t_drift: float
     step_ratio: float
     settle: int
+    left_out_walk: float
 
     @classmethod
     def fast_params(cls) -> dict[str, Any]:
@@ -169,7 +175,7 @@ class SensorValidation(Diagnoser):
             sample_time_s=self.sample_time_s_,
             closed_loop=self.channels_ == CLOSED_LOOP_CHANNELS,
         )
-        self.bank_ = LeaveOneOutBank(self.model_params(), config)
+        self.bank_ = LeaveOneOutBank(self.model_params(), config, self.left_out_walk)
 
     def _finish(self) -> None:
         names = MEASUREMENT_NAMES
