@@ -54,11 +54,10 @@ def main() -> None:
     ap.add_argument("--seed-start", type=int, default=1100)
     ap.add_argument("--channels", default=",".join(MEASUREMENT_NAMES))
     ap.add_argument("--train", type=int, default=4)
-    ap.add_argument("--left-out-walk", type=float, default=1.0)
     ap.add_argument("--out", type=Path, required=True)
     args = ap.parse_args()
     c0 = time.process_time()
-    track, data, det = fitted(args.train, left_out_walk=args.left_out_walk)
+    track, data, det = fitted(args.train)
     args.out.mkdir(parents=True, exist_ok=True)
     np.savez(args.out / "limits.npz", **det.limits_)
     print(f"fitted: {time.process_time() - c0:.0f} s CPU", flush=True)
@@ -72,7 +71,7 @@ def main() -> None:
     det.bank_.run = keep
     for i, ep in enumerate(data.train_episodes()):  # the healthy records the limits came from
         det._reset()
-        _, cons, kind, channel, _ = det._checks(np.asarray(ep.y, dtype=np.float64))
+        _, cons, kind, channel, _, _ = det._checks(np.asarray(ep.y, dtype=np.float64))
         out = stash["out"]
         np.savez_compressed(
             args.out / f"healthy-{i}.npz",
@@ -89,7 +88,7 @@ def main() -> None:
             if ep.fault_onset is None or ep.fault_onset >= ep.n_samples:
                 continue
             det._reset()
-            _, cons, kind, channel, _ = det._checks(np.asarray(ep.y, dtype=np.float64))
+            _, cons, kind, channel, _, _ = det._checks(np.asarray(ep.y, dtype=np.float64))
             out = stash["out"]
             np.savez_compressed(
                 args.out / f"{true}-{seed}.npz",

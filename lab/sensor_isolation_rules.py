@@ -46,6 +46,19 @@ def slow_consistency(white: np.ndarray, lam: float) -> np.ndarray:
     return np.sum(a * a, axis=2) * (2.0 - lam) / lam
 
 
+def nis_since_alarm(white: np.ndarray, alarm: np.ndarray) -> np.ndarray:
+    """(T, 9) the whitened innovations' squares (the left-out channel dropped) less their
+    mean (7; filter 0: 8), summed since the alarm began (0 while not alarmed)."""
+    w = left_out_white(white)
+    excess = np.sum(w * w, axis=2) - np.array([8.0] + [7.0] * (w.shape[1] - 1))
+    out = np.zeros_like(excess)
+    acc = np.zeros(excess.shape[1])
+    for k in range(excess.shape[0]):
+        acc = acc + excess[k] if alarm[k] else np.zeros_like(acc)
+        out[k] = acc
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("dir", type=Path)
@@ -77,6 +90,12 @@ def main() -> None:
         for f in (0.01, 0.1, 0.3, 1.0):
             rules[f"z/max(cons,{f})"] = np.argmax(z / np.maximum(cons, f), axis=1)
         rules["argmin cons"] = np.argmin(cons, axis=1)
+        full_alarm = r["kind"] > 0
+        nis = nis_since_alarm(r["white"], full_alarm)[onset:, 1:]
+        rules["argmin NIS since alarm"] = np.argmin(nis, axis=1)
+        for lam in lams:
+            e = ewma(left_out_white(r["white"]) ** 2, lam).sum(axis=2)[onset:, 1:]
+            rules[f"argmin ewma NIS({lam})"] = np.argmin(e, axis=1)
         for lam in lams:
             s = slow_consistency(r["white"], lam)[onset:, 1:] / slow_lim[lam][1:]
             rules[f"argmin slow({lam})"] = np.argmin(s, axis=1)

@@ -42,13 +42,11 @@ LEAVE_OUT_FACTOR = 1000.0
 
 @njit_kernel
 def loo_bank_run(
-    model, Ms, Ps, Y, Q, w, R_abs, R_rel, gate_idx, gate_lin, gate, n_scratch, WHITE, DED
+    model, Ms, Ps, Y, q, w, R_abs, R_rel, gate_idx, gate_lin, gate, n_scratch, WHITE, DED
 ) -> None:
     """Every filter of the bank on the samples ``Y`` (T, n_obs), in order.
 
-    ``Ms`` (H, n) and ``Ps`` (H, n, n) are the filters' priors (advanced in place); ``Q``
-    (H, n) their process-noise variances (row ``c + 1`` with a left-out input's walk widened,
-    :class:`LeaveOneOutBank`); ``R_abs``,
+    ``Ms`` (H, n) and ``Ps`` (H, n, n) are the filters' priors (advanced in place); ``R_abs``,
     ``R_rel`` (H, 8) their measurement-noise stds (row 0 the true ones, row ``c + 1`` with
     channel ``c`` inflated by :data:`LEAVE_OUT_FACTOR`). Out: ``WHITE`` (T, H, 8) the whitened
     innovations; ``DED`` (T, 8) channel ``c``'s innovation in filter ``c + 1`` over its
@@ -65,7 +63,7 @@ def loo_bank_run(
     k2 = LEAVE_OUT_FACTOR * LEAVE_OUT_FACTOR
     for k in range(Y.shape[0]):
         for h in range(H):
-            fixed = (Q[h], R_abs[h], R_rel[h], gate_idx, gate_lin, gate, w)
+            fixed = (q, R_abs[h], R_rel[h], gate_idx, gate_lin, gate, w)
             out = (innov, stdz, WHITE[k, h], S, post, post_sd, jumps)
             status = fcc_sample(model, Ms[h], Ps[h], Y[k], fixed, ws, out)
             if h == 0:
@@ -95,16 +93,9 @@ class BankOutput:
 
 class LeaveOneOutBank:
     """The nine filters of the scheme on one model (``params``, never a scored plant's) and
-    plant side (``config``); :meth:`start` gives fresh priors, :meth:`run` advances them.
+    plant side (``config``); :meth:`start` gives fresh priors, :meth:`run` advances them."""
 
-    ``left_out_walk``: the random-walk std of an estimated input (R_ar, T_ar, T_fp) in the
-    filter that leaves its reading out, as a multiple of its walk in ``config``. Why: without
-    its reading the filter follows the input only through the process (T_fp through T_rx), and
-    the operating program moves the inputs in steps that a walk tuned for a read input follows
-    in hundreds of samples; a wider walk follows them (1: the same walk as the others).
-    """
-
-    def __init__(self, params: FCCParams, config: UKFConfig, left_out_walk: float = 1.0) -> None:
+    def __init__(self, params: FCCParams, config: UKFConfig) -> None:
         est = FCCStateEstimator(params, config)
         self.estimator = est
         m = est.filter_model
@@ -112,12 +103,9 @@ class LeaveOneOutBank:
         H = self.n_channels + 1
         self.R_abs = np.tile(m.r_abs, (H, 1))
         self.R_rel = np.tile(m.r_rel, (H, 1))
-        self.Q = np.tile(m.q, (H, 1))
         for c in range(self.n_channels):
             self.R_abs[c + 1, c] *= LEAVE_OUT_FACTOR
             self.R_rel[c + 1, c] *= LEAVE_OUT_FACTOR
-        for state, channel in m.gate_idx:  # the inputs read directly, and their channels
-            self.Q[channel + 1, state] *= left_out_walk * left_out_walk
         self.weights = sigma_weights(m.n, config.alpha, config.beta, config.kappa)
         self.gate = math.inf if config.step_gate is None else float(config.step_gate)
 
@@ -141,7 +129,7 @@ class LeaveOneOutBank:
             Ms,
             Ps,
             Y,
-            self.Q,
+            m.q,
             self.weights,
             self.R_abs,
             self.R_rel,
