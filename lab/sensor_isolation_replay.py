@@ -55,6 +55,7 @@ def main() -> None:
     ap.add_argument("--channels", default=",".join(MEASUREMENT_NAMES))
     ap.add_argument("--train", type=int, default=4)
     ap.add_argument("--out", type=Path, required=True)
+    ap.add_argument("--skip-healthy", action="store_true", help="save no healthy records")
     args = ap.parse_args()
     c0 = time.process_time()
     track, data, det = fitted(args.train)
@@ -69,7 +70,8 @@ def main() -> None:
         return out
 
     det.bank_.run = keep
-    for i, ep in enumerate(data.train_episodes()):  # the healthy records the limits came from
+    healthy = [] if args.skip_healthy else data.train_episodes()
+    for i, ep in enumerate(healthy):  # the healthy records the limits came from
         det._reset()
         _, cons, kind, channel, _, _ = det._checks(np.asarray(ep.y, dtype=np.float64))
         out = stash["out"]
