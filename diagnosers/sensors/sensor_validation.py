@@ -80,7 +80,8 @@ class SensorValidation(Diagnoser):
 
     Attributes:
         classes_: the sensor-fault kinds among the labelled training faults.
-        limits_: the consistency limits per filter (9) and noise limits and clips per channel.
+        limits_: the consistency limits per filter (9, fast and slow) and noise limits and clips
+            per channel.
     """
 
     isolates: ClassVar[bool] = True
