@@ -83,6 +83,9 @@ def main() -> None:
     ap.add_argument("--healthy", type=int, default=20)
     ap.add_argument("--faulty", type=int, default=4)
     ap.add_argument("--train", type=int, default=9)
+    ap.add_argument(
+        "--train-faults", type=int, default=None, help="labelled training faults per fault"
+    )
     ap.add_argument("--seed-start", type=int, default=5100)
     ap.add_argument("--out", type=Path, default=Path("/tmp/fault-tracks"))
     ap.add_argument("--no-references", action="store_true")
@@ -92,6 +95,8 @@ def main() -> None:
         track = TRACKS[name].replace(
             n_healthy=args.healthy, n_faulty=args.faulty, n_train=args.train
         )
+        if args.train_faults is not None:
+            track = track.replace(n_train_faults=args.train_faults)
         track = track.with_seeds(test=args.seed_start)
         t0, c0 = time.perf_counter(), time.process_time()
         names = args.diagnosers.split(",")

@@ -21,10 +21,18 @@ Three checks, each a normalised statistic with its limit at 1 (:func:`decide_run
 
 **Which sensor** (no hold, no noise): among the leave-out filters, the one that is consistent
 and whose left-out sensor disagrees most with its prediction: the largest
-``z_c / max(M_{c+1} / limit, 0.01)``, ``z_c`` the EWMA of sensor ``c``'s dedicated residual
-over its healthy limit. Why not the least inconsistent filter alone: leaving out an input read
-directly (T_fp) lets that filter explain an offset of another sensor (T_rx) by a change of the
-unread input, so two filters stay consistent; the dedicated residual tells them apart.
+``z_c / max(L_{c+1}, CONSISTENT)``, ``z_c`` the EWMA of sensor ``c``'s dedicated residual
+over its healthy limit and ``L_h`` filter h's *slow* consistency: ``M_h`` of an EWMA at rate
+``lam_iso`` (default 0.001: a memory of about 1000 samples) of its whitened innovations on the
+seven channels it reads, over its healthy limit. Why not the least inconsistent filter alone:
+leaving out an input read directly (T_fp) lets that filter explain an offset of another sensor
+(T_rx) by a change of the unread input, so two filters stay consistent; the dedicated residual
+tells them apart. Why slow: the wrong one of such a pair is told by the process's slow answer
+(a T_fp bias read as a T_rx bias implies a hotter riser, which the regenerator shows over
+minutes), which a 50-sample EWMA (``lam``) forgets faster than it grows, and the T_fp-less
+filter, whose healthy limit its lag after each programmed T_fp step sets ~50× the others',
+was floored at 0.01 and so won against any filter merely as consistent
+(``lab/sensor-validation.md``, 2026-12-07).
 
 **Kind**, for the sensor named: held values with a break in the holding (a fresh sample
 between held ones, decaying count ``> 0.5``) are a dropout, an unbroken hold stuck; a noise
@@ -46,7 +54,7 @@ import numpy as np
 
 from fcc_env.physics import njit_kernel
 
-__all__ = ["HOLD_COUNT", "KINDS", "decide_run", "new_state"]
+__all__ = ["CONSISTENT", "HOLD_COUNT", "KINDS", "decide_run", "new_state"]
 
 #: The kinds of sensor fault the rule names, in the order of its codes 1..5.
 KINDS: tuple[str, ...] = (
@@ -58,6 +66,10 @@ KINDS: tuple[str, ...] = (
 )
 #: Held samples (decaying count) that make a hold: two repeats close together.
 HOLD_COUNT = 1.5
+#: The slow consistency (over its healthy maximum) under which every leave-out filter counts as
+#: equally consistent: a tenth of that maximum (0.1 against 0.01, 0.3 and 1 on training seeds
+#: 1100-1101, lab/sensor-validation.md).
+CONSISTENT = 0.1
 _BIAS, _DRIFT, _STUCK, _NOISE, _DROPOUT = 1, 2, 3, 4, 5
 
 
@@ -67,6 +79,7 @@ def new_state(n_filters: int, n_channels: int) -> dict[str, np.ndarray]:
     return {
         "count": np.zeros(1),  # samples seen; alarmed flag of the last sample
         "ewma": np.zeros((H, C)),
+        "slow": np.zeros((H, C)),  # EWMA (rate lam_iso) of the innovations a filter reads
         "prev": np.full(C, np.nan),
         "diff": np.zeros(C),
         "held": np.zeros(C),
@@ -87,10 +100,12 @@ def decide_run(
     ded,  # (T, C) the dedicated residuals
     y,  # (T, C) the readings
     lam,
+    lam_iso,
     lam_d,
     hold_decay,
     warmup,
     lim_m,  # (H,) limits of M_h
+    lim_s,  # (H,) limits of the slow consistency
     lim_d,  # (C,) limits of the noise check
     clip,  # (C,)
     lim_e,  # (C,) limits of |ded_fast|
@@ -99,6 +114,7 @@ def decide_run(
     settle,
     count,
     ewma,
+    slow,
     prev,
     diff,
     held,
@@ -112,6 +128,7 @@ def decide_run(
     pre,
     SIGNAL,  # (T, 1 + 2C) out: the normalised checks (limit 1)
     CONS,  # (T, H) out: M_h / limit_h
+    SLOW,  # (T, H) out: the slow consistency over its limit
     KIND,  # (T,) int out: 0 no alarm, 1..5 KINDS
     CHANNEL,  # (T,) int out: the sensor named (−1 none)
 ) -> None:
@@ -123,12 +140,17 @@ def decide_run(
         # model consistency
         for h in range(H):
             m = 0.0
+            ms = 0.0
             for c in range(C):
                 v = white[k, h, c]
                 if math.isfinite(v):
                     ewma[h, c] = (1.0 - lam) * ewma[h, c] + lam * v
+                    if c != h - 1:  # filter h reads every channel but h − 1
+                        slow[h, c] = (1.0 - lam_iso) * slow[h, c] + lam_iso * v
                 m += ewma[h, c] * ewma[h, c]
+                ms += slow[h, c] * slow[h, c]
             CONS[k, h] = 0.0 if warm else m * (2.0 - lam) / lam / lim_m[h]
+            SLOW[k, h] = 0.0 if warm else ms * (2.0 - lam_iso) / lam_iso / lim_s[h]
         SIGNAL[k, 0] = CONS[k, 0]
         # noise level and held values
         for c in range(C):
@@ -196,7 +218,7 @@ def decide_run(
             continue
         c_best, v_best = 0, -1.0
         for h in range(1, H):
-            v = abs(ded_fast[h - 1]) / lim_e[h - 1] / max(CONS[k, h], 0.01)
+            v = abs(ded_fast[h - 1]) / lim_e[h - 1] / max(SLOW[k, h], CONSISTENT)
             if v > v_best:
                 v_best, c_best = v, h - 1
         CHANNEL[k] = c_best

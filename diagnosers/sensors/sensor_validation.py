@@ -62,6 +62,8 @@ class SensorValidation(Diagnoser):
             :class:`~fcc_env.FCCParams`, or a dict of FCCParams fields changed from nominal.
         noise_scale: the measurement-noise multiplier the filters assume, in (0, 10]; default 1.
         lam: EWMA rate of the filters' whitened innovations, in (0, 1); default 0.02.
+        lam_iso: EWMA rate of the slow consistency that names the sensor, in (0, 1); default
+            0.001 (:mod:`diagnosers.sensors.sensor_checks`).
         lam_noise: EWMA rate of the noise check, in (0, 1); default 0.02.
         hold_decay: decay per sample of the held-value count, in (0, 1); default 0.01 (two
             repeats within about 70 samples make a hold).
@@ -78,7 +80,8 @@ class SensorValidation(Diagnoser):
 
     Attributes:
         classes_: the sensor-fault kinds among the labelled training faults.
-        limits_: the consistency limits per filter (9) and noise limits and clips per channel.
+        limits_: the consistency limits per filter (9, fast and slow) and noise limits and clips
+            per channel.
     """
 
     isolates: ClassVar[bool] = True
@@ -86,6 +89,7 @@ class SensorValidation(Diagnoser):
     CONSTRAINTS: ClassVar[dict[str, Any]] = {
         "noise_scale": Real(0, 10, closed="right"),
         "lam": Real(0, 1, closed="neither"),
+        "lam_iso": Real(0, 1, closed="neither"),
         "lam_noise": Real(0, 1, closed="neither"),
         "hold_decay": Real(0, 1, closed="neither"),
         "margin": Real(1, 10),
@@ -98,6 +102,7 @@ class SensorValidation(Diagnoser):
         "params": None,
         "noise_scale": 1.0,
         "lam": 0.02,
+        "lam_iso": 0.001,
         "lam_noise": 0.02,
         "hold_decay": 0.01,
         "margin": 1.2,
@@ -111,6 +116,7 @@ class SensorValidation(Diagnoser):
     params: dict[str, float] | None
     noise_scale: float
     lam: float
+    lam_iso: float
     lam_noise: float
     hold_decay: float
     margin: float
@@ -147,17 +153,22 @@ class SensorValidation(Diagnoser):
             )
         diffs = np.concatenate([np.abs(np.diff(ep.y[self.warmup :, :C], axis=0)) for ep in healthy])
         self.clip_ = CLIP_FACTOR * np.maximum(diffs.mean(axis=0), 1e-9)
-        self.lim_m_ = np.ones(self.bank_.n_filters)
+        H = self.bank_.n_filters
+        self.lim_m_ = np.ones(H)
+        self.lim_s_ = np.ones(H)
         self.lim_d_ = np.ones(C)
         self.lim_e_ = np.ones(C)
-        cons_max, diff_max, ded_max = np.zeros(self.bank_.n_filters), np.zeros(C), np.zeros(C)
+        cons_max, slow_max = np.zeros(H), np.zeros(H)
+        diff_max, ded_max = np.zeros(C), np.zeros(C)
         for ep in healthy:
             self._reset()
-            sig, cons, _, _, ded = self._checks(ep.y)
+            sig, cons, _, _, ded, slow = self._checks(ep.y)
             cons_max = np.maximum(cons_max, cons[self.warmup :].max(axis=0))
+            slow_max = np.maximum(slow_max, slow[self.warmup :].max(axis=0))
             diff_max = np.maximum(diff_max, sig[self.warmup :, 1 : 1 + C].max(axis=0))
             ded_max = np.maximum(ded_max, np.abs(_ewma(ded, self.lam)[self.warmup :]).max(axis=0))
         self.lim_m_ = self.margin * np.maximum(cons_max, 1e-9)
+        self.lim_s_ = np.maximum(slow_max, 1e-9)  # the rule's floor is a share of it
         self.lim_d_ = self.margin * np.maximum(diff_max, 1e-12)
         self.lim_e_ = self.margin * np.maximum(ded_max, 1e-9)
         self._finish()
@@ -183,6 +194,7 @@ class SensorValidation(Diagnoser):
     def limits_(self) -> dict[str, np.ndarray]:
         return {
             "consistency": self.lim_m_,
+            "slow": self.lim_s_,
             "noise": self.lim_d_,
             "clip": self.clip_,
             "dedicated": self.lim_e_,
@@ -195,12 +207,14 @@ class SensorValidation(Diagnoser):
         self._state = new_state(self.bank_.n_filters, self.bank_.n_channels)
 
     def _checks(self, Y: np.ndarray) -> tuple[np.ndarray, ...]:
-        """``(signal, consistency, kind, channel, dedicated residual)`` of the next samples."""
+        """``(signal, consistency, kind, channel, dedicated residual, slow consistency)`` of the
+        next samples."""
         C = self.bank_.n_channels
         out = self.bank_.run(self._M, self._P, Y)
         T = Y.shape[0]
         signal = np.empty((T, 1 + 2 * C))
         cons = np.empty((T, self.bank_.n_filters))
+        slow = np.empty((T, self.bank_.n_filters))
         kind = np.empty(T, dtype=np.int64)
         channel = np.empty(T, dtype=np.int64)
         s = self._state
@@ -209,10 +223,12 @@ class SensorValidation(Diagnoser):
             out.dedicated,
             np.ascontiguousarray(Y[:, :C], dtype=np.float64),
             self.lam,
+            self.lam_iso,
             self.lam_noise,
             self.hold_decay,
             float(self.warmup),
             self.lim_m_,
+            self.lim_s_,
             self.lim_d_,
             self.clip_,
             self.lim_e_,
@@ -221,6 +237,7 @@ class SensorValidation(Diagnoser):
             float(self.settle),
             s["count"],
             s["ewma"],
+            s["slow"],
             s["prev"],
             s["diff"],
             s["held"],
@@ -234,10 +251,11 @@ class SensorValidation(Diagnoser):
             s["pre"],
             signal,
             cons,
+            slow,
             kind,
             channel,
         )
-        return signal, cons, kind, channel, np.nan_to_num(out.dedicated)
+        return signal, cons, kind, channel, np.nan_to_num(out.dedicated), slow
 
     def _labels(self, kind: np.ndarray, channel: np.ndarray) -> tuple[np.ndarray, ...]:
         """Per sample: the diagnosis, the one-hot class scores and the sensor named."""
@@ -250,7 +268,7 @@ class SensorValidation(Diagnoser):
         return diagnosis, scores, names[channel].astype(str)
 
     def _run(self, Y: np.ndarray) -> tuple[Detection, np.ndarray]:
-        signal, _, kind, channel, ded = self._checks(Y)
+        signal, _, kind, channel, ded, _ = self._checks(Y)
         diagnosis, scores, sensors = self._labels(kind, channel)
         det = Detection(
             alarm=kind > 0,
@@ -286,7 +304,7 @@ class SensorValidation(Diagnoser):
         return getattr(self, "_named", "")
 
     def _update(self, y: np.ndarray) -> Decision:
-        signal, _, kind, channel, ded = self._checks(y[None, :])
+        signal, _, kind, channel, ded, _ = self._checks(y[None, :])
         diagnosis, scores, sensors = self._labels(kind, channel)
         self._named = str(sensors[0])
         return Decision(
@@ -304,6 +322,7 @@ class SensorValidation(Diagnoser):
         return {
             "classes": np.array(self.classes_, dtype=str),
             "lim_m": self.lim_m_,
+            "lim_s": self.lim_s_,
             "lim_d": self.lim_d_,
             "clip": self.clip_,
             "lim_e": self.lim_e_,
@@ -313,7 +332,7 @@ class SensorValidation(Diagnoser):
         self.classes_ = tuple(str(c) for c in state["classes"])
         self._build()
         H, C = self.bank_.n_filters, self.bank_.n_channels
-        arrays = {"lim_m": H, "lim_d": C, "clip": C, "lim_e": C}
+        arrays = {"lim_m": H, "lim_s": H, "lim_d": C, "clip": C, "lim_e": C}
         for key, n in arrays.items():
             a = np.asarray(state[key], dtype=np.float64).reshape(-1)
             if a.shape != (n,) or not np.all(np.isfinite(a) & (a > 0)):

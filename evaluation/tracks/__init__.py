@@ -9,6 +9,7 @@
 ``oracle``           the reference rows: physical-limit observers that read the noise-free plant
 ``optimal``          the optimal-detector rows: a CUSUM and a GLR on each fault's exact signature
 ``filter_bound``     the reachable bound: a GLR on the innovations of a filter of the exact model
+``sensor_bound``     how well the exact model names a biased sensor: per-channel bias hypotheses
 ``reference_runs``   the reference rows as tasks of the sweep's backend, stored like cells
 ``rows``             the rows of a track table: per diagnoser, intervals over the seeds (pure)
 ``goal``             the goal table: how far each detector is from its reference row

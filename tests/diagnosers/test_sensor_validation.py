@@ -22,7 +22,8 @@ PLANT = fcc_env.PlantConfig.build(regulatory=True)
 #: T_ar's bias is left out: the air temperature moves no other measurement enough for a bias
 #: of a few °C to show against the model (lab/sensor-validation.md measures it: r_td 0.01);
 #: T_fp's is tested apart (below): the feed temperature acts on the process through T_rx
-#: alone, so the model tells a T_fp fault from a T_rx one only weakly
+#: alone, so a T_fp bias reads at first as a T_rx one, told apart by the regenerator's slow
+#: answer
 SEEN = tuple(c for c in fcc_env.MEASUREMENT_NAMES if c not in ("T_ar", "T_fp"))
 
 
@@ -90,8 +91,10 @@ def test_a_bias_is_isolated_to_its_sensor(fitted: SensorValidation, channel: str
 
 
 def test_a_feed_temperature_bias_is_named_within_its_pair(fitted: SensorValidation) -> None:
-    """A T_fp bias is detected at once and named T_fp or T_rx (the pair the model barely
-    separates), T_fp for the most part (lab/sensor-validation.md: the isolability limit)."""
+    """A T_fp bias is detected at once and named T_fp or T_rx: T_rx first, T_fp once the
+    slow consistency (``lam_iso``) has seen the regenerator's answer, a few hundred samples
+    on (lab/sensor-validation.md, 2026-12-07: the exact model separates the pair; the
+    leave-out filters need that long)."""
     fault = fcc_env.FaultSpec(scenario="sensor-bias", channel="T_fp", magnitude=5.0, onset=ONSET)
     [ep] = _sim([5002], fault)
     det = fitted.detect(ep)
@@ -99,7 +102,7 @@ def test_a_feed_temperature_bias_is_named_within_its_pair(fitted: SensorValidati
     assert after[:50].any() and after.mean() > 0.9
     named = fitted.sensors(ep)[ONSET:][after]
     assert np.mean(np.isin(named, ["T_fp", "T_rx"])) >= 0.95
-    assert np.mean(named == "T_fp") > 0.5
+    assert np.mean(named[-100:] == "T_fp") >= 0.95, _counts(named[-100:])
 
 
 @pytest.mark.parametrize(
@@ -129,5 +132,7 @@ def test_kinds_outside_the_training_labels_are_unknown(fitted: SensorValidation)
 def test_bad_hyperparameters_are_refused_by_name() -> None:
     with pytest.raises(ValueError, match="lam"):
         diagnosers.make("sensor-validation", lam=1.5).fit(_sim([1000]))
+    with pytest.raises(ValueError, match="lam_iso"):
+        diagnosers.make("sensor-validation", lam_iso=0.0).fit(_sim([1000]))
     with pytest.raises(ValueError, match="params"):
         diagnosers.make("sensor-validation", params={"nope": 1.0}).fit(_sim([1000]))
