@@ -40,7 +40,7 @@ from evaluation.control.policies import (
     fault_setpoints,
     fixed_setpoints,
 )
-from fcc_common.validation import Real, check, invalid
+from fcc_common.validation import Integer, Real, check, invalid
 from fcc_env.scenarios import NOMINAL
 
 __all__ = [
@@ -131,6 +131,15 @@ class PosteriorSupervisor:
     samples after the arming during which the posterior is not acted on (the prior, healthy, stands in): ``mmae``'s filters start at the steady
     state of the nominal inputs, not of the set points in force, and its posterior names f1
     for 400-1600 samples after a reset on healthy episodes (``lab/posterior_supervisor.md``).
+    ``persist``: samples in a row a move away from the current set points must be called for
+    before it is made (1: at once; a move back to the healthy set points is always made at
+    once). ``confirm_level`` and ``confirmed_margin_usd_per_h``: once ``1 − P(nominal)``
+    reaches ``confirm_level``, moves need only ``confirmed_margin_usd_per_h`` (both None: the
+    one margin throughout). Why a fault's presence may lower the margin: on a plant that may
+    still be healthy, ``margin_usd_per_h`` also keeps it at set points where a later f1 is
+    caught cheaply (f3's earn 11 USD/h more on a healthy plant but 2,500 less on f1 while it
+    is being isolated); one fault at a time, a faulty plant has no later onset to be caught
+    by.
     """
 
     name: str
@@ -141,17 +150,31 @@ class PosteriorSupervisor:
     arm_after: int = ARM_AFTER
     trust_after: int = 0
     home_margin_usd_per_h: float | None = None
+    persist: int = 1
+    confirm_level: float | None = None
+    confirmed_margin_usd_per_h: float | None = None
     history: list[SupervisorEvent] = field(init=False, default_factory=list)
     _R: np.ndarray = field(init=False, repr=False)
     _names: list[str] = field(init=False, repr=False)
     _policy: SetpointPolicy = field(init=False, repr=False)
     _k: int = field(init=False, repr=False, default=0)
     _current: int = field(init=False, repr=False, default=0)
+    _pending: int = field(init=False, repr=False, default=-1)
+    _calls: int = field(init=False, repr=False, default=0)
 
     def __post_init__(self) -> None:
         check("margin_usd_per_h", self.margin_usd_per_h, Real(0.0, why="USD/h"))
         if self.home_margin_usd_per_h is not None:
             check("home_margin_usd_per_h", self.home_margin_usd_per_h, Real(0.0, why="USD/h"))
+        check("persist", self.persist, Integer(1, 100_000))
+        if self.confirm_level is not None:
+            check("confirm_level", self.confirm_level, Real(0.0, 1.0, closed="neither"))
+        if self.confirmed_margin_usd_per_h is not None:
+            check(
+                "confirmed_margin_usd_per_h",
+                self.confirmed_margin_usd_per_h,
+                Real(0.0, why="USD/h"),
+            )
         hyps = list(self.diagnoser.hypotheses_)
         missing = [h for h in hyps if h not in self.table]
         self._names = list(self.candidates)
@@ -171,6 +194,7 @@ class PosteriorSupervisor:
         self.diagnoser.reset()
         self._current = self._names.index("healthy")
         self._k = 0
+        self._pending, self._calls = -1, 0
         self.history = []
         self._policy.reset(info)
 
@@ -185,19 +209,35 @@ class PosteriorSupervisor:
         post = np.asarray(decision.posterior, dtype=np.float64)
         if self._k <= self.arm_after + self.trust_after:
             post = np.eye(len(post))[0]  # the filters' start-up: the prior, healthy
-        self._current = best_candidate(
-            post,
-            self._R,
-            self._current,
-            self.margin_usd_per_h,
-            self._names.index("healthy"),
-            self.home_margin_usd_per_h,
-        )
+        self._current = self._decide(post)
         likely = str(self.diagnoser.hypotheses_[int(np.argmax(post))])
         self._record(
             SupervisorEvent(self._k, bool(decision.alarm), likely, self._names[self._current])
         )
         return self._policy.act(obs, info)
+
+    def _decide(self, post: np.ndarray) -> int:
+        """The candidate to hold after this sample's posterior ``post``: :func:`best_candidate`
+        at the margin in force (``confirmed_margin_usd_per_h`` once ``1 − P(nominal)`` reaches
+        ``confirm_level``), a move away from the healthy set points made only once called for
+        ``persist`` samples in a row (a move home at once)."""
+        home = self._names.index("healthy")
+        margin = self.margin_usd_per_h
+        if (
+            self.confirm_level is not None
+            and self.confirmed_margin_usd_per_h is not None
+            and 1.0 - post[0] / post.sum() >= self.confirm_level
+        ):
+            margin = self.confirmed_margin_usd_per_h
+        call = best_candidate(
+            post, self._R, self._current, margin, home, self.home_margin_usd_per_h
+        )
+        if call == self._current or call == home:
+            self._pending, self._calls = -1, 0
+            return call
+        self._calls = self._calls + 1 if call == self._pending else 1
+        self._pending = call
+        return call if self._calls >= self.persist else self._current
 
     def _record(self, event: SupervisorEvent) -> None:
         if not self.history or self.history[-1][1:] != event[1:]:
@@ -256,6 +296,9 @@ def posterior_supervisor(
     home_margin_usd_per_h: float | None = 2.0,
     params: dict[str, Any] | None = None,
     trust_after: int = 1200,
+    persist: int = 1,
+    confirm_level: float | None = None,
+    confirmed_margin_usd_per_h: float | None = None,
 ) -> PosteriorSupervisor:
     """A :class:`PosteriorSupervisor` on ``mmae`` (``params``: its hyperparameters), fitted on
     episodes of the training seeds run at the healthy set points (one healthy, to calibrate
@@ -292,4 +335,7 @@ def posterior_supervisor(
         margin_usd_per_h,
         trust_after=trust_after,
         home_margin_usd_per_h=home_margin_usd_per_h,
+        persist=persist,
+        confirm_level=confirm_level,
+        confirmed_margin_usd_per_h=confirmed_margin_usd_per_h,
     )

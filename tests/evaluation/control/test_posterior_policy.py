@@ -127,9 +127,45 @@ def test_the_posterior_is_not_acted_on_before_trust_after():
 
 
 @pytest.mark.parametrize(
-    ("field", "value"), [("margin_usd_per_h", -1.0), ("home_margin_usd_per_h", float("nan"))]
+    ("field", "value"),
+    [
+        ("margin_usd_per_h", -1.0),
+        ("home_margin_usd_per_h", float("nan")),
+        ("confirmed_margin_usd_per_h", -1.0),
+        ("confirm_level", 1.0),
+        ("persist", 0),
+    ],
 )
-def test_a_bad_margin_is_refused_by_name(field: str, value: float) -> None:
-    # the margins are checked before the diagnoser is read, so no fitted bank is needed
-    with pytest.raises(ValueError, match=rf"{field}=(-1\.0|nan) is outside the allowed range"):
+def test_a_bad_setting_is_refused_by_name(field: str, value: float) -> None:
+    # the settings are checked before the diagnoser is read, so no fitted bank is needed
+    with pytest.raises(ValueError, match=rf"{field}=(-1\.0|nan|1\.0|0) is outside the allowed"):
         PosteriorSupervisor("posterior", None, {}, {}, **{field: value})
+
+
+def _stub_supervisor(flip: int, table: dict, **kw) -> PosteriorSupervisor:
+    healthy = fixed_setpoints().target(0, {})
+    cands = {"healthy": healthy, "f1": healthy + np.array([-4.0, 2.0])}
+    return PosteriorSupervisor("posterior (stub)", _Stub(flip=flip), table, cands, 5.0, 10, **kw)
+
+
+def _first_move(sup: PosteriorSupervisor) -> int | None:
+    run_episode(sup, "nominal", 5000, 60)
+    return next((e.k for e in sup.history if e.target != "healthy"), None)
+
+
+def test_a_move_away_waits_for_persist_calls_in_a_row():
+    table = {"nominal": {"healthy": 100.0, "f1": 90.0}, "f1": {"healthy": 0.0, "f1": 100.0}}
+    # the stub names f1 from its 21st update (k = 31): at once, or on the 5th call (k = 35)
+    assert _first_move(_stub_supervisor(20, table)) == 31
+    assert _first_move(_stub_supervisor(20, table, persist=5)) == 35
+
+
+def test_a_confirmed_fault_moves_on_the_smaller_margin():
+    # posterior (0.01, 0.99) after the flip: healthy 0.01*100 + 0.99*96 = 96.04, f1's
+    # 0.01*90 + 0.99*100 = 99.9, a gain of 3.86 USD/h: below the margin 5, above 1
+    table = {"nominal": {"healthy": 100.0, "f1": 90.0}, "f1": {"healthy": 96.0, "f1": 100.0}}
+    assert _first_move(_stub_supervisor(20, table)) is None
+    confirmed = {"confirmed_margin_usd_per_h": 1.0}
+    assert _first_move(_stub_supervisor(20, table, confirm_level=0.98, **confirmed)) == 31
+    # 1 - P(nominal) = 0.99 is short of a 0.995 confirmation: the margin 5 holds
+    assert _first_move(_stub_supervisor(20, table, confirm_level=0.995, **confirmed)) is None
