@@ -6,7 +6,8 @@ threshold rule on it could do.
 ``posterior:N:M:B:K=V`` syntax; margin 1e9: it never moves, so the plant stays at the healthy
 set points and the posterior is the one any rule sees until its first move) and keeps, per
 episode, the reward, the posterior of each sample after the arming and the candidate held.
-``limit T.npz``: per episode, when P(f1) first reaches each level after the onset, and the
+``replay T.npz '{"confidence": 0.99}'``: the supervisor's decision rule on the trace's
+posterior up to its first move (per episode, when and where to). ``limit T.npz``: per episode, when P(f1) first reaches each level after the onset, and the
 highest P(f1) on the non-f1 episodes; then, for rules "move to f1's set points once P(f1) ≥ c
 for d samples in a row", the f1 episodes' delay against the kept rule's entry (P(f1) ≥ 5.2 %,
 where f1's set points gain the 20 USD/h margin) and the non-f1 episodes it moves on.
@@ -123,6 +124,39 @@ def limit(path: str) -> None:
             )
 
 
+def replay(path: str, settings: dict, trust_after: int = 1200) -> None:
+    """The supervisor's decision (``settings``: ``PosteriorSupervisor`` keywords) on a trace's
+    posterior, up to its first move (after it the trace, taken at the healthy set points, no
+    longer is what the supervisor would see): per episode, the first move after the onset."""
+    from types import SimpleNamespace
+
+    from evaluation.control.policies import ARM_AFTER
+    from evaluation.control.posterior_policy import PosteriorSupervisor
+
+    z = np.load(path)
+    hyps = list(z["hypotheses"])
+    names = list(z["candidates"])
+    table = {("nominal" if h == "nominal" else h): RETURN_TABLE[h] for h in RETURN_TABLE}
+    stub = SimpleNamespace(hypotheses_=hyps)
+    episodes = sorted({k.rsplit("/", 1)[0] for k in z.files if k.count("/") == 2})
+    print(settings)
+    for ep in episodes:
+        sup = PosteriorSupervisor(
+            "replay", stub, table, {c: np.zeros(2) for c in names}, **settings
+        )
+        sup._current, sup._faulty_for = names.index("healthy"), 0
+        post, onset = z[f"{ep}/post"], int(z[f"{ep}/onset"])
+        moves = []
+        for t in range(ARM_AFTER, len(post)):
+            p = np.eye(len(hyps))[0] if t < ARM_AFTER + trust_after else post[t]
+            before = sup._current
+            sup._current = sup._decide(p)
+            if sup._current != before:
+                moves.append(f"{t - onset:+d} {names[sup._current]}")
+                break
+        print(f"{ep}: {moves[0] if moves else 'no move'}")
+
+
 if __name__ == "__main__":
     argv = sys.argv[1:]
     if argv[0] == "trace":
@@ -134,3 +168,7 @@ if __name__ == "__main__":
         )
     elif argv[0] == "limit":
         limit(argv[1])
+    elif argv[0] == "replay":
+        import json
+
+        replay(argv[1], json.loads(argv[2]))

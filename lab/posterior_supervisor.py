@@ -9,7 +9,7 @@ to JSON; ``summary S1.json S2.json ...`` pools chunks and prints the loss agains
 overall and per scenario (the record: ``lab/posterior_supervisor.md``). ``--policies`` may name
 ``iso`` for the supervisor on ``lrgf-iso`` around ``lrgf-glr-closed`` (trained as the command
 trains it); ``posterior:N:M:B``: trusted after N samples, margin M USD/h (default 20), margin B
-back to the healthy set points (default: none); ``posterior:N:M:B:persist=50/confirm_level=0.99``
+back to the healthy set points (default: none); ``posterior:N:M:B:confidence=0.99/confirm_after=300``
 adds the supervisor's other keywords;
 ``--mmae '{"tracking_rate": 0.01}'`` gives ``posterior:N``'s mmae hyperparameters.
 """
@@ -31,14 +31,14 @@ from evaluation.metrics.intervals import bootstrap_ci
 
 def posterior_policy(spec: str, mmae: dict | None = None) -> Any:
     """``posterior:N:M:B:K=V/K=V``: trusted after N samples, margin M USD/h (default 20), home
-    margin B (default: none), and any further keywords of ``posterior_supervisor`` (``persist``,
-    ``confirm_level``, ``confirmed_margin_usd_per_h``) as numbers."""
+    margin B (default: none), and any further keywords of ``posterior_supervisor`` (``confidence``,
+    ``confirm_after``, ``confirmed_margin_usd_per_h``) as numbers."""
     parts = spec.split(":")
     extra = {}
     if len(parts) > 4 and parts[4]:
         for kv in parts[4].split("/"):
             key, value = kv.split("=")
-            extra[key] = int(value) if key == "persist" else float(value)
+            extra[key] = int(value) if key == "confirm_after" else float(value)
     return make_policy(
         "posterior",
         trust_after=int(parts[1]),
