@@ -32,13 +32,15 @@ from evaluation.metrics.intervals import bootstrap_ci
 def posterior_policy(spec: str, mmae: dict | None = None) -> Any:
     """``posterior:N:M:B:K=V/K=V``: trusted after N samples, margin M USD/h (default 20), home
     margin B (default: none), and any further keywords of ``posterior_supervisor`` (``confidence``,
-    ``confirm_after``, ``confirmed_margin_usd_per_h``) as numbers."""
+    ``confirm_after``, ``confirmed_margin_usd_per_h``) as numbers or ``none`` (the rule before
+    2026-12-07: ``posterior:1200:20:2:confidence=none/confirm_after=none``)."""
     parts = spec.split(":")
     extra = {}
     if len(parts) > 4 and parts[4]:
         for kv in parts[4].split("/"):
             key, value = kv.split("=")
-            extra[key] = int(value) if key == "confirm_after" else float(value)
+            number = int if key == "confirm_after" else float
+            extra[key] = None if value == "none" else number(value)
     return make_policy(
         "posterior",
         trust_after=int(parts[1]),

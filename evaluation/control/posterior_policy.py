@@ -23,6 +23,12 @@ A move back to the healthy set points may have its own, smaller margin
 (``home_margin_usd_per_h``): the set points a fault calls for cost the other plants only a
 few USD/h (f1's about 3), less than the margin, so without it one moment of doubt (f4's
 first samples look like f1) held f1's set points to the end of the episode.
+
+The posterior is acted on only when one hypothesis reaches ``confidence`` (``mmae``'s
+in-between values are confusions between faults, not calibrated probabilities: acting on them
+hedged f4 episodes toward f1's set points), and once a fault is confirmed a smaller margin
+lets the supervisor take set points that pay a few USD/h on the faulty plant
+(:class:`PosteriorSupervisor`).
 """
 
 from __future__ import annotations
@@ -175,7 +181,12 @@ class PosteriorSupervisor:
         if self.confirm_after is not None:
             check("confirm_after", self.confirm_after, Integer(1, 100_000))
             if self.confidence is None:
-                raise invalid("confirm_after", self.confirm_after, "None without a confidence")
+                raise invalid(
+                    "confirm_after",
+                    self.confirm_after,
+                    "None unless confidence is set",
+                    "a fault is confirmed by 1 - P(nominal) >= confidence",
+                )
         if self.confirmed_margin_usd_per_h is not None:
             check(
                 "confirmed_margin_usd_per_h",
@@ -306,9 +317,9 @@ def posterior_supervisor(
     home_margin_usd_per_h: float | None = 2.0,
     params: dict[str, Any] | None = None,
     trust_after: int = 1200,
-    confidence: float | None = None,
-    confirm_after: int | None = None,
-    confirmed_margin_usd_per_h: float | None = None,
+    confidence: float | None = 0.99,
+    confirm_after: int | None = 300,
+    confirmed_margin_usd_per_h: float | None = 5.0,
 ) -> PosteriorSupervisor:
     """A :class:`PosteriorSupervisor` on ``mmae`` (``params``: its hyperparameters), fitted on
     episodes of the training seeds run at the healthy set points (one healthy, to calibrate
@@ -318,8 +329,13 @@ def posterior_supervisor(
     5000-5003; the study's faults start 1600 samples after the arming, so it hides no onset
     there, but it would hide an earlier one. ``home_margin_usd_per_h`` 2 (tried: none, 2;
     validation seeds 5000-5003, checked on 5004-5007): f4's loss against the best fixed set
-    points fell from 17 to 2 USD per episode. ``mmae`` runs with :data:`MMAE_PARAMS` under
-    ``params``."""
+    points fell from 17 to 2 USD per episode. ``confidence`` 0.99, ``confirm_after`` 300,
+    ``confirmed_margin_usd_per_h`` 5 (the rule replayed on the posterior of validation seeds
+    5000-5007, checked in closed loop there and on fresh 5008-5019): no more hedge toward f1's
+    set points on f2/f4 episodes, f1 moved 2-5 samples later, and a confirmed f2/f3/f4 held at
+    f3's set points (11 USD/h better on those plants); None, None, None: the rule before
+    (``lab/posterior_supervisor.md``, 2026-12-07). ``mmae`` runs with :data:`MMAE_PARAMS`
+    under ``params``."""
     from diagnosers import make
     from evaluation.control.returns import TRAIN_SEEDS, operated_episodes
     from fcc_env.scenarios import fault_names
@@ -337,6 +353,7 @@ def posterior_supervisor(
         train += operated_episodes(fixed, fault, seed, n_train_steps)
     table = {("nominal" if h == NOMINAL else h): row for h, row in table.items()}
     label = f", trusted after {trust_after}" if trust_after else ""
+    label += f", confidence {confidence}" if confidence is not None else ""
     return PosteriorSupervisor(
         f"supervisor on the mmae posterior (expected return{label})",
         make("mmae", **{**MMAE_PARAMS, **(params or {})}).fit(train),
