@@ -136,7 +136,7 @@ def replay(path: str, settings: dict, trust_after: int = 1200) -> None:
     z = np.load(path)
     hyps = list(z["hypotheses"])
     names = list(z["candidates"])
-    table = {("nominal" if h == "nominal" else h): RETURN_TABLE[h] for h in RETURN_TABLE}
+    table = dict(RETURN_TABLE)
     stub = SimpleNamespace(hypotheses_=hyps)
     episodes = sorted({k.rsplit("/", 1)[0] for k in z.files if k.count("/") == 2})
     print(settings)
