@@ -9,7 +9,8 @@ to JSON; ``summary S1.json S2.json ...`` pools chunks and prints the loss agains
 overall and per scenario (the record: ``lab/posterior_supervisor.md``). ``--policies`` may name
 ``iso`` for the supervisor on ``lrgf-iso`` around ``lrgf-glr-closed`` (trained as the command
 trains it); ``posterior:N:M:B``: trusted after N samples, margin M USD/h (default 20), margin B
-back to the healthy set points (default: none);
+back to the healthy set points (default: none); ``posterior:N:M:B:confidence=0.99/confirm_after=300``
+adds the supervisor's other keywords;
 ``--mmae '{"tracking_rate": 0.01}'`` gives ``posterior:N``'s mmae hyperparameters.
 """
 
@@ -18,12 +19,58 @@ from __future__ import annotations
 import json
 import sys
 import time
+from typing import Any
 
 import numpy as np
 
 from evaluation.control import make_policy
 from evaluation.control.posterior_policy import measure_return_table
 from evaluation.control.returns import EpisodeScore, run_study, summarise
+from evaluation.metrics.intervals import bootstrap_ci
+
+
+def posterior_policy(spec: str, mmae: dict | None = None) -> Any:
+    """``posterior:N:M:B:K=V/K=V``: trusted after N samples, margin M USD/h (default 20), home
+    margin B (default: none), and any further keywords of ``posterior_supervisor`` (``confidence``,
+    ``confirm_after``, ``confirmed_margin_usd_per_h``) as numbers or ``none`` (the rule before
+    2026-12-07: ``posterior:1200:20:2:confidence=none/confirm_after=none``)."""
+    parts = spec.split(":")
+    extra = {}
+    if len(parts) > 4 and parts[4]:
+        for kv in parts[4].split("/"):
+            key, value = kv.split("=")
+            number = int if key == "confirm_after" else float
+            extra[key] = None if value == "none" else number(value)
+    return make_policy(
+        "posterior",
+        trust_after=int(parts[1]),
+        params=mmae,
+        margin_usd_per_h=float([*parts, "20"][2]),
+        home_margin_usd_per_h=(float(parts[3]) if len(parts) > 3 and parts[3] else None),
+        **extra,
+    )
+
+
+def paired(scores: list[EpisodeScore], scen: list[str]) -> None:
+    """Per policy and scenario, its return minus the best fixed set points' on the same seed:
+    the mean [95 % bootstrap over the seeds] and each seed's figure (USD per episode)."""
+    fixed = {(s.scenario, s.seed): s.return_usd for s in scores if s.policy.startswith("best")}
+    print("\npaired against the best fixed set points, USD per episode [95 %]: per seed")
+    for name in dict.fromkeys(s.policy for s in scores):
+        if name.startswith(("best", "oracle")):
+            continue
+        print(f"{name}:")
+        for c in scen:
+            d = [
+                s.return_usd - fixed[(c, s.seed)]
+                for s in sorted(scores, key=lambda s: s.seed)
+                if s.policy == name and s.scenario == c and (c, s.seed) in fixed
+            ]
+            ci = bootstrap_ci(d)
+            print(
+                f"  {c}: {ci.estimate:+,.2f} [{ci.low:+,.2f}, {ci.high:+,.2f}] n={len(d)}: "
+                + " ".join(f"{v:+.1f}" for v in d)
+            )
 
 
 def main(argv: list[str]) -> None:
@@ -44,13 +91,7 @@ def main(argv: list[str]) -> None:
         policies = [
             make_policy("supervisor", name="lrgf-iso", params={"detector_name": "lrgf-glr-closed"})
             if n == "iso"
-            else make_policy(
-                "posterior",
-                trust_after=int(n.split(":")[1]),
-                params=mmae,
-                margin_usd_per_h=float([*n.split(":"), "20"][2]),
-                home_margin_usd_per_h=(float(n.split(":")[3]) if len(n.split(":")) > 3 else None),
-            )
+            else posterior_policy(n, mmae)
             if n.startswith("posterior:")
             else make_policy(n)
             for n in names
@@ -79,6 +120,7 @@ def main(argv: list[str]) -> None:
                 for c in scen
             ]
             print(f"| {name} | " + " | ".join(f"{v:,.0f}" for v in row) + " |")
+        paired(scores, scen)
     elif argv[0] == "merge":
         tables = [json.load(open(p)) for p in argv[1:]]
         merged = {

@@ -23,6 +23,12 @@ A move back to the healthy set points may have its own, smaller margin
 (``home_margin_usd_per_h``): the set points a fault calls for cost the other plants only a
 few USD/h (f1's about 3), less than the margin, so without it one moment of doubt (f4's
 first samples look like f1) held f1's set points to the end of the episode.
+
+The posterior is acted on only when one hypothesis reaches ``confidence`` (``mmae``'s
+in-between values are confusions between faults, not calibrated probabilities: acting on them
+hedged f4 episodes toward f1's set points), and once a fault is confirmed a smaller margin
+lets the supervisor take set points that pay a few USD/h on the faulty plant
+(:class:`PosteriorSupervisor`).
 """
 
 from __future__ import annotations
@@ -40,7 +46,7 @@ from evaluation.control.policies import (
     fault_setpoints,
     fixed_setpoints,
 )
-from fcc_common.validation import Real, check, invalid
+from fcc_common.validation import Integer, Real, check, invalid
 from fcc_env.scenarios import NOMINAL
 
 __all__ = [
@@ -131,6 +137,20 @@ class PosteriorSupervisor:
     samples after the arming during which the posterior is not acted on (the prior, healthy, stands in): ``mmae``'s filters start at the steady
     state of the nominal inputs, not of the set points in force, and its posterior names f1
     for 400-1600 samples after a reset on healthy episodes (``lab/posterior_supervisor.md``).
+    ``confidence``: the posterior is acted on only when one hypothesis holds at least this
+    probability (otherwise the set points in force are held; None: always). Why: in between,
+    ``mmae``'s posterior is a confusion, not a calibrated probability: on f4 episodes P(f1)
+    rose to 0.07-0.95 with no f1, while on f1 episodes it crossed from 0.01 to 0.99 within
+    1-7 samples (validation seeds 5000-5007, ``lab/posterior_supervisor.md``), so a hedge on
+    the in-between values cost f4 episodes and bought f1 next to nothing.
+    ``confirm_after`` and ``confirmed_margin_usd_per_h``: once ``1 − P(nominal)`` has held at
+    least ``confidence`` for ``confirm_after`` samples in a row (a fault confirmed), moves need
+    only ``confirmed_margin_usd_per_h`` (None: the one margin throughout). Why a confirmed
+    fault may lower the margin: on a plant that may still be healthy, ``margin_usd_per_h``
+    also keeps it at set points where a later f1 is caught cheaply (f3's earn 11 USD/h more on
+    a healthy plant but 2,550 less on f1 while it is being isolated); one fault at a time, a
+    faulty plant has no later onset to be caught by. Why the samples in a row: an f1 episode
+    looks like f2 (P(f2) near 1) for its first 100-130 samples.
     """
 
     name: str
@@ -141,17 +161,38 @@ class PosteriorSupervisor:
     arm_after: int = ARM_AFTER
     trust_after: int = 0
     home_margin_usd_per_h: float | None = None
+    confidence: float | None = None
+    confirm_after: int | None = None
+    confirmed_margin_usd_per_h: float | None = None
     history: list[SupervisorEvent] = field(init=False, default_factory=list)
     _R: np.ndarray = field(init=False, repr=False)
     _names: list[str] = field(init=False, repr=False)
     _policy: SetpointPolicy = field(init=False, repr=False)
     _k: int = field(init=False, repr=False, default=0)
     _current: int = field(init=False, repr=False, default=0)
+    _faulty_for: int = field(init=False, repr=False, default=0)
 
     def __post_init__(self) -> None:
         check("margin_usd_per_h", self.margin_usd_per_h, Real(0.0, why="USD/h"))
         if self.home_margin_usd_per_h is not None:
             check("home_margin_usd_per_h", self.home_margin_usd_per_h, Real(0.0, why="USD/h"))
+        if self.confidence is not None:
+            check("confidence", self.confidence, Real(0.0, 1.0, closed="neither"))
+        if self.confirm_after is not None:
+            check("confirm_after", self.confirm_after, Integer(1, 100_000))
+            if self.confidence is None:
+                raise invalid(
+                    "confirm_after",
+                    self.confirm_after,
+                    "None unless confidence is set",
+                    "a fault is confirmed by 1 - P(nominal) >= confidence",
+                )
+        if self.confirmed_margin_usd_per_h is not None:
+            check(
+                "confirmed_margin_usd_per_h",
+                self.confirmed_margin_usd_per_h,
+                Real(0.0, why="USD/h"),
+            )
         hyps = list(self.diagnoser.hypotheses_)
         missing = [h for h in hyps if h not in self.table]
         self._names = list(self.candidates)
@@ -171,6 +212,7 @@ class PosteriorSupervisor:
         self.diagnoser.reset()
         self._current = self._names.index("healthy")
         self._k = 0
+        self._faulty_for = 0
         self.history = []
         self._policy.reset(info)
 
@@ -185,19 +227,38 @@ class PosteriorSupervisor:
         post = np.asarray(decision.posterior, dtype=np.float64)
         if self._k <= self.arm_after + self.trust_after:
             post = np.eye(len(post))[0]  # the filters' start-up: the prior, healthy
-        self._current = best_candidate(
-            post,
-            self._R,
-            self._current,
-            self.margin_usd_per_h,
-            self._names.index("healthy"),
-            self.home_margin_usd_per_h,
-        )
+        self._current = self._decide(post)
         likely = str(self.diagnoser.hypotheses_[int(np.argmax(post))])
         self._record(
             SupervisorEvent(self._k, bool(decision.alarm), likely, self._names[self._current])
         )
         return self._policy.act(obs, info)
+
+    def _decide(self, post: np.ndarray) -> int:
+        """The candidate to hold after this sample's posterior ``post`` (over the hypotheses,
+        ``"nominal"`` first): held while no hypothesis reaches ``confidence``, else
+        :func:`best_candidate` at the margin in force (``confirmed_margin_usd_per_h`` once
+        ``1 − P(nominal)`` has reached ``confidence`` for ``confirm_after`` samples in a row)."""
+        p = post / post.sum()
+        if self.confidence is not None:
+            self._faulty_for = self._faulty_for + 1 if 1.0 - p[0] >= self.confidence else 0
+            if p.max() < self.confidence:
+                return self._current
+        margin = self.margin_usd_per_h
+        if (
+            self.confirm_after is not None
+            and self.confirmed_margin_usd_per_h is not None
+            and self._faulty_for >= self.confirm_after
+        ):
+            margin = self.confirmed_margin_usd_per_h
+        return best_candidate(
+            p,
+            self._R,
+            self._current,
+            margin,
+            self._names.index("healthy"),
+            self.home_margin_usd_per_h,
+        )
 
     def _record(self, event: SupervisorEvent) -> None:
         if not self.history or self.history[-1][1:] != event[1:]:
@@ -256,6 +317,9 @@ def posterior_supervisor(
     home_margin_usd_per_h: float | None = 2.0,
     params: dict[str, Any] | None = None,
     trust_after: int = 1200,
+    confidence: float | None = 0.99,
+    confirm_after: int | None = 300,
+    confirmed_margin_usd_per_h: float | None = 5.0,
 ) -> PosteriorSupervisor:
     """A :class:`PosteriorSupervisor` on ``mmae`` (``params``: its hyperparameters), fitted on
     episodes of the training seeds run at the healthy set points (one healthy, to calibrate
@@ -265,8 +329,13 @@ def posterior_supervisor(
     5000-5003; the study's faults start 1600 samples after the arming, so it hides no onset
     there, but it would hide an earlier one. ``home_margin_usd_per_h`` 2 (tried: none, 2;
     validation seeds 5000-5003, checked on 5004-5007): f4's loss against the best fixed set
-    points fell from 17 to 2 USD per episode. ``mmae`` runs with :data:`MMAE_PARAMS` under
-    ``params``."""
+    points fell from 17 to 2 USD per episode. ``confidence`` 0.99, ``confirm_after`` 300,
+    ``confirmed_margin_usd_per_h`` 5 (the rule replayed on the posterior of validation seeds
+    5000-5007, checked in closed loop there and on fresh 5008-5019): no more hedge toward f1's
+    set points on f2/f4 episodes, f1 moved 2-5 samples later, and a confirmed f2/f3/f4 held at
+    f3's set points (11 USD/h better on those plants); None, None, None: the rule before
+    (``lab/posterior_supervisor.md``, 2026-12-07). ``mmae`` runs with :data:`MMAE_PARAMS`
+    under ``params``."""
     from diagnosers import make
     from evaluation.control.returns import TRAIN_SEEDS, operated_episodes
     from fcc_env.scenarios import fault_names
@@ -284,6 +353,7 @@ def posterior_supervisor(
         train += operated_episodes(fixed, fault, seed, n_train_steps)
     table = {("nominal" if h == NOMINAL else h): row for h, row in table.items()}
     label = f", trusted after {trust_after}" if trust_after else ""
+    label += f", confidence {confidence}" if confidence is not None else ""
     return PosteriorSupervisor(
         f"supervisor on the mmae posterior (expected return{label})",
         make("mmae", **{**MMAE_PARAMS, **(params or {})}).fit(train),
@@ -292,4 +362,7 @@ def posterior_supervisor(
         margin_usd_per_h,
         trust_after=trust_after,
         home_margin_usd_per_h=home_margin_usd_per_h,
+        confidence=confidence,
+        confirm_after=confirm_after,
+        confirmed_margin_usd_per_h=confirmed_margin_usd_per_h,
     )

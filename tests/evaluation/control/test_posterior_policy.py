@@ -71,15 +71,15 @@ class _Stub:
 
     hypotheses_ = ("nominal", "f1")
 
-    def __init__(self, flip: int):
-        self.flip, self.n = flip, 0
+    def __init__(self, flip: int, after: tuple[float, float] = (0.01, 0.99)):
+        self.flip, self.n, self.after = flip, 0, np.array(after)
 
     def reset(self):
         self.n = 0
 
     def update(self, y):
         self.n += 1
-        p = np.array([0.01, 0.99]) if self.n > self.flip else np.array([0.999, 0.001])
+        p = self.after if self.n > self.flip else np.array([0.999, 0.001])
         return SimpleNamespace(alarm=self.n > self.flip, posterior=p)
 
 
@@ -127,9 +127,56 @@ def test_the_posterior_is_not_acted_on_before_trust_after():
 
 
 @pytest.mark.parametrize(
-    ("field", "value"), [("margin_usd_per_h", -1.0), ("home_margin_usd_per_h", float("nan"))]
+    ("field", "value"),
+    [
+        ("margin_usd_per_h", -1.0),
+        ("home_margin_usd_per_h", float("nan")),
+        ("confirmed_margin_usd_per_h", -1.0),
+        ("confidence", 1.0),
+        ("confirm_after", 0),
+    ],
 )
-def test_a_bad_margin_is_refused_by_name(field: str, value: float) -> None:
-    # the margins are checked before the diagnoser is read, so no fitted bank is needed
-    with pytest.raises(ValueError, match=rf"{field}=(-1\.0|nan) is outside the allowed range"):
+def test_a_bad_setting_is_refused_by_name(field: str, value: float) -> None:
+    # the settings are checked before the diagnoser is read, so no fitted bank is needed
+    with pytest.raises(ValueError, match=rf"{field}=(-1\.0|nan|1\.0|0) is outside the allowed"):
         PosteriorSupervisor("posterior", None, {}, {}, **{field: value})
+
+
+def test_a_confirmation_without_a_confidence_is_refused() -> None:
+    with pytest.raises(
+        ValueError, match=r"confirm_after=300 is outside the allowed range: None unless confidence"
+    ):
+        PosteriorSupervisor("posterior", None, {}, {}, confirm_after=300)
+
+
+def _first_move(table: dict, after: tuple[float, float], **kw) -> int | None:
+    """The sample of the first move off the healthy set points of a stub supervisor (armed
+    after 10 samples, margin 5) whose posterior turns to ``after`` from its 21st update."""
+    healthy = fixed_setpoints().target(0, {})
+    cands = {"healthy": healthy, "f1": healthy + np.array([-4.0, 2.0])}
+    stub = _Stub(flip=20, after=after)
+    sup = PosteriorSupervisor("posterior (stub)", stub, table, cands, 5.0, 10, **kw)
+    run_episode(sup, "nominal", 5000, 60)
+    return next((e.k for e in sup.history if e.target != "healthy"), None)
+
+
+def test_a_posterior_below_the_confidence_is_not_acted_on():
+    table = {"nominal": {"healthy": 100.0, "f1": 90.0}, "f1": {"healthy": 0.0, "f1": 100.0}}
+    # (0.3, 0.7): f1's set points gain 70 - 30 = 40 USD/h, a move at once (k = 10 + 21)
+    assert _first_move(table, (0.3, 0.7)) == 31
+    # held while no hypothesis reaches 0.9; (0.05, 0.95) reaches it
+    assert _first_move(table, (0.3, 0.7), confidence=0.9) is None
+    assert _first_move(table, (0.05, 0.95), confidence=0.9) == 31
+
+
+def test_a_confirmed_fault_moves_on_the_smaller_margin():
+    # posterior (0.01, 0.99) after the flip: healthy 0.01*100 + 0.99*96 = 96.04, f1's
+    # 0.01*90 + 0.99*100 = 99.9, a gain of 3.86 USD/h: below the margin 5, above 1
+    table = {"nominal": {"healthy": 100.0, "f1": 90.0}, "f1": {"healthy": 96.0, "f1": 100.0}}
+    confirmed = {"confidence": 0.98, "confirmed_margin_usd_per_h": 1.0}
+    assert _first_move(table, (0.01, 0.99)) is None
+    # 1 - P(nominal) = 0.99 >= 0.98 from k = 31: confirmed on its 5th sample in a row
+    assert _first_move(table, (0.01, 0.99), confirm_after=5, **confirmed) == 35
+    # a confidence of 0.995 is never reached: neither acted on nor confirmed
+    confirmed["confidence"] = 0.995
+    assert _first_move(table, (0.01, 0.99), confirm_after=5, **confirmed) is None
