@@ -47,10 +47,15 @@ def outcome(label: str, labels: tuple[str, ...]) -> str:
 
 
 def compose(
-    f: dict, claims: list[tuple[str, ...]], classes: tuple[str, ...], confirm: int, hold: bool
+    f: dict,
+    claims: list[tuple[str, ...]],
+    classes: tuple[str, ...],
+    confirm: int,
+    hold: bool,
+    several: list[bool],
 ) -> tuple[np.ndarray, list[tuple[int, str]]]:
     """The diagnosis per sample and the (sample, name) of each confirmation."""
-    comp = Composition(claims, classes, confirm=confirm, hold=hold)
+    comp = Composition(claims, classes, confirm=confirm, hold=hold, several=several)
     alarm, names = f["alarm"], f["diagnosis"]
     T = alarm.shape[1]
     out = np.empty(T, dtype=object)
@@ -69,6 +74,7 @@ def main() -> None:
     ap.add_argument("--confirm", type=int, default=30)
     ap.add_argument("--no-hold", action="store_true")
     ap.add_argument("--claims", default="", help="member=a|b;member=c: override the claims")
+    ap.add_argument("--one-each", action="store_true", help="no member names several")
     ap.add_argument("--verbose", action="store_true")
     args = ap.parse_args()
     files = sorted(args.store.glob("*.npz"))
@@ -79,6 +85,9 @@ def main() -> None:
     from diagnosers.isolation.catalogue import DEFAULT_MEMBERS
 
     by_name = {m["name"]: tuple(c for c in m["classes"] if c in parts) for m in DEFAULT_MEMBERS}
+    by_several = {m["name"]: m.get("several", False) for m in DEFAULT_MEMBERS}
+    if args.one_each:
+        by_several = {}
     for item in filter(None, args.claims.split(";")):
         k, v = item.split("=")
         by_name[k] = tuple(v.split("|"))
@@ -87,7 +96,8 @@ def main() -> None:
     for f in loaded:
         members = [str(m) for m in f["member_names"]]
         claims = [by_name[m] for m in members]
-        diag, seen = compose(f, claims, classes, args.confirm, not args.no_hold)
+        several = [bool(by_several.get(m, False)) for m in members]
+        diag, seen = compose(f, claims, classes, args.confirm, not args.no_hold, several)
         column = str(f["column"])
         if column == "nominal":
             rows[column]["alarmed"] += bool((diag != "").any())

@@ -15,7 +15,9 @@ and runs a whole episode, so ``update`` equals ``detect``):
 1. a member's name is *confirmed* once the member has said it ``confirm`` samples in a row;
 2. a confirmed name is *held* (``hold=True``, default): a fault in this benchmark persists, and a
    loop monitor's alarm comes and goes with the cycle; a later confirmation by the same member
-   replaces it (a sensor fault first read as a bias, later as a drift);
+   replaces it (a sensor fault first read as a bias, later as a drift), unless the member may
+   name ``several`` faults (a detector member with a direction per fault: each confirmed name
+   is added);
 3. the diagnosis is the set of held names, as the training label that names exactly that set
    (``a+b`` for a concurrent column, in any order: :func:`fcc_env.faults.isolation_outcome`),
    and ``"unknown"`` when it matches none (more names than any training label, a combination
@@ -71,6 +73,7 @@ DEFAULT_MEMBERS: list[dict[str, Any]] = [
             "faults": ["f1", "valve-bias", "blower-capacity", "sensor-bias", "valve-stiction"],
         },
         "classes": ["f1", "valve-bias", "blower-capacity"],
+        "several": True,
     },
 ]
 
@@ -108,25 +111,27 @@ class Composition:
         *,
         confirm: int,
         hold: bool,
+        several: list[bool] | None = None,
     ) -> None:
         self.claims = [frozenset(c) for c in claims]
         self.by_set = {frozenset(c.split("+")): c for c in classes}
         self.confirm = int(confirm)
         self.hold = bool(hold)
+        self.several = list(several) if several is not None else [False] * len(claims)
         self.reset()
 
     def reset(self) -> None:
         n = len(self.claims)
         self.run_name = [""] * n
         self.run_len = [0] * n
-        self.held: list[str] = [""] * n
-        self.held_at = [0] * n
+        #: per member, its held names with the sample each was confirmed at
+        self.held: list[dict[str, int]] = [{} for _ in range(n)]
         self.k = 0
 
     def named(self) -> tuple[str, ...]:
         """The held names, first confirmed first (duplicates once)."""
-        order = sorted((self.held_at[m], m) for m in range(len(self.held)) if self.held[m])
-        return tuple(dict.fromkeys(self.held[m] for _, m in order))
+        order = sorted((k, name) for held in self.held for name, k in held.items())
+        return tuple(dict.fromkeys(name for _, name in order))
 
     def step(self, alarms: list[bool], names: list[str]) -> tuple[bool, str]:
         """One sample: each member's alarm and name → ``(alarm, diagnosis)``."""
@@ -137,10 +142,13 @@ class Composition:
                 self.run_name[m] = name
             else:
                 self.run_name[m], self.run_len[m] = "", 0
-            if self.run_len[m] >= self.confirm and self.held[m] != name:
-                self.held[m], self.held_at[m] = name, self.k
+            held = self.held[m]
+            if self.run_len[m] >= self.confirm and name not in held:
+                if not self.several[m]:
+                    held.clear()  # a member that names one fault replaces its own word
+                held[name] = self.k
             if not self.hold and not alarm:
-                self.held[m] = ""
+                held.clear()
         self.k += 1
         named = self.named()
         alarm = any(alarms) or bool(named)
@@ -155,6 +163,8 @@ class _Member:
 
     diagnoser: Diagnoser
     claims: tuple[str, ...]
+    #: it may name several faults at once, each confirmed on its own (a detector member)
+    several: bool = False
     #: a detector member: the fault each of its signals names (None: no fault)
     signal_faults: tuple[str | None, ...] = ()
 
@@ -184,13 +194,20 @@ class _Member:
         return np.where(det.alarm, out, NO_DIAGNOSIS).astype(str)
 
 
+_KEYS = {"name", "params", "classes"}
+
+
 def _check_members(members: Any) -> list[dict[str, Any]]:
     if not isinstance(members, list | tuple) or not members:
         raise invalid("members", members, "a non-empty list of {name, params, classes} dicts")
     known = fault_names(include_path_faults=True)
     for i, m in enumerate(members):
-        if not isinstance(m, dict) or set(m) != {"name", "params", "classes"}:
-            raise invalid(f"members[{i}]", m, "a dict with exactly the keys name, params, classes")
+        if not isinstance(m, dict) or not _KEYS <= set(m) <= {*_KEYS, "several"}:
+            raise invalid(
+                f"members[{i}]", m, "a dict with the keys name, params, classes (and several)"
+            )
+        if not isinstance(m.get("several", False), bool):
+            raise invalid(f"members[{i}].several", m["several"], "True or False")
         cls = diagnoser_class(str(m["name"]))  # ValueError naming the registered ones
         if cls is CatalogueIsolator or issubclass(cls, CatalogueIsolator):
             raise invalid(
@@ -215,7 +232,8 @@ class CatalogueIsolator(Diagnoser):
 
     Args:
         members: the members, each ``{"name": registered diagnoser, "params": its
-            hyperparameters, "classes": the faults it may name}``; default
+            hyperparameters, "classes": the faults it may name}`` and optionally
+            ``"several": True`` (it may name several at once, each held); default
             :data:`DEFAULT_MEMBERS`.
         confirm: samples in a row a member must say a name before it counts, in [1, 100000];
             default 30 (5 minutes at 10 s).
@@ -281,7 +299,7 @@ class CatalogueIsolator(Diagnoser):
                 if len(mine := [p for p in ep.scenario.split("+") if p in claims]) == 1
             ]
             d.fit(healthy + own if d.isolates or d.learns_from_faults else healthy)
-            self.members_.append(self._member(d, claims))
+            self.members_.append(self._member(d, claims, bool(spec.get("several", False))))
             self.member_names_ += (spec["name"],)
             claimed.update(claims)
         self.classes_ = tuple(lab for lab in labels if set(lab.split("+")) <= claimed)
@@ -293,9 +311,9 @@ class CatalogueIsolator(Diagnoser):
         self._finish()
 
     @staticmethod
-    def _member(d: Diagnoser, claims: tuple[str, ...]) -> _Member:
+    def _member(d: Diagnoser, claims: tuple[str, ...], several: bool) -> _Member:
         faults = () if d.isolates else tuple(signal_fault(s) for s in d.signal_names_)
-        return _Member(d, claims, faults)
+        return _Member(d, claims, several, faults)
 
     def _finish(self) -> None:
         self.signal_names_ = (
@@ -307,7 +325,11 @@ class CatalogueIsolator(Diagnoser):
             "faults named",
         )
         self.composition_ = Composition(
-            [m.claims for m in self.members_], self.classes_, confirm=self.confirm, hold=self.hold
+            [m.claims for m in self.members_],
+            self.classes_,
+            confirm=self.confirm,
+            hold=self.hold,
+            several=[m.several for m in self.members_],
         )
 
     # ---- detection -----------------------------------------------------------------------------
@@ -353,7 +375,11 @@ class CatalogueIsolator(Diagnoser):
         """The composition of the members' :meth:`member_outputs` over a whole episode, from a
         fresh state: ``(alarm (T,), diagnosis (T,), names held (T,))``."""
         comp = Composition(
-            [m.claims for m in self.members_], self.classes_, confirm=self.confirm, hold=self.hold
+            [m.claims for m in self.members_],
+            self.classes_,
+            confirm=self.confirm,
+            hold=self.hold,
+            several=[m.several for m in self.members_],
         )
         T = len(outputs[0][0])
         alarm, diagnosis, n_named = np.zeros(T, bool), np.empty(T, dtype=object), np.zeros(T)
@@ -389,14 +415,16 @@ class CatalogueIsolator(Diagnoser):
             "classes": np.array(self.classes_, dtype=str),
             "member_names": np.array(self.member_names_, dtype=str),
             "claims": np.array(["|".join(m.claims) for m in self.members_], dtype=str),
+            "several": np.array([m.several for m in self.members_], dtype=bool),
         }
 
     def _set_state(self, state: dict[str, np.ndarray]) -> None:
         self.classes_ = tuple(str(c) for c in state["classes"])
         self.member_names_ = tuple(str(n) for n in state["member_names"])
         self._claims = [tuple(str(c).split("|")) for c in state["claims"]]
-        if len(self._claims) != len(self.member_names_):
-            raise ValueError("saved claims and member_names differ in length")
+        self._several = [bool(x) for x in np.asarray(state["several"]).reshape(-1)]
+        if not len(self._claims) == len(self._several) == len(self.member_names_):
+            raise ValueError("saved claims, several and member_names differ in length")
 
     def _save_extra(self, directory: Path) -> None:
         for i, m in enumerate(self.members_):
@@ -404,12 +432,12 @@ class CatalogueIsolator(Diagnoser):
 
     def _load_extra(self, directory: Path) -> None:
         self.members_ = []
-        for i, claims in enumerate(self._claims):
+        for i, (claims, several) in enumerate(zip(self._claims, self._several, strict=True)):
             d = Diagnoser.load(directory / f"member{i}")
             if d.name != self.member_names_[i]:
                 raise ValueError(
                     f"{directory / f'member{i}'} holds a {d.name!r}, the saved isolator names "
                     f"{self.member_names_[i]!r}"
                 )
-            self.members_.append(self._member(d, claims))
+            self.members_.append(self._member(d, claims, several))
         self._finish()
