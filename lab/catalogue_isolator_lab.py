@@ -53,9 +53,12 @@ def compose(
     confirm: int,
     hold: bool,
     several: list[bool],
+    defers: list[tuple[int, ...]],
 ) -> tuple[np.ndarray, list[tuple[int, str]]]:
     """The diagnosis per sample and the (sample, name) of each confirmation."""
-    comp = Composition(claims, classes, confirm=confirm, hold=hold, several=several)
+    comp = Composition(
+        claims, classes, confirm=confirm, hold=hold, several=several, defers=defers or None
+    )
     alarm, names = f["alarm"], f["diagnosis"]
     T = alarm.shape[1]
     out = np.empty(T, dtype=object)
@@ -74,20 +77,14 @@ def main() -> None:
     ap.add_argument("--confirm", type=int, default=30)
     ap.add_argument("--no-hold", action="store_true")
     ap.add_argument("--claims", default="", help="member=a|b;member=c: override the claims")
-    ap.add_argument("--one-each", action="store_true", help="no member names several")
+    ap.add_argument("--no-defer", action="store_true", help="no member defers to another")
     ap.add_argument("--verbose", action="store_true")
     args = ap.parse_args()
     files = sorted(args.store.glob("*.npz"))
     loaded = [dict(np.load(p)) for p in files]
     faulty = [f for f in loaded if str(f["column"]) != "nominal"]
     classes = tuple(sorted({str(f["column"]) for f in faulty}))
-    parts = {p for c in classes for p in c.split("+")}
-    from diagnosers.isolation.catalogue import DEFAULT_MEMBERS
-
-    by_name = {m["name"]: tuple(c for c in m["classes"] if c in parts) for m in DEFAULT_MEMBERS}
-    by_several = {m["name"]: m.get("several", False) for m in DEFAULT_MEMBERS}
-    if args.one_each:
-        by_several = {}
+    by_name: dict[str, tuple[str, ...]] = {}
     for item in filter(None, args.claims.split(";")):
         k, v = item.split("=")
         by_name[k] = tuple(v.split("|"))
@@ -95,9 +92,15 @@ def main() -> None:
     cdrs: dict[str, list[float]] = defaultdict(list)
     for f in loaded:
         members = [str(m) for m in f["member_names"]]
-        claims = [by_name[m] for m in members]
-        several = [bool(by_several.get(m, False)) for m in members]
-        diag, seen = compose(f, claims, classes, args.confirm, not args.no_hold, several)
+        claims = [tuple(str(c).split("|")) for c in f["claims"]]
+        claims = [by_name.get(m, c) for m, c in zip(members, claims, strict=True)]
+        several = [bool(x) for x in f["several"]]
+        defers = (
+            []
+            if args.no_defer
+            else [tuple(int(i) for i in str(d).split("|") if i) for d in f["defers"]]
+        )
+        diag, seen = compose(f, claims, classes, args.confirm, not args.no_hold, several, defers)
         column = str(f["column"])
         if column == "nominal":
             rows[column]["alarmed"] += bool((diag != "").any())

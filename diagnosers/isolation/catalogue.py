@@ -62,18 +62,25 @@ SENSOR_KINDS = ("sensor-bias", "sensor-drift", "sensor-stuck", "sensor-noise", "
 #: one) and tests the directions of the faults it claims plus those it must not confuse them
 #: with (a T_rx bias and a sticking valve also move the riser's innovations).
 DEFAULT_MEMBERS: list[dict[str, Any]] = [
-    {"name": "sensor-validation", "params": {}, "classes": list(SENSOR_KINDS)},
-    {"name": "stiction-ccf", "params": {}, "classes": ["valve-stiction"]},
+    {
+        "name": "sensor-validation",
+        "params": {},
+        "classes": list(SENSOR_KINDS),
+        # a process or valve fault makes every sensor inconsistent with the model: while the
+        # model's directions name such a fault, the sensor check's word is no evidence
+        "defers_to": ["ukf-glr"],
+    },
+    {"name": "stiction-ukf", "params": {}, "classes": ["valve-stiction"]},
+    {"name": "loop-offset", "params": {}, "classes": ["blower-capacity"]},
     {
         "name": "ukf-glr",
         "params": {
             "fit_method": "none",
             "estimate_noise": False,
             "online": "never",
-            "faults": ["f1", "valve-bias", "blower-capacity", "sensor-bias", "valve-stiction"],
+            "faults": ["f1", "valve-bias", "valve-stuck", "sensor-bias"],
         },
-        "classes": ["f1", "valve-bias", "blower-capacity"],
-        "several": True,
+        "classes": ["f1", "valve-bias", "valve-stuck"],
     },
 ]
 
@@ -112,12 +119,14 @@ class Composition:
         confirm: int,
         hold: bool,
         several: list[bool] | None = None,
+        defers: list[tuple[int, ...]] | None = None,
     ) -> None:
         self.claims = [frozenset(c) for c in claims]
         self.by_set = {frozenset(c.split("+")): c for c in classes}
         self.confirm = int(confirm)
         self.hold = bool(hold)
         self.several = list(several) if several is not None else [False] * len(claims)
+        self.defers = [tuple(d) for d in defers] if defers is not None else [()] * len(claims)
         self.reset()
 
     def reset(self) -> None:
@@ -136,7 +145,11 @@ class Composition:
     def step(self, alarms: list[bool], names: list[str]) -> tuple[bool, str]:
         """One sample: each member's alarm and name → ``(alarm, diagnosis)``."""
         for m, (alarm, name) in enumerate(zip(alarms, names, strict=True)):
-            if name in self.claims[m]:
+            # deferred: another member names a fault of its own now, which explains this one's
+            # alarm (a process fault makes every sensor look inconsistent with the model)
+            if any(names[o] in self.claims[o] for o in self.defers[m]):
+                name = ""
+            if name and name != UNKNOWN:
                 same = name == self.run_name[m]
                 self.run_len[m] = self.run_len[m] + 1 if same else 1
                 self.run_name[m] = name
@@ -144,9 +157,14 @@ class Composition:
                 self.run_name[m], self.run_len[m] = "", 0
             held = self.held[m]
             if self.run_len[m] >= self.confirm and name not in held:
-                if not self.several[m]:
+                if name not in self.claims[m]:
+                    if not self.several[m]:
+                        held.clear()  # its verdict is now a fault it does not name
+                elif not self.several[m]:
                     held.clear()  # a member that names one fault replaces its own word
-                held[name] = self.k
+                    held[name] = self.k
+                else:
+                    held[name] = self.k
             if not self.hold and not alarm:
                 held.clear()
         self.k += 1
@@ -195,6 +213,7 @@ class _Member:
 
 
 _KEYS = {"name", "params", "classes"}
+_OPTIONAL = {"several", "defers_to"}
 
 
 def _check_members(members: Any) -> list[dict[str, Any]]:
@@ -202,12 +221,20 @@ def _check_members(members: Any) -> list[dict[str, Any]]:
         raise invalid("members", members, "a non-empty list of {name, params, classes} dicts")
     known = fault_names(include_path_faults=True)
     for i, m in enumerate(members):
-        if not isinstance(m, dict) or not _KEYS <= set(m) <= {*_KEYS, "several"}:
+        if not isinstance(m, dict) or not _KEYS <= set(m) <= {*_KEYS, *_OPTIONAL}:
             raise invalid(
-                f"members[{i}]", m, "a dict with the keys name, params, classes (and several)"
+                f"members[{i}]",
+                m,
+                "a dict with the keys name, params, classes (and several, defers_to)",
             )
         if not isinstance(m.get("several", False), bool):
             raise invalid(f"members[{i}].several", m["several"], "True or False")
+        names = [str(o["name"]) for o in members if isinstance(o, dict) and "name" in o]
+        defers = m.get("defers_to", [])
+        if not isinstance(defers, list | tuple) or any(
+            d not in names or d == m["name"] for d in defers
+        ):
+            raise invalid(f"members[{i}].defers_to", defers, f"other members' names of {names}")
         cls = diagnoser_class(str(m["name"]))  # ValueError naming the registered ones
         if cls is CatalogueIsolator or issubclass(cls, CatalogueIsolator):
             raise invalid(
@@ -302,6 +329,12 @@ class CatalogueIsolator(Diagnoser):
             self.members_.append(self._member(d, claims, bool(spec.get("several", False))))
             self.member_names_ += (spec["name"],)
             claimed.update(claims)
+        fitted = list(self.member_names_)
+        self.defers_ = [
+            tuple(fitted.index(d) for d in spec.get("defers_to", []) if d in fitted)
+            for spec in self.members
+            if spec["name"] in fitted and any(c in parts for c in spec["classes"])
+        ]
         self.classes_ = tuple(lab for lab in labels if set(lab.split("+")) <= claimed)
         if not self.classes_:
             raise ValueError(
@@ -330,6 +363,7 @@ class CatalogueIsolator(Diagnoser):
             confirm=self.confirm,
             hold=self.hold,
             several=[m.several for m in self.members_],
+            defers=self.defers_,
         )
 
     # ---- detection -----------------------------------------------------------------------------
@@ -380,6 +414,7 @@ class CatalogueIsolator(Diagnoser):
             confirm=self.confirm,
             hold=self.hold,
             several=[m.several for m in self.members_],
+            defers=self.defers_,
         )
         T = len(outputs[0][0])
         alarm, diagnosis, n_named = np.zeros(T, bool), np.empty(T, dtype=object), np.zeros(T)
@@ -416,6 +451,7 @@ class CatalogueIsolator(Diagnoser):
             "member_names": np.array(self.member_names_, dtype=str),
             "claims": np.array(["|".join(m.claims) for m in self.members_], dtype=str),
             "several": np.array([m.several for m in self.members_], dtype=bool),
+            "defers": np.array(["|".join(map(str, d)) for d in self.defers_], dtype=str),
         }
 
     def _set_state(self, state: dict[str, np.ndarray]) -> None:
@@ -423,6 +459,10 @@ class CatalogueIsolator(Diagnoser):
         self.member_names_ = tuple(str(n) for n in state["member_names"])
         self._claims = [tuple(str(c).split("|")) for c in state["claims"]]
         self._several = [bool(x) for x in np.asarray(state["several"]).reshape(-1)]
+        self.defers_ = [
+            tuple(int(i) for i in str(d).split("|") if i)
+            for d in np.asarray(state["defers"]).reshape(-1)
+        ]
         if not len(self._claims) == len(self._several) == len(self.member_names_):
             raise ValueError("saved claims, several and member_names differ in length")
 

@@ -74,6 +74,14 @@ def test_a_member_replaces_its_own_name_and_reset_forgets() -> None:
     assert comp.named() == () and comp.step([False], [""]) == (False, "")
 
 
+def test_a_member_that_names_several_adds_each_confirmed_name() -> None:
+    seq = ([[True]] * 4, [["a"], ["a"], ["b"], ["b"]])
+    one = Composition([("a", "b")], ("a", "b", "a+b"), confirm=2, hold=True)
+    several = Composition([("a", "b")], ("a", "b", "a+b"), confirm=2, hold=True, several=[True])
+    assert _run(one, *seq)[-1] == "b"
+    assert _run(several, *seq)[-1] == "a+b"
+
+
 def test_signal_fault_reads_a_registered_fault_from_a_signal_name() -> None:
     assert signal_fault("glr[valve-bias,30]") == "valve-bias"
     assert signal_fault("glr[f1,300]") == "f1"
@@ -90,6 +98,10 @@ def test_signal_fault_reads_a_registered_fault_from_a_signal_name() -> None:
         ({"members": [{"name": "limits", "params": {}, "classes": ["f9"]}]}, "f9"),
         ({"members": [{"name": "limits", "params": {"alpha": 7}, "classes": ["f1"]}]}, "alpha"),
         ({"confirm": 0}, "confirm"),
+        (
+            {"members": [{"name": "limits", "params": {}, "classes": ["f1"], "several": 1}]},
+            "several",
+        ),
     ],
 )
 def test_bad_settings_are_refused_by_name(params: dict, match: str) -> None:
