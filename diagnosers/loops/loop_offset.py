@@ -51,6 +51,8 @@ class LoopOffset(Diagnoser):
     """
 
     isolates: ClassVar[bool] = True
+    #: the default loop's channels (read by name)
+    REQUIRED_CHANNELS: ClassVar[tuple[str, ...]] = ("T_rg1", "T_rg1_sp")
     CONSTRAINTS: ClassVar[dict[str, Any]] = {
         "loop": Options(tuple(LOOP_CHANNELS)),
         "sign": Options((1, -1)),

@@ -82,6 +82,29 @@ def test_a_member_that_names_several_adds_each_confirmed_name() -> None:
     assert _run(several, *seq)[-1] == "a+b"
 
 
+def test_a_confirmed_verdict_outside_its_classes_clears_a_members_name() -> None:
+    # a model member first reads a valve bias, later (better) a sensor bias it does not claim
+    comp = Composition([("valve-bias",)], ("valve-bias",), confirm=2, hold=True)
+    seq = [["valve-bias"]] * 3 + [["sensor-bias"]] * 2
+    assert _run(comp, [[True]] * 5, seq) == ["unknown", *["valve-bias"] * 3, "unknown"]
+
+
+def test_a_deferring_member_is_no_evidence_while_the_other_names_its_own_fault() -> None:
+    comp = Composition(
+        [("sensor-bias",), ("valve-bias",)],
+        ("sensor-bias", "valve-bias"),
+        confirm=2,
+        hold=True,
+        defers=[(1,), ()],
+    )
+    both = [["sensor-bias", "valve-bias"]] * 3
+    assert _run(comp, [[True, True]] * 3, both)[-1] == "valve-bias"
+    # the model names a fault it does not claim: the sensor check's word counts again
+    comp.reset()
+    free = [["sensor-bias", "sensor-bias"]] * 3
+    assert _run(comp, [[True, True]] * 3, free)[-1] == "sensor-bias"
+
+
 def test_signal_fault_reads_a_registered_fault_from_a_signal_name() -> None:
     assert signal_fault("glr[valve-bias,30]") == "valve-bias"
     assert signal_fault("glr[f1,300]") == "f1"
@@ -101,6 +124,10 @@ def test_signal_fault_reads_a_registered_fault_from_a_signal_name() -> None:
         (
             {"members": [{"name": "limits", "params": {}, "classes": ["f1"], "several": 1}]},
             "several",
+        ),
+        (
+            {"members": [{"name": "limits", "params": {}, "classes": ["f1"], "defers_to": ["x"]}]},
+            "defers_to",
         ),
     ],
 )
