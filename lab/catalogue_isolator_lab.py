@@ -54,10 +54,17 @@ def compose(
     hold: bool,
     several: list[bool],
     defers: list[tuple[int, ...]],
+    confirms: list[int | None],
 ) -> tuple[np.ndarray, list[tuple[int, str]]]:
     """The diagnosis per sample and the (sample, name) of each confirmation."""
     comp = Composition(
-        claims, classes, confirm=confirm, hold=hold, several=several, defers=defers or None
+        claims,
+        classes,
+        confirm=confirm,
+        hold=hold,
+        several=several,
+        defers=defers or None,
+        confirms=confirms,
     )
     alarm, names = f["alarm"], f["diagnosis"]
     T = alarm.shape[1]
@@ -77,6 +84,8 @@ def main() -> None:
     ap.add_argument("--confirm", type=int, default=30)
     ap.add_argument("--no-hold", action="store_true")
     ap.add_argument("--claims", default="", help="member=a|b;member=c: override the claims")
+    ap.add_argument("--member-confirm", default="", help="member=N,...: its own confirm")
+    ap.add_argument("--defers", default="", help="member=other|other,...: who defers to whom")
     ap.add_argument("--no-defer", action="store_true", help="no member defers to another")
     ap.add_argument("--verbose", action="store_true")
     args = ap.parse_args()
@@ -85,6 +94,9 @@ def main() -> None:
     faulty = [f for f in loaded if str(f["column"]) != "nominal"]
     classes = tuple(sorted({str(f["column"]) for f in faulty}))
     by_name: dict[str, tuple[str, ...]] = {}
+    own = {
+        k: int(v) for k, v in (x.split("=") for x in filter(None, args.member_confirm.split(",")))
+    }
     for item in filter(None, args.claims.split(";")):
         k, v = item.split("=")
         by_name[k] = tuple(v.split("|"))
@@ -95,12 +107,25 @@ def main() -> None:
         claims = [tuple(str(c).split("|")) for c in f["claims"]]
         claims = [by_name.get(m, c) for m, c in zip(members, claims, strict=True)]
         several = [bool(x) for x in f["several"]]
+        if args.defers:
+            pairs = dict(x.split("=") for x in args.defers.split(","))
+            table = [
+                "|".join(str(members.index(o)) for o in pairs.get(m, "").split("|") if o in members)
+                for m in members
+            ]
+            f = {**f, "defers": np.array(table)}
         defers = (
             []
             if args.no_defer
             else [tuple(int(i) for i in str(d).split("|") if i) for d in f["defers"]]
         )
-        diag, seen = compose(f, claims, classes, args.confirm, not args.no_hold, several, defers)
+        stored = (
+            [int(c) or None for c in f["confirms"]] if "confirms" in f else [None] * len(members)
+        )
+        confirms = [own.get(m, c) for m, c in zip(members, stored, strict=True)]
+        diag, seen = compose(
+            f, claims, classes, args.confirm, not args.no_hold, several, defers, confirms
+        )
         column = str(f["column"])
         if column == "nominal":
             rows[column]["alarmed"] += bool((diag != "").any())

@@ -85,6 +85,7 @@ def main() -> None:
             claims=np.array(["|".join(m.claims) for m in iso.members_], dtype=str),
             several=np.array([m.several for m in iso.members_], dtype=bool),
             defers=np.array(["|".join(map(str, d)) for d in iso.defers_], dtype=str),
+            confirms=np.array([m.confirm or 0 for m in iso.members_], dtype=np.int64),
             alarm=np.stack([o[0] for o in outs]),
             diagnosis=np.stack([o[1] for o in outs]),
             composite=composite,

@@ -48,7 +48,7 @@ from diagnosers.diagnoser import Diagnoser
 from diagnosers.episode.record import Episode
 from diagnosers.presets import keyword_init
 from diagnosers.registry import diagnoser_class, make, register
-from fcc_common.validation import Boolean, Integer, check_params, invalid
+from fcc_common.validation import Boolean, Integer, check, check_params, invalid
 from fcc_env.faults import fault_names
 from fcc_env.params import MEASUREMENT_NAMES
 
@@ -78,9 +78,14 @@ DEFAULT_MEMBERS: list[dict[str, Any]] = [
             "fit_method": "none",
             "estimate_noise": False,
             "online": "never",
-            "faults": ["f1", "valve-bias", "valve-stuck", "sensor-bias"],
+            "faults": ["f1", "valve-bias", "sensor-bias"],
         },
-        "classes": ["f1", "valve-bias", "valve-stuck"],
+        "classes": ["f1", "valve-bias"],
+        # a sticking valve's cycle also fits a mean shift of some direction now and then
+        "defers_to": ["stiction-ukf"],
+        # a T_rx sensor bias first reads as a valve bias for ~550 samples (the loop moves the
+        # valve either way), then as the sensor bias it is: the model's word needs longer
+        "confirm": 700,
     },
 ]
 
@@ -120,6 +125,7 @@ class Composition:
         hold: bool,
         several: list[bool] | None = None,
         defers: list[tuple[int, ...]] | None = None,
+        confirms: list[int | None] | None = None,
     ) -> None:
         self.claims = [frozenset(c) for c in claims]
         self.by_set = {frozenset(c.split("+")): c for c in classes}
@@ -127,6 +133,8 @@ class Composition:
         self.hold = bool(hold)
         self.several = list(several) if several is not None else [False] * len(claims)
         self.defers = [tuple(d) for d in defers] if defers is not None else [()] * len(claims)
+        own = confirms if confirms is not None else [None] * len(claims)
+        self.confirms = [int(confirm) if c is None else int(c) for c in own]
         self.reset()
 
     def reset(self) -> None:
@@ -145,9 +153,9 @@ class Composition:
     def step(self, alarms: list[bool], names: list[str]) -> tuple[bool, str]:
         """One sample: each member's alarm and name → ``(alarm, diagnosis)``."""
         for m, (alarm, name) in enumerate(zip(alarms, names, strict=True)):
-            # deferred: another member names a fault of its own now, which explains this one's
-            # alarm (a process fault makes every sensor look inconsistent with the model)
-            if any(names[o] in self.claims[o] for o in self.defers[m]):
+            # deferred: another member names, or holds, a fault of its own, which explains this
+            # one's alarm (a process fault makes every sensor look inconsistent with the model)
+            if any(names[o] in self.claims[o] or self.held[o] for o in self.defers[m]):
                 name = ""
             if name and name != UNKNOWN:
                 same = name == self.run_name[m]
@@ -156,15 +164,22 @@ class Composition:
             else:
                 self.run_name[m], self.run_len[m] = "", 0
             held = self.held[m]
-            if self.run_len[m] >= self.confirm and name not in held:
+            if self.run_len[m] >= self.confirms[m] and name not in held:
                 if name not in self.claims[m]:
                     if not self.several[m]:
                         held.clear()  # its verdict is now a fault it does not name
-                elif not self.several[m]:
-                    held.clear()  # a member that names one fault replaces its own word
-                    held[name] = self.k
                 else:
+                    if not self.several[m]:
+                        held.clear()  # a member that names one fault replaces its own word
                     held[name] = self.k
+                    # what a deferring member named while this fault was being confirmed was
+                    # this fault's echo: explained, dropped (a name it held before stays)
+                    start = self.k - self.run_len[m] + 1
+                    for other, defers in enumerate(self.defers):
+                        if m in defers:
+                            echo = [n for n, k in self.held[other].items() if k >= start]
+                            for n in echo:
+                                del self.held[other][n]
             if not self.hold and not alarm:
                 held.clear()
         self.k += 1
@@ -183,6 +198,8 @@ class _Member:
     claims: tuple[str, ...]
     #: it may name several faults at once, each confirmed on its own (a detector member)
     several: bool = False
+    #: its own confirmation run (None: the isolator's ``confirm``)
+    confirm: int | None = None
     #: a detector member: the fault each of its signals names (None: no fault)
     signal_faults: tuple[str | None, ...] = ()
 
@@ -213,7 +230,7 @@ class _Member:
 
 
 _KEYS = {"name", "params", "classes"}
-_OPTIONAL = {"several", "defers_to"}
+_OPTIONAL = {"several", "defers_to", "confirm"}
 
 
 def _check_members(members: Any) -> list[dict[str, Any]]:
@@ -225,10 +242,12 @@ def _check_members(members: Any) -> list[dict[str, Any]]:
             raise invalid(
                 f"members[{i}]",
                 m,
-                "a dict with the keys name, params, classes (and several, defers_to)",
+                "a dict with the keys name, params, classes (and several, defers_to, confirm)",
             )
         if not isinstance(m.get("several", False), bool):
             raise invalid(f"members[{i}].several", m["several"], "True or False")
+        if "confirm" in m:
+            check(f"members[{i}].confirm", m["confirm"], Integer(1, 100_000))
         names = [str(o["name"]) for o in members if isinstance(o, dict) and "name" in o]
         defers = m.get("defers_to", [])
         if not isinstance(defers, list | tuple) or any(
@@ -326,7 +345,9 @@ class CatalogueIsolator(Diagnoser):
                 if len(mine := [p for p in ep.scenario.split("+") if p in claims]) == 1
             ]
             d.fit(healthy + own if d.isolates or d.learns_from_faults else healthy)
-            self.members_.append(self._member(d, claims, bool(spec.get("several", False))))
+            self.members_.append(
+                self._member(d, claims, bool(spec.get("several", False)), spec.get("confirm"))
+            )
             self.member_names_ += (spec["name"],)
             claimed.update(claims)
         fitted = list(self.member_names_)
@@ -344,9 +365,11 @@ class CatalogueIsolator(Diagnoser):
         self._finish()
 
     @staticmethod
-    def _member(d: Diagnoser, claims: tuple[str, ...], several: bool) -> _Member:
+    def _member(
+        d: Diagnoser, claims: tuple[str, ...], several: bool, confirm: int | None
+    ) -> _Member:
         faults = () if d.isolates else tuple(signal_fault(s) for s in d.signal_names_)
-        return _Member(d, claims, several, faults)
+        return _Member(d, claims, several, confirm, faults)
 
     def _finish(self) -> None:
         self.signal_names_ = (
@@ -364,6 +387,7 @@ class CatalogueIsolator(Diagnoser):
             hold=self.hold,
             several=[m.several for m in self.members_],
             defers=self.defers_,
+            confirms=[m.confirm for m in self.members_],
         )
 
     # ---- detection -----------------------------------------------------------------------------
@@ -415,6 +439,7 @@ class CatalogueIsolator(Diagnoser):
             hold=self.hold,
             several=[m.several for m in self.members_],
             defers=self.defers_,
+            confirms=[m.confirm for m in self.members_],
         )
         T = len(outputs[0][0])
         alarm, diagnosis, n_named = np.zeros(T, bool), np.empty(T, dtype=object), np.zeros(T)
@@ -452,6 +477,7 @@ class CatalogueIsolator(Diagnoser):
             "claims": np.array(["|".join(m.claims) for m in self.members_], dtype=str),
             "several": np.array([m.several for m in self.members_], dtype=bool),
             "defers": np.array(["|".join(map(str, d)) for d in self.defers_], dtype=str),
+            "confirms": np.array([m.confirm or 0 for m in self.members_], dtype=np.int64),
         }
 
     def _set_state(self, state: dict[str, np.ndarray]) -> None:
@@ -463,6 +489,7 @@ class CatalogueIsolator(Diagnoser):
             tuple(int(i) for i in str(d).split("|") if i)
             for d in np.asarray(state["defers"]).reshape(-1)
         ]
+        self._confirms = [int(c) or None for c in np.asarray(state["confirms"]).reshape(-1)]
         if not len(self._claims) == len(self._several) == len(self.member_names_):
             raise ValueError("saved claims, several and member_names differ in length")
 
@@ -472,12 +499,13 @@ class CatalogueIsolator(Diagnoser):
 
     def _load_extra(self, directory: Path) -> None:
         self.members_ = []
-        for i, (claims, several) in enumerate(zip(self._claims, self._several, strict=True)):
+        saved = zip(self._claims, self._several, self._confirms, strict=True)
+        for i, (claims, several, confirm) in enumerate(saved):
             d = Diagnoser.load(directory / f"member{i}")
             if d.name != self.member_names_[i]:
                 raise ValueError(
                     f"{directory / f'member{i}'} holds a {d.name!r}, the saved isolator names "
                     f"{self.member_names_[i]!r}"
                 )
-            self.members_.append(self._member(d, claims, several))
+            self.members_.append(self._member(d, claims, several, confirm))
         self._finish()
