@@ -143,6 +143,8 @@ class Composition:
         self.run_len = [0] * n
         #: per member, its held names with the sample each was confirmed at
         self.held: list[dict[str, int]] = [{} for _ in range(n)]
+        #: per member, the sample its current alarm began (the next one while not alarmed)
+        self.alarm_since = [0] * n
         self.k = 0
 
     def named(self) -> tuple[str, ...]:
@@ -153,6 +155,8 @@ class Composition:
     def step(self, alarms: list[bool], names: list[str]) -> tuple[bool, str]:
         """One sample: each member's alarm and name → ``(alarm, diagnosis)``."""
         for m, (alarm, name) in enumerate(zip(alarms, names, strict=True)):
+            if not alarm:
+                self.alarm_since[m] = self.k + 1
             # deferred: another member names, or holds, a fault of its own, which explains this
             # one's alarm (a process fault makes every sensor look inconsistent with the model)
             if any(names[o] in self.claims[o] or self.held[o] for o in self.defers[m]):
@@ -172,9 +176,9 @@ class Composition:
                     if not self.several[m]:
                         held.clear()  # a member that names one fault replaces its own word
                     held[name] = self.k
-                    # what a deferring member named while this fault was being confirmed was
-                    # this fault's echo: explained, dropped (a name it held before stays)
-                    start = self.k - self.run_len[m] + 1
+                    # what a deferring member named since this member's alarm began was this
+                    # fault's echo: explained, dropped (a name it held before stays)
+                    start = self.alarm_since[m]
                     for other, defers in enumerate(self.defers):
                         if m in defers:
                             echo = [n for n, k in self.held[other].items() if k >= start]

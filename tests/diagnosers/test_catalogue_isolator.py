@@ -105,6 +105,26 @@ def test_a_deferring_member_is_no_evidence_while_the_other_names_its_own_fault()
     assert _run(comp, [[True, True]] * 3, free)[-1] == "sensor-bias"
 
 
+def test_a_name_confirmed_since_the_others_alarm_began_is_dropped_as_its_echo() -> None:
+    # the sensor check (confirm 1) names a bias while the model is alarmed but undecided; the
+    # model then confirms f1: the bias was f1's echo. A name held before its alarm stays.
+    def comp() -> Composition:
+        return Composition(
+            [("sensor-bias",), ("f1",)],
+            ("f1", "sensor-bias+f1"),
+            confirm=1,
+            hold=True,
+            defers=[(1,), ()],
+            confirms=[1, 2],
+        )
+
+    echo = [["sensor-bias", "unknown"]] + [["sensor-bias", "f1"]] * 2
+    assert _run(comp(), [[True, True]] * 3, echo) == ["unknown", "unknown", "f1"]
+    before = [["sensor-bias", ""]] + [["", "f1"]] * 2
+    alarms = [[True, False], [False, True], [False, True]]
+    assert _run(comp(), alarms, before)[-1] == "sensor-bias+f1"
+
+
 def test_signal_fault_reads_a_registered_fault_from_a_signal_name() -> None:
     assert signal_fault("glr[valve-bias,30]") == "valve-bias"
     assert signal_fault("glr[f1,300]") == "f1"
