@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from diagnosers.isolation.catalogue import Composition
+from diagnosers.isolation.composition import Composition
 from evaluation.metrics.isolation_metrics import cdr, episode_label
 from evaluation.sweep.records import column_labels
 from fcc_env.faults import isolation_outcome
@@ -101,6 +101,7 @@ def main() -> None:
         k, v = item.split("=")
         by_name[k] = tuple(v.split("|"))
     rows: dict[str, Counter] = defaultdict(Counter)
+    binding: list[tuple[float, bool]] = []
     cdrs: dict[str, list[float]] = defaultdict(list)
     for f in loaded:
         members = [str(m) for m in f["member_names"]]
@@ -154,6 +155,9 @@ def main() -> None:
             r[f"found:{lab}"] += bool(hit)
             if hit:
                 r[f"delay:{lab}"] += hit[0] - on
+        if float(f.get("cap_binding", -1.0)) >= 0:
+            found_cap = any(s == "blower-capacity" for _, s in seen)
+            binding.append((float(f["cap_binding"]), found_cap))
         wrong = [s for _, s in seen if s not in labels]
         r["false names"] += bool(wrong)
         for s in wrong:
@@ -192,6 +196,9 @@ def main() -> None:
         f"{wilson(tot['track:correct'], n)} | | {tot['final:unknown']} | {tot['final:wrong']} |"
         " | |"
     )
+    if binding:
+        shares = ", ".join(f"{b:.2f}{'+' if hit else '-'}" for b, hit in sorted(binding))
+        print(f"blower cap's binding share after its onset (+ named, - not): {shares}")
     h = rows["nominal"]
     if h["n"]:
         print(

@@ -13,6 +13,7 @@ The rooms:
                         and diagnosis (isolation with probabilities, grey box)
 ``catalogue``           the registered ``catalogue-isolator``: specialised isolators side by side,
                         each confirming its own fault, so that two faults are named (grey box)
+``composition``         its per-sample rule: confirmation, hold, deferral, the answer
 ======================  ==========================================================================
 
 Importing the package registers the isolators.

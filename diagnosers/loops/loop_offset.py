@@ -29,6 +29,7 @@ from diagnosers.loops.loop_detectors import LOOP_CHANNELS
 from diagnosers.presets import keyword_init
 from diagnosers.registry import register
 from fcc_common.validation import Integer, Options, Real, check_params
+from fcc_env.closed_loop import CLOSED_LOOP_CHANNELS
 
 __all__ = ["LoopOffset"]
 
@@ -51,8 +52,8 @@ class LoopOffset(Diagnoser):
     """
 
     isolates: ClassVar[bool] = True
-    #: the default loop's channels (read by name)
-    REQUIRED_CHANNELS: ClassVar[tuple[str, ...]] = ("T_rg1", "T_rg1_sp")
+    #: the closed-loop observation (the set points are recorded only there)
+    REQUIRED_CHANNELS: ClassVar[tuple[str, ...]] = CLOSED_LOOP_CHANNELS
     CONSTRAINTS: ClassVar[dict[str, Any]] = {
         "loop": Options(tuple(LOOP_CHANNELS)),
         "sign": Options((1, -1)),

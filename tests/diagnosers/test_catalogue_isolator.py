@@ -14,7 +14,8 @@ import pytest
 import diagnosers
 import fcc_env
 from diagnosers import Episode
-from diagnosers.isolation.catalogue import Composition, signal_fault
+from diagnosers.isolation.catalogue import signal_fault
+from diagnosers.isolation.composition import Composition
 
 
 def _run(comp: Composition, alarms: list[list[bool]], names: list[list[str]]) -> list[str]:
