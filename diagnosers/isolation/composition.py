@@ -21,6 +21,9 @@ class Composition:
         classes: the answers the isolator may give: each a name or ``a+b`` (its set counts).
         confirm: samples in a row a member must say a name before it is confirmed, ≥ 1.
         hold: keep a confirmed name after its member's alarm ends.
+        several: per member, whether it may hold several names at once (default: none may).
+        defers: per member, the members it defers to (their indexes; default: none).
+        confirms: per member, its own confirmation run (``None``: ``confirm``).
 
     >>> c = Composition([("a",), ("b",)], ("a+b",), confirm=2, hold=True)
     >>> [c.step([True, False], ["a", ""]) for _ in range(2)]
