@@ -2,35 +2,42 @@
 with its own onset (issue 43 item 3, the ``concurrent`` track).
 
 A closed loop's faults are of kinds that no single method reads well: a sensor fault is seen
-by analytical redundancy (``sensor-validation``), a sticking valve by its limit cycle
-(``stiction-ccf``), a process or actuator fault by the model's innovations along its direction
-(``ukf-glr``). This isolator runs such *members* side by side on every sample, each with the
-fault names it may say (its ``classes``: a member's word on another kind is no evidence), and
-keeps watching after the first alarm: every member confirms its own fault, so a second fault
-is named when its member confirms it, whatever the first one did.
+by analytical redundancy (``sensor-validation``), a sticking valve by the variance it puts in
+the model's T_rx innovation (``stiction-ukf``), a blower short of air by its loop held off its
+set point (``loop-offset``), a process fault or a valve bias by the model's innovations along
+its direction (``ukf-glr``). This isolator runs such *members* side by side on every sample,
+each with the fault names it may say (its ``classes``: a member's word on another kind is no
+evidence), and keeps watching after the first alarm: every member confirms its own fault, so a
+second fault is named when its member confirms it, whatever the first one did.
 
-**The composition** (:class:`Composition`, a per-sample state machine; the same code streams
-and runs a whole episode, so ``update`` equals ``detect``):
+**The composition** (:class:`~diagnosers.isolation.composition.Composition`, a per-sample state
+machine; the same code streams and runs a whole episode, so ``update`` equals ``detect``):
 
-1. a member's name is *confirmed* once the member has said it ``confirm`` samples in a row;
+1. a member's name is *confirmed* once the member has said it ``confirm`` samples in a row (a
+   member may have its own ``confirm``);
 2. a confirmed name is *held* (``hold=True``, default): a fault in this benchmark persists, and a
-   loop monitor's alarm comes and goes with the cycle; a later confirmation by the same member
-   replaces it (a sensor fault first read as a bias, later as a drift), unless the member may
-   name ``several`` faults (a detector member with a direction per fault: each confirmed name
-   is added);
-3. the diagnosis is the set of held names, as the training label that names exactly that set
+   loop monitor's alarm comes and goes; a later confirmation by the same member replaces it (a
+   sensor fault first read as a bias, later as a drift), and a confirmed verdict outside its
+   classes clears it (the model first reads a T_rx bias as a valve bias), unless the member
+   may name ``several`` faults (each confirmed name is added);
+3. **deferral** (``defers_to``): a member's word is no evidence while a member it defers to
+   names or holds a fault of its own, and what it named since that member's alarm began is
+   dropped when that member confirms (an echo: a process fault makes every sensor look
+   inconsistent with the model, and ``sensor-validation`` then names some sensor);
+4. the diagnosis is the set of held names, as the training label that names exactly that set
    (``a+b`` for a concurrent column, in any order: :func:`fcc_env.faults.isolation_outcome`),
    and ``"unknown"`` when it matches none (more names than any training label, a combination
    never trained on, or an alarm with nothing confirmed yet): the isolator abstains rather than
    give half an answer, which the track scores as wrong.
 
 Members are registered diagnosers given by name, hyperparameters and classes (presets change
-them; the default is the three above). An isolating member's own diagnosis is read; a detector
-member's is the fault named by its most exceeded signal (``glr[valve-bias,30]`` names
-``valve-bias``). Each member is trained on the healthy episodes and, if it isolates or learns
-from faults, on the labelled faulty episodes relabelled with the one name of theirs it claims
-(a concurrent pair ``a+b`` becomes ``a`` for the member that claims ``a``); a member that
-claims none of the training faults is not fitted and not run.
+them; the default is :data:`DEFAULT_MEMBERS`, the four above). An isolating member's own
+diagnosis is read; a detector member's is the fault named by its most exceeded signal
+(``glr[valve-bias,30]`` names ``valve-bias``). Each member is trained on the healthy episodes
+and, if it isolates or learns from faults, on the labelled faulty episodes relabelled with the
+one name of theirs it claims (a concurrent pair ``a+b`` becomes ``a`` for the member that
+claims ``a``); a member that claims none of the training faults is not fitted and not run.
+Figures: ``lab/catalogue-isolator.md``.
 """
 
 from __future__ import annotations

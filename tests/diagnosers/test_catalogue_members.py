@@ -80,3 +80,9 @@ def test_the_members_keep_the_contract(name: str, fault: str, loop) -> None:
 def test_bad_settings_are_refused_by_name(name: str, params: dict, match: str) -> None:
     with pytest.raises(ValueError, match=match):
         diagnosers.make(name, **params).validate_params()
+
+
+def test_ukf_glr_takes_the_path_faults_as_directions() -> None:
+    diagnosers.make("ukf-glr", faults=["valve-bias", "sensor-bias", "f1"]).validate_params()
+    with pytest.raises(ValueError, match="faults"):
+        diagnosers.make("ukf-glr", faults=["f9"]).validate_params()
