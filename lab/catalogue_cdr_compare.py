@@ -4,50 +4,57 @@
     PYTHONPATH=$PWD python lab/catalogue_cdr_compare.py /tmp/catalogue/final_sensor
 """
 
-import glob
-import sys
+from __future__ import annotations
+
+import argparse
 from collections import defaultdict
+from pathlib import Path
 
 import numpy as np
 
 from diagnosers.isolation.composition import Composition
 from evaluation.metrics.isolation_metrics import cdr, episode_label
 
-rows = defaultdict(lambda: defaultdict(list))
-files = sorted(glob.glob(sys.argv[1] + "/*.npz"))
-classes = tuple(sorted({str(np.load(p)["column"]) for p in files}))
-for p in files:
-    f = dict(np.load(p))
-    col = str(f["column"])
-    on = int(f["onsets"][0])
-    claims = [tuple(str(c).split("|")) for c in f["claims"]]
-    defers = [tuple(int(i) for i in str(d).split("|") if i) for d in f["defers"]]
-    confirms = [int(c) or None for c in f["confirms"]]
-    comp = Composition(
-        claims,
-        classes,
-        confirm=30,
-        hold=True,
-        several=[bool(x) for x in f["several"]],
-        defers=defers,
-        confirms=confirms,
-    )
-    T = f["alarm"].shape[1]
-    d = np.array(
-        [
-            comp.step([bool(a) for a in f["alarm"][:, k]], [str(n) for n in f["diagnosis"][:, k]])[
-                1
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("store", type=Path)
+    ap.add_argument("--confirm", type=int, default=30)
+    args = ap.parse_args()
+    files = sorted(args.store.glob("*.npz"))
+    loaded = [dict(np.load(p)) for p in files]
+    loaded = [f for f in loaded if str(f["column"]) != "nominal"]
+    classes = tuple(sorted({str(f["column"]) for f in loaded}))
+    rows: dict[str, dict[str, list[float]]] = defaultdict(lambda: defaultdict(list))
+    for f in loaded:
+        col, on = str(f["column"]), int(f["onsets"][0])
+        claims = [tuple(str(c).split("|")) for c in f["claims"]]
+        comp = Composition(
+            claims,
+            classes,
+            confirm=args.confirm,
+            hold=True,
+            several=[bool(x) for x in f["several"]],
+            defers=[tuple(int(i) for i in str(d).split("|") if i) for d in f["defers"]],
+            confirms=[int(c) or None for c in f["confirms"]],
+        )
+        alarm, names = f["alarm"], f["diagnosis"]
+        d = np.array(
+            [
+                comp.step([bool(a) for a in alarm[:, k]], [str(n) for n in names[:, k]])[1]
+                for k in range(alarm.shape[1])
             ]
-            for k in range(T)
-        ]
-    )
-    c = cdr(d, col, on)
-    rows[col]["composite"].append(c)
-    rows[col]["composite label ok"].append(float(episode_label(d, on) == col))
-    rows[col]["composite final ok"].append(float(d[-1] == col))
-    for m, diag in zip(f["member_names"], f["diagnosis"]):
-        if col in str(f["claims"][list(f["member_names"]).index(m)]).split("|"):
-            rows[col][f"{m} alone"].append(cdr(diag, col, on))
-            rows[col][f"{m} alone label ok"].append(float(episode_label(diag, on) == col))
-for col, r in rows.items():
-    print(col, "; ".join(f"{k} {np.nanmean(v):.2f} (n={len(v)})" for k, v in r.items()))
+        )
+        r = rows[col]
+        r["union CDR"].append(cdr(d, col, on))
+        r["union label right"].append(float(episode_label(d, on) == col))
+        for m, diag, own in zip(f["member_names"], names, claims, strict=True):
+            if col in own:
+                r[f"{m} alone CDR"].append(cdr(diag, col, on))
+                r[f"{m} alone label right"].append(float(episode_label(diag, on) == col))
+    for col, r in rows.items():
+        print(col, "; ".join(f"{k} {np.nanmean(v):.2f} (n={len(v)})" for k, v in r.items()))
+
+
+if __name__ == "__main__":
+    main()
