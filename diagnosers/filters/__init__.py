@@ -20,11 +20,14 @@ The rooms:
                        simulations (noise twins), never from fault data
 ``ukf_glr``            ``ukf-glr``, the grey-box detector: the fitted filter, a GLR per fault
                        direction and a variance CUSUM on its whitened innovations
+``stiction_ukf``       ``stiction-ukf``: a sticking valve by the excess variance of the model's
+                       T_rx innovation about its mean (the command the valve does not follow)
 =====================  ===========================================================================
 """
 
 from diagnosers.filters.state_estimator import FCCStateEstimator, FilterResult, FilterStep
+from diagnosers.filters.stiction_ukf import StictionUKF
 from diagnosers.filters.ukf_config import UKFConfig
 from diagnosers.filters.ukf_glr import UKFGLR
 
-__all__ = ["UKFGLR", "FCCStateEstimator", "FilterResult", "FilterStep", "UKFConfig"]
+__all__ = ["UKFGLR", "FCCStateEstimator", "FilterResult", "FilterStep", "StictionUKF", "UKFConfig"]

@@ -189,7 +189,10 @@ class UKFGLR(Diagnoser):
     def _validate_params(self) -> None:
         check_params(self.get_params(), UKF_GLR_CONSTRAINTS)
         if self.faults is not None:
-            check_params({"faults": self.faults}, {"faults": OptionSequence(fault_names())})
+            check_params(
+                {"faults": self.faults},
+                {"faults": OptionSequence(fault_names(include_path_faults=True))},
+            )
         if self.fit_method != "none" and not self.fit_parameters:
             raise invalid(
                 "fit_parameters",

@@ -11,13 +11,17 @@ The rooms:
                         call, and their multiple-model posterior
 ``mmae``                the registered ``mmae``: the bank's posterior per hypothesis, its alarm
                         and diagnosis (isolation with probabilities, grey box)
+``catalogue``           the registered ``catalogue-isolator``: specialised isolators side by side,
+                        each confirming its own fault, so that two faults are named (grey box)
+``composition``         its per-sample rule: confirmation, hold, deferral, the answer
 ======================  ==========================================================================
 
 Importing the package registers the isolators.
 """
 
+from diagnosers.isolation.catalogue import CatalogueIsolator
 from diagnosers.isolation.isolating_detector import IsolatingDetector
 from diagnosers.isolation.isolators import LRGFISO, LRGFLDA
 from diagnosers.isolation.mmae import MMAE
 
-__all__ = ["LRGFISO", "LRGFLDA", "MMAE", "IsolatingDetector"]
+__all__ = ["LRGFISO", "LRGFLDA", "MMAE", "CatalogueIsolator", "IsolatingDetector"]

@@ -12,15 +12,19 @@ model-based test of the valve against its command.
 ``valve_glr``          ``valve-glr``: the riser outlet regressed on the valve command and the
                        riser's measured inputs, the GLRs on its residual (a model's redundancy:
                        it sees the first stuck samples, not a limit cycle)
+``loop_offset``        ``loop-offset``: a loop that cannot hold its set point, its actuator short
+                       (named ``blower-capacity`` on the air loop)
 =====================  ===========================================================================
 """
 
 from diagnosers.loops.loop_detectors import LOOP_CHANNELS, OscillationACF, StictionCCF
 from diagnosers.loops.loop_indexes import acf_regularity, horch_phase
+from diagnosers.loops.loop_offset import LoopOffset
 from diagnosers.loops.valve_glr import ValveGLR
 
 __all__ = [
     "LOOP_CHANNELS",
+    "LoopOffset",
     "OscillationACF",
     "StictionCCF",
     "ValveGLR",

@@ -36,11 +36,13 @@ class PlantParameterRead(AssertionError):
     """A grey-box diagnoser read a parameter of the plant it is scored on."""
 
 
-def _drawn_episodes() -> tuple[list[Episode], Episode, list[FCCParams]]:
+def _drawn_episodes(closed_loop: bool = False) -> tuple[list[Episode], Episode, list[FCCParams]]:
     unc = PlantUncertainty()
-    b = fcc_env.simulate_episodes(TRAIN, N, plant_uncertainty=unc)
+    # a diagnoser of the closed loop's channels (stiction-ukf) watches the closed-loop plant
+    plant = fcc_env.PlantConfig.build(regulatory=True if closed_loop else None)
+    b = fcc_env.simulate_episodes(TRAIN, N, plant_uncertainty=unc, plant=plant)
     f1 = fcc_env.FaultSpec(scenario="f1", onset=400)
-    t = fcc_env.simulate_episodes([TEST], N, fault=f1, plant_uncertainty=unc)
+    t = fcc_env.simulate_episodes([TEST], N, fault=f1, plant_uncertainty=unc, plant=plant)
     hidden = [unc.draw(s).params for s in [*TRAIN, TEST]]
     return Episode.from_batch(b), Episode.from_batch(t)[0], hidden
 
@@ -73,15 +75,17 @@ def test_the_registry_has_a_grey_box_tier() -> None:
 def test_no_grey_box_diagnoser_reads_the_scored_plants_parameters(
     name: str, monkeypatch: pytest.MonkeyPatch
 ) -> None:
-    train, test, hidden = _drawn_episodes()
     cls = diagnosers.diagnoser_class(name)
+    closed = "u_F" in getattr(cls, "REQUIRED_CHANNELS", ())
+    train, test, hidden = _drawn_episodes(closed)
     online = {"online": "always"} if "online" in cls.param_names() else {}
     det = diagnosers.make(name, **{**cls.fast_params(), **online})
     if cls.isolates:  # an isolator also gets labelled faults, on the same drawn plants
         f2 = fcc_env.FaultSpec(scenario="f2", onset=400)
         unc = PlantUncertainty()
+        plant = fcc_env.PlantConfig.build(regulatory=True if closed else None)
         train = train + Episode.from_batch(
-            fcc_env.simulate_episodes(TRAIN, N, fault=f2, plant_uncertainty=unc)
+            fcc_env.simulate_episodes(TRAIN, N, fault=f2, plant_uncertainty=unc, plant=plant)
         )
     _guarded(monkeypatch, hidden)
     detection = _fit_and_detect(det, train, test)
