@@ -45,6 +45,7 @@ from evaluation.reports.outputs import figure_cells, write_figures
 from evaluation.sweep.config import DiagnoserSpec, SweepConfig, default_specs
 from evaluation.sweep.runner import run_sweep
 from evaluation.sweep.store import ResultStore, canonical_hash
+from evaluation.sweep.task_log import TIMINGS_FILE, TaskLog
 from evaluation.sweep.tasks import dir_files
 from evaluation.tracks.oracle import DEFAULT_REFERENCES
 from evaluation.tracks.reference_runs import run_references
@@ -138,8 +139,10 @@ def run_track(
         figure_cells=figure_cells(config) if figures else (),
         relation_cache=relation_cache,
     )
+    log = TaskLog(store / TIMINGS_FILE, "track", backend, workers)
     if model_cache is not None:
-        _models_to_cache(config, store, model_cache)
+        with log.stage("model-cache"):
+            _models_to_cache(config, store, model_cache)
     references, n_references = run_references(
         data,
         DEFAULT_REFERENCES,
@@ -151,9 +154,11 @@ def run_track(
     )
     records = (*results.records, *references)
     tiers = {s.key: str(diagnoser_class(s.name).tier) for s in config.diagnosers}
-    rows = track_rows(records, [s.key for s in config.diagnosers], track.faults, tiers)
+    with log.stage("rows"):
+        rows = track_rows(records, [s.key for s in config.diagnosers], track.faults, tiers)
     if figures:
-        write_figures(results, out / "figures")
+        with log.stage("figures"):
+            write_figures(results, out / "figures")
     return TrackRun(
         track=track,
         records=records,

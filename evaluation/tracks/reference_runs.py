@@ -47,6 +47,7 @@ from diagnosers.registry import diagnoser_class
 from evaluation.sweep.backends import BACKENDS, Backend, make_backend
 from evaluation.sweep.records import CellResult, score_episode
 from evaluation.sweep.store import ResultStore, canonical_hash
+from evaluation.sweep.task_log import TIMINGS_FILE, ProfiledBackend, TaskLog, submit_task, task_part
 from evaluation.tracks.filter_bound import SIGNATURE_SEEDS, FilterBound
 from evaluation.tracks.oracle import (
     OracleConfig,
@@ -254,7 +255,8 @@ def seed_task(
         obs.share_simulations(sims)
     out = []
     for sc, seed in task.cells:
-        loaded = task.data.load_test(sc, seed)
+        with task_part("simulate"):
+            loaded = task.data.load_test(sc, seed)
         row = []
         for obs in observers:
             try:
@@ -303,15 +305,17 @@ def run_references(
             raise ValueError(f"configs holds {c!r}; allowed: evaluation.tracks.oracle.OracleConfig")
         c.calibration_seeds(data.track)  # seed clashes are refused before any work
     store = ResultStore.open(store_dir, data.store_key())
+    log = TaskLog(store.root / TIMINGS_FILE, "references", backend, n_workers)
     hashes = [reference_hash(c, store.data_hash, t_on) for c in configs]
     labels = [reference_label(c, h) for c, h in zip(configs, hashes, strict=True)]
     cells = data.cells()
     # what is stored is read once (a fully stored track reads every file once, no more)
-    stored = {
-        (i, cell): store.read_cell(labels[i], *cell, hashes[i])
-        for i in range(len(configs))
-        for cell in cells
-    }
+    with log.stage("plan"):
+        stored = {
+            (i, cell): store.read_cell(labels[i], *cell, hashes[i])
+            for i in range(len(configs))
+            for cell in cells
+        }
     missing = {i: [cell for cell in cells if stored[i, cell] is None] for i in range(len(configs))}
     todo = [i for i in range(len(configs)) if missing[i]]
     n_missing = sum(len(missing[i]) for i in todo)
@@ -325,14 +329,29 @@ def run_references(
             for group in groups
         ]
         n_tasks = len(todo) + sum(len(seeds) for _, seeds in plan)
-        runner = make_backend(backend, n_workers, n_tasks, ray_address)
+        runner = ProfiledBackend(make_backend(backend, n_workers, n_tasks, ray_address), log)
         cancel = True
         try:
-            work = _Work(runner, store, data, configs, labels, hashes, missing, t_on)
-            work.run(plan, n_tasks, progress)
+            with log.stage("references"):
+                work = _Work(runner, store, data, configs, labels, hashes, missing, t_on)
+                work.run(plan, n_tasks, progress)
             cancel = False
         finally:
             runner.close(cancel=cancel)
+    with log.stage("collect"):
+        records = _collect(store, cells, configs, labels, hashes, stored)
+    return records, n_missing
+
+
+def _collect(
+    store: ResultStore,
+    cells: Sequence[tuple[str, int]],
+    configs: Sequence[OracleConfig],
+    labels: Sequence[str],
+    hashes: Sequence[str],
+    stored: Mapping[tuple[int, tuple[str, int]], Mapping[str, Any] | None],
+) -> list[CellResult]:
+    """The records of every cell (read now unless ``stored`` holds them), rows in order."""
     records = []
     for sc, seed in cells:
         for i, (c, label, h) in enumerate(zip(configs, labels, hashes, strict=True)):
@@ -345,7 +364,7 @@ def run_references(
                 path = store.cell_path(label, sc, seed)
                 raise ValueError(f"{path}: {e}; delete it to recompute this cell") from e
             records.append(dataclasses.replace(result, diagnoser=c.label))
-    return records, n_missing
+    return records
 
 
 def sharing_groups(configs: Sequence[OracleConfig]) -> list[list[int]]:
@@ -410,6 +429,8 @@ class _Work:
         self._stats: dict[int, list[Any]] = {}
         self._pending: list[Any] = []
         fitted: dict[int, PhysicalLimit] = {}
+        fitted_by: dict[int, Any] = {}  # row -> the task that finished its fit (task log)
+        self._part_handles: dict[tuple[int, str], list[Any]] = {}
         scoring: dict[Any, tuple[list[int], tuple[tuple[str, int], ...]]] = {}
         pending = self._pending
         with tqdm(
@@ -425,7 +446,16 @@ class _Work:
                     bar.total -= 1
                     self._start_filter(i)
                 else:
-                    fits[self.runner.submit(fit_task, self.data, self.configs[i])] = i
+                    handle = submit_task(
+                        self.runner,
+                        "reference-fit",
+                        f"{self.configs[i].inputs}+{self.configs[i].stage}",
+                        fit_task,
+                        self.data,
+                        self.configs[i],
+                        after=(),
+                    )
+                    fits[handle] = i
             pending.extend(fits)
             while pending:
                 try:
@@ -445,18 +475,40 @@ class _Work:
                 else:
                     i = fits[handle]
                 fitted[i] = result
+                fitted_by[i] = handle  # its fit task, or a filter row's limits task
                 for rows, seeds in plan:
                     if i in rows and all(j in fitted for j in rows):
                         shared = self.runner.put(tuple(fitted[j] for j in rows))
+                        group = "+".join(str(self.configs[j].stage) for j in rows)
                         for cells in seeds:
                             task = ReferenceSeedTask(data=self.data, cells=cells, t_on=self.t_on)
-                            h = self.runner.submit(seed_task, task, shared)
+                            h = submit_task(
+                                self.runner,
+                                "reference-seed",
+                                f"{group}/seed-{cells[0][1]}",
+                                seed_task,
+                                task,
+                                shared,
+                                after=[fitted_by[j] for j in rows],
+                            )
                             scoring[h] = (rows, cells)
                             pending.append(h)
 
     # ---- the filter row's fit, split: signatures per seed, statistics per chunk, limits ------
     def _submit_part(self, i: int, kind: str, index: int, fn: Any, *args: Any) -> None:
-        handle = self.runner.submit(fn, self.data, self.configs[i], *args)
+        before = {"signature": (), "statistics": "signature", "limits": "statistics"}[kind]
+        after = self._part_handles.get((i, before), []) if before else ()
+        handle = submit_task(
+            self.runner,
+            f"filter-{kind}",
+            f"{self.configs[i].stage}/{index}",
+            fn,
+            self.data,
+            self.configs[i],
+            *args,
+            after=after,
+        )
+        self._part_handles.setdefault((i, kind), []).append(handle)
         self._parts[handle] = (i, kind, index)
         self._pending.append(handle)
         self._bar.total += 1
