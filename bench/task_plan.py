@@ -58,7 +58,7 @@ from evaluation.sweep.task_log import (
     timed_call,
 )
 from evaluation.sweep.tasks import TrainOutcome, train_task
-from evaluation.tracks.board import _cache_dir, applicable, track_channels
+from evaluation.tracks.board import applicable, model_cache_dir, track_channels
 from evaluation.tracks.catalogue import parse_tracks
 from evaluation.tracks.filter_bound import SIGNATURE_SEEDS
 from evaluation.tracks.oracle import DEFAULT_REFERENCES, OracleStage
@@ -92,7 +92,7 @@ def plan_trainings(
         config = SweepConfig(diagnosers=default_specs(keep), data=TrackData(track=track))
         keys = []
         for spec in config.diagnosers:
-            key = str(_cache_dir(config, spec, Path("/")))
+            key = str(model_cache_dir(config, spec, Path("/")))
             keys.append(key)
             if key not in fits:  # else the model cache: trained by an earlier track
                 fits[key] = _train(spec, config, jobs)
@@ -157,7 +157,7 @@ def sample_track(
     store_dir = work / track.name
     store = ResultStore.open(store_dir, config.data.store_key())
     for spec in config.diagnosers:
-        fit = entry["fits"][str(_cache_dir(entry["config"], spec, Path("/")))]
+        fit = entry["fits"][str(model_cache_dir(entry["config"], spec, Path("/")))]
         mhash = config.model_hash(spec, store.data_hash)
         store.write_model(spec.key, mhash, fit["files"], {**spec.to_json(), **fit["info"]})
     run_sweep(config, store_dir, n_workers=0, progress=False)

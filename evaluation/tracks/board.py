@@ -55,7 +55,7 @@ from evaluation.tracks.track_data import TrackData
 from fcc_env.closed_loop import CLOSED_LOOP_CHANNELS
 from fcc_env.params import MEASUREMENT_NAMES
 
-__all__ = ["applicable", "run_track", "track_channels"]
+__all__ = ["applicable", "model_cache_dir", "run_track", "track_channels"]
 
 
 def applicable(
@@ -172,7 +172,10 @@ def run_track(
     )
 
 
-def _cache_dir(config: SweepConfig, spec: DiagnoserSpec, cache: Path) -> Path:
+def model_cache_dir(config: SweepConfig, spec: DiagnoserSpec, cache: Path) -> Path:
+    """Where the model cache ``cache`` files ``spec``'s model trained on ``config``'s track:
+    tracks with the same training set (and, for a diagnoser that learns faults, the same
+    labelled faults) share the directory, so a later track reuses the model."""
     data = config.data
     assert isinstance(data, TrackData)
     # model_hash with a constant data part: the package version and the resolved settings
@@ -189,7 +192,7 @@ def _models_from_cache(config: SweepConfig, store_dir: Path, cache: Path) -> int
     n = 0
     for spec in config.diagnosers:
         mhash = config.model_hash(spec, store.data_hash)
-        src = _cache_dir(config, spec, cache)
+        src = model_cache_dir(config, spec, cache)
         if not store.has_model(spec.key, mhash) and (src / "model").is_dir():
             files = dir_files(src / "model")
             store.write_model(spec.key, mhash, files, {**spec.to_json(), "from_cache": str(src)})
@@ -201,7 +204,7 @@ def _models_to_cache(config: SweepConfig, store_dir: Path, cache: Path) -> None:
     """Offer the track's trained models to the cache (atomic: a renamed temporary copy)."""
     store = ResultStore.open(store_dir, config.data.store_key())
     for spec in config.diagnosers:
-        dst = _cache_dir(config, spec, cache)
+        dst = model_cache_dir(config, spec, cache)
         if (dst / "model").is_dir():
             continue
         dst.mkdir(parents=True, exist_ok=True)
