@@ -147,12 +147,22 @@ def relation_rate(jobs: Mapping[str, Any], n: int) -> dict[str, Any]:
     }
 
 
+#: First test seed of the sampled episodes: validation seeds (5000+), never test seeds, and
+#: clear of the reference rows' calibration seeds (5000 + at most a few hundred).
+SAMPLE_SEED_START = 9000
+
+
+def sampled(track: Track, healthy: int, faulty: int) -> Track:
+    """The track at sample sizes, its test episodes moved to :data:`SAMPLE_SEED_START`."""
+    return track.replace(n_healthy=healthy, n_faulty=faulty).with_seeds(test=SAMPLE_SEED_START)
+
+
 def sample_track(
     entry: Mapping[str, Any], work: Path, healthy: int, faulty: int, references: bool
 ) -> list[dict[str, Any]]:
     """Score the track at sample sizes with its trained models, and (``references``) its
     reference rows, in this process; the timing lines."""
-    track = entry["track"].replace(n_healthy=healthy, n_faulty=faulty)
+    track = sampled(entry["track"], healthy, faulty)
     config = dataclasses.replace(entry["config"], data=TrackData(track=track))
     store_dir = work / track.name
     store = ResultStore.open(store_dir, config.data.store_key())
@@ -442,7 +452,7 @@ def _report(args: argparse.Namespace) -> int:
         for e in plan:
             t = e["track"]
             lines = sample_track(e, work, args.healthy, args.faulty, t.name in ref_tracks)
-            small = t.replace(n_healthy=args.healthy, n_faulty=args.faulty)
+            small = sampled(t, args.healthy, args.faulty)
             costs[t.name] = sample_costs(lines, TrackData(track=small).cells())
             print(
                 f"sampled {t.name}: {costs[t.name]['episode_healthy_s']:.2f} s per healthy episode task",
