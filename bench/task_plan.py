@@ -158,10 +158,12 @@ def sampled(track: Track, healthy: int, faulty: int) -> Track:
 
 
 def sample_track(
-    entry: Mapping[str, Any], work: Path, healthy: int, faulty: int, references: bool
+    entry: Mapping[str, Any], work: Path, healthy: int, faulty: int, score: bool, references: bool
 ) -> list[dict[str, Any]]:
-    """Score the track at sample sizes with its trained models, and (``references``) its
-    reference rows, in this process; the timing lines."""
+    """Score the track at sample sizes with its trained models (``score``), and
+    (``references``) its reference rows, in this process; the timing lines."""
+    if not (score or references):
+        return []
     track = sampled(entry["track"], healthy, faulty)
     config = dataclasses.replace(entry["config"], data=TrackData(track=track))
     store_dir = work / track.name
@@ -170,7 +172,8 @@ def sample_track(
         fit = entry["fits"][str(model_cache_dir(entry["config"], spec, Path("/")))]
         mhash = config.model_hash(spec, store.data_hash)
         store.write_model(spec.key, mhash, fit["files"], {**spec.to_json(), **fit["info"]})
-    run_sweep(config, store_dir, n_workers=0, progress=False)
+    if score:
+        run_sweep(config, store_dir, n_workers=0, progress=False)
     if references:
         run_references(config.data, DEFAULT_REFERENCES, store_dir, n_workers=0, progress=False)
     return read_timings(store_dir / TIMINGS_FILE)
@@ -241,6 +244,7 @@ def sample_costs(
         },
         "reference_fit_s": {k: _mean(v) for k, v in fits.items()},
         "has_references": bool(fits),
+        "has_scoring": bool(ep),
     }
 
 
@@ -423,6 +427,12 @@ def main(argv: list[str] | None = None) -> int:
     p.add_argument("--healthy", type=int, default=2, help="healthy test episodes sampled per track")
     p.add_argument("--faulty", type=int, default=1, help="faulty test episodes per fault sampled")
     p.add_argument(
+        "--score-tracks",
+        default="all",
+        help="tracks whose scoring is sampled (the others take a sampled track's of the same "
+        "loop kind)",
+    )
+    p.add_argument(
         "--reference-tracks", default="paper,closed", help="tracks whose reference rows are sampled"
     )
     p.add_argument("--goal-track", default="small", help="a track also planned alone, from scratch")
@@ -442,6 +452,7 @@ def _report(args: argparse.Namespace) -> int:
     tracks = parse_tracks(args.track)
     names = None if args.diagnosers is None else args.diagnosers.split(",")
     ref_tracks = set(args.reference_tracks.split(","))
+    score_tracks = {t.name for t in parse_tracks(args.score_tracks)}
     c0 = time.process_time()
     with tempfile.TemporaryDirectory(prefix="fcc-plan-") as tmp:
         work = Path(args.work or tmp)
@@ -451,14 +462,17 @@ def _report(args: argparse.Namespace) -> int:
         costs = {}
         for e in plan:
             t = e["track"]
-            lines = sample_track(e, work, args.healthy, args.faulty, t.name in ref_tracks)
+            lines = sample_track(
+                e, work, args.healthy, args.faulty, t.name in score_tracks, t.name in ref_tracks
+            )
             small = sampled(t, args.healthy, args.faulty)
             costs[t.name] = sample_costs(lines, TrackData(track=small).cells())
             print(
                 f"sampled {t.name}: {costs[t.name]['episode_healthy_s']:.2f} s per healthy episode task",
                 file=sys.stderr,
             )
-    _borrow_references(plan, costs)
+    _borrow(plan, costs, "has_scoring", SCORING_FIELDS)
+    _borrow(plan, costs, "has_references", REFERENCE_FIELDS)
     out: dict[str, Any] = {
         "relation_rate": rate,
         "worker_startup_s": startup,
@@ -483,19 +497,34 @@ def _report(args: argparse.Namespace) -> int:
     return 0
 
 
-def _borrow_references(plan: Sequence[Mapping[str, Any]], costs: dict[str, dict[str, Any]]) -> None:
-    """A track whose reference rows were not sampled takes those of a sampled track of the same
-    loop kind (closed or open), else of any sampled track."""
-    sampled = [e["track"] for e in plan if costs[e["track"].name]["has_references"]]
-    fields = ("reference_driver_per_cell_s", "reference_seed_per_cell_s", "reference_fit_s")
+SCORING_FIELDS = ("episode_healthy_s", "episode_faulty_s", "sweep_driver_per_cell_s")
+REFERENCE_FIELDS = (
+    "reference_driver_per_cell_s",
+    "reference_seed_per_cell_s",
+    "reference_fit_s",
+)
+
+
+def _borrow(
+    plan: Sequence[Mapping[str, Any]],
+    costs: dict[str, dict[str, Any]],
+    flag: str,
+    fields: Sequence[str],
+) -> None:
+    """A track whose part (``flag``) was not sampled takes the ``fields`` of a sampled track of
+    the same loop kind (closed or open) and diagnoser count if there is one, else of the same
+    loop kind, else of any sampled track."""
+    done = [e for e in plan if costs[e["track"].name][flag]]
     for e in plan:
         c = costs[e["track"].name]
-        if c["has_references"] or not sampled:
+        if c[flag] or not done:
             continue
-        same = [t for t in sampled if t.closed_loop == e["track"].closed_loop] or sampled
+        loop = [d for d in done if d["track"].closed_loop == e["track"].closed_loop]
+        same = [d for d in loop if len(d["keys"]) == len(e["keys"])] or loop or done
+        src = same[0]["track"].name
         for f in fields:
-            c[f] = costs[same[0].name][f]
-        c["references_from"] = same[0].name
+            c[f] = costs[src][f]
+        c[f"{flag}_from"] = src
 
 
 if __name__ == "__main__":
