@@ -62,7 +62,12 @@ from evaluation.tracks.board import applicable, model_cache_dir, track_channels
 from evaluation.tracks.catalogue import parse_tracks
 from evaluation.tracks.filter_bound import SIGNATURE_SEEDS
 from evaluation.tracks.oracle import DEFAULT_REFERENCES, OracleStage
-from evaluation.tracks.reference_runs import FILTER_CHUNK, run_references, sharing_groups
+from evaluation.tracks.reference_runs import (
+    DIRECTIONAL_CHUNK,
+    FILTER_CHUNK,
+    run_references,
+    sharing_groups,
+)
 from evaluation.tracks.track import Track
 from evaluation.tracks.track_data import TrackData
 from fcc_common.invocation import command_parser, run_command
@@ -223,7 +228,7 @@ def sample_costs(
             seed_cells[group] += per_seed[int(seed)]
     fits = defaultdict(list)
     for r in lines:
-        if r["kind"] == "reference-fit" or r["kind"].startswith("filter-"):
+        if r["kind"] == "reference-fit" or r["kind"].startswith(("filter-", "directional-")):
             fits[r["kind"] if r["kind"] != "reference-fit" else f"fit:{r['key']}"].append(
                 r["cpu_s"]
             )
@@ -304,32 +309,33 @@ def build_blocks(
             add(score, "episode", c["episode_healthy_s" if sc == "nominal" else "episode_faulty_s"])
         kinds["cells"]["n"] += len(cells) * n_specs
         blocks.append(score)
-        blocks.append(_reference_block(name, track, cells, c, add, kinds))
+        blocks.append(_reference_block(name, track, cells, c, add))
     return blocks, dict(kinds)
 
 
-def _reference_block(
-    name: str, track: Track, cells: Any, c: Mapping[str, Any], add: Any, kinds: Any
-) -> Block:
+def _reference_block(name: str, track: Track, cells: Any, c: Mapping[str, Any], add: Any) -> Block:
+    """The reference rows' tasks of a track as :func:`~evaluation.tracks.reference_runs.run_references`
+    submits them: the fits (the filter and directional rows split in parts), then per group
+    of rows one task per seed, after the group's fits."""
     b = Block(f"{name}:references", driver_s=c["reference_driver_per_cell_s"] * len(cells))
+    fit_s = c["reference_fit_s"]
+
+    def parts(kind: str, n: int, after: Sequence[int] = ()) -> list[int]:
+        return [add(b, kind, fit_s.get(kind, 0.0), after) for _ in range(n)]
+
     fit_of: dict[int, int] = {}
     for j, cfg in enumerate(DEFAULT_REFERENCES):
+        n_cal = len(cfg.calibration_seeds(track))
         if cfg.stage == OracleStage.FILTER:
-            n_sig = len(track.train_fault_seeds[:SIGNATURE_SEEDS])
-            sig = [
-                add(b, "filter-signature", c["reference_fit_s"].get("filter-signature", 0.0))
-                for _ in range(n_sig)
-            ]
-            n_stat = math.ceil(len(cfg.calibration_seeds(track)) / FILTER_CHUNK)
-            st = [
-                add(b, "filter-statistics", c["reference_fit_s"].get("filter-statistics", 0.0), sig)
-                for _ in range(n_stat)
-            ]
-            fit_of[j] = add(b, "filter-limits", c["reference_fit_s"].get("filter-limits", 0.0), st)
+            sig = parts("filter-signature", len(track.train_fault_seeds[:SIGNATURE_SEEDS]))
+            stat = parts("filter-statistics", math.ceil(n_cal / FILTER_CHUNK), sig)
+            (fit_of[j],) = parts("filter-limits", 1, stat)
+        elif cfg.stage == OracleStage.DIRECTIONAL:
+            res = parts("directional-residuals", math.ceil(n_cal / DIRECTIONAL_CHUNK))
+            (fit_of[j],) = parts("directional-fit", 1, res)
         else:
-            fit_of[j] = add(
-                b, "reference-fit", c["reference_fit_s"].get(f"fit:{cfg.inputs}+{cfg.stage}", 0.0)
-            )
+            key = f"fit:{cfg.inputs}+{cfg.stage}"
+            fit_of[j] = add(b, "reference-fit", fit_s.get(key, 0.0))
     per_seed: dict[int, int] = defaultdict(int)
     for _, seed in cells:
         per_seed[seed] += 1

@@ -12,7 +12,7 @@ from bench.task_plan import build_blocks, sample_costs, summary, with_startup
 from bench.task_profile import list_schedule
 from evaluation.tracks.catalogue import parse_tracks
 from evaluation.tracks.filter_bound import SIGNATURE_SEEDS
-from evaluation.tracks.reference_runs import FILTER_CHUNK
+from evaluation.tracks.reference_runs import DIRECTIONAL_CHUNK, FILTER_CHUNK
 from evaluation.tracks.track_data import TrackData
 
 COSTS = {
@@ -21,7 +21,7 @@ COSTS = {
     "sweep_driver_per_cell_s": 0.01,
     "reference_driver_per_cell_s": 0.02,
     "reference_seed_per_cell_s": {"oracle": 0.5},
-    "reference_fit_s": {"filter-statistics": 3.0},
+    "reference_fit_s": {"filter-statistics": 3.0, "directional-residuals": 1.0},
     "has_references": True,
 }
 
@@ -64,6 +64,11 @@ def test_blocks_follow_the_drivers_rules() -> None:
     track = entries[0]["track"]
     n_stat = math.ceil(100 / FILTER_CHUNK)
     assert kinds["filter-statistics"] == {"n": 2 * n_stat, "cpu_s": 2 * 3.0 * n_stat}
+    assert kinds["directional-residuals"] == {
+        "n": 2 * 100 // DIRECTIONAL_CHUNK,
+        "cpu_s": 2 * 100 // DIRECTIONAL_CHUNK,
+    }
+    assert kinds["directional-fit"]["n"] == 2
     assert kinds["filter-signature"]["n"] == 2 * len(track.train_fault_seeds[:SIGNATURE_SEEDS])
     assert kinds["reference-seed"]["n"] == 2 * 2 * len({s for _, s in track.cells()})
     started = with_startup(blocks, 3.0)

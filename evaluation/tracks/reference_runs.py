@@ -61,6 +61,7 @@ from fcc_common.workers import limit_threads
 from fcc_env import MODEL_VERSION, __version__
 
 __all__ = [
+    "DIRECTIONAL_CHUNK",
     "FILTER_CHUNK",
     "PROJECT_PACKAGES",
     "REFERENCE_CODE",
@@ -69,6 +70,8 @@ __all__ = [
     "REFERENCE_STORE_VERSION",
     "ReferenceSeedTask",
     "code_version",
+    "directional_fit_task",
+    "directional_residuals_task",
     "filter_limits_task",
     "filter_signature_task",
     "filter_statistics_task",
@@ -229,6 +232,51 @@ def filter_limits_task(
     row = PhysicalLimit(data, config)
     row.stage_ = _filter_bound(data, config, terms).set_limits(statistics)
     return row
+
+
+#: Calibration episodes per residuals task of the directional row's split fit.
+DIRECTIONAL_CHUNK = 10
+
+
+def directional_residuals_task(
+    data: TrackData, config: OracleConfig, seeds: Sequence[int], _serial: bool = False
+) -> tuple[tuple[str, ...], list[np.ndarray]]:
+    """The directional row's calibration residuals on the seeds ``seeds`` (a chunk of them)
+    and the episodes' channels: :meth:`PhysicalLimit.directional_residuals`."""
+    if not _serial:
+        limit_threads()
+    try:
+        return PhysicalLimit(data, config).directional_residuals(seeds)
+    except Exception as e:
+        raise RuntimeError(f"fitting {config.label!r}: {type(e).__name__}: {e}") from e
+
+
+def directional_fit_task(
+    data: TrackData,
+    config: OracleConfig,
+    chunks: Sequence[tuple[tuple[str, ...], list[np.ndarray]]],
+    _serial: bool = False,
+) -> PhysicalLimit:
+    """The fitted directional row from its calibration residuals (chunks in seed order): the
+    fault directions from the training faults, then the stage. The same bits as
+    :func:`fit_task` of the row (``tests/evaluation/tracks/test_filter_split.py``)."""
+    if not _serial:
+        limit_threads()
+    try:
+        residuals = [r for _, rem in chunks for r in rem]
+        return PhysicalLimit(data, config).fit_directional(residuals, chunks[0][0])
+    except Exception as e:
+        raise RuntimeError(f"fitting {config.label!r}: {type(e).__name__}: {e}") from e
+
+
+#: The parts of the split fits: part → (the task log's kind, the part it waits for).
+_SPLIT_PARTS: dict[str, tuple[str, str | None]] = {
+    "signature": ("filter-signature", None),
+    "statistics": ("filter-statistics", "signature"),
+    "limits": ("filter-limits", "statistics"),
+    "residuals": ("directional-residuals", None),
+    "directional": ("directional-fit", "residuals"),
+}
 
 
 @dataclass(frozen=True)
@@ -427,6 +475,7 @@ class _Work:
         self._parts: dict[Any, tuple[int, str, int]] = {}  # the filter rows' split fits
         self._terms: dict[int, list[Any]] = {}
         self._stats: dict[int, list[Any]] = {}
+        self._resid: dict[int, list[Any]] = {}
         self._pending: list[Any] = []
         fitted: dict[int, PhysicalLimit] = {}
         fitted_by: dict[int, Any] = {}  # row -> the task that finished its fit (task log)
@@ -445,6 +494,9 @@ class _Work:
                 if self.configs[i].stage == OracleStage.FILTER:
                     bar.total -= 1
                     self._start_filter(i)
+                elif self.configs[i].stage == OracleStage.DIRECTIONAL:
+                    bar.total -= 1
+                    self._start_directional(i)
                 else:
                     handle = submit_task(
                         self.runner,
@@ -468,14 +520,14 @@ class _Work:
                     self._write(*scoring.pop(handle), result)
                     continue
                 if handle in self._parts:
-                    i, row = self._filter_part(handle, result)
+                    i, row = self._split_part(handle, result)
                     if row is None:
                         continue
                     result = row
                 else:
                     i = fits[handle]
                 fitted[i] = result
-                fitted_by[i] = handle  # its fit task, or a filter row's limits task
+                fitted_by[i] = handle  # its fit task, or the last part of a split fit
                 for rows, seeds in plan:
                     if i in rows and all(j in fitted for j in rows):
                         shared = self.runner.put(tuple(fitted[j] for j in rows))
@@ -494,13 +546,14 @@ class _Work:
                             scoring[h] = (rows, cells)
                             pending.append(h)
 
-    # ---- the filter row's fit, split: signatures per seed, statistics per chunk, limits ------
+    # ---- split fits: the filter row's signatures per seed, statistics per chunk, limits; the
+    # ---- directional row's calibration residuals per chunk, then its directions and stage
     def _submit_part(self, i: int, kind: str, index: int, fn: Any, *args: Any) -> None:
-        before = {"signature": (), "statistics": "signature", "limits": "statistics"}[kind]
+        log_kind, before = _SPLIT_PARTS[kind]
         after = self._part_handles.get((i, before), []) if before else ()
         handle = submit_task(
             self.runner,
-            f"filter-{kind}",
+            log_kind,
             f"{self.configs[i].stage}/{index}",
             fn,
             self.data,
@@ -519,12 +572,24 @@ class _Work:
         for k, seed in enumerate(seeds):
             self._submit_part(i, "signature", k, filter_signature_task, seed)
 
-    def _filter_part(self, handle: Any, result: Any) -> tuple[int, PhysicalLimit | None]:
-        """Take one finished part of a filter row's fit; submit what it unblocks. Returns the
-        row and, once its limits are in, the fitted row."""
+    def _start_directional(self, i: int) -> None:
+        seeds = list(self.configs[i].calibration_seeds(self.data.track))
+        chunks = [seeds[k : k + DIRECTIONAL_CHUNK] for k in range(0, len(seeds), DIRECTIONAL_CHUNK)]
+        self._resid[i] = [None] * len(chunks)
+        for k, chunk in enumerate(chunks):
+            self._submit_part(i, "residuals", k, directional_residuals_task, chunk)
+
+    def _split_part(self, handle: Any, result: Any) -> tuple[int, PhysicalLimit | None]:
+        """Take one finished part of a split fit; submit what it unblocks. Returns the row
+        and, once its last part is in, the fitted row."""
         i, kind, index = self._parts.pop(handle)
-        if kind == "limits":
+        if kind in ("limits", "directional"):
             return i, result
+        if kind == "residuals":
+            self._resid[i][index] = result
+            if all(r is not None for r in self._resid[i]):
+                self._submit_part(i, "directional", 0, directional_fit_task, self._resid[i])
+            return i, None
         if kind == "signature":
             self._terms[i][index] = result
             if any(t is None for t in self._terms[i]):
