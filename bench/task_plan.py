@@ -129,8 +129,10 @@ def _train(spec: DiagnoserSpec, config: SweepConfig, jobs: dict[str, Any]) -> di
 
 def relation_rate(jobs: Mapping[str, Any], n: int) -> dict[str, Any]:
     """CPU seconds per unit of job cost, from ``n`` jobs trained at their real settings, picked
-    at even quantiles of cost."""
-    ordered = sorted(jobs.values(), key=lambda j: j.cost)
+    at even quantiles of cost among the jobs that start from scratch."""
+    # cold starts: a warm-started job's stand-in start is no trained bank (it would stop late)
+    cold = [j for j in jobs.values() if j.init is None] or list(jobs.values())
+    ordered = sorted(cold, key=lambda j: j.cost)
     picks = (
         [ordered[round(q * (len(ordered) - 1) / max(n - 1, 1))] for q in range(n)]
         if ordered
