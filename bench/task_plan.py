@@ -395,8 +395,8 @@ def summary(
     }
 
 
-def _print_summary(title: str, s: Mapping[str, Any], out: Any = sys.stdout) -> None:
-    w = out.write
+def _print_summary(title: str, s: Mapping[str, Any], out: Any = None) -> None:
+    w = (out or sys.stdout).write
     total = s["task_cpu_s"] + s["driver_cpu_s"]
     w(f"\n## {title}\n\n| part | tasks | CPU [s] | share |\n|---|---|---|---|\n")
     for k, v in sorted(s["kinds"].items(), key=lambda kv: -kv[1]["cpu_s"]):

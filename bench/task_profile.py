@@ -227,10 +227,10 @@ def profile(
     }
 
 
-def print_profile(p: Mapping[str, Any], out: Any = sys.stdout) -> None:
+def print_profile(p: Mapping[str, Any], out: Any = None) -> None:
     """The profile as Markdown tables."""
     total = p["task_cpu_s"] + p["driver_cpu_s"] + p["startup_cpu_s"]
-    w = out.write
+    w = (out or sys.stdout).write
     w(f"{p['n_tasks']} tasks; measured wall of the driver stages {p['measured_wall_s']:.1f} s\n\n")
     w("| part | tasks | CPU [s] | share | mean [s] | longest [s] |\n|---|---|---|---|---|---|\n")
     for k, v in p["kinds"].items():

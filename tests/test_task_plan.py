@@ -70,7 +70,7 @@ def test_blocks_follow_the_drivers_rules() -> None:
     }
     assert kinds["directional-fit"]["n"] == 2
     assert kinds["filter-signature"]["n"] == 2 * len(track.train_fault_seeds[:SIGNATURE_SEEDS])
-    assert kinds["reference-seed"]["n"] == 2 * 2 * len({s for _, s in track.cells()})
+    assert kinds["reference-seed"]["n"] == 2 * 2 * len({s for _, s in track.test_cells()})
     started = with_startup(blocks, 3.0)
     assert [b.startup_s for b in started] == [3.0, 0.0, 3.0, 0.0, 3.0, 3.0]
     s = summary(started, kinds, (1, 2))
