@@ -38,7 +38,7 @@ import sys
 import tempfile
 import time
 from collections import defaultdict
-from collections.abc import Mapping, Sequence
+from collections.abc import Collection, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -49,7 +49,7 @@ from diagnosers.registry import available
 from evaluation.sweep.backends import LocalBackend
 from evaluation.sweep.config import DiagnoserSpec, SweepConfig, default_specs
 from evaluation.sweep.runner import run_sweep
-from evaluation.sweep.store import ResultStore
+from evaluation.sweep.store import ResultStore, canonical_hash
 from evaluation.sweep.task_log import (
     TIMINGS_FILE,
     ProfiledBackend,
@@ -84,14 +84,21 @@ def _stand_in(job: Any) -> Any:
 
 
 def plan_trainings(
-    tracks: Sequence[Track], names: Sequence[str] | None, work: Path
+    tracks: Sequence[Track], names: Sequence[str] | None, fit_tracks: Collection[str]
 ) -> tuple[list[dict[str, Any]], dict[str, Any]]:
     """Per track, its diagnosers and the trainings it runs (rounds: CPU and relation jobs);
-    and every relation job met (key → job), each once."""
+    and every relation job met (key → job), each once.
+
+    The trainings of ``fit_tracks`` are run (with stand-in relations); another track's
+    training of a diagnoser copies the rounds of that diagnoser on a fitted track of the same
+    loop kind (its relation jobs renamed for the track's training set, unless that set is the
+    fitted track's own: then the relation cache shares them)."""
     fits: dict[str, dict[str, Any]] = {}  # model-cache key -> its training
     jobs: dict[str, Any] = {}
-    plan = []
-    for track in tracks:
+    plan: dict[str, dict[str, Any]] = {}
+    fitted: list[dict[str, Any]] = []
+    order = sorted(tracks, key=lambda t: t.name not in fit_tracks)  # the fitted tracks first
+    for track in order:
         wanted = list(available()) if names is None else list(names)
         keep, _ = applicable(wanted, track_channels(track), f"on track {track.name}")
         config = SweepConfig(diagnosers=default_specs(keep), data=TrackData(track=track))
@@ -99,13 +106,48 @@ def plan_trainings(
         for spec in config.diagnosers:
             key = str(model_cache_dir(config, spec, Path("/")))
             keys.append(key)
-            if key not in fits:  # else the model cache: trained by an earlier track
+            if key in fits:  # the model cache: trained by an earlier track
+                continue
+            if track.name in fit_tracks or not fitted:
                 fits[key] = _train(spec, config, jobs)
-        plan.append({"track": track, "config": config, "keys": keys, "fits": fits})
-        print(
-            f"planned {track.name}: {len(fits)} trainings, {len(jobs)} jobs so far", file=sys.stderr
-        )
-    return plan, jobs
+            else:
+                fits[key] = _copied(spec, track, fitted, fits, jobs)
+        entry = {"track": track, "config": config, "keys": keys, "fits": fits}
+        plan[track.name] = entry
+        if track.name in fit_tracks:
+            fitted.append(entry)
+        print(f"planned {track.name}: {len(fits)} trainings, {len(jobs)} jobs", file=sys.stderr)
+    return [plan[t.name] for t in tracks], jobs
+
+
+def _copied(
+    spec: DiagnoserSpec,
+    track: Track,
+    fitted: Sequence[Mapping[str, Any]],
+    fits: Mapping[str, Mapping[str, Any]],
+    jobs: dict[str, Any],
+) -> dict[str, Any]:
+    """``spec``'s training on ``track`` as planned on a fitted track (same loop kind first)."""
+    same = [e for e in fitted if e["track"].closed_loop == track.closed_loop] or list(fitted)
+    for e in same:
+        for key in e["keys"]:
+            if fits[key]["spec"].key == spec.key:
+                src, rep = fits[key], e["track"]
+                break
+        else:
+            continue
+        break
+    else:
+        raise RuntimeError(f"{spec.key} on {track.name}: no fitted track plans it")
+    own = canonical_hash(TrackData(track=track).training_key())[:12]
+    shared = own == canonical_hash(TrackData(track=rep).training_key())[:12]
+    rounds = []
+    for rnd in src["rounds"]:
+        renamed = [k if shared else f"{k}@{own}" for k in rnd["jobs"]]
+        for k, new in zip(rnd["jobs"], renamed, strict=True):
+            jobs.setdefault(new, jobs[k])
+        rounds.append({**rnd, "jobs": renamed})
+    return {**src, "rounds": rounds, "copied_from": rep.name}
 
 
 def _train(spec: DiagnoserSpec, config: SweepConfig, jobs: dict[str, Any]) -> dict[str, Any]:
@@ -431,14 +473,20 @@ def main(argv: list[str] | None = None) -> int:
     )
     p.add_argument("--track", default="all", help="tracks, as the leaderboard's --track")
     p.add_argument("--diagnosers", default=None, help="comma-separated (default: every registered)")
-    p.add_argument("--relations", type=int, default=3, help="relation jobs trained in full")
+    p.add_argument("--relations", type=int, default=3, help="relation jobs trained in full (0: none, relation CPU unknown)")
     p.add_argument("--healthy", type=int, default=2, help="healthy test episodes sampled per track")
     p.add_argument("--faulty", type=int, default=1, help="faulty test episodes per fault sampled")
     p.add_argument(
+        "--fit-tracks",
+        default="paper,closed",
+        help="tracks whose trainings are run (with stand-in relations); the others copy a "
+        "fitted track's trainings of the same loop kind",
+    )
+    p.add_argument(
         "--score-tracks",
         default="all",
-        help="tracks whose scoring is sampled (the others take a sampled track's of the same "
-        "loop kind)",
+        help="tracks whose scoring is sampled, among the fitted ones (the others take a sampled "
+        "track's of the same loop kind)",
     )
     p.add_argument(
         "--reference-tracks", default="paper,closed", help="tracks whose reference rows are sampled"
@@ -454,17 +502,18 @@ def main(argv: list[str] | None = None) -> int:
 
 def _report(args: argparse.Namespace) -> int:
     workers = parse_workers(args.workers)
-    for flag in ("relations", "healthy", "faulty"):
-        if getattr(args, flag) < 1:
-            raise invalid(f"--{flag}", getattr(args, flag), "an integer >= 1")
+    for flag, low in (("relations", 0), ("healthy", 1), ("faulty", 1)):
+        if getattr(args, flag) < low:
+            raise invalid(f"--{flag}", getattr(args, flag), f"an integer >= {low}")
     tracks = parse_tracks(args.track)
     names = None if args.diagnosers is None else args.diagnosers.split(",")
     ref_tracks = set(args.reference_tracks.split(","))
-    score_tracks = {t.name for t in parse_tracks(args.score_tracks)}
+    fit_tracks = {t.name for t in parse_tracks(args.fit_tracks)}
+    score_tracks = {t.name for t in parse_tracks(args.score_tracks)} & fit_tracks
     c0 = time.process_time()
     with tempfile.TemporaryDirectory(prefix="fcc-plan-") as tmp:
         work = Path(args.work or tmp)
-        plan, jobs = plan_trainings(tracks, names, work)
+        plan, jobs = plan_trainings(tracks, names, fit_tracks)
         rate = relation_rate(jobs, args.relations)
         startup = worker_startup()
         costs = {}
