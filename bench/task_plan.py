@@ -108,37 +108,54 @@ def plan_trainings(
             keys.append(key)
             if key in fits:  # the model cache: trained by an earlier track
                 continue
-            if track.name in fit_tracks or not fitted:
+            src = None if track.name in fit_tracks else _fitted_like(spec, track, fitted, fits)
+            if src is None:
                 fits[key] = _train(spec, config, jobs)
+                print(f"  trained {spec.key}: {_cpu(fits[key]):.1f} s CPU", file=sys.stderr)
             else:
-                fits[key] = _copied(spec, track, fitted, fits, jobs)
+                fits[key] = _copied(track, *src, jobs)
         entry = {"track": track, "config": config, "keys": keys, "fits": fits}
         plan[track.name] = entry
-        if track.name in fit_tracks:
-            fitted.append(entry)
+        if track.name in fit_tracks or any(not fits[k].get("copied_from") for k in keys):
+            fitted.append(entry)  # later tracks copy what was trained here
         print(f"planned {track.name}: {len(fits)} trainings, {len(jobs)} jobs", file=sys.stderr)
     return [plan[t.name] for t in tracks], jobs
 
 
-def _copied(
+def _cpu(fit: Mapping[str, Any]) -> float:
+    return sum(r["cpu_s"] for r in fit["rounds"])
+
+
+#: Suffixes of a variant whose training is its base's (a preset of other settings): a
+#: variant no fitted track holds copies its base's training.
+VARIANT_SUFFIXES = ("-closed-novelty", "-novelty", "-closed")
+
+
+def _fitted_like(
     spec: DiagnoserSpec,
     track: Track,
     fitted: Sequence[Mapping[str, Any]],
     fits: Mapping[str, Mapping[str, Any]],
-    jobs: dict[str, Any],
+) -> tuple[Mapping[str, Any], Track] | None:
+    """The training of ``spec`` (else of its base, :data:`VARIANT_SUFFIXES`) on a fitted
+    track, the same loop kind first: ``(training, track)``, or None."""
+    names = [spec.key] + [
+        spec.key.removesuffix(x) for x in VARIANT_SUFFIXES if spec.key.endswith(x)
+    ]
+    same = [e for e in fitted if e["track"].closed_loop == track.closed_loop]
+    for name in names:
+        for e in [*same, *(e for e in fitted if e not in same)]:
+            for key in e["keys"]:
+                if fits[key]["spec"].key == name:
+                    return fits[key], e["track"]
+    return None
+
+
+def _copied(
+    track: Track, src: Mapping[str, Any], rep: Track, jobs: dict[str, Any]
 ) -> dict[str, Any]:
-    """``spec``'s training on ``track`` as planned on a fitted track (same loop kind first)."""
-    same = [e for e in fitted if e["track"].closed_loop == track.closed_loop] or list(fitted)
-    for e in same:
-        for key in e["keys"]:
-            if fits[key]["spec"].key == spec.key:
-                src, rep = fits[key], e["track"]
-                break
-        else:
-            continue
-        break
-    else:
-        raise RuntimeError(f"{spec.key} on {track.name}: no fitted track plans it")
+    """A training planned on the fitted track ``rep``, on ``track``: the same rounds, the
+    relation jobs renamed for ``track``'s training set unless it is ``rep``'s."""
     own = canonical_hash(TrackData(track=track).training_key())[:12]
     shared = own == canonical_hash(TrackData(track=rep).training_key())[:12]
     rounds = []
@@ -473,7 +490,12 @@ def main(argv: list[str] | None = None) -> int:
     )
     p.add_argument("--track", default="all", help="tracks, as the leaderboard's --track")
     p.add_argument("--diagnosers", default=None, help="comma-separated (default: every registered)")
-    p.add_argument("--relations", type=int, default=3, help="relation jobs trained in full (0: none, relation CPU unknown)")
+    p.add_argument(
+        "--relations",
+        type=int,
+        default=3,
+        help="relation jobs trained in full (0: none, relation CPU unknown)",
+    )
     p.add_argument("--healthy", type=int, default=2, help="healthy test episodes sampled per track")
     p.add_argument("--faulty", type=int, default=1, help="faulty test episodes per fault sampled")
     p.add_argument(
