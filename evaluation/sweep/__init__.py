@@ -18,6 +18,8 @@ The rooms:
 ``store``              the resumable result store on disk (:class:`ResultStore`)
 ``backends``           where tasks run: local processes, Ray, or this process
 ``backends_watchdog``  reaps the local Ray cluster of a driver that was killed
+``task_log``           per-task accounting: each task's CPU and wall seconds, kind, key and
+                       dependencies, and the driver's own time, in the store's ``timings.jsonl``
 =====================  ===========================================================================
 
 The names below are the sweep's public API; import them from here.

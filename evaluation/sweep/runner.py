@@ -51,6 +51,7 @@ from evaluation.sweep.records import (
 )
 from evaluation.sweep.sources import LoadedEpisode
 from evaluation.sweep.store import ResultStore
+from evaluation.sweep.task_log import TIMINGS_FILE, ProfiledBackend, TaskLog, submit_task
 from evaluation.sweep.tasks import OWN_INNER, EpisodeTask, dir_files, episode_task
 from evaluation.sweep.training_stage import train_all
 from fcc_common.workers import cpu_count
@@ -119,7 +120,75 @@ def run_sweep(
     mhash = {s.key: config.model_hash(s, store.data_hash) for s in specs}
     chash = {s.key: config.cell_hash(s, store.data_hash) for s in specs}
 
-    # Which work is left: models to train, and per episode the diagnosers still missing.
+    log = TaskLog(store.root / TIMINGS_FILE, "sweep", backend, n_workers)
+    with log.stage("plan"):
+        to_train, missing, stored = _work_left(store, config, specs, mhash, chash, figure_cells)
+    cells = config.data.cells()
+    n_missing = sum(need_cell for v in missing.values() for _, need_cell, _ in v)
+    logger.info(
+        "sweep in %s: %d of %d diagnosers to train, %d of %d cells to score (%s backend)",
+        store.root,
+        len(to_train),
+        len(specs),
+        n_missing,
+        len(specs) * len(cells),
+        backend,
+    )
+
+    if to_train or missing:
+        # a training may add relation tasks, unknown before it runs: then no cap below the
+        # workers (a local pool starts its workers on demand)
+        n_tasks = max(len(to_train), len(missing), (n_workers or cpu_count()) if to_train else 0)
+        runner = ProfiledBackend(make_backend(backend, n_workers, n_tasks, ray_address), log)
+        cancel = True
+        try:
+            cache = None if relation_cache is None else str(relation_cache)
+            with log.stage("train"), _progress_bar(len(to_train), "training", progress) as bar:
+                train_all(runner, store, config, to_train, mhash, cache, bar)
+            with log.stage("score"):
+                inner_of = inner_detectors(store, specs)
+                plan = _ScorePlan(store, chash, inner_of)
+                _score_all(runner, store, config, missing, mhash, plan, n_missing, progress)
+            cancel = False
+        finally:
+            runner.close(cancel=cancel)
+
+    records = []
+    with log.stage("collect"):
+        for s in specs:
+            for sc, seed in cells:
+                if (s.key, sc, seed) in stored:
+                    records.append(stored[s.key, sc, seed])
+                    continue
+                rec = store.read_cell(s.key, sc, seed, chash[s.key])
+                if rec is None:  # only if a file vanished while we ran
+                    raise RuntimeError(f"cell {s.key}/{sc}/seed {seed} is missing after the sweep")
+                records.append(_cell_result(store, rec, s.key, sc, seed))
+    return SweepResults(
+        config=config,
+        store_dir=store.root,
+        records=tuple(records),
+        n_computed=n_missing,
+        n_reused=len(records) - n_missing,
+        n_trained=len(to_train),
+        wall_s=time.perf_counter() - t_start,
+    )
+
+
+def _work_left(
+    store: ResultStore,
+    config: SweepConfig,
+    specs: Sequence[DiagnoserSpec],
+    mhash: Mapping[str, str],
+    chash: Mapping[str, str],
+    figure_cells: Sequence[tuple[str, int]],
+) -> tuple[
+    list[DiagnoserSpec],
+    dict[tuple[str, int], list[tuple[DiagnoserSpec, bool, bool]]],
+    dict[tuple[str, str, int], CellResult],
+]:
+    """Which work is left: ``(models to train, per episode the diagnosers still missing as
+    (spec, cell missing?, detection missing?), the stored cells read)``."""
     to_train = [s for s in specs if not store.has_model(s.key, mhash[s.key])]
     cells = config.data.cells()
     unknown = sorted(set(map(tuple, figure_cells)) - set(cells))
@@ -140,53 +209,7 @@ def run_sweep(
             )
             if no_cell or no_det:
                 missing.setdefault((sc, seed), []).append((s, no_cell, no_det))
-    n_missing = sum(need_cell for v in missing.values() for _, need_cell, _ in v)
-    logger.info(
-        "sweep in %s: %d of %d diagnosers to train, %d of %d cells to score (%s backend)",
-        store.root,
-        len(to_train),
-        len(specs),
-        n_missing,
-        len(specs) * len(cells),
-        backend,
-    )
-
-    if to_train or missing:
-        # a training may add relation tasks, unknown before it runs: then no cap below the
-        # workers (a local pool starts its workers on demand)
-        n_tasks = max(len(to_train), len(missing), (n_workers or cpu_count()) if to_train else 0)
-        runner = make_backend(backend, n_workers, n_tasks, ray_address)
-        cancel = True
-        try:
-            cache = None if relation_cache is None else str(relation_cache)
-            with _progress_bar(len(to_train), "training", progress) as bar:
-                train_all(runner, store, config, to_train, mhash, cache, bar)
-            inner_of = inner_detectors(store, specs)
-            plan = _ScorePlan(store, chash, inner_of)
-            _score_all(runner, store, config, missing, mhash, plan, n_missing, progress)
-            cancel = False
-        finally:
-            runner.close(cancel=cancel)
-
-    records = []
-    for s in specs:
-        for sc, seed in cells:
-            if (s.key, sc, seed) in stored:
-                records.append(stored[s.key, sc, seed])
-                continue
-            rec = store.read_cell(s.key, sc, seed, chash[s.key])
-            if rec is None:  # only if a file vanished while we ran
-                raise RuntimeError(f"cell {s.key}/{sc}/seed {seed} is missing after the sweep")
-            records.append(_cell_result(store, rec, s.key, sc, seed))
-    return SweepResults(
-        config=config,
-        store_dir=store.root,
-        records=tuple(records),
-        n_computed=n_missing,
-        n_reused=len(records) - n_missing,
-        n_trained=len(to_train),
-        wall_s=time.perf_counter() - t_start,
-    )
+    return to_train, missing, stored
 
 
 def _cell_result(
@@ -247,7 +270,8 @@ def _score_all(
             share=share,
         )
         args = [] if runner.passes_paths else [refs[lab] for lab in labels]
-        handles[runner.submit(episode_task, task, *args)] = (sc, seed)
+        handle = submit_task(runner, "episode", f"{sc}/{seed}", episode_task, task, *args, after=())
+        handles[handle] = (sc, seed)
     with _progress_bar(n_missing, "cells", progress) as bar:
         it = runner.completed(list(handles))
         while True:

@@ -29,6 +29,7 @@ from evaluation.sweep.records import (
     pack_detection,
 )
 from evaluation.sweep.sources import DataSource
+from evaluation.sweep.task_log import task_part
 from fcc_common.workers import limit_threads
 
 __all__ = [
@@ -112,9 +113,10 @@ def train_task(
     import_modules(imports)  # a fresh worker has not seen the user's registrations
     t0 = time.perf_counter()
     diag = spec.build()
-    episodes = training_episodes(diag, data, spec.key)
+    with task_part("data"):
+        episodes = training_episodes(diag, data, spec.key)
     try:
-        with planned_relations(relations or {}):
+        with planned_relations(relations or {}), task_part("fit"):
             diag.fit(episodes)
     except RelationsNeeded as need:
         return TrainOutcome({}, {}, need.jobs)
@@ -202,7 +204,8 @@ def episode_task(
     if not _serial:
         limit_threads()
     import_modules(task.imports)
-    loaded = task.data.load_test(task.scenario, task.seed)
+    with task_part("simulate"):
+        loaded = task.data.load_test(task.scenario, task.seed)
     n = len(task.labels)
     out = []
     keep = task.keep or (False,) * n
@@ -213,9 +216,13 @@ def episode_task(
     for i, (label, mhash) in enumerate(zip(task.labels, task.model_hashes, strict=True)):
         source = task.model_paths[i] if task.model_paths is not None else model_files[i]
         try:
-            diag = load_model(mhash, source)
-            detect, box = _inner_detect(diag, inner[i], given[i], dets)
-            rec, det = detect_and_score(diag, loaded, label=label, t_on=task.t_on, detect=detect)
+            with task_part(f"load:{label}"):
+                diag = load_model(mhash, source)
+            with task_part(f"detect:{label}"):
+                detect, box = _inner_detect(diag, inner[i], given[i], dets)
+                rec, det = detect_and_score(
+                    diag, loaded, label=label, t_on=task.t_on, detect=detect
+                )
             dets[i] = det
             arrays = (
                 pack_detection(loaded, det, diag.band_view(loaded.episode)) if keep[i] else None

@@ -31,6 +31,7 @@ from diagnosers.bank.relation_cache import RelationCache
 from evaluation.sweep.backends import Backend
 from evaluation.sweep.config import DiagnoserSpec, SweepConfig
 from evaluation.sweep.store import ResultStore
+from evaluation.sweep.task_log import submit_task
 from evaluation.sweep.tasks import TrainOutcome, train_task
 from fcc_common.workers import limit_threads
 
@@ -71,11 +72,27 @@ def train_all(
     needs: dict[str, set[str]] = {key: set() for key in specs}  # diagnoser -> relation keys
     waiting: dict[str, set[str]] = {}  # relation key in flight -> diagnosers waiting for it
     pending: dict[Any, tuple[str, str]] = {}  # handle -> ("train", diagnoser) | ("relation", key)
+    # for the task log (evaluation.sweep.task_log): what each task waited for
+    relation_handle: dict[str, Any] = {}  # relation key -> its task in this sweep
+    last_training: dict[str, Any] = {}  # diagnoser -> its latest training task
 
     def submit_training(key: str) -> None:
         relations = {k: known[k] for k in sorted(needs[key])}
-        handle = runner.submit(train_task, specs[key], config.data, config.imports, relations)
+        after = [relation_handle[k] for k in sorted(needs[key]) if k in relation_handle]
+        after += [last_training[key]] if key in last_training else []
+        handle = submit_task(
+            runner,
+            "train",
+            key,
+            train_task,
+            specs[key],
+            config.data,
+            config.imports,
+            relations,
+            after=after,
+        )
         pending[handle] = ("train", key)
+        last_training[key] = handle
 
     def ask(key: str, jobs: Mapping[str, RelationJob]) -> None:
         needs[key].update(jobs)
@@ -93,7 +110,17 @@ def train_all(
                 new.append((rkey, job))
             waiting[rkey].add(key)
         for rkey, job in sorted(new, key=lambda kj: -kj[1].cost):  # costliest first
-            pending[runner.submit(relation_task, job)] = ("relation", rkey)
+            handle = submit_task(
+                runner,
+                "relation",
+                rkey[:16],
+                relation_task,
+                job,
+                after=[last_training[key]],
+                info={"cost": job.cost, "max_epochs": job.settings.max_epochs},
+            )
+            pending[handle] = ("relation", rkey)
+            relation_handle[rkey] = handle
         if needs[key] <= known.keys():
             submit_training(key)
 

@@ -45,6 +45,7 @@ from evaluation.reports.outputs import figure_cells, write_figures
 from evaluation.sweep.config import DiagnoserSpec, SweepConfig, default_specs
 from evaluation.sweep.runner import run_sweep
 from evaluation.sweep.store import ResultStore, canonical_hash
+from evaluation.sweep.task_log import TIMINGS_FILE, TaskLog
 from evaluation.sweep.tasks import dir_files
 from evaluation.tracks.oracle import DEFAULT_REFERENCES
 from evaluation.tracks.reference_runs import run_references
@@ -54,7 +55,7 @@ from evaluation.tracks.track_data import TrackData
 from fcc_env.closed_loop import CLOSED_LOOP_CHANNELS
 from fcc_env.params import MEASUREMENT_NAMES
 
-__all__ = ["applicable", "run_track", "track_channels"]
+__all__ = ["applicable", "model_cache_dir", "run_track", "track_channels"]
 
 
 def applicable(
@@ -138,8 +139,10 @@ def run_track(
         figure_cells=figure_cells(config) if figures else (),
         relation_cache=relation_cache,
     )
+    log = TaskLog(store / TIMINGS_FILE, "track", backend, workers)
     if model_cache is not None:
-        _models_to_cache(config, store, model_cache)
+        with log.stage("model-cache"):
+            _models_to_cache(config, store, model_cache)
     references, n_references = run_references(
         data,
         DEFAULT_REFERENCES,
@@ -151,9 +154,11 @@ def run_track(
     )
     records = (*results.records, *references)
     tiers = {s.key: str(diagnoser_class(s.name).tier) for s in config.diagnosers}
-    rows = track_rows(records, [s.key for s in config.diagnosers], track.faults, tiers)
+    with log.stage("rows"):
+        rows = track_rows(records, [s.key for s in config.diagnosers], track.faults, tiers)
     if figures:
-        write_figures(results, out / "figures")
+        with log.stage("figures"):
+            write_figures(results, out / "figures")
     return TrackRun(
         track=track,
         records=records,
@@ -167,7 +172,10 @@ def run_track(
     )
 
 
-def _cache_dir(config: SweepConfig, spec: DiagnoserSpec, cache: Path) -> Path:
+def model_cache_dir(config: SweepConfig, spec: DiagnoserSpec, cache: Path) -> Path:
+    """Where the model cache ``cache`` files ``spec``'s model trained on ``config``'s track:
+    tracks with the same training set (and, for a diagnoser that learns faults, the same
+    labelled faults) share the directory, so a later track reuses the model."""
     data = config.data
     assert isinstance(data, TrackData)
     # model_hash with a constant data part: the package version and the resolved settings
@@ -184,7 +192,7 @@ def _models_from_cache(config: SweepConfig, store_dir: Path, cache: Path) -> int
     n = 0
     for spec in config.diagnosers:
         mhash = config.model_hash(spec, store.data_hash)
-        src = _cache_dir(config, spec, cache)
+        src = model_cache_dir(config, spec, cache)
         if not store.has_model(spec.key, mhash) and (src / "model").is_dir():
             files = dir_files(src / "model")
             store.write_model(spec.key, mhash, files, {**spec.to_json(), "from_cache": str(src)})
@@ -196,7 +204,7 @@ def _models_to_cache(config: SweepConfig, store_dir: Path, cache: Path) -> None:
     """Offer the track's trained models to the cache (atomic: a renamed temporary copy)."""
     store = ResultStore.open(store_dir, config.data.store_key())
     for spec in config.diagnosers:
-        dst = _cache_dir(config, spec, cache)
+        dst = model_cache_dir(config, spec, cache)
         if (dst / "model").is_dir():
             continue
         dst.mkdir(parents=True, exist_ok=True)

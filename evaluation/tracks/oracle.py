@@ -398,19 +398,40 @@ class PhysicalLimit:
             ).fit(healthy)
             return self
         if self.config.stage == OracleStage.DIRECTIONAL:
-            stage = _PerfectModelStage(
-                self._reference,
-                self.config.channels,
-                false_alarm_target=self.config.false_alarm_target,
-                ewma_lambda=self.config.ewma_lambda,
-            )
-            # the training faults a detector gets, on its fault_seeds, and their healthy twins
-            faults = self.data.train_fault_episodes(stage.directions.seeds)
-            seeds = sorted({e.seed for e in faults if e.seed is not None})
-            twins = self.data.simulate(seeds, FaultSpec())
-            self.stage_ = stage.fit(healthy, [*(le.episode for le in twins), *faults])
-            return self
+            rem = self._directional_stage().residuals(healthy)
+            return self.fit_directional(rem, healthy[0].channels)
         self.stage_ = self._t2_stage().fit([self._residual(ep) for ep in healthy])
+        return self
+
+    def _directional_stage(self) -> _PerfectModelStage:
+        return _PerfectModelStage(
+            self._reference,
+            self.config.channels,
+            false_alarm_target=self.config.false_alarm_target,
+            ewma_lambda=self.config.ewma_lambda,
+        )
+
+    def directional_residuals(
+        self, seeds: Sequence[int]
+    ) -> tuple[tuple[str, ...], list[np.ndarray]]:
+        """The directional row's calibration residuals on the healthy episodes of ``seeds``
+        (the first part of its fit, split by seeds), with the episodes' channels."""
+        healthy = [self._sims.healthy(s) for s in seeds]
+        return healthy[0].channels, self._directional_stage().residuals(healthy)
+
+    def fit_directional(
+        self, residuals: Sequence[np.ndarray], channels: Sequence[str]
+    ) -> PhysicalLimit:
+        """The directional row's fit given its calibration residuals (in seed order, from
+        :meth:`directional_residuals`) and the episodes' channels: the fault directions from
+        the training faults, then the stage. The bits of :meth:`fit`."""
+        stage = self._directional_stage()
+        # the training faults a detector gets, on its fault_seeds, and their healthy twins
+        faults = self.data.train_fault_episodes(stage.directions.seeds)
+        seeds = sorted({e.seed for e in faults if e.seed is not None})
+        twins = self.data.simulate(seeds, FaultSpec())
+        training = [*(le.episode for le in twins), *faults]
+        self.stage_ = stage.fit_residuals(residuals, channels, training)
         return self
 
     def detect(self, episode: Episode) -> Detection:
@@ -486,10 +507,20 @@ class _PerfectModelStage:
     def fit(self, episodes: Sequence[Episode], training: Sequence[Episode]) -> _PerfectModelStage:
         """Calibrate on the healthy ``episodes``; the fault directions from the labelled faults
         of ``training`` and their healthy twins there (the track's training episodes)."""
-        channels = episodes[0].channels
-        self.out_idx_ = np.array([channels.index(c) for c in self.monitored])
+        return self.fit_residuals(self.residuals(episodes), episodes[0].channels, training)
+
+    def residuals(self, episodes: Sequence[Episode]) -> list[np.ndarray]:
+        """The calibration residuals of healthy ``episodes`` (each its own; a split fit
+        computes them in parts)."""
+        self.out_idx_ = np.array([episodes[0].channels.index(c) for c in self.monitored])
         w = self.steady_window
-        rem = [(ep.y[:, self.out_idx_] - self._centre_of(ep))[w:] for ep in episodes]
+        return [(ep.y[:, self.out_idx_] - self._centre_of(ep))[w:] for ep in episodes]
+
+    def fit_residuals(
+        self, rem: Sequence[np.ndarray], channels: Sequence[str], training: Sequence[Episode]
+    ) -> _PerfectModelStage:
+        """:meth:`fit` given the calibration residuals (:meth:`residuals`, in order)."""
+        self.out_idx_ = np.array([list(channels).index(c) for c in self.monitored])
         self.v_residual_ = np.maximum(np.sqrt(np.mean(np.concatenate(rem) ** 2, axis=0)), 1e-9)
         kept = self._lasting(training)
         has_faults = any(ep.fault_onset is not None for ep in kept)

@@ -47,6 +47,7 @@ from diagnosers.registry import diagnoser_class
 from evaluation.sweep.backends import BACKENDS, Backend, make_backend
 from evaluation.sweep.records import CellResult, score_episode
 from evaluation.sweep.store import ResultStore, canonical_hash
+from evaluation.sweep.task_log import TIMINGS_FILE, ProfiledBackend, TaskLog, submit_task, task_part
 from evaluation.tracks.filter_bound import SIGNATURE_SEEDS, FilterBound
 from evaluation.tracks.oracle import (
     OracleConfig,
@@ -60,6 +61,7 @@ from fcc_common.workers import limit_threads
 from fcc_env import MODEL_VERSION, __version__
 
 __all__ = [
+    "DIRECTIONAL_CHUNK",
     "FILTER_CHUNK",
     "PROJECT_PACKAGES",
     "REFERENCE_CODE",
@@ -68,6 +70,8 @@ __all__ = [
     "REFERENCE_STORE_VERSION",
     "ReferenceSeedTask",
     "code_version",
+    "directional_fit_task",
+    "directional_residuals_task",
     "filter_limits_task",
     "filter_signature_task",
     "filter_statistics_task",
@@ -230,6 +234,51 @@ def filter_limits_task(
     return row
 
 
+#: Calibration episodes per residuals task of the directional row's split fit.
+DIRECTIONAL_CHUNK = 10
+
+
+def directional_residuals_task(
+    data: TrackData, config: OracleConfig, seeds: Sequence[int], _serial: bool = False
+) -> tuple[tuple[str, ...], list[np.ndarray]]:
+    """The directional row's calibration residuals on the seeds ``seeds`` (a chunk of them)
+    and the episodes' channels: :meth:`PhysicalLimit.directional_residuals`."""
+    if not _serial:
+        limit_threads()
+    try:
+        return PhysicalLimit(data, config).directional_residuals(seeds)
+    except Exception as e:
+        raise RuntimeError(f"fitting {config.label!r}: {type(e).__name__}: {e}") from e
+
+
+def directional_fit_task(
+    data: TrackData,
+    config: OracleConfig,
+    chunks: Sequence[tuple[tuple[str, ...], list[np.ndarray]]],
+    _serial: bool = False,
+) -> PhysicalLimit:
+    """The fitted directional row from its calibration residuals (chunks in seed order): the
+    fault directions from the training faults, then the stage. The same bits as
+    :func:`fit_task` of the row (``tests/evaluation/tracks/test_filter_split.py``)."""
+    if not _serial:
+        limit_threads()
+    try:
+        residuals = [r for _, rem in chunks for r in rem]
+        return PhysicalLimit(data, config).fit_directional(residuals, chunks[0][0])
+    except Exception as e:
+        raise RuntimeError(f"fitting {config.label!r}: {type(e).__name__}: {e}") from e
+
+
+#: The parts of the split fits: part → (the task log's kind, the part it waits for).
+_SPLIT_PARTS: dict[str, tuple[str, str | None]] = {
+    "signature": ("filter-signature", None),
+    "statistics": ("filter-statistics", "signature"),
+    "limits": ("filter-limits", "statistics"),
+    "residuals": ("directional-residuals", None),
+    "directional": ("directional-fit", "residuals"),
+}
+
+
 @dataclass(frozen=True)
 class ReferenceSeedTask:
     """Score fitted reference rows on the test cells ``cells`` (one seed's) of ``data``."""
@@ -254,7 +303,8 @@ def seed_task(
         obs.share_simulations(sims)
     out = []
     for sc, seed in task.cells:
-        loaded = task.data.load_test(sc, seed)
+        with task_part("simulate"):
+            loaded = task.data.load_test(sc, seed)
         row = []
         for obs in observers:
             try:
@@ -303,15 +353,17 @@ def run_references(
             raise ValueError(f"configs holds {c!r}; allowed: evaluation.tracks.oracle.OracleConfig")
         c.calibration_seeds(data.track)  # seed clashes are refused before any work
     store = ResultStore.open(store_dir, data.store_key())
+    log = TaskLog(store.root / TIMINGS_FILE, "references", backend, n_workers)
     hashes = [reference_hash(c, store.data_hash, t_on) for c in configs]
     labels = [reference_label(c, h) for c, h in zip(configs, hashes, strict=True)]
     cells = data.cells()
     # what is stored is read once (a fully stored track reads every file once, no more)
-    stored = {
-        (i, cell): store.read_cell(labels[i], *cell, hashes[i])
-        for i in range(len(configs))
-        for cell in cells
-    }
+    with log.stage("plan"):
+        stored = {
+            (i, cell): store.read_cell(labels[i], *cell, hashes[i])
+            for i in range(len(configs))
+            for cell in cells
+        }
     missing = {i: [cell for cell in cells if stored[i, cell] is None] for i in range(len(configs))}
     todo = [i for i in range(len(configs)) if missing[i]]
     n_missing = sum(len(missing[i]) for i in todo)
@@ -325,14 +377,29 @@ def run_references(
             for group in groups
         ]
         n_tasks = len(todo) + sum(len(seeds) for _, seeds in plan)
-        runner = make_backend(backend, n_workers, n_tasks, ray_address)
+        runner = ProfiledBackend(make_backend(backend, n_workers, n_tasks, ray_address), log)
         cancel = True
         try:
-            work = _Work(runner, store, data, configs, labels, hashes, missing, t_on)
-            work.run(plan, n_tasks, progress)
+            with log.stage("references"):
+                work = _Work(runner, store, data, configs, labels, hashes, missing, t_on)
+                work.run(plan, n_tasks, progress)
             cancel = False
         finally:
             runner.close(cancel=cancel)
+    with log.stage("collect"):
+        records = _collect(store, cells, configs, labels, hashes, stored)
+    return records, n_missing
+
+
+def _collect(
+    store: ResultStore,
+    cells: Sequence[tuple[str, int]],
+    configs: Sequence[OracleConfig],
+    labels: Sequence[str],
+    hashes: Sequence[str],
+    stored: Mapping[tuple[int, tuple[str, int]], Mapping[str, Any] | None],
+) -> list[CellResult]:
+    """The records of every cell (read now unless ``stored`` holds them), rows in order."""
     records = []
     for sc, seed in cells:
         for i, (c, label, h) in enumerate(zip(configs, labels, hashes, strict=True)):
@@ -345,7 +412,7 @@ def run_references(
                 path = store.cell_path(label, sc, seed)
                 raise ValueError(f"{path}: {e}; delete it to recompute this cell") from e
             records.append(dataclasses.replace(result, diagnoser=c.label))
-    return records, n_missing
+    return records
 
 
 def sharing_groups(configs: Sequence[OracleConfig]) -> list[list[int]]:
@@ -408,8 +475,11 @@ class _Work:
         self._parts: dict[Any, tuple[int, str, int]] = {}  # the filter rows' split fits
         self._terms: dict[int, list[Any]] = {}
         self._stats: dict[int, list[Any]] = {}
+        self._resid: dict[int, list[Any]] = {}
         self._pending: list[Any] = []
         fitted: dict[int, PhysicalLimit] = {}
+        fitted_by: dict[int, Any] = {}  # row -> the task that finished its fit (task log)
+        self._part_handles: dict[tuple[int, str], list[Any]] = {}
         scoring: dict[Any, tuple[list[int], tuple[tuple[str, int], ...]]] = {}
         pending = self._pending
         with tqdm(
@@ -424,8 +494,20 @@ class _Work:
                 if self.configs[i].stage == OracleStage.FILTER:
                     bar.total -= 1
                     self._start_filter(i)
+                elif self.configs[i].stage == OracleStage.DIRECTIONAL:
+                    bar.total -= 1
+                    self._start_directional(i)
                 else:
-                    fits[self.runner.submit(fit_task, self.data, self.configs[i])] = i
+                    handle = submit_task(
+                        self.runner,
+                        "reference-fit",
+                        f"{self.configs[i].inputs}+{self.configs[i].stage}",
+                        fit_task,
+                        self.data,
+                        self.configs[i],
+                        after=(),
+                    )
+                    fits[handle] = i
             pending.extend(fits)
             while pending:
                 try:
@@ -438,25 +520,48 @@ class _Work:
                     self._write(*scoring.pop(handle), result)
                     continue
                 if handle in self._parts:
-                    i, row = self._filter_part(handle, result)
+                    i, row = self._split_part(handle, result)
                     if row is None:
                         continue
                     result = row
                 else:
                     i = fits[handle]
                 fitted[i] = result
+                fitted_by[i] = handle  # its fit task, or the last part of a split fit
                 for rows, seeds in plan:
                     if i in rows and all(j in fitted for j in rows):
                         shared = self.runner.put(tuple(fitted[j] for j in rows))
+                        group = "+".join(str(self.configs[j].stage) for j in rows)
                         for cells in seeds:
                             task = ReferenceSeedTask(data=self.data, cells=cells, t_on=self.t_on)
-                            h = self.runner.submit(seed_task, task, shared)
+                            h = submit_task(
+                                self.runner,
+                                "reference-seed",
+                                f"{group}/seed-{cells[0][1]}",
+                                seed_task,
+                                task,
+                                shared,
+                                after=[fitted_by[j] for j in rows],
+                            )
                             scoring[h] = (rows, cells)
                             pending.append(h)
 
-    # ---- the filter row's fit, split: signatures per seed, statistics per chunk, limits ------
+    # ---- split fits: the filter row's signatures per seed, statistics per chunk, limits; the
+    # ---- directional row's calibration residuals per chunk, then its directions and stage
     def _submit_part(self, i: int, kind: str, index: int, fn: Any, *args: Any) -> None:
-        handle = self.runner.submit(fn, self.data, self.configs[i], *args)
+        log_kind, before = _SPLIT_PARTS[kind]
+        after = self._part_handles.get((i, before), []) if before else ()
+        handle = submit_task(
+            self.runner,
+            log_kind,
+            f"{self.configs[i].stage}/{index}",
+            fn,
+            self.data,
+            self.configs[i],
+            *args,
+            after=after,
+        )
+        self._part_handles.setdefault((i, kind), []).append(handle)
         self._parts[handle] = (i, kind, index)
         self._pending.append(handle)
         self._bar.total += 1
@@ -467,12 +572,24 @@ class _Work:
         for k, seed in enumerate(seeds):
             self._submit_part(i, "signature", k, filter_signature_task, seed)
 
-    def _filter_part(self, handle: Any, result: Any) -> tuple[int, PhysicalLimit | None]:
-        """Take one finished part of a filter row's fit; submit what it unblocks. Returns the
-        row and, once its limits are in, the fitted row."""
+    def _start_directional(self, i: int) -> None:
+        seeds = list(self.configs[i].calibration_seeds(self.data.track))
+        chunks = [seeds[k : k + DIRECTIONAL_CHUNK] for k in range(0, len(seeds), DIRECTIONAL_CHUNK)]
+        self._resid[i] = [None] * len(chunks)
+        for k, chunk in enumerate(chunks):
+            self._submit_part(i, "residuals", k, directional_residuals_task, chunk)
+
+    def _split_part(self, handle: Any, result: Any) -> tuple[int, PhysicalLimit | None]:
+        """Take one finished part of a split fit; submit what it unblocks. Returns the row
+        and, once its last part is in, the fitted row."""
         i, kind, index = self._parts.pop(handle)
-        if kind == "limits":
+        if kind in ("limits", "directional"):
             return i, result
+        if kind == "residuals":
+            self._resid[i][index] = result
+            if all(r is not None for r in self._resid[i]):
+                self._submit_part(i, "directional", 0, directional_fit_task, self._resid[i])
+            return i, None
         if kind == "signature":
             self._terms[i][index] = result
             if any(t is None for t in self._terms[i]):
