@@ -97,6 +97,7 @@ UKF_GLR_DEFAULTS: dict[str, Any] = {
     "direction_seeds": [1000, 1001, 1002],
     "direction_onset": 500,
     "direction_size": 1.0,
+    "bias_memory": None,
 }
 #: their declarative constraints, checked in ``fit``
 UKF_GLR_CONSTRAINTS: dict[str, Any] = {
@@ -112,6 +113,7 @@ UKF_GLR_CONSTRAINTS: dict[str, Any] = {
     "direction_seeds": IntegerSequence(0, 2**31 - 1),
     "direction_onset": Integer(150, 100_000),
     "direction_size": Real(0.0, 10.0, closed="right"),
+    "bias_memory": (Integer(1, 100_000), None),
 }
 
 
@@ -147,6 +149,12 @@ class UKFGLR(Diagnoser):
             training range by default: 1000-1002).
         direction_onset: the simulated faults' onset sample, ≥ 150 (after the filter settles).
         direction_size: the simulated size, a multiple of each fault's registered magnitude.
+        bias_memory: ``None`` (default): the statistics test the innovations as they are; an
+            integer in [1, 100000]: they test them after removing each channel's slowly varying
+            mean, learnt over about this many samples
+            (:class:`~diagnosers.stages.innovation_stage.BiasTracker`): a plant's undeclared
+            effects leave a bias the 1000-sample GLR would add up (``lab/greybox-lab.md``,
+            ``mismatch``); a fault's step passes at once and fades over the memory.
 
     Decision arrays, names ``glr[fault,window]`` … and ``cusum[nis]``: ``signal`` the
     statistics, ``upper`` their limits, ``residual`` the matched innovations d_gᵀe_t and the NIS.
@@ -171,6 +179,7 @@ class UKFGLR(Diagnoser):
     direction_seeds: list[int]
     direction_onset: int
     direction_size: float
+    bias_memory: int | None
 
     @classmethod
     def fast_params(cls) -> dict[str, Any]:
@@ -244,9 +253,7 @@ class UKFGLR(Diagnoser):
             windows=self.signature_windows,
             size=self.direction_size,
         )
-        stage = InnovationStage(
-            self.directions_, window=self.window, omnibus_variance=self.omnibus_variance
-        )
+        stage = self._new_stage()
         healthy = [self._settled(r.whitened[0]) for r in filter_records(self.estimator_, records)]
         self.limits_ = stage.fit(healthy, self.false_alarm_target).limits_
         self._finish()
@@ -267,10 +274,16 @@ class UKFGLR(Diagnoser):
         self.estimator_ = FCCStateEstimator(params, config)
         self.faults_ = tuple(self.faults) if self.faults is not None else fault_names()
 
-    def _finish(self) -> None:
-        self.stage_ = InnovationStage(
-            self.directions_, window=self.window, omnibus_variance=self.omnibus_variance
+    def _new_stage(self) -> InnovationStage:
+        return InnovationStage(
+            self.directions_,
+            window=self.window,
+            omnibus_variance=self.omnibus_variance,
+            bias_memory=self.bias_memory,
         )
+
+    def _finish(self) -> None:
+        self.stage_ = self._new_stage()
         self.stage_.limits_ = self.limits_
         pairs = [(f, w) for f in self.faults_ for w in self.signature_windows]
         self.signal_names_ = (*(f"glr[{f},{w}]" for f, w in pairs), "cusum[nis]")
