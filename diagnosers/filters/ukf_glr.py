@@ -44,7 +44,7 @@ from diagnosers.filters.parameter_fit import (
     fit_maximum_likelihood,
 )
 from diagnosers.filters.state_estimator import FCCStateEstimator
-from diagnosers.filters.ukf_config import UKFConfig
+from diagnosers.filters.ukf_config import LAG_CHANNELS, UKFConfig
 from diagnosers.presets import keyword_init
 from diagnosers.registry import register
 from diagnosers.stages.innovation_stage import DEFAULT_GLR_WINDOW, InnovationStage
@@ -98,6 +98,7 @@ UKF_GLR_DEFAULTS: dict[str, Any] = {
     "direction_onset": 500,
     "direction_size": 1.0,
     "bias_memory": None,
+    "sensor_lags": None,
 }
 #: their declarative constraints, checked in ``fit``
 UKF_GLR_CONSTRAINTS: dict[str, Any] = {
@@ -114,6 +115,7 @@ UKF_GLR_CONSTRAINTS: dict[str, Any] = {
     "direction_onset": Integer(150, 100_000),
     "direction_size": Real(0.0, 10.0, closed="right"),
     "bias_memory": (Integer(1, 100_000), None),
+    "sensor_lags": (OptionSequence(LAG_CHANNELS), None),
 }
 
 
@@ -155,6 +157,9 @@ class UKFGLR(Diagnoser):
             (:class:`~diagnosers.stages.innovation_stage.BiasTracker`): a plant's undeclared
             effects leave a bias the 1000-sample GLR would add up (``lab/greybox-lab.md``,
             ``mismatch``); a fault's step passes at once and fades over the memory.
+        sensor_lags: thermocouples the filter reads through a first-order lag of unknown time
+            constant, estimated online (``UKFConfig.sensor_lags``): ``None`` (default): none;
+            a list of :data:`~diagnosers.filters.ukf_config.LAG_CHANNELS`.
 
     Decision arrays, names ``glr[fault,window]`` … and ``cusum[nis]``: ``signal`` the
     statistics, ``upper`` their limits, ``residual`` the matched innovations d_gᵀe_t and the NIS.
@@ -180,6 +185,7 @@ class UKFGLR(Diagnoser):
     direction_onset: int
     direction_size: float
     bias_memory: int | None
+    sensor_lags: list[str] | None
 
     @classmethod
     def fast_params(cls) -> dict[str, Any]:
@@ -223,7 +229,11 @@ class UKFGLR(Diagnoser):
         self.channel_idx_ = np.array([self.channels_.index(c) for c in need])
         records = self._records(episodes)
         prior = FCCParams()  # the spec's nominal values: the only parameters a grey box reads
-        config = UKFConfig(sample_time_s=self.sample_time_s_, closed_loop=closed)
+        config = UKFConfig(
+            sample_time_s=self.sample_time_s_,
+            closed_loop=closed,
+            sensor_lags=tuple(self.sensor_lags or ()),
+        )
         if self.estimate_noise:  # first on the prior: the parameter fit weighs by the noise
             config = config.replace(noise_scale=estimate_noise_scale(prior, config, records))
         names = tuple(self.fit_parameters or ())
@@ -268,6 +278,7 @@ class UKFGLR(Diagnoser):
             sample_time_s=self.sample_time_s_,
             closed_loop=self.closed_loop_,
             noise_scale=self.noise_scale_,
+            sensor_lags=tuple(self.sensor_lags or ()),
         )
         if self.online_:
             config = config.replace(**_online_changes(names))
