@@ -19,7 +19,8 @@ The rooms:
 ``model_directions``   each fault's innovation direction from the fitted model's own
                        simulations (noise twins), never from fault data
 ``ukf_glr``            ``ukf-glr``, the grey-box detector: the fitted filter, a GLR per fault
-                       direction and a variance CUSUM on its whitened innovations
+                       direction and a variance CUSUM on its whitened innovations; its preset
+                       ``ukf-glr-robust`` (thermocouple lags, UA_1 and A_cr estimated)
 ``stiction_ukf``       ``stiction-ukf``: a sticking valve by the excess variance of the model's
                        T_rx innovation about its mean (the command the valve does not follow)
 =====================  ===========================================================================

@@ -31,6 +31,7 @@ from fcc_env.plant import (
 
 __all__ = [
     "CLOSED_LOOP_AIR_WALK_STD_REL",
+    "LAG_CHANNELS",
     "OPEN_LOOP_AIR_WALK_STD_REL",
     "UKF_RANGES",
     "UKFConfig",
@@ -47,6 +48,11 @@ OPEN_LOOP_AIR_WALK_STD_REL = 5e-4
 #: flow): a white jitter around a slow level, which a walk fits only roughly; this value was the
 #: best compromise (R_ar's innovations: variance 1.02, lag-1 autocorrelation −0.08).
 CLOSED_LOOP_AIR_WALK_STD_REL = 1.5e-3
+
+#: The channels a lag state may be given (``sensor_lags``): the process thermocouples, whose
+#: readings a real sensor's time constant delays (not the inputs' channels: their states are
+#: the readings' own values).
+LAG_CHANNELS: tuple[str, ...] = MEASUREMENT_NAMES[3:]
 
 #: Allowed values of the :class:`UKFConfig` fields (the plant's own ranges for the plant side).
 UKF_RANGES: dict[str, Any] = {
@@ -68,6 +74,9 @@ UKF_RANGES: dict[str, Any] = {
     "parameter_initial_std_rel": Real(0.0, 1.0, closed="right"),
     "state_noise_std": Real(0.0, 100.0, closed="right", why="filter units per sample"),
     "initial_state_std": Real(0.0, 1e4, closed="right", why="filter units"),
+    "lag_coefficient_prior": Real(0.0, 0.95, why="the reading's share kept per sample"),
+    "lag_coefficient_std": Real(0.0, 1.0, closed="right"),
+    "lag_walk_std": Real(0.0, 0.1, why="per sample"),
     "alpha": Real(0.0, 1.0, closed="right"),
     "beta": Real(0.0, 10.0),
     "kappa": Real(0.0, 100.0),
@@ -90,7 +99,12 @@ class UKFConfig:
     * ``estimate_coking``: the feed coking factor f_coke as a random walk (default: in closed
       loop, where the set-point program drifts it; otherwise it is 1);
     * ``parameters``: :class:`fcc_env.FCCParams` field names estimated as random walks around
-      the given parameters (the ``uncertain`` track); each must be non-zero.
+      the given parameters (the ``uncertain`` track); each must be non-zero;
+    * ``sensor_lags``: channels of :data:`LAG_CHANNELS` read through a first-order lag of
+      unknown time constant (a thermocouple's, the ``mismatch`` track): per channel the lagged
+      reading and its coefficient ``a = exp(−T_s/τ)`` (0: no lag) are states, the coefficient a
+      random walk of prior ``lag_coefficient_prior`` ± ``lag_coefficient_std`` and walk
+      ``lag_walk_std`` per sample, clipped to [0, 0.95] where the model reads it.
 
     Tuning (process noise of the random walks; the filter's units are °C, t/h, 1 kg·10³ for
     holdups and 10⁻⁵ kg/kg for coke, 1 % for parameters):
@@ -134,6 +148,10 @@ class UKFConfig:
     parameter_initial_std_rel: float = 0.05
     state_noise_std: float = 1e-3
     initial_state_std: float = 0.1
+    sensor_lags: tuple[str, ...] = ()
+    lag_coefficient_prior: float = 0.4
+    lag_coefficient_std: float = 0.3
+    lag_walk_std: float = 1e-3
     alpha: float = 1.0
     beta: float = 2.0
     kappa: float = 0.0
@@ -149,6 +167,11 @@ class UKFConfig:
         if names != ():
             names = check("parameters", names, OptionSequence(PARAM_FIELDS))
         set_(self, "parameters", names)
+        lags = self.sensor_lags
+        lags = tuple(lags) if isinstance(lags, list) else lags
+        if lags != ():
+            lags = check("sensor_lags", lags, OptionSequence(LAG_CHANNELS))
+        set_(self, "sensor_lags", lags)
 
     @classmethod
     def matching(cls, plant: PlantConfig, **changes: Any) -> UKFConfig:

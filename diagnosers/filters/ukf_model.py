@@ -8,7 +8,10 @@ The augmented state, in order:
   Table 1's first three channels measure them, so the filter never takes a noisy reading for
   the input itself;
 * f_coke (with ``estimate_coking``): the feed coking factor, a random walk;
-* the parameters named in ``parameters`` (random walks around the given values).
+* the parameters named in ``parameters`` (random walks around the given values);
+* per channel of ``sensor_lags``, the lag's coefficient (a random walk), then, last, the
+  lagged readings themselves: ``y_c = a·L_c + (1 − a)·T_c(x_k)``, ``L_c ← y_c`` (the plant's
+  exact discretisation of a first-order lag, :mod:`fcc_env.effects`' ``sensor_lag``).
 
 The filter works in scaled coordinates ``z_s = (z − ref) / scale`` (:data:`STATE_SCALES`:
 °C, t/h, 10³ kg, 10⁻⁵ kg/kg, 0.01 for f_coke, 1 % of a parameter's value), so the covariance
@@ -70,6 +73,11 @@ _COKE_COLUMN = INPUT_NAMES.index("f_coke")
 STATE_SCALES: tuple[float, ...] = (1e3, 1e-5, 1e3, 1e-5, 1.0, 1e3, 1e-5, 1.0, 1e3, 1.0, 1.0)
 _COKE_SCALE = 0.01
 _PARAMETER_SCALE_REL = 0.01
+#: Filter unit of a lag coefficient (dimensionless, in [0, 0.95]).
+_LAG_COEF_SCALE = 0.1
+#: The largest lag coefficient the model applies (a 195 s lag at 10 s samples): a sigma point
+#: beyond it would make the reading a near-constant.
+_LAG_COEF_MAX = 0.95
 #: Where the closed-loop observation carries the valve command (fcc_env.CLOSED_LOOP_CHANNELS).
 _VALVE_CHANNEL = N_MEASUREMENTS
 _NO_MULT = np.ones(NO_FAULT.shape[0])
@@ -81,7 +89,7 @@ _I_COKE, _I_SUBSTEPS, _I_CLOSED = 0, 1, 2
 def _physical(z, obs, model, x, u, p) -> None:
     """The plant's state ``x``, inputs ``u`` and the estimated parameters in ``p`` at filter
     point ``z`` (``p``'s other entries are the given parameters, :func:`work_vectors`)."""
-    scale, ref, _, u_nom, pslot, pindex, ints, _ = model
+    scale, ref, _, u_nom, pslot, pindex, ints, _, _ = model
     for i in range(x.shape[0]):
         x[i] = ref[i] + scale[i] * z[i]
     for i in range(u.shape[0]):
@@ -97,6 +105,16 @@ def _physical(z, obs, model, x, u, p) -> None:
     for j in range(pslot.shape[0]):
         s = pslot[j]
         p[pindex[j]] = ref[s] + scale[s] * z[s]
+
+
+@njit_kernel
+def _lagged(z, model, j, value):
+    """The ``j``-th lagged channel's reading at filter point ``z`` when the true value is
+    ``value``: ``a·L + (1 − a)·value``, ``a`` the lag's coefficient clipped to [0, max]."""
+    scale, ref, lags = model[0], model[1], model[8]
+    c, s_l = lags[j, 0], z.shape[0] - lags.shape[0] + j
+    a = min(max(ref[c] + scale[c] * z[c], 0.0), _LAG_COEF_MAX)
+    return a * (ref[s_l] + scale[s_l] * z[s_l]) + (1.0 - a) * value
 
 
 @njit_kernel
@@ -118,12 +136,18 @@ def fcc_transition(z, obs, model, x, u, p, out) -> None:
     inputs held over this one; the random walks' states unchanged (their noise is ``Q``).
     ``x``, ``u``, ``p`` are work vectors, ``p`` holding the given parameters
     (:func:`work_vectors`)."""
-    scale, ref, _, _, _, _, ints, reals = model
+    scale, ref, _, _, _, _, ints, reals, lags = model
     _physical(z, obs, model, x, u, p)
+    n_walk = z.shape[0] - lags.shape[0]  # the lagged readings come last
+    if lags.shape[0]:  # each lagged reading takes this sample's value (out[:8] as scratch)
+        measure_core(x, u, p, out[:N_MEASUREMENTS])
+        for j in range(lags.shape[0]):
+            s_l, ch = n_walk + j, lags[j, 1]
+            out[s_l] = (_lagged(z, model, j, out[ch]) - ref[s_l]) / scale[s_l]
     step_kernel(x, u, p, NO_FAULT, _NO_MULT, reals[0], ints[_I_SUBSTEPS])
     for i in range(N_STATES):
         out[i] = (x[i] - ref[i]) / scale[i]
-    for i in range(N_STATES, z.shape[0]):
+    for i in range(N_STATES, n_walk):
         out[i] = z[i]
 
 
@@ -134,6 +158,9 @@ def fcc_measure(z, obs, model, x, u, p, out) -> None:
     :func:`fcc_transition`."""
     _physical(z, obs, model, x, u, p)
     measure_core(x, u, p, out)
+    lags = model[8]
+    for j in range(lags.shape[0]):
+        out[lags[j, 1]] = _lagged(z, model, j, out[lags[j, 1]])
 
 
 @njit_kernel
@@ -297,6 +324,24 @@ class FCCFilterModel:
             ref.append(value)
             q.append(rel * rel)
             p0.append(rel0 * rel0)
+        lag_rows = []
+        if config.sensor_lags:
+            y0 = np.empty(N_MEASUREMENTS)
+            measure_core(x0, NOMINAL_INPUTS.copy(), p_base, y0)
+            for ch_name in config.sensor_lags:  # the coefficients
+                lag_rows.append([len(names), MEASUREMENT_NAMES.index(ch_name)])
+                names.append(f"lag_coef[{ch_name}]")
+                scale.append(_LAG_COEF_SCALE)
+                ref.append(config.lag_coefficient_prior)
+                q.append((config.lag_walk_std / _LAG_COEF_SCALE) ** 2)
+                p0.append((config.lag_coefficient_std / _LAG_COEF_SCALE) ** 2)
+            for ch_name in config.sensor_lags:  # the lagged readings, last
+                names.append(f"lag[{ch_name}]")
+                scale.append(1.0)
+                ref.append(float(y0[MEASUREMENT_NAMES.index(ch_name)]))
+                q.append(st * st)
+                p0.append(config.initial_state_std**2)
+        lag_arr = np.array(lag_rows, dtype=np.int64).reshape(-1, 2)
         scale_a, ref_a = np.array(scale), np.array(ref)
         ints = np.array([coke, config.rk4_substeps, int(config.closed_loop)], dtype=np.int64)
         reals = np.array([config.sample_time_s / config.rk4_substeps])
@@ -309,6 +354,7 @@ class FCCFilterModel:
             np.array(pindex, dtype=np.int64),
             ints,
             reals,
+            lag_arr,
         )
         steps = (config.air_step_std_rel * u_read[0], config.step_std_C, config.step_std_C)
         reads = [MEASUREMENT_NAMES.index(name) for name in ESTIMATED_INPUTS]  # their channels

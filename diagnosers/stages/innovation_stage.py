@@ -17,6 +17,11 @@ Basseville & Nikiforov 1993, ch. 7):
    that the *union* alarms on the target share of the calibration samples, so that no
    statistic's scale buys it the false alarms.
 
+Optionally (``bias_memory``) the innovations first lose their slowly varying mean
+(:class:`BiasTracker`): a model that is wrong in a way it does not estimate (a plant's
+undeclared heat loss, a drifting activity) leaves a per-plant bias that a 1000-sample GLR
+accumulates into an alarm; what is tested then is a *change* against the recent past.
+
 Used by ``ukf-glr`` (:mod:`diagnosers.filters.ukf_glr`) and by the reachable-bound reference
 row (:mod:`evaluation.tracks.filter_bound`), the same formulas in both.
 
@@ -42,6 +47,7 @@ from fcc_common.validation import Integer, Real, check, invalid
 __all__ = [
     "DEFAULT_GLR_WINDOW",
     "OMNIBUS_VARIANCE",
+    "BiasTracker",
     "InnovationStage",
     "union_limits",
     "variance_llr",
@@ -52,6 +58,53 @@ __all__ = [
 DEFAULT_GLR_WINDOW = 1000
 #: The omnibus CUSUM's alternative: the innovations' covariance times this.
 OMNIBUS_VARIANCE = 2.0
+
+
+class BiasTracker:
+    """Each channel's slowly varying mean of the whitened innovations, removed as it goes.
+
+    ``out_t = (e_t − m_{t−1}) / sqrt(1 + var m_{t−1})`` with ``m`` the running mean of the
+    finite samples so far, turning into an exponential average of memory ``memory`` samples
+    (``λ_t = max(1/k, 1/memory)``); ``var m`` is its variance on white unit innovations, so
+    that ``out`` stays white and of unit variance under the healthy model (the recursive
+    residuals of a constant mean) while a constant bias leaves it within ``memory`` samples.
+    A step (a fault) passes at once and fades over ``memory`` samples. A sample with a
+    non-finite entry passes as NaN and is not learnt from.
+
+    >>> t = BiasTracker(100); e = np.full((500, 1), 0.7)
+    >>> out = t.filter(e); float(abs(out[-1, 0])) < 1e-9, float(out[0, 0])
+    (True, 0.7)
+    """
+
+    def __init__(self, memory: int) -> None:
+        self.memory = check("memory", memory, Integer(1))
+        self.reset()
+
+    def reset(self) -> None:
+        self._m: np.ndarray | None = None
+        self._var = 0.0
+        self._k = 0
+
+    def update(self, e: np.ndarray) -> np.ndarray:
+        """The de-biased ``(n,)`` of one sample ``e`` ``(n,)``."""
+        e = np.asarray(e, dtype=np.float64)
+        if self._m is None:
+            self._m = np.zeros_like(e)
+        if not np.isfinite(e).all():
+            return np.full_like(e, np.nan)
+        out = (e - self._m) / math.sqrt(1.0 + self._var)
+        lam = max(1.0 / (self._k + 1), 1.0 / self.memory)
+        self._m += lam * (e - self._m)
+        self._var = (1.0 - lam) ** 2 * self._var + lam * lam
+        self._k += 1
+        return out
+
+    def filter(self, e: np.ndarray) -> np.ndarray:
+        """The de-biased ``(T, n)`` of a whole sequence ``e`` ``(T, n)``, from a fresh start
+        (the tracker's own state is left alone)."""
+        fresh = BiasTracker(self.memory)
+        e = np.asarray(e, dtype=np.float64)
+        return np.array([fresh.update(x) for x in e]).reshape(e.shape)
 
 
 def union_limits(stats: np.ndarray, target: float, *, iterations: int = 40) -> np.ndarray:
@@ -98,6 +151,9 @@ class InnovationStage:
             each; ``k`` may be 0: the omnibus alone).
         window: the GLR's onset search window [samples], ≥ 1.
         omnibus_variance: the omnibus CUSUM's alternative covariance factor, > 1.
+        bias_memory: when set, the innovations lose their slowly varying mean
+            (:class:`BiasTracker` of this memory, samples) before both tests; ``None`` (the
+            default): tested as they are.
 
     Statistics, in order: ``glr[0..k−1]``, then the omnibus. A non-finite innovation (a sample
     the filter skipped) counts as zero: it carries no evidence.
@@ -112,6 +168,7 @@ class InnovationStage:
         *,
         window: int = DEFAULT_GLR_WINDOW,
         omnibus_variance: float = OMNIBUS_VARIANCE,
+        bias_memory: int | None = None,
     ) -> None:
         d = np.asarray(directions, dtype=np.float64)
         if d.ndim != 2:
@@ -121,8 +178,12 @@ class InnovationStage:
         self.omnibus_variance = check(
             "omnibus_variance", omnibus_variance, Real(1.0, 100.0, closed="right")
         )
+        self.bias_memory = (
+            None if bias_memory is None else check("bias_memory", bias_memory, Integer(1))
+        )
         self._glr = DirectionalGLR(self.window)
         self._cusum = CUSUM(0.0)
+        self._bias = None if self.bias_memory is None else BiasTracker(self.bias_memory)
 
     @property
     def n_statistics(self) -> int:
@@ -136,13 +197,16 @@ class InnovationStage:
 
     def statistics(self, e: np.ndarray) -> np.ndarray:
         """The statistics ``(T, k + 1)`` of one sequence of innovations ``e`` ``(T, n)``."""
-        a, llr = self._parts(np.asarray(e, dtype=np.float64))
+        e = np.asarray(e, dtype=np.float64)
+        if self._bias is not None:
+            e = self._bias.filter(e)
+        a, llr = self._parts(e)
         glr = self._glr.filter(a) if a.shape[1] else np.zeros((a.shape[0], 0))
         return np.column_stack([glr, self._cusum.filter(llr[:, None])])
 
     def matched(self, e: np.ndarray) -> np.ndarray:
         """``(T, k + 1)``: the matched innovations ``d_gᵀe_t`` and the NIS (what each statistic
-        accumulates; the decisions' residual)."""
+        accumulates, before any de-biasing; the decisions' residual)."""
         e = np.asarray(e, dtype=np.float64)
         clean = np.where(np.isfinite(e), e, 0.0)
         return np.column_stack([clean @ self.directions.T, np.sum(clean**2, axis=-1)])
@@ -151,11 +215,16 @@ class InnovationStage:
         """Start a new sequence for :meth:`step`."""
         self._glr.reset()
         self._cusum.reset()
+        if self._bias is not None:
+            self._bias.reset()
 
     def step(self, e: np.ndarray) -> np.ndarray:
         """The statistics ``(k + 1,)`` after one more innovation ``(n,)``; equals the same row
         of :meth:`statistics` (to rounding: the GLR sums in another order)."""
-        a, llr = self._parts(np.asarray(e, dtype=np.float64))
+        e = np.asarray(e, dtype=np.float64)
+        if self._bias is not None:
+            e = self._bias.update(e)
+        a, llr = self._parts(e)
         glr = self._glr.update(a) if a.shape[0] else np.zeros(0)
         return np.concatenate([glr, self._cusum.update(np.atleast_1d(llr))])
 
