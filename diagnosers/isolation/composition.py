@@ -1,5 +1,5 @@
 """The per-sample composition of ``catalogue-isolator``'s members: which faults are named
-(:class:`Composition`; the rules are :mod:`diagnosers.isolation.catalogue`'s, steps 1-4).
+(:class:`Composition`; the rules are :mod:`diagnosers.isolation.catalogue_isolator`'s, steps 1-4).
 
 Pure: it reads each member's alarm and name per sample, and holds what it needs to decide the
 next one; the same code streams and runs a whole episode, so ``update`` equals ``detect``.
@@ -14,7 +14,7 @@ __all__ = ["Composition"]
 
 class Composition:
     """The per-sample union of the members' confirmed names (module docstring of
-    :mod:`diagnosers.isolation.catalogue`, steps 1-4).
+    :mod:`diagnosers.isolation.catalogue_isolator`, steps 1-4).
 
     Args:
         claims: per member, the names it may say (others are no evidence).

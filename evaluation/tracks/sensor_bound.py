@@ -90,9 +90,27 @@ def _run(est: FCCStateEstimator, M: np.ndarray, P: np.ndarray, Y: np.ndarray, ke
     w = sigma_weights(n, cfg.alpha, cfg.beta, cfg.kappa)
     gate = math.inf if cfg.step_gate is None else float(cfg.step_gate)
     fcc_filter_batch(
-        m.model, M, P, Y, m.q, m.r_abs, m.r_rel, m.gate_idx, m.gate_lin, gate, w,
-        m.n_scratch, innov, stdz, white, S, post, post_sd, jumps, status,
-    )  # fmt: skip
+        m.model,
+        M,
+        P,
+        Y,
+        m.q,
+        m.r_abs,
+        m.r_rel,
+        m.gate_idx,
+        m.gate_lin,
+        gate,
+        w,
+        m.n_scratch,
+        innov,
+        stdz,
+        white,
+        S,
+        post,
+        post_sd,
+        jumps,
+        status,
+    )
     return white, S
 
 

@@ -14,7 +14,7 @@ import pytest
 import diagnosers
 import fcc_env
 from diagnosers import Episode
-from diagnosers.isolation.catalogue import signal_fault
+from diagnosers.isolation.catalogue_isolator import signal_fault
 from diagnosers.isolation.composition import Composition
 
 
