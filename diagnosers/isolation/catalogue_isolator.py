@@ -289,6 +289,18 @@ class CatalogueIsolator(Diagnoser):
         faults = () if d.isolates else tuple(signal_fault(s) for s in d.signal_names_)
         return _Member(d, claims, several, confirm, faults)
 
+    def _new_composition(self) -> Composition:
+        """The members' composition in a fresh state (the fitted one, or a whole episode's)."""
+        return Composition(
+            [m.claims for m in self.members_],
+            self.classes_,
+            confirm=self.confirm,
+            hold=self.hold,
+            several=[m.several for m in self.members_],
+            defers=self.defers_,
+            confirms=[m.confirm for m in self.members_],
+        )
+
     def _finish(self) -> None:
         self.signal_names_ = (
             *(
@@ -298,15 +310,7 @@ class CatalogueIsolator(Diagnoser):
             ),
             "faults named",
         )
-        self.composition_ = Composition(
-            [m.claims for m in self.members_],
-            self.classes_,
-            confirm=self.confirm,
-            hold=self.hold,
-            several=[m.several for m in self.members_],
-            defers=self.defers_,
-            confirms=[m.confirm for m in self.members_],
-        )
+        self.composition_ = self._new_composition()
 
     # ---- detection -----------------------------------------------------------------------------
     def _reset(self) -> None:
@@ -350,15 +354,7 @@ class CatalogueIsolator(Diagnoser):
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The composition of the members' :meth:`member_outputs` over a whole episode, from a
         fresh state: ``(alarm (T,), diagnosis (T,), names held (T,))``."""
-        comp = Composition(
-            [m.claims for m in self.members_],
-            self.classes_,
-            confirm=self.confirm,
-            hold=self.hold,
-            several=[m.several for m in self.members_],
-            defers=self.defers_,
-            confirms=[m.confirm for m in self.members_],
-        )
+        comp = self._new_composition()
         T = len(outputs[0][0])
         alarm, diagnosis, n_named = np.zeros(T, bool), np.empty(T, dtype=object), np.zeros(T)
         for k in range(T):
