@@ -16,6 +16,8 @@
 ``task_plan``          ``python -m bench.task_plan --track all``: every task of a leaderboard
                        run, counted without running the long ones, with sampled costs and the
                        same projection
+``task_costs``         ``task_plan``'s measured part: a track at sample sizes through the real
+                       drivers, timed, and a pool worker's start-up
 ``amdahl``             Amdahl's law and its fit (the serial fraction), for the two above and
                        ``scaling``
 ``loop_speed``         ``python -m bench.loop_speed``: wall time of the modelling loop
