@@ -24,8 +24,6 @@ import torch
 
 import diagnosers
 from diagnosers import Diagnoser
-from diagnosers.bank.relations import required_channels
-from diagnosers.conformance import default_episodes
 from fcc_common.safe_files import (
     MAX_FILE_BYTES,
     MAX_INFLATED_BYTES,
@@ -37,21 +35,13 @@ from fcc_common.safe_files import (
 
 
 @pytest.fixture(scope="module")
-def saved(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
-    """Every registered diagnoser, fitted with its fast parameters and saved once."""
+def saved(
+    tmp_path_factory: pytest.TempPathFactory, fast_fitted: dict[str, Diagnoser]
+) -> dict[str, Path]:
+    """Every registered diagnoser, fitted with its fast parameters (tests/diagnosers/conftest.py)
+    and saved once."""
     root = tmp_path_factory.mktemp("saved")
-    data = {False: default_episodes(), True: None}
-    out = {}
-    for name in diagnosers.available():
-        closed = "u_F" in required_channels(name)  # needs the closed-loop plant's channels
-        if data[closed] is None:
-            data[closed] = default_episodes(closed_loop=True)
-        train, _, faulty = data[closed]
-        cls = diagnosers.diagnoser_class(name)
-        d = cls(**cls.fast_params())
-        d.fit(train + (faulty if cls.isolates else []))
-        out[name] = d.save(root / name)
-    return out
+    return {name: d.save(root / name) for name, d in fast_fitted.items()}
 
 
 def _copy(saved: dict[str, Path], name: str, tmp_path: Path) -> Path:

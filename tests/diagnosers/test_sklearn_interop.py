@@ -42,24 +42,20 @@ def _closed_loop(d: Diagnoser) -> bool:
     return "u_F" in read_channels(d)
 
 
-@pytest.fixture(scope="module")
-def episodes() -> dict[bool, Episodes]:
-    return {cl: default_episodes(1000, 900, closed_loop=cl) for cl in (False, True)}
-
-
 def _fit(d: Diagnoser, episodes: dict[bool, Episodes]) -> Diagnoser:
     train, _, faulty = episodes[_closed_loop(d)]
     return d.fit(train + (faulty if d.isolates else []))
 
 
 @pytest.fixture(scope="module")
-def fitted(episodes: dict[bool, Episodes]) -> dict[str, Diagnoser]:
-    """One fitted instance per registered diagnoser (fast hyperparameters)."""
-    out = {}
-    for name in NAMES:
-        cls = diagnosers.diagnoser_class(name)
-        out[name] = _fit(diagnosers.make(name, **cls.fast_params()), episodes)
-    return out
+def episodes(default_data: dict[bool, Episodes]) -> dict[bool, Episodes]:
+    return default_data  # tests/diagnosers/conftest.py: simulated once per session
+
+
+@pytest.fixture(scope="module")
+def fitted(fast_fitted: dict[str, Diagnoser]) -> dict[str, Diagnoser]:
+    """One fitted instance per registered diagnoser (fast hyperparameters; shared, read only)."""
+    return fast_fitted
 
 
 # ---- clone -------------------------------------------------------------------------------------
