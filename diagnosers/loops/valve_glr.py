@@ -101,8 +101,9 @@ class ValveGLR(Diagnoser):
             default 30) whose step GLR against the reference mean kept from its onset is
             held (0: no hold, the windowed test alone, which forgets a bias once its onset
             leaves the window).
-        hold_threshold: the held GLR's limit; the hold ends when it falls to it (default
-            100).
+        hold_threshold: the held GLR's limit, at most ``bias_threshold``; the hold ends when
+            it falls to it (default 100; the smallest valve bias of the ``actuator`` track
+            holds it at 300 and more, healthy loops never start one: lab/stiction-detection.md).
 
     Decision arrays, names ``stuck GLR``, ``bias GLR``, ``share lost``, ``samples stuck``,
     ``bias held GLR``: ``signal`` the two GLRs, the fitted ``a``, the stuck GLR's onset age
@@ -126,6 +127,15 @@ class ValveGLR(Diagnoser):
 
     def _validate_params(self) -> None:
         check_params(self.get_params(), VALVE_GLR_CONSTRAINTS)
+        if self.hold_threshold > self.bias_threshold:
+            # a hold starts where the bias GLR passes its limit, its GLR then the same: a
+            # higher hold limit would end every hold on its first sample
+            raise invalid(
+                "hold_threshold",
+                self.hold_threshold,
+                f"(0, bias_threshold={self.bias_threshold:g}]",
+                "a hold starts at the bias limit and would end at once",
+            )
 
     # ---- fitting -------------------------------------------------------------------------------
     def _fit(self, episodes: list[Episode]) -> None:

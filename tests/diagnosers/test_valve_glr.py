@@ -157,6 +157,8 @@ def test_bad_settings_and_records_are_refused_by_name(synthetic) -> None:
         diagnosers.make("valve-glr", regressors=["T_rx"]).fit(train)
     with pytest.raises(ValueError, match=r"missing \['T_d1'\]"):
         diagnosers.make("valve-glr", regressors=["T_d1"]).fit(train)
+    with pytest.raises(ValueError, match=r"hold_threshold=300.0 is outside the allowed range"):
+        diagnosers.make("valve-glr", hold_threshold=300.0).fit(train)
     open_loop = Episode.from_batch(fcc_env.simulate_episodes([1000], 300))
     with pytest.raises(ValueError, match=r"missing \['u_F'\]"):
         diagnosers.make("valve-glr").fit(open_loop)
