@@ -12,7 +12,9 @@ onset U(1000, 3000), from each seed's own generator): ``valve-stiction`` U(0.02,
 
 Each episode is run once; the alarm for each pair of limits of ``--limits`` (stuck GLR, bias
 GLR) is the statistics against them, so a sweep costs no more runs (the alarm is exactly
-``stuck > limit or bias > bias limit``, as the detector's). Per pair: r_fd over the healthy
+``stuck > limit or bias > bias limit or held > hold limit``, as the detector's, but the held
+step GLR starts where the detector's own ``bias_threshold`` is passed: sweep that with
+``--set``). Per pair: r_fd over the healthy
 episodes with its 95 % BCa interval and the episodes alarmed at least once (Wilson); per fault
 column r_td, t_dt (samples of 10 s) with intervals and the misses; for the drift, the episodes
 alarmed after the onset. Record in ``lab/stiction-detection.md``.
@@ -123,7 +125,9 @@ def main() -> None:
     ]
 
     def alarms(det, lim):
-        return (det.signal[:, 0] > lim[0]) | (det.signal[:, 1] > lim[1])
+        # the held step GLR (column 4) was taken from the detector's own bias limit
+        held = det.signal[:, 4] > float(d.hold_threshold)
+        return (det.signal[:, 0] > lim[0]) | (det.signal[:, 1] > lim[1]) | held
 
     t_sim = time.process_time()
     healthy = episodes(

@@ -12,7 +12,11 @@ local linear map: no parameter of the plant is read), so the residual
 reads ``gain · (position − command)``: noise while the valve follows its command, and the
 command's moves since the valve stuck once it sticks (:mod:`diagnosers.loops.valve_statistics`:
 a windowed GLR over the onset of that signature, and one of a step for a valve bias). The
-alarm is either GLR over its limit.
+alarm is either GLR over its limit, or the step's GLR held: a valve bias steps ``r`` by
+``gain · bias`` for good (the loop moves the command by the bias to hold T_rx), but the
+windowed test sees the step only while its onset lies in the window. Once the step GLR
+passes its limit, its onset's reference mean is kept and the same GLR is taken over the
+latest ``hold`` samples against it, until it falls to ``hold_threshold``.
 
 What the loop hides a black-box monitor must wait for (the limit cycle,
 :mod:`diagnosers.loops.loop_detectors`); this test sees the first stuck samples, as the command
@@ -33,7 +37,7 @@ from diagnosers.contract import require_varying
 from diagnosers.detection import Decision
 from diagnosers.diagnoser import Diagnoser
 from diagnosers.episode.record import Episode
-from diagnosers.loops.valve_statistics import onset_statistics
+from diagnosers.loops.valve_statistics import OnsetStatistics, onset_statistics, step_glr
 from diagnosers.presets import keyword_init, preset
 from diagnosers.registry import register
 from fcc_common.validation import Integer, OptionSequence, Real, check_params, invalid
@@ -51,6 +55,8 @@ VALVE_GLR_DEFAULTS: dict[str, Any] = {
     "a_min": 1.0,
     "threshold": 15.0,
     "bias_threshold": 100.0,
+    "hold": 30,
+    "hold_threshold": 100.0,
 }
 #: their declarative constraints, checked in ``fit``
 VALVE_GLR_CONSTRAINTS: dict[str, Any] = {
@@ -63,6 +69,8 @@ VALVE_GLR_CONSTRAINTS: dict[str, Any] = {
     "a_min": Real(0.0, 1.0, closed="right", why="the least share of the moves a fault loses"),
     "threshold": Real(0.0, closed="neither", why="the stuck GLR's limit"),
     "bias_threshold": Real(0.0, closed="neither", why="the bias GLR's limit"),
+    "hold": Integer(0, 2000, why="latest samples the held step GLR takes; 0: no hold"),
+    "hold_threshold": Real(0.0, closed="neither", why="the held step GLR's limit"),
 }
 _CONTROLLED, _COMMAND = "T_rx", "u_F"
 
@@ -89,10 +97,18 @@ class ValveGLR(Diagnoser):
             ``actuator`` track, 0.05 of the nominal flow, steps the residual by 5 °C, a GLR
             of about 100 on its first sample; the loop's set-point transients step it by up
             to 1 °C).
+        hold: once the bias GLR passes its limit, the latest samples (at most ``hold``,
+            default 30) whose step GLR against the reference mean kept from its onset is
+            held (0: no hold, the windowed test alone, which forgets a bias once its onset
+            leaves the window).
+        hold_threshold: the held GLR's limit, at most ``bias_threshold``; the hold ends when
+            it falls to it (default 100; the smallest valve bias of the ``actuator`` track
+            holds it at 300 and more, healthy loops never start one: lab/stiction-detection.md).
 
-    Decision arrays, names ``stuck GLR``, ``bias GLR``, ``share lost``, ``samples stuck``:
-    ``signal`` the two GLRs, the fitted ``a`` and the stuck GLR's onset age; ``upper`` the
-    two limits (inf for the others); ``residual`` the regression's residual ``r_t`` (°C).
+    Decision arrays, names ``stuck GLR``, ``bias GLR``, ``share lost``, ``samples stuck``,
+    ``bias held GLR``: ``signal`` the two GLRs, the fitted ``a``, the stuck GLR's onset age
+    and the held step GLR (0 while none is held); ``upper`` the three limits (inf for the
+    others); ``residual`` the regression's residual ``r_t`` (°C).
     """
 
     DEFAULTS: ClassVar[dict[str, Any]] = VALVE_GLR_DEFAULTS
@@ -106,9 +122,20 @@ class ValveGLR(Diagnoser):
     a_min: float
     threshold: float
     bias_threshold: float
+    hold: int
+    hold_threshold: float
 
     def _validate_params(self) -> None:
         check_params(self.get_params(), VALVE_GLR_CONSTRAINTS)
+        if self.hold_threshold > self.bias_threshold:
+            # a hold starts where the bias GLR passes its limit, its GLR then the same: a
+            # higher hold limit would end every hold on its first sample
+            raise invalid(
+                "hold_threshold",
+                self.hold_threshold,
+                f"(0, bias_threshold={self.bias_threshold:g}]",
+                "a hold starts at the bias limit and would end at once",
+            )
 
     # ---- fitting -------------------------------------------------------------------------------
     def _fit(self, episodes: list[Episode]) -> None:
@@ -156,9 +183,17 @@ class ValveGLR(Diagnoser):
 
     def _finish(self) -> None:
         self.gain_ = float(self.coef_[1])
-        self.signal_names_ = ("stuck GLR", "bias GLR", "share lost", "samples stuck")
-        self._upper = np.array([self.threshold, self.bias_threshold, math.inf, math.inf])
-        self._lower = np.full(4, -math.inf)
+        self.signal_names_ = (
+            "stuck GLR",
+            "bias GLR",
+            "share lost",
+            "samples stuck",
+            "bias held GLR",
+        )
+        self._upper = np.array(
+            [self.threshold, self.bias_threshold, math.inf, math.inf, self.hold_threshold]
+        )
+        self._lower = np.full(5, -math.inf)
         self._alpha = 1.0 / (1.0 + float(self.smooth_samples))
 
     # ---- persistence ---------------------------------------------------------------------------
@@ -181,11 +216,16 @@ class ValveGLR(Diagnoser):
 
     # ---- detection -----------------------------------------------------------------------------
     def _reset(self) -> None:
-        size = int(self.window) + int(self.reference)
+        size = max(int(self.window) + int(self.reference), int(self.hold))
         self.r_buf_ = np.zeros(size)
         self.u_buf_ = np.zeros(size)
         self.k_ = 0
         self.smoothed_: np.ndarray | None = None
+        # the held step: the count ``k_`` at its onset's first sample and its reference mean
+        self.held_: tuple[int, float] | None = None
+        # the count from which a reference mean is clean: a held step's samples are not (the
+        # step back down after a transient would be held against them, for good)
+        self.clean_from_ = 0
 
     def _update(self, y: np.ndarray) -> Decision:
         d = y[self.channel_idx_]
@@ -198,7 +238,7 @@ class ValveGLR(Diagnoser):
         size = self.r_buf_.shape[0]
         self.r_buf_[self.k_ % size], self.u_buf_[self.k_ % size] = r, d[1]
         self.k_ += 1
-        n = min(self.k_, size)
+        n = min(self.k_, int(self.window) + int(self.reference))
         order = (np.arange(self.k_ - n, self.k_)) % size  # oldest first
         s = onset_statistics(
             self.r_buf_[order],
@@ -208,9 +248,39 @@ class ValveGLR(Diagnoser):
             reference=int(self.reference),
             a_min=float(self.a_min),
         )
-        signal = np.array([s.stuck, s.bias, s.size, float(s.since)])
-        alarm = bool(s.stuck > self.threshold or s.bias > self.bias_threshold)
+        held = self._held(s)
+        signal = np.array([s.stuck, s.bias, s.size, float(s.since), held])
+        alarm = bool(
+            s.stuck > self.threshold or s.bias > self.bias_threshold or held > self.hold_threshold
+        )
         return Decision(alarm, signal, self._lower.copy(), self._upper.copy(), np.array([r]))
+
+    def _held(self, s: OnsetStatistics) -> float:
+        """The held step GLR (module docstring): taken from the bias GLR's onset when that
+        passes its limit, over the latest ``hold`` samples since, ended at its own limit."""
+        if int(self.hold) == 0:
+            return 0.0
+        start = self.k_ - s.bias_since
+        if (
+            self.held_ is None
+            and s.bias > self.bias_threshold
+            and start - int(self.reference) >= self.clean_from_
+        ):
+            self.held_ = (start, s.bias_reference)
+        if self.held_ is None:
+            return 0.0
+        start, mean = self.held_
+        n = min(self.k_ - start, int(self.hold))
+        size = self.r_buf_.shape[0]
+        latest = self.r_buf_[np.arange(self.k_ - n, self.k_) % size]
+        glr = float(
+            step_glr(
+                float(np.sum(latest - mean)), n, sigma=self.sigma_, reference=int(self.reference)
+            )
+        )
+        if glr <= self.hold_threshold:
+            self.held_, self.clean_from_ = None, self.k_
+        return glr
 
 
 ValveGLRPartial = preset(

@@ -18,10 +18,14 @@ std ``sigma``, are
   per cent off, which a large command move (a set-point step) turns into a residual
   proportional to ``φ``, fits ``a`` near 0 and is not taken for a sticking valve;
 * **bias**: ``(Σ z)² / (2 σ² n (1 + n / reference))``: a step of unknown size (the reference
-  mean's own noise in the variance).
+  mean's own noise in the variance), :func:`step_glr`.
 
 :func:`onset_statistics` computes both over one buffer (oldest first, the current sample
-last) from suffix sums, O(window) a sample.
+last) from suffix sums, O(window) a sample. A valve bias is a step the loop then hides from
+the controlled variable but not from ``r`` (the command moves by the bias, the position does
+not): the step stays, while the window slides past its onset. :func:`step_glr` on the latest
+samples against the reference mean kept from the onset the windowed test found is the same
+GLR with the onset held (``valve-glr``'s ``hold``).
 """
 
 from __future__ import annotations
@@ -30,7 +34,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-__all__ = ["OnsetStatistics", "onset_statistics"]
+__all__ = ["OnsetStatistics", "onset_statistics", "step_glr"]
 
 
 class OnsetStatistics(NamedTuple):
@@ -40,6 +44,21 @@ class OnsetStatistics(NamedTuple):
     bias: float  #: the step's
     size: float  #: the stuck GLR's fitted share of the moves lost, ``a`` (0: none)
     since: int  #: samples since its onset (0: none)
+    bias_since: int = 0  #: samples since the bias GLR's best onset (0: none)
+    bias_reference: float = 0.0  #: the reference mean ``r̄`` at that onset
+
+
+def step_glr(
+    sum_z: np.ndarray | float, n: np.ndarray | float, *, sigma: float, reference: int
+) -> np.ndarray | float:
+    """The step's GLR ``(Σ z)² / (2 σ² n (1 + n / reference))`` of ``n`` samples whose
+    deviations from a ``reference``-sample mean sum to ``sum_z`` (white noise of std
+    ``sigma``; the reference mean's own variance ``σ² / reference`` is in the denominator).
+
+    >>> round(step_glr(3.0, 10, sigma=0.2, reference=20), 2)
+    7.5
+    """
+    return sum_z * sum_z / (2.0 * sigma * sigma * n * (1.0 + n / reference))
 
 
 def onset_statistics(
@@ -84,9 +103,12 @@ def onset_statistics(
     with np.errstate(invalid="ignore", divide="ignore"):
         a = np.clip(np.where(s_phi2 > 0.0, s_zphi / s_phi2, 0.0), a_min, 1.0)
     stuck = np.maximum(a * s_zphi - 0.5 * a * a * s_phi2, 0.0) / var
-    s_z = a_r - n * mean
-    bias = s_z * s_z / (2.0 * var * n * (1.0 + n / reference))
+    bias = step_glr(a_r - n * mean, n, sigma=sigma, reference=reference)
+    step = int(np.argmax(bias))
+    held = (int(n[step]), float(mean[step]))
     best = stuck.shape[0] - 1 - int(np.argmax(stuck[::-1]))  # ties: the latest onset
     if stuck[best] <= 0.0:
-        return OnsetStatistics(0.0, float(bias.max()), 0.0, 0)
-    return OnsetStatistics(float(stuck[best]), float(bias.max()), float(a[best]), int(n[best]))
+        return OnsetStatistics(0.0, float(bias[step]), 0.0, 0, *held)
+    return OnsetStatistics(
+        float(stuck[best]), float(bias[step]), float(a[best]), int(n[best]), *held
+    )

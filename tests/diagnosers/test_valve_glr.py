@@ -33,20 +33,25 @@ def test_the_stuck_glr_is_the_gaussian_llr_of_the_stuck_path() -> None:
     step = np.r_[np.zeros(60), np.full(10, 0.3)]
     b = onset_statistics(step, np.zeros(70), gain=0.5, sigma=0.2, reference=20, a_min=0.5)
     assert b.bias == pytest.approx(3.0**2 / (2 * 0.04 * 10 * 1.5), rel=1e-9)
+    assert (b.bias_since, b.bias_reference) == (10, 0.0)  # the step's onset and its r̄
     assert onset_statistics(r[:20], u[:20], gain=0.5, sigma=0.2, reference=20, a_min=0.5) == (
         0.0,
         0.0,
         0.0,
         0,
+        0,
+        0.0,
     )
 
 
-def _loop(S: float = 0.0, onset: int | None = None, n: int = 2500, seed: int = 0) -> Episode:
+def _loop(
+    S: float = 0.0, onset: int | None = None, n: int = 2500, seed: int = 0, bias: float = 0.0
+) -> Episode:
     """A quasi-steady loop shaped like the plant's T_rx loop (sample 10 s): T_rx = 0.25 °C per
     kg/s of valve position + 0.6 T_rg2 (a slow walk) − 0.1 T_fp, noise 0.3 °C on each reading,
     an integral-dominated PI law (Kc 0.26, Ts/τI 2.3) on the measurement, set-point steps of up
     to ±6 °C every 300 samples (from sample 0), the valve sticking (S, J = S/2) from
-    ``onset``."""
+    ``onset``, or passing ``bias`` kg/s more than its command from ``onset`` when S = 0."""
     rng = np.random.default_rng(seed)
     u, e_prev, t_rg2, t_fp, sp = 400.0, 0.0, 700.0, 200.0, 520.0
     valve: StictionValve | None = None
@@ -54,9 +59,11 @@ def _loop(S: float = 0.0, onset: int | None = None, n: int = 2500, seed: int = 0
     for k in range(n):
         if k % 300 == 0:
             sp = 520.0 + rng.uniform(-6.0, 6.0)
-        if onset is not None and k == onset:
+        if onset is not None and k == onset and S > 0.0:
             valve = StictionValve(u)
         position = u if valve is None else valve.move(u, S, S / 2)
+        if onset is not None and k >= onset:
+            position += bias
         t_rg2 += rng.normal(0.0, 0.05)
         t_rx = 0.25 * position + 0.6 * t_rg2 - 0.1 * t_fp - 0.0
         y = np.array([t_rx, u, t_rg2, t_fp]) + rng.normal(0.0, 0.3, 4) * [1, 0, 1, 1]
@@ -87,6 +94,33 @@ def test_a_valve_that_sticks_is_found_within_tens_of_samples(synthetic) -> None:
         alarm = d.detect(ep).alarm
         assert not alarm[:1480].any()
         assert alarm[1480:1540].any()
+
+
+def test_a_valve_bias_stays_alarmed_after_the_loop_has_taken_it_out(synthetic) -> None:
+    d = diagnosers.make("valve-glr").fit(synthetic["train"])
+    ep = _loop(onset=1000, n=1800, seed=30, bias=20.0)  # 5 °C of residual, for good
+    det = d.detect(ep)
+    assert not det.alarm[:1000].any()
+    # alarmed from the sample after its onset (a GLR of about 100 on the onset's own) to the
+    # end, the set-point steps at 1200 and 1500 included; the windowed test alone forgets it
+    # once the onset leaves its window
+    assert det.alarm[1001:].all()
+    windowed = diagnosers.make("valve-glr", hold=0).fit(synthetic["train"]).detect(ep).alarm
+    assert windowed[1001] and not windowed[1100:].any()
+    # the held GLR reads the step against the reference mean kept from before its onset
+    assert det.signal[1500, 4] > 10 * d.hold_threshold
+
+
+def test_a_transient_is_held_only_while_it_lasts(synthetic) -> None:
+    d = diagnosers.make("valve-glr").fit(synthetic["train"])
+    ep = synthetic["healthy"][0]
+    y = np.array(ep.y, copy=True)
+    y[1000:1020, 0] += 3.0  # the residual steps up by 3 °C (about 8 σ) for 20 samples
+    alarm = d.detect(Episode(y, channels=CHANNELS, sample_time_s=10.0)).alarm
+    assert alarm[1000:1010].any()
+    # released once the latest samples are back at the kept mean; the step back down, whose
+    # reference mean holds the transient, is not held in its turn
+    assert not alarm[1100:].any()
 
 
 @pytest.mark.parametrize("name", ["valve-glr", "valve-glr-partial"])
@@ -123,6 +157,8 @@ def test_bad_settings_and_records_are_refused_by_name(synthetic) -> None:
         diagnosers.make("valve-glr", regressors=["T_rx"]).fit(train)
     with pytest.raises(ValueError, match=r"missing \['T_d1'\]"):
         diagnosers.make("valve-glr", regressors=["T_d1"]).fit(train)
+    with pytest.raises(ValueError, match=r"hold_threshold=300.0 is outside the allowed range"):
+        diagnosers.make("valve-glr", hold_threshold=300.0).fit(train)
     open_loop = Episode.from_batch(fcc_env.simulate_episodes([1000], 300))
     with pytest.raises(ValueError, match=r"missing \['u_F'\]"):
         diagnosers.make("valve-glr").fit(open_loop)
