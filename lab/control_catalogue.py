@@ -1,8 +1,8 @@
 """The value of information per fault class on FCC-control-v0's whole catalogue (issue 43 item 7).
 
 Runs validation seeds (5000..) of ``gym.make("FCC-control-v0", catalogue="all")`` under three
-policies: the best fixed set points of the healthy plant (the fault-blind policy of the table:
-PPO on these draws could not be trained here, lab/control-catalogue.md says why), the
+policies: the best fixed set points of the healthy plant (the fault-blind policy of the table;
+a PPO agent joins with ``--ppo``, lab/control-catalogue.md section 5), the
 sensor-correcting supervisor (its frozen-reading check; no diagnoser) and the oracle
 (:class:`evaluation.control.fault_oracle.FaultOracle`). Per episode it writes the drawn fault
 and the three returns to ``--out`` (JSON lines); ``--report`` reads such files and prints the
