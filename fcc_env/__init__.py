@@ -7,7 +7,9 @@ The modules, by job:
   side, the measurement map and the steady state; :mod:`~fcc_env.integrator`: RK4 stepping;
 - :mod:`~fcc_env.faults`: the fault registry (:data:`FAULTS`, :func:`register_fault`);
   :mod:`~fcc_env.sensor_faults`: the sensor faults on a chosen measured channel (bias, drift,
-  stuck, noise, dropout), registered on import; :mod:`~fcc_env.actuator_faults`: the actuator
+  stuck, noise, dropout), registered on import, and :mod:`~fcc_env.sensor_kernel`, their
+  compiled transmitter (all but the dropout), which the native vector env runs too;
+  :mod:`~fcc_env.actuator_faults`: the actuator
   faults (valve stiction, bias, stuck; blower capacity), registered on import, with
   :mod:`~fcc_env.stiction`, the valve-stiction model of Choudhury et al. 2005;
   :mod:`~fcc_env.scenarios`: :class:`FaultSpec`, the one typed fault request;
@@ -22,7 +24,7 @@ The modules, by job:
   linearised closed loop's eigenvalues; :mod:`~fcc_env.closed_loop_report` and
   :mod:`~fcc_env.closed_loop_figures`: the closed-loop report (responses, masking, terminations);
 - :mod:`~fcc_env.control_task`: ``FCC-control-v0``, the closed loop with an economic reward;
-  :mod:`~fcc_env.control_draws`: what its random episodes draw (the paper's faults or the whole catalogue, by fault class);
+  :mod:`~fcc_env.control_draws`: what its random episodes draw (the paper's faults, the whole catalogue by fault class, or the sensor faults);
 - :mod:`~fcc_env.vector_env`, :mod:`~fcc_env.control_vector`: native vector envs (N episodes in
   one compiled loop) of ``FCC-v0``/``FCC-closedloop-v0`` and of ``FCC-control-v0``;
 - :mod:`~fcc_env.plotting`, :mod:`~fcc_env.render`: figures and the env's ``rgb_array`` frame;

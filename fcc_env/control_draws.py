@@ -27,31 +27,47 @@ The draw of ``"all"`` (:func:`draw_catalogue_fault`), in this order, each unifor
 Every draw consumes the same numbers, so that the episode's noise never depends on the fault.
 The draw reads a generator of its own (the env spawns it from its ``np_random``): the plant's
 noise and program stay those of the same seed under any fixed fault.
+
+``catalogue="sensor"`` is the same draw over two classes only, healthy and sensor (each half
+of the episodes; then the scenario, the channel, the onset and the size as above): the issue's
+"sensor-fault scenarios" as a training draw. It is what the native vector env
+(:class:`fcc_env.control_vector.FCCControlVectorEnv`) carries besides the paper's draw: its
+compiled loop has the sensor faults' transmitter (:mod:`fcc_env.sensor_kernel`) but no
+actuator device, so ``"all"`` (a quarter of it actuator faults) runs on Python envs only
+(``vectorization_mode="sync"``). Why a catalogue of its own rather than ``"all"`` with the
+actuator draws skipped: that would be a different draw under the same name on the two paths.
 """
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from enum import StrEnum
+from typing import Any
 
 import numpy as np
 
-from fcc_common.validation import Options, check
-from fcc_env.faults import FAULTS, NOMINAL, fault_definition
+from fcc_common.validation import Options, check, invalid
+from fcc_env.faults import FAULTS, NOMINAL, RANDOM_SCENARIO, fault_definition
 from fcc_env.scenarios import FaultSpec
 
 __all__ = [
     "CATALOGUES",
+    "DRAWN_FIELDS",
     "LEFT_OUT",
     "LOOP_CHANNELS",
     "FaultClass",
+    "catalogue_classes",
     "catalogue_option",
+    "check_drawn_fields",
     "class_scenarios",
     "draw_catalogue_fault",
+    "draws_random",
     "fault_class",
 ]
 
-#: The catalogues a random episode draws from: the paper's faults (today's draw) or all.
-CATALOGUES: tuple[str, ...] = ("paper", "all")
+#: The catalogues a random episode draws from: the paper's faults (today's draw), all, or the
+#: healthy plant and the sensor faults.
+CATALOGUES: tuple[str, ...] = ("paper", "all", "sensor")
 #: Registered faults the whole catalogue's draw leaves out (module docstring: why).
 LEFT_OUT: tuple[str, ...] = ("sensor-noise", "sensor-dropout")
 #: The measured channels the regulatory loops control (a fault there moves the true process).
@@ -97,11 +113,58 @@ def class_scenarios() -> dict[FaultClass, tuple[str, ...]]:
     return {c: tuple(v) for c, v in out.items()}
 
 
-def draw_catalogue_fault(rng: np.random.Generator, horizon: int) -> FaultSpec:
-    """One episode's fault from the whole catalogue (module docstring: the draw), as a
+#: The env keywords of the fault fields a catalogue draws (a fixed one would be overridden).
+DRAWN_FIELDS: tuple[str, ...] = (
+    "fault",
+    "fault_time",
+    "fault_magnitude",
+    "fault_channel",
+    "fault_profile",
+)
+
+
+def check_drawn_fields(catalogue: str, kwargs: Mapping[str, Any]) -> None:
+    """Refuse env keywords ``kwargs`` that fix a field ``catalogue`` draws (all but
+    ``"paper"`` draw the fault whole), naming them."""
+    fixed = [k for k, v in kwargs.items() if k in DRAWN_FIELDS and v is not None]
+    if catalogue != "paper" and fixed:
+        raise invalid(
+            "catalogue",
+            catalogue,
+            "'paper' with fixed fault fields",
+            f"catalogue={catalogue!r} draws the fault whole; {fixed} would be ignored",
+        )
+
+
+def catalogue_classes(catalogue: str) -> tuple[FaultClass, ...]:
+    """The fault classes ``catalogue`` (``"all"`` or ``"sensor"``) draws, in draw order."""
+    if catalogue_option(catalogue) == "sensor":
+        return (FaultClass.HEALTHY, FaultClass.SENSOR)
+    if catalogue == "all":
+        return tuple(FaultClass)
+    raise invalid("catalogue", catalogue, "'all' or 'sensor'", "'paper' draws through FaultSpec")
+
+
+def draws_random(options: Mapping[str, Any] | None, make_scenario: str) -> bool:
+    """True when a reset's fault is ``scenario="random"`` (the ``make`` scenario
+    ``make_scenario``, or a ``reset`` option's) with no other fault field fixed: the resets
+    whose fault a catalogue draws."""
+    options = options or {}
+    if "fault" in options:
+        return options["fault"] is not None and options["fault"].scenario == RANDOM_SCENARIO
+    keys = set(options) - {"plant_effects"}
+    if keys - {"scenario"}:
+        return False
+    return options.get("scenario", make_scenario) == RANDOM_SCENARIO
+
+
+def draw_catalogue_fault(
+    rng: np.random.Generator, horizon: int, catalogue: str = "all"
+) -> FaultSpec:
+    """One episode's fault from ``catalogue``'s classes (module docstring: the draw), as a
     :class:`FaultSpec` with every field fixed."""
     by_class = class_scenarios()
-    classes = [c for c in FaultClass if by_class[c]]
+    classes = [c for c in catalogue_classes(catalogue) if by_class[c]]
     # a fixed number of draws, whatever comes out
     u_class, u_scenario, u_loop, u_channel, u_scale = rng.random(5)
     onset = int(rng.integers(horizon // 4, max(horizon // 4 + 1, 3 * horizon // 4)))

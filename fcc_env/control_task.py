@@ -7,7 +7,8 @@ layer (the riser outlet temperature on the slide valve, the stage-1 bed temperat
 out of its range is clipped and flagged in ``info["setpoint_clipped"]``). Every episode draws its
 fault (healthy, f1–f4; size and onset as ``scenario="random"`` draws them) unless the
 ``scenario`` keyword fixes it; ``catalogue="all"`` draws from the whole catalogue instead
-(healthy, process, sensor and actuator faults: :mod:`fcc_env.control_draws`). The observation
+(healthy, process, sensor and actuator faults: :mod:`fcc_env.control_draws`), and
+``catalogue="sensor"`` from the healthy plant and the sensor faults. The observation
 is ``FCC-closedloop-v0``'s.
 
 The reward is the unit's economic margin over the sample, in US dollars, minus penalties for
@@ -66,9 +67,13 @@ import gymnasium as gym
 import numpy as np
 
 from fcc_common.validation import Real, check_params, from_fields, invalid
-from fcc_env.control_draws import catalogue_option, draw_catalogue_fault
+from fcc_env.control_draws import (
+    catalogue_option,
+    check_drawn_fields,
+    draw_catalogue_fault,
+    draws_random,
+)
 from fcc_env.env import FCCEnv, closed_loop_keyword, env_id, trend_frame
-from fcc_env.faults import RANDOM_SCENARIO
 from fcc_env.plant import AFTERBURN_WARNING_C, afterburn_delta_C
 from fcc_env.render import WINDOW_SAMPLES
 
@@ -122,8 +127,6 @@ _T_RG1, _T_RG2, _W_SP = 4, 7, 8
 _R_AR, _F_FEED = 1, 4
 
 _PRICE = Real(0.0, 1e7, closed="both")
-# the fault fields catalogue="all" draws (a fixed one would be silently overridden)
-_DRAWN = ("fault", "fault_time", "fault_magnitude", "fault_channel", "fault_profile")
 # afterburn_delta_C's Python body (the same source): the compiled one, called from Python with
 # a list of floats or a transposed array, spent most of the single env's reward on typing its
 # argument (issue 44)
@@ -328,7 +331,7 @@ class FCCControlEnv(gym.Env):
     plus ``economics`` (an :class:`EconomicReward` or a mapping of its
     fields) and ``catalogue`` (what ``scenario="random"`` draws: ``"paper"``, the default,
     healthy or f1–f4 as ``FCC-closedloop-v0`` draws them; ``"all"``, every registered fault by
-    class, :mod:`fcc_env.control_draws`; ``info["scenario"]``, ``info["fault_channel"]`` name
+    class; ``"sensor"``, healthy or a sensor fault: :mod:`fcc_env.control_draws`; ``info["scenario"]``, ``info["fault_channel"]`` name
     the drawn fault). ``info["reward_terms"]`` holds the terms of the step's reward. The plant is an
     ``FCCEnv`` inside (``plant``); spaces and seeding are its own. ``render_mode="rgb_array"``
     draws the plant's closed-loop frame titled ``FCC-control-v0`` with two panels more: the
@@ -350,14 +353,7 @@ class FCCControlEnv(gym.Env):
         self.catalogue = catalogue_option(catalogue)
         regulatory = closed_loop_keyword(regulatory, CONTROL_ENV_ID)
         self.plant = FCCEnv(scenario=scenario, regulatory=regulatory, **kwargs)
-        fixed = [k for k, v in kwargs.items() if k in _DRAWN and v is not None]
-        if self.catalogue == "all" and fixed:
-            raise invalid(
-                "catalogue",
-                self.catalogue,
-                "'paper' with fixed fault fields",
-                f"catalogue='all' draws the fault whole; {fixed} would be ignored",
-            )
+        check_drawn_fields(self.catalogue, kwargs)
         self.observation_space = self.plant.observation_space
         self.action_space = self.plant.action_space
         self.render_mode = self.plant.render_mode
@@ -370,10 +366,10 @@ class FCCControlEnv(gym.Env):
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray, dict[str, Any]]:
         super().reset(seed=seed)
-        if self.catalogue == "all" and self._draws_random(options):
+        if self.catalogue != "paper" and draws_random(options, self.plant.fault_spec.scenario):
             # the draw's own stream (spawned): the plant's noise is that of the same seed
             rng = self.np_random.spawn(1)[0]
-            fault = draw_catalogue_fault(rng, self.plant.horizon)
+            fault = draw_catalogue_fault(rng, self.plant.horizon, self.catalogue)
             options = {**(options or {}), "fault": fault}
             options.pop("scenario", None)
         obs, info = self.plant.reset(seed=seed, options=options)
@@ -381,17 +377,6 @@ class FCCControlEnv(gym.Env):
         self._rewards = deque([0.0], maxlen=WINDOW_SAMPLES)
         self._returns = deque([0.0], maxlen=WINDOW_SAMPLES)
         return obs, info
-
-    def _draws_random(self, options: Mapping[str, Any] | None) -> bool:
-        """True when this reset's fault is ``scenario="random"`` (the ``make`` fault, or a
-        ``reset`` option's) with no other fault field fixed."""
-        options = options or {}
-        if "fault" in options:
-            return options["fault"] is not None and options["fault"].scenario == RANDOM_SCENARIO
-        keys = set(options) - {"plant_effects"}
-        if keys - {"scenario"}:
-            return False
-        return options.get("scenario", self.plant.fault_spec.scenario) == RANDOM_SCENARIO
 
     def step(self, action: Any) -> tuple[np.ndarray, SupportsFloat, bool, bool, dict[str, Any]]:
         obs, _, terminated, truncated, info = self.plant.step(action)

@@ -7,6 +7,18 @@ so a vector env seeded as ``SyncVectorEnv`` seeds its sub-envs gives their rewar
 ``info["reward_terms"]`` bit for bit (``tests/fcc_env/test_control_vector.py``). Through
 Gymnasium: ``gym.make_vec("FCC-control-v0", 256, vectorization_mode="vector_entry_point")``.
 
+**Catalogues** (:data:`NATIVE_CATALOGUES`): ``"paper"`` (the default) and ``"sensor"`` (healthy
+or a sensor fault: bias, drift or stuck, half of them on a loop transmitter;
+:mod:`fcc_env.control_draws`), the issue's sensor-fault scenarios as a training draw. The
+compiled loop applies a transmitter's bias, drift, stuck reading or extra noise before the
+controllers read the measurement (:mod:`fcc_env.sensor_kernel`, the formula the single env
+runs too), so each env draws its fault as ``FCCControlEnv`` does (its own generator, spawned
+per episode) and gives the sync env's numbers bit for bit. ``"all"`` is refused by name: a
+quarter of its draws are actuator faults (valve stiction, bias, stuck, the weak blower), whose
+devices act in Python between the controllers and the plant and are not in the compiled loop;
+run it with ``vectorization_mode="sync"``. A sensor dropout (a per-sample draw) is refused too;
+no catalogue draws it.
+
 >>> envs = FCCControlVectorEnv(2, scenario="nominal")
 >>> _ = envs.reset(seed=0)
 >>> obs, reward, terminated, truncated, info = envs.step(np.zeros((2, 2)))
@@ -19,10 +31,16 @@ from __future__ import annotations
 from typing import Any
 
 import numpy as np
+from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 
 from fcc_common.validation import invalid
-from fcc_env.control_draws import catalogue_option
+from fcc_env.control_draws import (
+    catalogue_option,
+    check_drawn_fields,
+    draw_catalogue_fault,
+    draws_random,
+)
 from fcc_env.control_task import (
     CONTROL_ENV_ID,
     REWARD_TERMS,
@@ -34,9 +52,36 @@ from fcc_env.env import closed_loop_keyword
 from fcc_env.scenarios import DEFAULT_N_SAMPLES
 from fcc_env.vector_env import FCCVectorEnv
 
-__all__ = ["CONTROL_VECTOR_ENTRY_POINT", "FCCControlVectorEnv"]
+__all__ = ["CONTROL_VECTOR_ENTRY_POINT", "NATIVE_CATALOGUES", "FCCControlVectorEnv"]
 
 CONTROL_VECTOR_ENTRY_POINT = "fcc_env.control_vector:FCCControlVectorEnv"
+#: The catalogues the native vector env draws (module doc: why not ``"all"``).
+NATIVE_CATALOGUES: tuple[str, ...] = ("paper", "sensor")
+
+
+class _CataloguePlant(FCCVectorEnv):
+    """:class:`FCCVectorEnv` whose random episodes draw their fault from a catalogue, each env
+    as :meth:`FCCControlEnv.reset <fcc_env.control_task.FCCControlEnv.reset>` draws it: from a
+    generator spawned from the env's own, seeded with the env's seed."""
+
+    def __init__(self, num_envs: int, catalogue: str, **kwargs: Any) -> None:
+        super().__init__(num_envs, **kwargs)
+        self.catalogue = catalogue
+        # each env's FCCControlEnv.np_random (the plant's generator is the parent's _rngs)
+        self._draw_rngs: list[np.random.Generator | None] = [None] * self.num_envs
+
+    def _episode_options(
+        self, b: int, seed: int | None, options: dict[str, Any] | None
+    ) -> dict[str, Any] | None:
+        if seed is not None or self._draw_rngs[b] is None:
+            self._draw_rngs[b] = seeding.np_random(seed)[0]
+        if not draws_random(options, self._template.fault_spec.scenario):
+            return options
+        rng = self._draw_rngs[b].spawn(1)[0]
+        fault = draw_catalogue_fault(rng, self._template.horizon, self.catalogue)
+        options = {**(options or {}), "fault": fault}
+        options.pop("scenario", None)
+        return options
 
 
 class FCCControlVectorEnv(VectorEnv):
@@ -66,22 +111,29 @@ class FCCControlVectorEnv(VectorEnv):
         **kwargs: Any,
     ) -> None:
         self.economics = EconomicReward.from_option(economics)
-        if catalogue_option(catalogue) != "paper":
+        self.catalogue = catalogue_option(catalogue)
+        if self.catalogue not in NATIVE_CATALOGUES:
             raise invalid(
                 "catalogue",
                 catalogue,
-                "'paper' on the native vector env",
-                "its compiled loop carries no sensor or actuator fault; for catalogue='all' use "
+                f"{list(NATIVE_CATALOGUES)} on the native vector env",
+                "its compiled loop carries no actuator fault (valve-stiction, valve-bias, "
+                "valve-stuck, blower-capacity), a quarter of catalogue='all''s draws: use "
+                "catalogue='sensor' (healthy or a sensor fault), or "
                 "gym.make_vec(..., vectorization_mode='sync', catalogue='all')",
             )
-        self.plant = FCCVectorEnv(
-            num_envs,
-            max_episode_steps=max_episode_steps,
-            render_mode=render_mode,
-            scenario=scenario,
-            regulatory=closed_loop_keyword(regulatory, CONTROL_ENV_ID),
+        plant_kwargs = {
+            "max_episode_steps": max_episode_steps,
+            "render_mode": render_mode,
+            "scenario": scenario,
+            "regulatory": closed_loop_keyword(regulatory, CONTROL_ENV_ID),
             **kwargs,
-        )
+        }
+        if self.catalogue == "paper":
+            self.plant = FCCVectorEnv(num_envs, **plant_kwargs)
+        else:
+            check_drawn_fields(self.catalogue, kwargs)  # FCCControlEnv refuses them too
+            self.plant = _CataloguePlant(num_envs, self.catalogue, **plant_kwargs)
         self.num_envs = self.plant.num_envs
         self.max_episode_steps = self.plant.max_episode_steps
         self.single_observation_space = self.plant.single_observation_space

@@ -46,12 +46,16 @@ samples a diagnoser has to name it.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
 
+from fcc_common.validation import invalid
 from fcc_env.faults import FaultDefinition, path_fault, register_fault
 from fcc_env.params import MEASUREMENT_NAMES
+from fcc_env.sensor_kernel import NATIVE_SENSOR_KINDS, NO_SENSOR, sensor_read
 
-__all__ = ["SENSOR_FAULTS", "ChannelSensor"]
+__all__ = ["SENSOR_FAULTS", "ChannelSensor", "compiled_transmitter"]
 
 #: The channel a sensor fault acts on when the request names none: the riser outlet
 #: thermocouple, the controlled temperature a biased reading steers away from its set point.
@@ -62,7 +66,9 @@ class ChannelSensor:
     """One episode's faulty transmitter on one channel (a :class:`fcc_env.faults.SensorPath`).
 
     ``kind``: ``bias``, ``drift``, ``stuck``, ``noise`` or ``dropout``. The held values (stuck,
-    dropout) live here, per episode, because :meth:`read` sees the samples in order.
+    dropout) live here, per episode, because :meth:`read` sees the samples in order. Every kind
+    but the dropout reads through the compiled :func:`fcc_env.sensor_kernel.sensor_read`, the
+    formula the native vector env runs too.
     """
 
     def __init__(
@@ -75,6 +81,9 @@ class ChannelSensor:
         # the dropout draws: one uniform per sample of the episode, from the fault's own stream
         self.lost_draw = rng.random(horizon) if kind == "dropout" else None
         self.last: tuple[float, float] | None = None  # the last delivered (y, z) of the channel
+        self._code = NATIVE_SENSOR_KINDS.get(kind, NO_SENSOR)
+        self._held = np.zeros(2)  # the compiled kinds' last delivered (y, z)
+        self._has_held = False
 
     def dropped(self, k: int, frac: float) -> bool:
         draw = self.lost_draw
@@ -85,25 +94,55 @@ class ChannelSensor:
     def read(self, k: int, y: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, np.ndarray, bool]:
         y = np.array(y, dtype=np.float64, copy=True)
         z = np.array(z, dtype=np.float64, copy=True)
-        frac = float(self.fault.fraction(np.asarray(k)))
-        m, ch = self.fault.magnitude * frac, self.ch
-        lost = False
-        if self.kind == "bias":
-            y[ch] += m
-        elif self.kind == "drift":
-            y[ch] += m * (k - self.fault.onset + 1) * self.hours_per_sample if frac else 0.0
-        elif self.kind == "noise":
-            z[ch] *= 1.0 + m
-        elif self.kind == "stuck" and frac and self.last is not None:
-            held_y, held_z = self.last
-            y[ch] = held_y + (1.0 - m) * (y[ch] - held_y)
-            z[ch] = held_z + (1.0 - m) * (z[ch] - held_z)
-        elif self.kind == "dropout" and self.last is not None and self.dropped(k, frac):
+        f = self.fault
+        if self._code != NO_SENSOR:
+            self._has_held = sensor_read(
+                self._code,
+                k,
+                y,
+                z,
+                self.ch,
+                f.magnitude,
+                f.onset,
+                f.ramp,
+                self.hours_per_sample,
+                self._held,
+                self._has_held,
+            )
+            return y, z, False
+        # the dropout: the last delivered value held on a lost sample
+        frac = float(f.fraction(np.asarray(k)))
+        ch, lost = self.ch, False
+        if self.last is not None and self.dropped(k, frac):
             y[ch], z[ch] = self.last
             lost = True
-        if self.kind != "stuck" or not frac or self.last is None:
-            self.last = (float(y[ch]), float(z[ch]))  # stuck: the value before the onset stays
+        self.last = (float(y[ch]), float(z[ch]))
         return y, z, lost
+
+
+def compiled_transmitter(
+    sensors: tuple[Any, ...], scenario: str
+) -> tuple[int, int, float, int, int]:
+    """The compiled transmitter (:func:`~fcc_env.sensor_kernel.sensor_read`) of an episode's
+    ``sensors`` (:attr:`~fcc_env.episode_setup.PlantSchedule.sensors`), for the native vector
+    env: ``(kind code, channel index, magnitude, onset, ramp)``, kind 0 when there is none; a
+    clear refusal for what it cannot carry (a dropout, a transmitter not of this module, two
+    faulty transmitters)."""
+    if not sensors:
+        return NO_SENSOR, 0, 0.0, -1, 0
+    kinds = [getattr(s, "kind", type(s).__name__) for s in sensors]
+    s = sensors[0]
+    if len(sensors) > 1 or not isinstance(s, ChannelSensor) or s.kind not in NATIVE_SENSOR_KINDS:
+        raise invalid(
+            "scenario",
+            scenario,
+            f"at most one faulty transmitter of kind {sorted(NATIVE_SENSOR_KINDS)} on the "
+            "native vector env",
+            f"its transmitters are {kinds}: a dropout draws per sample in Python; use "
+            "vectorization_mode='sync'",
+        )
+    f = s.fault
+    return NATIVE_SENSOR_KINDS[s.kind], s.ch, float(f.magnitude), int(f.onset), int(f.ramp)
 
 
 def _factory(kind: str):

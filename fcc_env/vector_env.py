@@ -86,6 +86,8 @@ from fcc_env.regulatory import (
     initial_controller_state,
 )
 from fcc_env.scenarios import DEFAULT_N_SAMPLES
+from fcc_env.sensor_faults import compiled_transmitter
+from fcc_env.sensor_kernel import sensor_read
 
 __all__ = [
     "MIN_ENVS_PER_THREAD",
@@ -104,6 +106,8 @@ RING = 2 * CHUNK_SAMPLES
 REASONS = np.array([*TERMINATION_REASONS, "measurement_out_of_range"], dtype=object)
 _OUT_OF_RANGE = len(TERMINATION_REASONS)
 _NUMERICAL_FAILURE = 1
+#: Info keys some episodes' ``FCCEnv`` infos lack: batched only where one env has them.
+_OPTIONAL_KEYS = ("fault_time", "fault_labels", "fault_times", "fault_channel", "sensor_dropout")
 # Per-env kernel modes.
 _SKIP, _STEP, _START = 0, 1, 2
 #: Actuator limits as [low, high] rows over (u_F, R_ar): the numbers of ``actuator_inputs``.
@@ -157,6 +161,15 @@ class Episodes(NamedTuple):
     saturated: np.ndarray  # (n,) bool: action or actuator limit hit this step
     controller_saturated: np.ndarray  # (n,) bool
     setpoint_clipped: np.ndarray  # (n,) bool
+    # the faulty transmitter (fcc_env.sensor_kernel): kind code (0 none), channel, size, onset,
+    # ramp (0 abrupt); its last delivered (y, z), valid where sensor_has_held
+    sensor_kind: np.ndarray  # (n,) int8
+    sensor_ch: np.ndarray  # (n,) int64
+    sensor_size: np.ndarray  # (n,) float64, the fault's magnitude (its unit)
+    sensor_onset: np.ndarray  # (n,) int64 sample
+    sensor_ramp: np.ndarray  # (n,) int64 samples
+    sensor_held: np.ndarray  # (n, 2) float64
+    sensor_has_held: np.ndarray  # (n,) bool
 
 
 class Streams(NamedTuple):
@@ -182,6 +195,7 @@ class Plant(NamedTuple):
     low: np.ndarray  # (d,) float32 observation bounds
     high: np.ndarray
     scale: np.ndarray  # (2,) physical size of a unit action
+    hours_per_sample: float  # a drifting transmitter's clock
 
 
 @numba.njit(cache=True, nogil=True, error_model="numpy")
@@ -202,6 +216,20 @@ def _observe(b: int, k: int, e: Episodes, s: Streams, pl: Plant) -> bool:
     e.aux[b] = aux
     y = e.y_clean[b, :N_MEASUREMENTS]
     measurements_into(e.x[b], u, aux[0], y)
+    if e.sensor_kind[b] != 0:  # the transmitter sits before the noise and the controllers
+        e.sensor_has_held[b] = sensor_read(
+            e.sensor_kind[b],
+            k,
+            y,
+            s.z[b, j],
+            e.sensor_ch[b],
+            e.sensor_size[b],
+            e.sensor_onset[b],
+            e.sensor_ramp[b],
+            pl.hours_per_sample,
+            e.sensor_held[b],
+            e.sensor_has_held[b],
+        )
     e.obs[b, :N_MEASUREMENTS] = noisy_kernel(
         y, s.z[b, j], NOISE_STD_ABS, NOISE_STD_REL, pl.noise_scale
     )
@@ -291,9 +319,11 @@ class FCCVectorEnv(VectorEnv):
     Keywords are ``FCCEnv``'s (validated by it, with its messages) plus ``max_episode_steps``
     (``None``: no truncation) and ``threads`` (numba threads of a step, 1 to
     ``NUMBA_NUM_THREADS``; ``None``: :func:`vector_threads` picks them at each step; the module
-    doc says why and how the threads wait). Plant effects that act through ``measure`` or
-    ``d_state`` need Python per sample and are refused: run them with
-    ``vectorization_mode="sync"``.
+    doc says why and how the threads wait). A sensor fault's transmitter (bias, drift, stuck,
+    noise) runs in the compiled loop (:mod:`fcc_env.sensor_kernel`), before the noise and the
+    controllers. Plant effects that act through ``measure`` or ``d_state``, a fault's measure
+    hook, an actuator fault and a sensor dropout need Python per sample and are refused: run
+    them with ``vectorization_mode="sync"``.
     """
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}  # noqa: RUF012
@@ -336,6 +366,13 @@ class FCCVectorEnv(VectorEnv):
             np.zeros(n, np.bool_),
             np.zeros(n, np.bool_),
             np.zeros(n, np.bool_),
+            np.zeros(n, np.int8),
+            np.zeros(n, np.int64),
+            np.zeros(n),
+            np.zeros(n, np.int64),
+            np.zeros(n, np.int64),
+            np.zeros((n, 2)),
+            np.zeros(n, np.bool_),
         )
         self._s = self._streams(n, 1)
         cfg = self.config
@@ -351,6 +388,7 @@ class FCCVectorEnv(VectorEnv):
             self.single_observation_space.low,
             self.single_observation_space.high,
             SETPOINT_ACTION_SCALE if self.closed_loop else ACTION_SCALE,
+            cfg.sample_time_s / 3600.0,
         )
         self._x0 = cfg.initial_state()
         self._rngs: list[np.random.Generator | None] = [None] * n
@@ -365,6 +403,10 @@ class FCCVectorEnv(VectorEnv):
         # a concurrent episode's labels and onsets (FCCEnv's info keys), else None
         self._labels = np.full(n, None, dtype=object)
         self._times = np.full(n, None, dtype=object)
+        # a channel fault's channel, and whether an episode has a transmitter fault (FCCEnv's
+        # info keys fault_channel and sensor_dropout)
+        self._channel = np.full(n, None, dtype=object)
+        self._sensed = np.zeros(n, np.bool_)
 
     @staticmethod
     def _streams(n: int, n_mult: int) -> Streams:
@@ -435,8 +477,17 @@ class FCCVectorEnv(VectorEnv):
         self._template.close()
 
     # ---- episodes ------------------------------------------------------------------------------
+    def _episode_options(
+        self, b: int, seed: int | None, options: dict[str, Any] | None
+    ) -> dict[str, Any] | None:
+        """Env ``b``'s reset options (a subclass draws its fault here: the control env's
+        catalogue), called once per episode before its set-up; ``seed`` as :meth:`reset` got it
+        for the env (``None`` on an autoreset)."""
+        return options
+
     def _start_episode(self, b: int, seed: int | None, options: dict[str, Any] | None) -> None:
         """``FCCEnv.reset`` up to the first sample: the generator, the set-up, chunk 0."""
+        options = self._episode_options(b, seed, options)
         effects = fx.resolve(self._effects_request)
         spec, effects = episode_request(options, self._template.fault_spec, effects)
         if seed is not None or self._rngs[b] is None:
@@ -450,16 +501,20 @@ class FCCVectorEnv(VectorEnv):
                 "effects acting through parameters or inputs",
                 "measure/d_state effects need Python per sample: use vectorization_mode='sync'",
             )
-        if setup.schedule.python_fault:
+        if setup.schedule.fault_measures or setup.schedule.actuators:
             raise invalid(
                 "scenario",
                 setup.fault.scenario,
-                "a fault acting through parameters or inputs",
-                "a fault's measure hook, sensor or actuator device needs Python per sample: "
+                "a fault acting through parameters, inputs or a sensor fault's transmitter "
+                "(bias, drift, stuck, noise)",
+                "a fault's measure hook or actuator device needs Python per sample: "
                 "use vectorization_mode='sync'",
             )
+        sensor = compiled_transmitter(setup.schedule.sensors, setup.fault.scenario)
         self._setups[b] = setup
         fault = setup.fault
+        self._channel[b] = fault.channel
+        self._sensed[b] = any(c.channel is not None for c in fault.components)
         self._faulty[b] = not fault.nominal
         self._onset[b], self._magnitude[b] = fault.onset, fault.magnitude
         self._scenario[b] = fault.scenario
@@ -479,6 +534,10 @@ class FCCVectorEnv(VectorEnv):
         e.x[b], e.move[b], e.k[b], e.reason[b] = self._x0, 0.0, 0, 0
         e.c[b] = initial_controller_state(NOMINAL_INPUTS)
         e.saturated[b] = e.controller_saturated[b] = e.setpoint_clipped[b] = False
+        kind, ch, size, onset, ramp = sensor
+        e.sensor_kind[b], e.sensor_ch[b], e.sensor_size[b] = kind, ch, size
+        e.sensor_onset[b], e.sensor_ramp[b] = onset, ramp
+        e.sensor_held[b], e.sensor_has_held[b] = 0.0, False
         self._elapsed[b] = 0
 
     def _draw_chunk(self, b: int) -> None:
@@ -550,6 +609,9 @@ class FCCVectorEnv(VectorEnv):
             "fault_magnitude": self._magnitude.copy(),
             "fault_labels": self._labels.copy(),
             "fault_times": self._times.copy(),
+            "fault_channel": self._channel.copy(),
+            # a native transmitter never drops a sample (a dropout is refused)
+            "sensor_dropout": np.zeros(self.num_envs, np.bool_),
             "y_clean": e.y_clean.copy(),
             "state": e.x.copy(),
             "inputs": e.u.copy(),
@@ -571,7 +633,11 @@ class FCCVectorEnv(VectorEnv):
                 reported &= self._faulty
             elif key in ("fault_labels", "fault_times"):  # a concurrent episode's only
                 reported &= self._labels != None  # noqa: E711 (elementwise on an object array)
-            if key in ("fault_time", "fault_labels", "fault_times") and not reported.any():
+            elif key == "fault_channel":  # a channel fault's only
+                reported &= self._channel != None  # noqa: E711
+            elif key == "sensor_dropout":  # an episode with a faulty transmitter's only
+                reported &= self._sensed
+            if key in _OPTIONAL_KEYS and not reported.any():
                 continue
             # envs without the key or left alone: zeros or None, as sync leaves them
             value[~reported] = None if value.dtype == object else 0

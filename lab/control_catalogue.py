@@ -1,8 +1,8 @@
 """The value of information per fault class on FCC-control-v0's whole catalogue (issue 43 item 7).
 
 Runs validation seeds (5000..) of ``gym.make("FCC-control-v0", catalogue="all")`` under three
-policies: the best fixed set points of the healthy plant (the fault-blind policy of the table:
-PPO on these draws could not be trained here, lab/control-catalogue.md says why), the
+policies: the best fixed set points of the healthy plant (the fault-blind policy of the table;
+a PPO agent joins with ``--ppo``, lab/control-catalogue.md section 5), the
 sensor-correcting supervisor (its frozen-reading check; no diagnoser) and the oracle
 (:class:`evaluation.control.fault_oracle.FaultOracle`). Per episode it writes the drawn fault
 and the three returns to ``--out`` (JSON lines); ``--report`` reads such files and prints the
@@ -15,6 +15,14 @@ paired by episode) and what the supervisor captures (supervisor − fault-blind)
     python lab/control_catalogue.py --loop-sensors --first 5000 --n 20 --out /tmp/loop.jsonl
     python lab/control_catalogue.py --loop-sensors --diagnoser sensor-validation --first 5220 \
         --n 5 --out /tmp/loop_sv.jsonl
+
+``--ppo DIR`` adds a saved PPO agent (``python -m evaluation.control.rl train --out DIR``; the
+issue's fault-blind policy when trained on the same draws, e.g. ``--catalogue sensor``) as the
+policy ``ppo``; the report then adds its columns, the supervisor's paired gain over it and
+whether their intervals overlap.
+
+    python lab/control_catalogue.py --loop-sensors --ppo /tmp/ppo_sensor --first 5300 --n 10 \
+        --out /tmp/loop_ppo.jsonl
 
 ``--diagnoser NAME`` adds a fourth policy, ``sensor-correcting+NAME``: the same supervisor
 with registered diagnoser NAME streamed in it (fitted on training seeds by
@@ -56,8 +64,11 @@ def run(
     loop_sensors: bool = False,
     diagnoser: str | None = None,
     diagnoser_only: bool = False,
+    ppo: str | None = None,
 ) -> None:
     policies = {name: make_policy(name) for name in POLICIES}
+    if ppo:
+        policies["ppo"] = make_policy("ppo", directory=ppo)
     if diagnoser:
         # diagnosis only: the frozen and residual checks can never fire
         off = {"frozen_samples": 10**9, "limit_C": 1e9} if diagnoser_only else {}
@@ -162,7 +173,35 @@ def report(paths: list[str]) -> None:
                 f"| {name} | {len(g)} | {_ci(diag)} | {_ci(diag - blind)} | {_ci(diag - sup)} "
                 f"| {trips} |"
             )
+    if any("ppo" in r for r in rows):
+        _report_ppo(groups)
     print(f"\n{len(rows)} episodes, {sum(r['cpu_s'] for r in rows):.0f} CPU s")
+
+
+def _report_ppo(groups: dict[str, list[dict]]) -> None:
+    """The PPO agent beside the best fixed set points and the sensor-correcting supervisor:
+    means, the supervisor's paired gain over the agent, and whether the unpaired intervals of
+    the two overlap (the issue's goal: a diagnosis-driven policy above the best fault-blind
+    one, intervals apart)."""
+    print(
+        "\n| class | n | ppo | fixed | sensor-correcting | ppo − fixed | sensor-correcting − ppo "
+        "| intervals apart | trips ppo |"
+    )
+    print("|---|---|---|---|---|---|---|---|---|")
+    for name, g in groups.items():
+        g = [r for r in g if "ppo" in r]
+        if len(g) < 2:
+            continue
+        agent = np.array([r["ppo"] for r in g])
+        blind = np.array([r["fixed"] for r in g])
+        sup = np.array([r["sensor-correcting"] for r in g])
+        a, c = bootstrap_ci(list(agent)), bootstrap_ci(list(sup))
+        apart = "yes" if c.low > a.high else "no"
+        trips = sum(r["ppo_trip"] for r in g)
+        print(
+            f"| {name} | {len(g)} | {_ci(agent)} | {_ci(blind)} | {_ci(sup)} | "
+            f"{_ci(agent - blind)} | {_ci(sup - agent)} | {apart} | {trips} |"
+        )
 
 
 if __name__ == "__main__":
@@ -186,6 +225,7 @@ if __name__ == "__main__":
         action="store_true",
         help="the fourth policy judges by the diagnosis alone (frozen and residual checks off)",
     )
+    ap.add_argument("--ppo", default=None, help="a saved PPO agent's directory: policy ppo")
     a = ap.parse_args()
     if a.report:
         report(a.report)
@@ -199,4 +239,5 @@ if __name__ == "__main__":
             loop_sensors=a.loop_sensors,
             diagnoser=a.diagnoser,
             diagnoser_only=a.diagnoser_only,
+            ppo=a.ppo,
         )

@@ -67,8 +67,8 @@ def main(argv: Sequence[str] | None = None) -> int:
     t.add_argument(
         "--catalogue",
         default=d.catalogue,
-        help="what the episodes draw: paper (f1-f4, the native vector env) or all (every "
-        "fault class, Python envs: slower)",
+        help="what the episodes draw: paper (f1-f4) or sensor (healthy or a sensor fault), on "
+        "the native vector env; all (every fault class, Python envs: ten times slower)",
     )
     t.add_argument("--out", type=out_path, required=True)
     add_progress_flag(t)

@@ -36,6 +36,7 @@ from fcc_common.progress import progress_bar
 from fcc_common.validation import invalid
 from fcc_env.control_draws import catalogue_option
 from fcc_env.control_task import CONTROL_ENV_ID
+from fcc_env.control_vector import NATIVE_CATALOGUES
 from fcc_env.scenarios import scenario_names
 from fcc_env.simulation import DEFAULT_MEMORY_BUDGET_BYTES
 
@@ -97,8 +98,9 @@ class PPOSettings:
     reward_scale_usd: float = REWARD_SCALE_USD
     max_env_steps: int | None = None
     torch_threads: int = 1
-    #: what the episodes draw (``FCC-control-v0``'s ``catalogue``): ``"all"`` steps Python envs
-    #: (``SyncVectorEnv``), as the native vector env carries no sensor or actuator fault
+    #: what the episodes draw (``FCC-control-v0``'s ``catalogue``): ``"paper"`` and ``"sensor"``
+    #: run on the native vector env; ``"all"`` steps Python envs (``SyncVectorEnv``), as the
+    #: native env carries no actuator fault (:mod:`fcc_env.control_vector`)
     catalogue: str = "paper"
 
     def __post_init__(self) -> None:
@@ -271,8 +273,13 @@ def train(
         # numba's OpenMP workers spin-wait after each env step and starve torch's forward
         # passes (measured: 12 ms instead of 1 ms per step of 64 envs on two cores)
         numba.set_num_threads(1)
-        if s.catalogue == "paper":
-            venv = gym.make_vec(CONTROL_ENV_ID, s.envs, vectorization_mode="vector_entry_point")
+        if s.catalogue in NATIVE_CATALOGUES:
+            venv = gym.make_vec(
+                CONTROL_ENV_ID,
+                s.envs,
+                vectorization_mode="vector_entry_point",
+                catalogue=s.catalogue,
+            )
         else:
             venv = gym.make_vec(
                 CONTROL_ENV_ID, s.envs, vectorization_mode="sync", catalogue=s.catalogue

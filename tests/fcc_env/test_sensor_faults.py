@@ -159,9 +159,10 @@ def test_refusals_name_the_value_and_the_allowed_ones() -> None:
         FaultSpec(scenario="sensor-dropout", magnitude=0.95)
     with pytest.raises(ValueError, match=r"fault_magnitude=3\.0 .*\[0, 2\]"):
         gym.make("FCC-v0", scenario="sensor-drift", fault_magnitude=3.0)
+    # a dropout draws per sample (bias, drift, stuck and noise run natively: test_vector_sensor)
     with pytest.raises(ValueError, match="vectorization_mode='sync'"):
         envs = gym.make_vec(
-            "FCC-v0", 2, vectorization_mode="vector_entry_point", scenario="sensor-bias"
+            "FCC-v0", 2, vectorization_mode="vector_entry_point", scenario="sensor-dropout"
         )
         envs.reset(seed=0)
 
