@@ -25,7 +25,7 @@ The rooms (the contract, the registry and the presets at the top; the parts belo
                        innovations, state and disturbance estimates, and the grey-box
                        detector ``ukf-glr`` on them
 ``loops/``             control-loop monitors on a loop's own records: ``oscillation-acf``,
-                       ``stiction-ccf``, ``valve-glr``
+                       ``stiction-ccf``, ``valve-glr``, ``loop-offset``, ``air-deficit``
 ``sensors/``           sensor validation by analytical redundancy: ``sensor-validation``
 =====================  ===========================================================================
 

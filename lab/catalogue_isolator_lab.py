@@ -55,6 +55,8 @@ def compose(
     several: list[bool],
     defers: list[tuple[int, ...]],
     confirms: list[int | None],
+    name_confirms: list[dict[str, int]] | None = None,
+    precedes: list[int | None] | None = None,
 ) -> tuple[np.ndarray, list[tuple[int, str]]]:
     """The diagnosis per sample and the (sample, name) of each confirmation."""
     comp = Composition(
@@ -65,6 +67,8 @@ def compose(
         several=several,
         defers=defers or None,
         confirms=confirms,
+        name_confirms=name_confirms,
+        precedes=precedes,
     )
     alarm, names = f["alarm"], f["diagnosis"]
     T = alarm.shape[1]
@@ -78,6 +82,30 @@ def compose(
     return out.astype(str), seen
 
 
+def _alone(column: str) -> bool:
+    """A part of a pair run alone (``lab/catalogue_members.py --alone``)."""
+    return column.startswith("alone:")
+
+
+def _drop(f: dict, members: set[str]) -> dict:
+    """The stored outputs without ``members`` (their rows, and deferrals to them, left out)."""
+    names = [str(m) for m in f["member_names"]]
+    keep = [i for i, m in enumerate(names) if m not in members]
+    if len(keep) == len(names):
+        return f
+    new = {i: j for j, i in enumerate(keep)}
+    defers = [
+        "|".join(str(new[int(o)]) for o in str(f["defers"][i]).split("|") if o and int(o) in new)
+        for i in keep
+    ]
+    out = dict(f)
+    for key in ("member_names", "claims", "several", "confirms", "alarm", "diagnosis"):
+        if key in f:
+            out[key] = np.asarray(f[key])[keep]
+    out["defers"] = np.array(defers, dtype=str)
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("store", type=Path)
@@ -87,21 +115,34 @@ def main() -> None:
     ap.add_argument("--member-confirm", default="", help="member=N,...: its own confirm")
     ap.add_argument("--defers", default="", help="member=other|other,...: who defers to whom")
     ap.add_argument("--no-defer", action="store_true", help="no member defers to another")
+    ap.add_argument("--drop", default="", help="member,...: left out of the composition")
+    ap.add_argument(
+        "--precedes", default="", help="member=N,...: its run begun N samples first is no echo"
+    )
+    ap.add_argument(
+        "--name-confirm", default="", help="member:name=N,...: the run one of its names needs"
+    )
     ap.add_argument("--verbose", action="store_true")
     args = ap.parse_args()
     files = sorted(args.store.glob("*.npz"))
-    loaded = [dict(np.load(p)) for p in files]
-    faulty = [f for f in loaded if str(f["column"]) != "nominal"]
+    loaded = [_drop(dict(np.load(p)), set(filter(None, args.drop.split(",")))) for p in files]
+    faulty = [f for f in loaded if str(f["column"]) != "nominal" and not _alone(str(f["column"]))]
     classes = tuple(sorted({str(f["column"]) for f in faulty}))
     by_name: dict[str, tuple[str, ...]] = {}
     own = {
         k: int(v) for k, v in (x.split("=") for x in filter(None, args.member_confirm.split(",")))
     }
+    first = {k: int(v) for k, v in (x.split("=") for x in filter(None, args.precedes.split(",")))}
+    by_member: dict[str, dict[str, int]] = defaultdict(dict)
+    for item in filter(None, args.name_confirm.split(",")):
+        who, rest = item.split(":")
+        name, n = rest.split("=")
+        by_member[who][name] = int(n)
     for item in filter(None, args.claims.split(";")):
         k, v = item.split("=")
         by_name[k] = tuple(v.split("|"))
     rows: dict[str, Counter] = defaultdict(Counter)
-    binding: list[tuple[float, bool]] = []
+    binding: list[tuple[float, float, bool]] = []
     cdrs: dict[str, list[float]] = defaultdict(list)
     for f in loaded:
         members = [str(m) for m in f["member_names"]]
@@ -124,10 +165,33 @@ def main() -> None:
             [int(c) or None for c in f["confirms"]] if "confirms" in f else [None] * len(members)
         )
         confirms = [own.get(m, c) for m, c in zip(members, stored, strict=True)]
+        name_confirms = [dict(by_member.get(m, {})) for m in members]
+        precedes = [first.get(m) for m in members]
         diag, seen = compose(
-            f, claims, classes, args.confirm, not args.no_hold, several, defers, confirms
+            f,
+            claims,
+            classes,
+            args.confirm,
+            not args.no_hold,
+            several,
+            defers,
+            confirms,
+            name_confirms,
+            precedes,
         )
         column = str(f["column"])
+        if _alone(column):
+            part = column.split(":", 1)[1]
+            r = rows[column]
+            r["n"] += 1
+            r["own"] += any(s == part for _, s in seen)
+            wrong = sorted({s for _, s in seen if s != part})
+            r["false"] += bool(wrong)
+            for s in wrong:
+                r[f"false:{s}"] += 1
+            if args.verbose:
+                print(f"{column} {int(f['seed'])}: confirmed {seen}")
+            continue
         if column == "nominal":
             rows[column]["alarmed"] += bool((diag != "").any())
             rows[column]["n"] += 1
@@ -157,7 +221,8 @@ def main() -> None:
                 r[f"delay:{lab}"] += hit[0] - on
         if float(f.get("cap_binding", -1.0)) >= 0:
             found_cap = any(s == "blower-capacity" for _, s in seen)
-            binding.append((float(f["cap_binding"]), found_cap))
+            excess = float(f["cap_excess"]) if "cap_excess" in f else float("nan")
+            binding.append((float(f["cap_binding"]), excess, found_cap))
         wrong = [s for _, s in seen if s not in labels]
         r["false names"] += bool(wrong)
         for s in wrong:
@@ -197,8 +262,22 @@ def main() -> None:
         " | |"
     )
     if binding:
-        shares = ", ".join(f"{b:.2f}{'+' if hit else '-'}" for b, hit in sorted(binding))
-        print(f"blower cap's binding share after its onset (+ named, - not): {shares}")
+        shares = ", ".join(f"{b:.2f}/{x:.1f}{'+' if hit else '-'}" for b, x, hit in sorted(binding))
+        print(
+            "blower cap's binding share after its onset / the command's largest excess over "
+            f"it [t/h] (+ named, - not): {shares}"
+        )
+    alone = sorted(c for c in rows if _alone(c))
+    if alone:
+        print("| fault alone | n | its name confirmed | another name confirmed (which) |")
+        print("|---|---|---|---|")
+    for column in alone:
+        r = rows[column]
+        false = ", ".join(f"{k[6:]} {v}" for k, v in r.items() if k.startswith("false:"))
+        print(
+            f"| {column[6:]} | {r['n']} | {wilson(r['own'], r['n'])} | "
+            f"{wilson(r['false'], r['n'])} ({false or '–'}) |"
+        )
     h = rows["nominal"]
     if h["n"]:
         print(

@@ -20,6 +20,7 @@ import numpy as np
 
 import diagnosers
 import fcc_env
+from diagnosers.loops.air_deficit import air_commands
 from evaluation.tracks.catalogue import TRACKS
 from evaluation.tracks.track_data import TrackData
 from fcc_env.actuator_faults import BLOWER_CAPACITY
@@ -41,6 +42,13 @@ def main() -> None:
     ap.add_argument("--train-faults", type=int, default=1)
     ap.add_argument("--seed-start", type=int, default=5000)
     ap.add_argument("--columns", default="")
+    ap.add_argument(
+        "--alone",
+        default="",
+        help="a,b: also these faults alone, as the first pair holding them draws them (same "
+        "seed, size, onset), saved as column alone:<fault>",
+    )
+    ap.add_argument("--alone-count", type=int, default=-1, help="episodes each (-1: --faulty)")
     ap.add_argument("--params", default="{}", help="catalogue-isolator hyperparameters (JSON)")
     ap.add_argument("--out", type=Path, default=Path("/tmp/catalogue/concurrent"))
     args = ap.parse_args()
@@ -61,18 +69,30 @@ def main() -> None:
     cells += [
         (c, s) for c in columns for s in range(args.seed_start, args.seed_start + args.faulty)
     ]
+    for fault in filter(None, args.alone.split(",")):
+        pair = next(c for c in track.faults if fault in c.split("+"))
+        i = pair.split("+").index(fault)
+        count = args.faulty if args.alone_count < 0 else args.alone_count
+        cells += [(f"alone:{i}:{pair}", s) for s in range(args.seed_start, args.seed_start + count)]
     for column, seed in cells:
         c1 = cpu_s()
         if column == "nominal":
+            spec = None
             le = data.simulate([seed], FaultSpec(), test=True)[0]
+        elif column.startswith("alone:"):
+            _, i, pair = column.split(":")
+            spec = track.fault_spec(pair, seed).parts[int(i)]
+            column = f"alone:{spec.scenario}"
+            le = data.simulate([seed], spec, test=True)[0]
         else:
+            spec = track.fault_spec(column, seed)
             le = data.load_test(column, seed)
         ep = le.episode
         outs = iso.member_outputs(ep)
-        spec = track.fault_spec(column, seed) if column != "nominal" else None
         parts = (spec.parts or (spec,)) if spec is not None else ()
         _, composite, _ = iso.compose(outs)
         binding = _cap_binding(track, spec, parts, seed)
+        excess = _cap_excess(ep, parts)
         np.savez(
             args.out / f"{column}_{seed}.npz",
             column=column,
@@ -90,12 +110,14 @@ def main() -> None:
             diagnosis=np.stack([o[1] for o in outs]),
             composite=composite,
             cap_binding=binding,
+            cap_excess=excess,
         )
         print(
             f"{column} {seed}: {cpu_s() - c1:.0f} s CPU, parts "
             f"{[(p.scenario, p.onset) for p in parts]}, final {composite[-1]!r}"
             + (
-                f", cap binds on {binding:.3f} of the samples after its onset"
+                f", cap binds on {binding:.3f} of the samples after its onset, the command "
+                f"exceeds it by up to {excess:.2f} t/h"
                 if binding >= 0
                 else ""
             ),
@@ -116,6 +138,20 @@ def _cap_binding(track, spec, parts, seed: int) -> float:
     air = res.inputs[0, caps[0].onset : end, INPUT_NAMES.index("R_ar")]
     cap = (1.0 - caps[0].magnitude) * BLOWER_CAPACITY
     return float(np.mean(air >= cap - 1e-9)) if air.size else 0.0
+
+
+def _cap_excess(ep, parts) -> float:
+    """The air loop's command's largest excess over a ``blower-capacity`` part's cap after its
+    onset [t/h] (the command computed again from the recorded error, as ``air-deficit`` does;
+    ≤ 0: the loop never asked for more than the cap); nan without such a part."""
+    caps = [p for p in parts if p.scenario == "blower-capacity"]
+    if not caps:
+        return float("nan")
+    ch = list(ep.channels)
+    error = ep.y[:, ch.index("T_rg1_sp")] - ep.y[:, ch.index("T_rg1")]
+    command = air_commands(error, ep.sample_time_s)[caps[0].onset :]
+    cap = (1.0 - caps[0].magnitude) * BLOWER_CAPACITY
+    return float(np.max(command - cap)) if command.size else float("nan")
 
 
 if __name__ == "__main__":

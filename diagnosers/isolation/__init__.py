@@ -13,6 +13,7 @@ The rooms:
                          and diagnosis (isolation with probabilities, grey box)
 ``catalogue_isolator``  the registered ``catalogue-isolator``: specialised isolators side by side,
                          each confirming its own fault, so that two faults are named (grey box)
+``catalogue_members``    its members: how a member's word is read, what a member spec may hold
 ``composition``          its per-sample rule: confirmation, hold, deferral, the answer
 =======================  ==========================================================================
 

@@ -14,9 +14,13 @@ model-based test of the valve against its command.
                        it sees the first stuck samples, not a limit cycle)
 ``loop_offset``        ``loop-offset``: a loop that cannot hold its set point, its actuator short
                        (named ``blower-capacity`` on the air loop)
+``air_deficit``        ``air-deficit``: the metered air short of the air loop's command, computed
+                       again from the recorded error through the published PI law (grey box;
+                       named ``blower-capacity``)
 =====================  ===========================================================================
 """
 
+from diagnosers.loops.air_deficit import AirDeficit
 from diagnosers.loops.loop_detectors import LOOP_CHANNELS, OscillationACF, StictionCCF
 from diagnosers.loops.loop_indexes import acf_regularity, horch_phase
 from diagnosers.loops.loop_offset import LoopOffset
@@ -24,6 +28,7 @@ from diagnosers.loops.valve_glr import ValveGLR
 
 __all__ = [
     "LOOP_CHANNELS",
+    "AirDeficit",
     "LoopOffset",
     "OscillationACF",
     "StictionCCF",

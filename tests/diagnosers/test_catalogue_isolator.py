@@ -90,6 +90,20 @@ def test_a_confirmed_verdict_outside_its_classes_clears_a_members_name() -> None
     assert _run(comp, [[True]] * 5, seq) == ["unknown", *["valve-bias"] * 3, "unknown"]
 
 
+def test_a_name_may_need_a_run_of_its_own() -> None:
+    # the model's valve bias needs a long run (a sensor bias imitates it at first), its f1 not
+    comp = Composition(
+        [("f1", "valve-bias")],
+        ("f1", "valve-bias"),
+        confirm=4,
+        hold=True,
+        name_confirms=[{"f1": 2}],
+    )
+    assert _run(comp, [[True]] * 3, [["valve-bias"]] * 3) == ["unknown"] * 3
+    comp.reset()
+    assert _run(comp, [[True]] * 3, [["f1"]] * 3) == ["unknown", "f1", "f1"]
+
+
 def test_a_deferring_member_is_no_evidence_while_the_other_names_its_own_fault() -> None:
     comp = Composition(
         [("sensor-bias",), ("valve-bias",)],
@@ -126,6 +140,29 @@ def test_a_name_confirmed_since_the_others_alarm_began_is_dropped_as_its_echo() 
     assert _run(comp(), alarms, before)[-1] == "sensor-bias+f1"
 
 
+def test_a_run_begun_before_the_others_alarm_is_not_its_echo() -> None:
+    # the model says f1 from sample 0 (confirm 4); a sticking valve's member alarms at sample 2
+    # and confirms at 3. Deferring every run, f1 is never confirmed; with precedes=1, the f1
+    # run began 2 samples before that alarm (more than 1): f1 came first and is named.
+    def comp(first: int | None) -> Composition:
+        return Composition(
+            [("f1",), ("valve-stiction",)],
+            ("f1+valve-stiction",),
+            confirm=4,
+            hold=True,
+            defers=[(1,), ()],
+            confirms=[4, 2],
+            precedes=[first, None],
+        )
+
+    alarms = [[True, False]] * 2 + [[True, True]] * 4
+    names = [["f1", ""]] * 2 + [["f1", "valve-stiction"]] * 4
+    assert _run(comp(None), alarms, names)[-1] == "unknown"
+    assert _run(comp(1), alarms, names)[-1] == "f1+valve-stiction"
+    # a run begun within ``precedes`` of the alarm stays deferred: an echo
+    assert _run(comp(2), alarms, names)[-1] == "unknown"
+
+
 def test_signal_fault_reads_a_registered_fault_from_a_signal_name() -> None:
     assert signal_fault("glr[valve-bias,30]") == "valve-bias"
     assert signal_fault("glr[f1,300]") == "f1"
@@ -149,6 +186,22 @@ def test_signal_fault_reads_a_registered_fault_from_a_signal_name() -> None:
         (
             {"members": [{"name": "limits", "params": {}, "classes": ["f1"], "defers_to": ["x"]}]},
             "defers_to",
+        ),
+        (
+            {
+                "members": [
+                    {"name": "limits", "params": {}, "classes": ["f1"], "confirm_names": {"f2": 5}}
+                ]
+            },
+            "confirm_names",
+        ),
+        (
+            {
+                "members": [
+                    {"name": "limits", "params": {}, "classes": ["f1"], "confirm_names": {"f1": 0}}
+                ]
+            },
+            "confirm_names",
         ),
     ],
 )

@@ -1,15 +1,18 @@
 """The members ``catalogue-isolator`` adds for the closed loop: ``stiction-ukf`` (a sticking
 valve by the excess variance of the model's T_rx innovation) and ``loop-offset`` (a loop that
-cannot hold its set point). Their contract on their own faults' records, and what each sees."""
+cannot hold its set point), ``air-deficit`` (the metered air short of the air loop's
+command). Their contract on their own faults' records, and what each sees."""
 
 from __future__ import annotations
 
+import numpy as np
 import pytest
 
 import diagnosers
 import fcc_env
 from diagnosers import Episode
 from diagnosers.conformance import check_diagnoser
+from diagnosers.loops.air_deficit import air_commands
 
 
 @pytest.fixture(scope="module")
@@ -56,8 +59,36 @@ def test_a_loop_held_off_its_set_point_is_flagged(loop) -> None:
     assert set(det.diagnosis[det.alarm]) == {"blower-capacity"}
 
 
+def test_the_air_command_is_the_controllers_own(loop) -> None:
+    # computed again from the recorded error, it is the air the healthy process received
+    plant = fcc_env.PlantConfig.build(regulatory=True)
+    res = fcc_env.simulate_episodes([5001], 1500, plant=plant)
+    ep = Episode.from_batch(res)[0]
+    error = ep.y[:, ep.channels.index("T_rg1_sp")] - ep.y[:, ep.channels.index("T_rg1")]
+    applied = res.inputs[0, :, fcc_env.INPUT_NAMES.index("R_ar")]
+    assert np.allclose(air_commands(error, ep.sample_time_s), applied, rtol=0, atol=1e-3)
+
+
+def test_metered_air_short_of_its_command_is_flagged(loop) -> None:
+    d = diagnosers.make("air-deficit").fit(loop["train"])
+    assert not d.detect(loop["healthy"][0]).alarm.any()
+    ep = loop["healthy"][0]
+    y = ep.y.copy()
+    j = ep.channels.index("R_ar")
+    # the meter shows 1 t/h (0.7 %) less air than the loop commands from sample 1000 on
+    y[1000:, j] -= 1.0
+    det = d.detect(Episode(y, channels=ep.channels, sample_time_s=ep.sample_time_s))
+    assert det.alarm[1300:].all() and not det.alarm[:1000].any()
+    assert set(det.diagnosis[det.alarm]) == {"blower-capacity"}
+
+
 @pytest.mark.parametrize(
-    "name, fault", [("stiction-ukf", "valve-stiction"), ("loop-offset", "blower-capacity")]
+    "name, fault",
+    [
+        ("stiction-ukf", "valve-stiction"),
+        ("loop-offset", "blower-capacity"),
+        ("air-deficit", "blower-capacity"),
+    ],
 )
 def test_the_members_keep_the_contract(name: str, fault: str, loop) -> None:
     check_diagnoser(
@@ -75,6 +106,8 @@ def test_the_members_keep_the_contract(name: str, fault: str, loop) -> None:
         ("stiction-ukf", {"channel": "T_x"}, "channel"),
         ("loop-offset", {"loop": "F"}, "loop"),
         ("loop-offset", {"sign": 2}, "sign"),
+        ("air-deficit", {"lam": 1.5}, "lam"),
+        ("air-deficit", {"margin": 0.5}, "margin"),
     ],
 )
 def test_bad_settings_are_refused_by_name(name: str, params: dict, match: str) -> None:

@@ -95,8 +95,8 @@ def fitted(train: list[Episode], train_faults: list[Episode]) -> dict[str, Diagn
 #: Isolators that name one fault of their own, which check_diagnoser's default closed-loop
 #: episodes (f1, f2) do not carry: their contract is checked on their own fault's episodes
 #: (``stiction-ccf``: tests/diagnosers/test_loop_monitors.py, on sticking-valve records;
-#: ``stiction-ukf``, ``loop-offset``: tests/diagnosers/test_catalogue_members.py).
-OWN_FAULT_DATA = ("stiction-ccf", "stiction-ukf", "loop-offset")
+#: ``stiction-ukf``, ``loop-offset``, ``air-deficit``: tests/diagnosers/test_catalogue_members.py).
+OWN_FAULT_DATA = ("stiction-ccf", "stiction-ukf", "loop-offset", "air-deficit")
 
 
 @pytest.mark.parametrize(

@@ -32,6 +32,7 @@ OWN_FAULT = {
     "stiction-ccf": ("valve-stiction", 0.2, 3),
     "stiction-ukf": ("valve-stiction", 0.2, 3),
     "loop-offset": ("blower-capacity", 0.12, 5),
+    "air-deficit": ("blower-capacity", 0.12, 5),
 }
 
 # small episodes: (healthy training, faulty test, labelled faulty training) per plant
