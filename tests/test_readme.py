@@ -21,7 +21,7 @@ ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
 QUICKSTART = (
     "pip install torch==2.13.0 -e . && python -m evaluation.leaderboard --quick\n"
-    'pip install torch==2.13.0 -e ".[test,ray]" && python -m pytest\n'
+    'pip install torch==2.13.0 -e ".[test,ray]" && python -m pytest -n 2 --dist loadfile\n'
 )
 
 
