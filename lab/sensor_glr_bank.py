@@ -4,7 +4,7 @@
 Per saved faulty episode, the bank starts from the all-sensor filter's prior at the first
 alarm after the onset (``--delay`` samples before it, to study a start nearer the onset) and
 names the channel of the largest GLR over the next ``--window`` samples, where it is ``--margin``
-nats ahead of the second (else the saved rule names); the diagnoser's own rule
+nats and ``--ratio`` times ahead of the second (else the saved rule names); the diagnoser's own rule
 (``decide_run``, replayed as ``sensor_kinds_replay.py`` does) then decides the kind for the
 channel named. Prints the tables of ``sensor_kinds_replay.py`` (kind and channel CDR per kind
 and channel, 95 % BCa intervals over the episodes), and per episode the window's channel CDR
@@ -37,6 +37,7 @@ def main() -> None:
     ap.add_argument("--delay", type=int, default=0, help="samples before the alarm to start")
     ap.add_argument("--b1", type=float, default=5.0)
     ap.add_argument("--margin", type=float, default=0.0, help="nats ahead of the second")
+    ap.add_argument("--ratio", type=float, default=1.0, help="times the second's GLR")
     ap.add_argument("--kinds", default="sensor-bias,sensor-drift")
     ap.add_argument("--ramp", type=float, default=0.0,
                     help="nats a ramp must add for a drift (0: the residual's tests decide)")  # fmt: skip
@@ -62,7 +63,9 @@ def main() -> None:
             white0 = np.asarray(rec["white"][s:e, 0], dtype=np.float64)
             gain, ramp, size = bank.run(state, rec["y_all"][s:e], white0)
             top2 = np.sort(gain, axis=1)[:, -2:]
-            sure = top2[:, 1] - top2[:, 0] >= args.margin
+            sure = (top2[:, 1] - top2[:, 0] >= args.margin) & (
+                top2[:, 1] >= args.ratio * top2[:, 0]
+            )
             pick = np.where(sure, np.argmax(gain, axis=1), -1)
             named[t_a:e] = pick[t_a - s :]
             if args.ramp > 0:
@@ -91,7 +94,7 @@ def main() -> None:
 
     print(
         f"window {args.window}, delay {args.delay}, b1 {args.b1}, margin {args.margin}, "
-        f"ramp {args.ramp}"
+        f"ratio {args.ratio}, ramp {args.ramp}"
     )
     score(args.dir, rule, tuple(args.kinds.split(",")))
 

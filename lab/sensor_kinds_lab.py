@@ -85,11 +85,12 @@ def main() -> None:
     ap.add_argument("--train", type=int, default=4)
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--glr-window", type=int, default=0, help="sensor-validation's glr_window")
+    ap.add_argument("--glr-ramp", type=float, default=0.0, help="sensor-validation's glr_ramp")
     args = ap.parse_args()
     if args.seed_start < 1000:
         raise SystemExit(f"--seed-start {args.seed_start}: test seeds 0-999 are not for the lab")
     c0 = time.process_time()
-    track, data, det = fitted(args.train, glr_window=args.glr_window)
+    track, data, det = fitted(args.train, glr_window=args.glr_window, glr_ramp=args.glr_ramp)
     args.out.mkdir(parents=True, exist_ok=True)
     stash = _recorder(det)
     if not (args.out / "limits.npz").exists():

@@ -80,12 +80,20 @@ class SensorValidation(Diagnoser):
             [3, 100000]; default 300.
         glr_window: samples from an alarm's start that the GLR bank of bias hypotheses names
             the sensor (:mod:`diagnosers.sensors.glr_bank`; the slow rule after them), in
-            [0, 100000]; 0 turns the bank off; default 0.
+            [0, 100000]; 0 turns the bank off; default 3000 (the rest of a ``sensor`` track
+            episode: ``lab/sensor-validation.md``, 2026-12-07 afternoon).
         glr_offset: the bank's trial offset, in each channel's unit, in (0, 100]; default 5
             (inside the ``sensor`` track's sizes 2-10).
         glr_ramp: within the bank's window, the evidence (nats) a ramp beside the step adds
             from which the fault is a drift, else a bias, in [0, 10⁶]; 0 leaves the kind to
-            the residual's tests; default 0.
+            the residual's tests; default 20 (validation seeds: a bias's ramp evidence stayed
+            under 17 over 3000 samples but once, a drift's passed 12-50 at 300 samples).
+        glr_ratio: the bank names only where its largest GLR is this many times the second
+            (else the slow rule names, and the residual's tests say the kind), in [1, 100];
+            default 1.
+        glr_settle: samples of the bank's window before it says the kind (the residual's
+            tests before: they know the level before the alarm, which tells a young drift),
+            in [0, 100000]; default 300.
 
     Attributes:
         classes_: the sensor-fault kinds among the labelled training faults.
@@ -109,6 +117,8 @@ class SensorValidation(Diagnoser):
         "glr_window": Integer(0, 100_000),
         "glr_offset": Real(0, 100, closed="right"),
         "glr_ramp": Real(0, 1e6),
+        "glr_ratio": Real(1, 100),
+        "glr_settle": Integer(0, 100_000),
     }
     DEFAULTS: ClassVar[dict[str, Any]] = {
         "params": None,
@@ -122,9 +132,11 @@ class SensorValidation(Diagnoser):
         "t_drift": 4.0,
         "step_ratio": 3.0,
         "settle": 300,
-        "glr_window": 0,
+        "glr_window": 3000,
         "glr_offset": 5.0,
-        "glr_ramp": 0.0,
+        "glr_ramp": 20.0,
+        "glr_ratio": 1.0,
+        "glr_settle": 300,
     }
     __init__ = keyword_init(DEFAULTS)
 
@@ -142,6 +154,8 @@ class SensorValidation(Diagnoser):
     glr_window: int
     glr_offset: float
     glr_ramp: float
+    glr_ratio: float
+    glr_settle: int
 
     @classmethod
     def fast_params(cls) -> dict[str, Any]:
@@ -315,10 +329,14 @@ class SensorValidation(Diagnoser):
             n = min(g["left"], T - k)
             gain, ramp, _ = self.glr_.run(g["bank"], Y[k : k + n], out.white[k : k + n, 0])
             c = np.argmax(gain, axis=1)
-            named[k : k + n] = c
+            top2 = np.sort(gain, axis=1)[:, -2:]
+            sure = top2[:, 1] >= self.glr_ratio * top2[:, 0]
+            named[k : k + n] = np.where(sure, c, -1)
             if self.glr_ramp > 0:
                 drift = ramp[np.arange(n), c] > self.glr_ramp
-                named_kind[k : k + n] = np.where(drift, 2, 1)
+                age = g["bank"]["age"][0] - n + 1 + np.arange(n)  # 1 at the window's start
+                says = sure & (age > self.glr_settle)
+                named_kind[k : k + n] = np.where(says, np.where(drift, 2, 1), 0)
             g["left"] -= n
             k += n
         return named, named_kind

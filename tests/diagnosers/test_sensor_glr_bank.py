@@ -26,7 +26,7 @@ def _sim(seeds: list[int], fault: fcc_env.FaultSpec | None = None) -> list[Episo
 @pytest.fixture(scope="module")
 def fitted() -> SensorValidation:
     labelled = _sim([1005], fcc_env.FaultSpec(scenario="sensor-bias", onset=ONSET))
-    d = diagnosers.make("sensor-validation", warmup=100, glr_window=WINDOW)
+    d = diagnosers.make("sensor-validation", warmup=100, glr_window=WINDOW, glr_settle=50)
     assert isinstance(d, SensorValidation)
     return d.fit(_sim([1000, 1001, 1002]) + labelled)
 
