@@ -42,7 +42,7 @@ LEAVE_OUT_FACTOR = 1000.0
 
 @njit_kernel
 def loo_bank_run(
-    model, Ms, Ps, Y, q, w, R_abs, R_rel, gate_idx, gate_lin, gate, n_scratch, WHITE, DED
+    model, Ms, Ps, Y, q, w, R_abs, R_rel, gate_idx, gate_lin, gate, n_scratch, WHITE, DED, PM, PP
 ) -> None:
     """Every filter of the bank on the samples ``Y`` (T, n_obs), in order.
 
@@ -50,7 +50,9 @@ def loo_bank_run(
     ``R_rel`` (H, 8) their measurement-noise stds (row 0 the true ones, row ``c + 1`` with
     channel ``c`` inflated by :data:`LEAVE_OUT_FACTOR`). Out: ``WHITE`` (T, H, 8) the whitened
     innovations; ``DED`` (T, 8) channel ``c``'s innovation in filter ``c + 1`` over its
-    standard deviation with the channel's *own* noise (NaN on a skipped sample).
+    standard deviation with the channel's *own* noise (NaN on a skipped sample); ``PM`` (T, n),
+    ``PP`` (T, n, n) filter 0's prior before each sample (where a bank of bias hypotheses
+    starts, :mod:`diagnosers.sensors.glr_bank`).
     """
     H, n = Ms.shape
     ny = R_abs.shape[1]
@@ -62,6 +64,8 @@ def loo_bank_run(
     jumps = np.empty(G, dtype=np.bool_)
     k2 = LEAVE_OUT_FACTOR * LEAVE_OUT_FACTOR
     for k in range(Y.shape[0]):
+        PM[k] = Ms[0]
+        PP[k] = Ps[0]
         for h in range(H):
             fixed = (q, R_abs[h], R_rel[h], gate_idx, gate_lin, gate, w)
             out = (innov, stdz, WHITE[k, h], S, post, post_sd, jumps)
@@ -84,11 +88,14 @@ class BankOutput:
     ``white`` (T, 9, 8): each filter's whitened innovations (filter 0 all sensors, filter
     ``c + 1`` without sensor ``c``; the left-out channel's entry is about 1/1000 of the
     others'); ``dedicated`` (T, 8): sensor ``c``'s reading less filter ``c + 1``'s prediction,
-    in standard deviations (standard normal while sensor ``c`` is right).
+    in standard deviations (standard normal while sensor ``c`` is right); ``prior_m`` (T, n),
+    ``prior_p`` (T, n, n): filter 0's prior before each sample.
     """
 
     white: np.ndarray
     dedicated: np.ndarray
+    prior_m: np.ndarray
+    prior_p: np.ndarray
 
 
 class LeaveOneOutBank:
@@ -124,6 +131,7 @@ class LeaveOneOutBank:
         T = Y.shape[0]
         white = np.empty((T, self.n_filters, self.n_channels))
         ded = np.empty((T, self.n_channels))
+        pm, pp = np.empty((T, m.n)), np.empty((T, m.n, m.n))
         loo_bank_run(
             m.model,
             Ms,
@@ -139,5 +147,7 @@ class LeaveOneOutBank:
             m.n_scratch,
             white,
             ded,
+            pm,
+            pp,
         )
-        return BankOutput(white, ded)
+        return BankOutput(white, ded, pm, pp)

@@ -34,6 +34,10 @@ filter, whose healthy limit its lag after each programmed T_fp step sets ~50× t
 was floored at 0.01 and so won against any filter merely as consistent
 (``lab/sensor-validation.md``, 2026-12-07).
 
+Where another test names the sensor (``NAMED`` ≥ 0: the GLR bank of bias hypotheses of
+:mod:`diagnosers.sensors.glr_bank` over an alarm's first samples), that one is taken instead,
+and the kind it says (``NAMED_KIND`` > 0: a bias or a drift) too.
+
 **Kind**, for the sensor named: held values with a break in the holding (a fresh sample
 between held ones, decaying count ``> 0.5``) are a dropout, an unbroken hold stuck; a noise
 check over its limit is noise; otherwise the dedicated residual since the alarm began decides
@@ -126,6 +130,8 @@ def decide_run(
     ded_fast,
     ded_slow,
     pre,
+    NAMED,  # (T,) int: a channel named by another test (the GLR bank), −1 where none
+    NAMED_KIND,  # (T,) int: the kind (1 bias, 2 drift) that test says, 0 where none
     SIGNAL,  # (T, 1 + 2C) out: the normalised checks (limit 1)
     CONS,  # (T, H) out: M_h / limit_h
     SLOW,  # (T, H) out: the slow consistency over its limit
@@ -216,8 +222,8 @@ def decide_run(
             CHANNEL[k] = ch_noise
             KIND[k] = _NOISE
             continue
-        c_best, v_best = 0, -1.0
-        for h in range(1, H):
+        c_best, v_best = NAMED[k], -1.0
+        for h in range(1, H if c_best < 0 else 1):
             v = abs(ded_fast[h - 1]) / lim_e[h - 1] / max(SLOW[k, h], CONSISTENT)
             if v > v_best:
                 v_best, c_best = v, h - 1
@@ -237,4 +243,4 @@ def decide_run(
                 kind = _DRIFT
             elif n < settle and abs(mean) < step_ratio * abs(pre[c_best]):
                 kind = _DRIFT
-        KIND[k] = kind
+        KIND[k] = NAMED_KIND[k] if NAMED[k] >= 0 and NAMED_KIND[k] > 0 else kind

@@ -41,6 +41,7 @@ from diagnosers.filters import UKFConfig
 from diagnosers.filters.ukf_config import check_fcc_channels, model_params
 from diagnosers.presets import keyword_init
 from diagnosers.registry import register
+from diagnosers.sensors.glr_bank import GLRBank
 from diagnosers.sensors.loo_bank import LeaveOneOutBank
 from diagnosers.sensors.sensor_checks import KINDS, decide_run, new_state
 from fcc_common.validation import Integer, Real, check_params
@@ -77,6 +78,26 @@ class SensorValidation(Diagnoser):
             a young fault is a bias (a step), in [1, 1000]; default 3.
         settle: samples of an alarm after which a fault without a slope is a bias, in
             [3, 100000]; default 300.
+        glr_window: samples from an alarm's start that the GLR bank of bias hypotheses names
+            the sensor (:mod:`diagnosers.sensors.glr_bank`; the slow rule after them), in
+            [0, 100000]; 0 turns the bank off; default 0 (off). On fresh seeds the bank named
+            a bias's kind better (kind CDR 0.919 against 0.806) but its sensor worse (channel
+            CDR 0.789 against 0.936: a T_ar bias is named R_ar, whose GLR is within 5 %), and
+            a supervisor that rebuilds a loop acts on the sensor named, so the bank stays
+            opt-in (3000, the rest of a ``sensor`` track episode, is the setting measured:
+            ``lab/sensor-validation.md``, 2026-12-07 afternoon).
+        glr_offset: the bank's trial offset, in each channel's unit, in (0, 100]; default 5
+            (inside the ``sensor`` track's sizes 2-10).
+        glr_ramp: within the bank's window, the evidence (nats) a ramp beside the step adds
+            from which the fault is a drift, else a bias, in [0, 10⁶]; 0 leaves the kind to
+            the residual's tests; default 20 (validation seeds: a bias's ramp evidence stayed
+            under 17 over 3000 samples but once, a drift's passed 12-50 at 300 samples).
+        glr_ratio: the bank names only where its largest GLR is this many times the second
+            (else the slow rule names, and the residual's tests say the kind), in [1, 100];
+            default 1.
+        glr_settle: samples of the bank's window before it says the kind (the residual's
+            tests before: they know the level before the alarm, which tells a young drift),
+            in [0, 100000]; default 300.
 
     Attributes:
         classes_: the sensor-fault kinds among the labelled training faults.
@@ -97,6 +118,11 @@ class SensorValidation(Diagnoser):
         "t_drift": Real(0, 100, closed="right"),
         "step_ratio": Real(1, 1000),
         "settle": Integer(3, 100_000),
+        "glr_window": Integer(0, 100_000),
+        "glr_offset": Real(0, 100, closed="right"),
+        "glr_ramp": Real(0, 1e6),
+        "glr_ratio": Real(1, 100),
+        "glr_settle": Integer(0, 100_000),
     }
     DEFAULTS: ClassVar[dict[str, Any]] = {
         "params": None,
@@ -110,6 +136,11 @@ class SensorValidation(Diagnoser):
         "t_drift": 4.0,
         "step_ratio": 3.0,
         "settle": 300,
+        "glr_window": 0,
+        "glr_offset": 5.0,
+        "glr_ramp": 20.0,
+        "glr_ratio": 1.0,
+        "glr_settle": 300,
     }
     __init__ = keyword_init(DEFAULTS)
 
@@ -124,6 +155,11 @@ class SensorValidation(Diagnoser):
     t_drift: float
     step_ratio: float
     settle: int
+    glr_window: int
+    glr_offset: float
+    glr_ramp: float
+    glr_ratio: float
+    glr_settle: int
 
     @classmethod
     def fast_params(cls) -> dict[str, Any]:
@@ -181,6 +217,7 @@ class SensorValidation(Diagnoser):
             closed_loop=self.channels_ == CLOSED_LOOP_CHANNELS,
         )
         self.bank_ = LeaveOneOutBank(self.model_params(), config)
+        self.glr_ = GLRBank(self.bank_.estimator, self.glr_offset)
 
     def _finish(self) -> None:
         names = MEASUREMENT_NAMES
@@ -205,6 +242,7 @@ class SensorValidation(Diagnoser):
         self._named = ""
         self._M, self._P = self.bank_.start()
         self._state = new_state(self.bank_.n_filters, self.bank_.n_channels)
+        self._glr: dict[str, Any] = {"left": 0, "bank": None}
 
     def _checks(self, Y: np.ndarray) -> tuple[np.ndarray, ...]:
         """``(signal, consistency, kind, channel, dedicated residual, slow consistency)`` of the
@@ -218,6 +256,15 @@ class SensorValidation(Diagnoser):
         kind = np.empty(T, dtype=np.int64)
         channel = np.empty(T, dtype=np.int64)
         s = self._state
+        named, named_kind = np.full(T, -1, dtype=np.int64), np.zeros(T, dtype=np.int64)
+        if self.glr_window > 0:
+            named, named_kind = self._glr_named(out, Y, s)
+        self._decide(out, Y, s, (named, named_kind), signal, cons, slow, kind, channel)
+        return signal, cons, kind, channel, np.nan_to_num(out.dedicated), slow
+
+    def _decide(self, out, Y, s, named, signal, cons, slow, kind, channel) -> None:
+        """:func:`decide_run` over the bank's output ``out`` with the state ``s`` (in place)."""
+        C = self.bank_.n_channels
         decide_run(
             out.white,
             out.dedicated,
@@ -249,13 +296,54 @@ class SensorValidation(Diagnoser):
             s["ded_fast"],
             s["ded_slow"],
             s["pre"],
+            *named,
             signal,
             cons,
             slow,
             kind,
             channel,
         )
-        return signal, cons, kind, channel, np.nan_to_num(out.dedicated), slow
+
+    def _glr_named(
+        self, out, Y: np.ndarray, s: dict[str, np.ndarray]
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Per sample, the channel the GLR bank names (−1 outside its windows) and the kind it
+        says (1 bias, 2 drift, 0 none: ``glr_ramp`` 0) of it: the bank starts
+        from the all-sensor filter's prior at an alarm's first sample (the alarms of a trial
+        run of the rule on a copy of the state: naming does not change them) and names the
+        next ``glr_window`` samples."""
+        T, H, C = out.white.shape
+        trial = {k: v.copy() for k, v in s.items()}
+        sig, cn, sl = np.empty((T, 1 + 2 * C)), np.empty((T, H)), np.empty((T, H))
+        k1, c1 = np.empty(T, dtype=np.int64), np.empty(T, dtype=np.int64)
+        none = (np.full(T, -1, dtype=np.int64), np.zeros(T, dtype=np.int64))
+        self._decide(out, Y, trial, none, sig, cn, sl, k1, c1)
+        alarm = k1 > 0
+        starts = alarm & ~np.concatenate([[s["alarmed"][0] > 0], alarm[:-1]])
+        named, named_kind = none
+        g, k = self._glr, 0
+        while k < T:
+            if g["left"] <= 0:
+                nxt = np.flatnonzero(starts[k:])
+                if nxt.size == 0:
+                    break
+                k += int(nxt[0])
+                g["bank"] = self.glr_.start(out.prior_m[k], out.prior_p[k])
+                g["left"] = self.glr_window
+            n = min(g["left"], T - k)
+            gain, ramp, _ = self.glr_.run(g["bank"], Y[k : k + n], out.white[k : k + n, 0])
+            c = np.argmax(gain, axis=1)
+            top2 = np.sort(gain, axis=1)[:, -2:]
+            sure = top2[:, 1] >= self.glr_ratio * top2[:, 0]
+            named[k : k + n] = np.where(sure, c, -1)
+            if self.glr_ramp > 0:
+                drift = ramp[np.arange(n), c] > self.glr_ramp
+                age = g["bank"]["age"][0] - n + 1 + np.arange(n)  # 1 at the window's start
+                says = sure & (age > self.glr_settle)
+                named_kind[k : k + n] = np.where(says, np.where(drift, 2, 1), 0)
+            g["left"] -= n
+            k += n
+        return named, named_kind
 
     def _labels(self, kind: np.ndarray, channel: np.ndarray) -> tuple[np.ndarray, ...]:
         """Per sample: the diagnosis, the one-hot class scores and the sensor named."""

@@ -91,10 +91,10 @@ def test_a_bias_is_isolated_to_its_sensor(fitted: SensorValidation, channel: str
 
 
 def test_a_feed_temperature_bias_is_named_within_its_pair(fitted: SensorValidation) -> None:
-    """A T_fp bias is detected at once and named T_fp or T_rx: T_rx first, T_fp once the
-    slow consistency (``lam_iso``) has seen the regenerator's answer, a few hundred samples
-    on (lab/sensor-validation.md, 2026-12-07: the exact model separates the pair; the
-    leave-out filters need that long)."""
+    """A T_fp bias is detected at once and named T_fp or T_rx, T_fp at the end: the slow
+    consistency (``lam_iso``) alone names T_rx first, T_fp once it has seen the
+    regenerator's answer (lab/sensor-validation.md, 2026-12-07); the GLR bank (on by
+    default) names T_fp from the first samples (tests/diagnosers/test_sensor_glr_bank.py)."""
     fault = fcc_env.FaultSpec(scenario="sensor-bias", channel="T_fp", magnitude=5.0, onset=ONSET)
     [ep] = _sim([5002], fault)
     det = fitted.detect(ep)

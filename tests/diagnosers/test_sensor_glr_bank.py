@@ -1,0 +1,71 @@
+"""The GLR bank of bias hypotheses (``diagnosers.sensors.glr_bank``) in ``sensor-validation``.
+
+The oracle is the fault's own definition: the plant is simulated with a bias of a known size on
+a known channel (``FCC-closedloop-v0``); the expectations (the channel, the size) are that
+fault's, never the diagnoser's output.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import diagnosers
+import fcc_env
+from diagnosers import Episode
+from diagnosers.sensors.sensor_validation import SensorValidation
+
+N, ONSET, WINDOW = 900, 500, 200
+PLANT = fcc_env.PlantConfig.build(regulatory=True)
+
+
+def _sim(seeds: list[int], fault: fcc_env.FaultSpec | None = None) -> list[Episode]:
+    return Episode.from_batch(fcc_env.simulate_episodes(seeds, N, plant=PLANT, fault=fault))
+
+
+@pytest.fixture(scope="module")
+def fitted() -> SensorValidation:
+    labelled = _sim([1005], fcc_env.FaultSpec(scenario="sensor-bias", onset=ONSET))
+    d = diagnosers.make("sensor-validation", warmup=100, glr_window=WINDOW, glr_settle=50)
+    assert isinstance(d, SensorValidation)
+    return d.fit(_sim([1000, 1001, 1002]) + labelled)
+
+
+def _bias(channel: str, size: float) -> Episode:
+    fault = fcc_env.FaultSpec(scenario="sensor-bias", channel=channel, magnitude=size, onset=ONSET)
+    return _sim([5002], fault)[0]
+
+
+def test_a_feed_temperature_bias_is_named_from_the_first_samples(fitted) -> None:
+    """The pair the leave-out filters name late (T_rx first, lab/sensor-validation.md): the
+    bank names T_fp within the window, its size to within a fifth."""
+    ep = _bias("T_fp", 5.0)
+    det = fitted.detect(ep)
+    after = det.alarm[ONSET:]
+    assert after[:50].any()
+    first = np.flatnonzero(after)[0] + ONSET
+    named = fitted.sensors(ep)[first : first + WINDOW][det.alarm[first : first + WINDOW]]
+    assert np.mean(named == "T_fp") >= 0.9, np.unique(named, return_counts=True)
+    fitted.reset()
+    fitted._checks(np.asarray(ep.y[: first + WINDOW], dtype=np.float64))
+    b = fitted._glr["bank"]
+    assert b is not None and fitted._glr["left"] == 0
+    acc = b["acc"][fcc_env.MEASUREMENT_NAMES.index("T_fp")]
+    assert -fitted.glr_offset * acc[0] / acc[1] == pytest.approx(5.0, rel=0.2)
+
+
+def test_streaming_names_as_the_whole_record_does(fitted) -> None:
+    """``update`` sample by sample carries the bank across calls: the same sensor per sample
+    as :meth:`sensors` on the whole record (the contract's detect = reset + updates)."""
+    ep = _bias("T_rx", 4.0)
+    whole = fitted.sensors(ep)
+    fitted.reset()
+    streamed = [(fitted.update(y), fitted.named_sensor)[1] for y in np.asarray(ep.y)]
+    assert list(whole) == streamed
+
+
+def test_the_window_must_be_a_count_of_samples() -> None:
+    with pytest.raises(ValueError, match="glr_window"):
+        diagnosers.make("sensor-validation", glr_window=-1).fit(_sim([1000]))
+    with pytest.raises(ValueError, match="glr_offset"):
+        diagnosers.make("sensor-validation", glr_offset=0.0).fit(_sim([1000]))
