@@ -32,9 +32,9 @@ from typing import Any, ClassVar
 import numpy as np
 
 from diagnosers.contract import Tier
-from diagnosers.detection import NO_DIAGNOSIS, Decision, Detection
 from diagnosers.diagnoser import Diagnoser
 from diagnosers.episode.record import Episode
+from diagnosers.loops.loop_offset import EwmaLimitDecisions
 from diagnosers.presets import keyword_init
 from diagnosers.registry import register
 from fcc_common.validation import Integer, Real, check_params
@@ -80,7 +80,7 @@ def air_commands(error_C: np.ndarray, sample_time_s: float) -> np.ndarray:
 
 
 @register("air-deficit")
-class AirDeficit(Diagnoser):
+class AirDeficit(EwmaLimitDecisions, Diagnoser):
     """The metered air short of the air loop's recomputed command (module docstring), named
     ``label``.
 
@@ -159,44 +159,3 @@ class AirDeficit(Diagnoser):
             self._u, self._e = _pi_step(self._u, self._e, e, self._law), e
         self._k += 1
         return self._a
-
-    def _statistic(self, y: np.ndarray) -> np.ndarray:
-        self._start()
-        return np.array([self._step(row) for row in y])
-
-    def _reset(self) -> None:
-        self._start()
-
-    def _decision(self, s: float, k: int) -> Decision:
-        alarm = bool(k >= self.warm_up and s > self.limit_)
-        return Decision(
-            alarm=alarm,
-            signal=np.array([s if k >= self.warm_up else 0.0]),
-            lower=np.array([-np.inf]),
-            upper=np.array([self.limit_]),
-            residual=np.array([s]),
-            diagnosis=self.classes_[0] if alarm else NO_DIAGNOSIS,
-            class_scores=np.array([float(alarm)]),
-        )
-
-    def _update(self, y: np.ndarray) -> Decision:
-        s = self._step(y)
-        return self._decision(s, self._k - 1)
-
-    def _detect(self, y: np.ndarray) -> Detection:
-        s = self._statistic(y)
-        return Detection.from_decisions(
-            [self._decision(float(x), k) for k, x in enumerate(s)],
-            self.signal_names_,
-            self.classes_,
-        )
-
-    def _get_state(self) -> dict[str, np.ndarray]:
-        return {"limit": np.array(self.limit_)}
-
-    def _set_state(self, state: dict[str, np.ndarray]) -> None:
-        limit = float(state["limit"])
-        if not limit > 0:
-            raise ValueError(f"saved limit must be positive, got {limit}")
-        self.limit_ = limit
-        self._build()

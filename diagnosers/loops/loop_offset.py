@@ -31,11 +31,68 @@ from diagnosers.registry import register
 from fcc_common.validation import Integer, Options, Real, check_params
 from fcc_env.closed_loop import CLOSED_LOOP_CHANNELS
 
-__all__ = ["LoopOffset"]
+__all__ = ["EwmaLimitDecisions", "LoopOffset"]
+
+
+class EwmaLimitDecisions:
+    """The decisions of a one-sided limit on a per-sample statistic (shared by ``loop-offset``
+    and ``air-deficit``): the host class gives ``_start`` (reset the recursion), ``_step`` (one
+    sample in, the statistic out, ``_k`` counting samples), ``_build``, ``warm_up``,
+    ``limit_``, ``classes_`` and ``signal_names_``; an alarm names the host's one class."""
+
+    def _start(self) -> None:
+        raise NotImplementedError
+
+    def _step(self, row: np.ndarray) -> float:
+        raise NotImplementedError
+
+    def _build(self) -> None:
+        raise NotImplementedError
+
+    def _statistic(self, y: np.ndarray) -> np.ndarray:
+        self._start()
+        return np.array([self._step(row) for row in y])
+
+    def _reset(self) -> None:
+        self._start()
+
+    def _decision(self, s: float, k: int) -> Decision:
+        alarm = bool(k >= self.warm_up and s > self.limit_)
+        return Decision(
+            alarm=alarm,
+            signal=np.array([s if k >= self.warm_up else 0.0]),
+            lower=np.array([-np.inf]),
+            upper=np.array([self.limit_]),
+            residual=np.array([s]),
+            diagnosis=self.classes_[0] if alarm else NO_DIAGNOSIS,
+            class_scores=np.array([float(alarm)]),
+        )
+
+    def _update(self, y: np.ndarray) -> Decision:
+        s = self._step(y)
+        return self._decision(s, self._k - 1)
+
+    def _detect(self, y: np.ndarray) -> Detection:
+        s = self._statistic(y)
+        return Detection.from_decisions(
+            [self._decision(float(x), k) for k, x in enumerate(s)],
+            self.signal_names_,
+            self.classes_,
+        )
+
+    def _get_state(self) -> dict[str, np.ndarray]:
+        return {"limit": np.array(self.limit_)}
+
+    def _set_state(self, state: dict[str, np.ndarray]) -> None:
+        limit = float(state["limit"])
+        if not limit > 0:
+            raise ValueError(f"saved limit must be positive, got {limit}")
+        self.limit_ = limit
+        self._build()
 
 
 @register("loop-offset")
-class LoopOffset(Diagnoser):
+class LoopOffset(EwmaLimitDecisions, Diagnoser):
     """A persistent control error of one loop (module docstring), named ``label``.
 
     Args:
@@ -117,44 +174,3 @@ class LoopOffset(Diagnoser):
         self._a = (1.0 - self.lam) * self._a + self.lam * float(e)
         self._k += 1
         return self._a
-
-    def _statistic(self, y: np.ndarray) -> np.ndarray:
-        self._start()
-        return np.array([self._step(row) for row in y])
-
-    def _reset(self) -> None:
-        self._start()
-
-    def _decision(self, s: float, k: int) -> Decision:
-        alarm = bool(k >= self.warm_up and s > self.limit_)
-        return Decision(
-            alarm=alarm,
-            signal=np.array([s if k >= self.warm_up else 0.0]),
-            lower=np.array([-np.inf]),
-            upper=np.array([self.limit_]),
-            residual=np.array([s]),
-            diagnosis=self.classes_[0] if alarm else NO_DIAGNOSIS,
-            class_scores=np.array([float(alarm)]),
-        )
-
-    def _update(self, y: np.ndarray) -> Decision:
-        s = self._step(y)
-        return self._decision(s, self._k - 1)
-
-    def _detect(self, y: np.ndarray) -> Detection:
-        s = self._statistic(y)
-        return Detection.from_decisions(
-            [self._decision(float(x), k) for k, x in enumerate(s)],
-            self.signal_names_,
-            self.classes_,
-        )
-
-    def _get_state(self) -> dict[str, np.ndarray]:
-        return {"limit": np.array(self.limit_)}
-
-    def _set_state(self, state: dict[str, np.ndarray]) -> None:
-        limit = float(state["limit"])
-        if not limit > 0:
-            raise ValueError(f"saved limit must be positive, got {limit}")
-        self.limit_ = limit
-        self._build()
