@@ -43,9 +43,27 @@ RAMP_SAMPLES = 1000.0
 
 @njit_kernel
 def glr_bank_run(
-    model, Ms, Ps, Y, WHITE0, q, w, r_abs, r_rel, gate_idx, gate_lin, gate, n_scratch, b1, r1,
-    age, acc, GAIN, RAMP, SIZE,
-) -> None:  # fmt: skip
+    model,
+    Ms,
+    Ps,
+    Y,
+    WHITE0,
+    q,
+    w,
+    r_abs,
+    r_rel,
+    gate_idx,
+    gate_lin,
+    gate,
+    n_scratch,
+    b1,
+    r1,
+    age,
+    acc,
+    GAIN,
+    RAMP,
+    SIZE,
+) -> None:
     """The hypothesis filters over ``Y`` (T, n_obs): filter ``c`` (priors ``Ms[c]``, ``Ps[c]``,
     advanced in place) reads channel ``c`` lowered by ``b1``, filter ``C + c`` lowered by
     ``r1`` times the samples since the start (``age[0]``, in place); ``WHITE0`` (T, ny) the
