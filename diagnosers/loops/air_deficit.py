@@ -128,16 +128,7 @@ class AirDeficit(EwmaLimitDecisions, Diagnoser):
         if missing:
             raise ValueError(f"air-deficit reads {list(_CHANNELS)}; the episodes lack {missing}")
         self._build()
-        peak = 0.0
-        for ep in episodes:
-            if ep.fault_onset is None and ep.n_samples > self.warm_up:
-                peak = max(peak, float(np.max(self._statistic(ep.y)[self.warm_up :])))
-        if peak <= 0.0:
-            raise ValueError(
-                f"air-deficit needs healthy training episodes longer than warm_up = "
-                f"{self.warm_up} samples"
-            )
-        self.limit_ = self.margin * peak
+        self._calibrate_limit(episodes, "air-deficit")
 
     def _build(self) -> None:
         self.idx_ = tuple(self.channels_.index(c) for c in _CHANNELS)

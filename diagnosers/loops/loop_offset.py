@@ -37,7 +37,7 @@ __all__ = ["EwmaLimitDecisions", "LoopOffset"]
 class EwmaLimitDecisions:
     """The decisions of a one-sided limit on a per-sample statistic (shared by ``loop-offset``
     and ``air-deficit``): the host class gives ``_start`` (reset the recursion), ``_step`` (one
-    sample in, the statistic out, ``_k`` counting samples), ``_build``, ``warm_up``,
+    sample in, the statistic out, ``_k`` counting samples), ``_build``, ``warm_up``, ``margin``,
     ``limit_``, ``classes_`` and ``signal_names_``; an alarm names the host's one class."""
 
     def _start(self) -> None:
@@ -48,6 +48,20 @@ class EwmaLimitDecisions:
 
     def _build(self) -> None:
         raise NotImplementedError
+
+    def _calibrate_limit(self, episodes: list[Episode], name: str, need: str = "") -> None:
+        """``limit_``: ``margin`` times the statistic's peak over the healthy episodes after
+        ``warm_up``; ``name`` and ``need`` word the refusal when there is no positive peak."""
+        peak = 0.0
+        for ep in episodes:
+            if ep.fault_onset is None and ep.n_samples > self.warm_up:
+                peak = max(peak, float(np.max(self._statistic(ep.y)[self.warm_up :])))
+        if peak <= 0.0:
+            raise ValueError(
+                f"{name} needs healthy training episodes longer than warm_up = "
+                f"{self.warm_up} samples{need}"
+            )
+        self.limit_ = self.margin * peak
 
     def _statistic(self, y: np.ndarray) -> np.ndarray:
         self._start()
@@ -149,16 +163,9 @@ class LoopOffset(EwmaLimitDecisions, Diagnoser):
                 f"lack {missing}"
             )
         self._build()
-        peak = 0.0
-        for ep in episodes:
-            if ep.fault_onset is None and ep.n_samples > self.warm_up:
-                peak = max(peak, float(np.max(self._statistic(ep.y)[self.warm_up :])))
-        if peak <= 0.0:
-            raise ValueError(
-                f"loop-offset needs healthy training episodes longer than warm_up = "
-                f"{self.warm_up} samples whose control error ever leans to the watched side"
-            )
-        self.limit_ = self.margin * peak
+        self._calibrate_limit(
+            episodes, "loop-offset", " whose control error ever leans to the watched side"
+        )
 
     def _build(self) -> None:
         y, sp, _ = LOOP_CHANNELS[self.loop]
