@@ -80,12 +80,11 @@ class SensorValidation(Diagnoser):
             [3, 100000]; default 300.
         glr_window: samples from an alarm's start that the GLR bank of bias hypotheses names
             the sensor (:mod:`diagnosers.sensors.glr_bank`; the slow rule after them), in
-            [0, 100000]; 0 turns the bank off; default 0 (off). On fresh seeds the bank named
-            a bias's kind better (kind CDR 0.919 against 0.806) but its sensor worse (channel
-            CDR 0.789 against 0.936: a T_ar bias is named R_ar, whose GLR is within 5 %), and
-            a supervisor that rebuilds a loop acts on the sensor named, so the bank stays
-            opt-in (3000, the rest of a ``sensor`` track episode, is the setting measured:
-            ``lab/sensor-validation.md``, 2026-12-07 afternoon).
+            [0, 100000]; 0 turns the bank off; default 0 (off): the bank names a bias's kind
+            better but its sensor worse (a T_ar bias as R_ar, whose evidence is within a few
+            per cent), and a supervisor that rebuilds a loop acts on the sensor named; 3000
+            (the rest of a ``sensor`` track episode) is the setting measured in
+            ``lab/sensor-validation.md``.
         glr_offset: the bank's trial offset, in each channel's unit, in (0, 100]; default 5
             (inside the ``sensor`` track's sizes 2-10).
         glr_ramp: within the bank's window, the evidence (nats) a ramp beside the step adds

@@ -203,6 +203,10 @@ def test_signal_fault_reads_a_registered_fault_from_a_signal_name() -> None:
             },
             "confirm_names",
         ),
+        (
+            {"members": [{"name": "limits", "params": {}, "classes": ["f1"], "precedes": -1}]},
+            r"precedes=-1",
+        ),
     ],
 )
 def test_bad_settings_are_refused_by_name(params: dict, match: str) -> None:

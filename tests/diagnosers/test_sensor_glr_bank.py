@@ -69,3 +69,11 @@ def test_the_window_must_be_a_count_of_samples() -> None:
         diagnosers.make("sensor-validation", glr_window=-1).fit(_sim([1000]))
     with pytest.raises(ValueError, match="glr_offset"):
         diagnosers.make("sensor-validation", glr_offset=0.0).fit(_sim([1000]))
+
+
+@pytest.mark.parametrize(
+    ("key", "value"), [("glr_ramp", -1.0), ("glr_ratio", 0.5), ("glr_settle", -1)]
+)
+def test_bad_bank_settings_name_the_value_and_the_range(key: str, value: float) -> None:
+    with pytest.raises(ValueError, match=rf"{key}={value}.*allowed range"):
+        diagnosers.make("sensor-validation", **{key: value}).validate_params()
