@@ -4,7 +4,7 @@ Prints env-steps per second of :class:`fcc_env.vector_env.FCCVectorEnv` (through
 ``gym.make_vec(..., vectorization_mode="vector_entry_point", threads=...)``) beside Gymnasium's
 ``SyncVectorEnv`` over the same keywords, with the native/sync ratio, for ``FCC-v0`` (scenario
 f1) and ``FCC-closedloop-v0``, random actions, the registered time limit, at each number of envs
-and threads asked (``auto``: the env's default policy, :func:`fcc_env.vector_env.vector_threads`).
+and threads asked (``auto``: the env's default policy, :func:`fcc_env.vector_threads.vector_threads`).
 Each figure is by wall clock and by the CPU time of this process (``time.process_time``, every
 thread counted: threads spinning at a barrier show there); with ``--repeats`` above 1, the
 median and the range (min-max) of the runs, measured in turn. Figures, not assertions: the machine
@@ -26,7 +26,8 @@ import numpy as np
 import fcc_env
 from fcc_common.invocation import command_parser, csv_list, run_command
 from fcc_env.simulation import check_memory
-from fcc_env.vector_env import RING, vector_threads
+from fcc_env.vector_env import RING
+from fcc_env.vector_threads import vector_threads
 
 #: The issues' goals (45): at 1024 envs >= 20x sync and at 16 envs >= 1x sync; native >= 500,000
 #: env-steps/s at 1024 envs on a free machine (issue 24).

@@ -26,7 +26,8 @@ The modules, by job:
 - :mod:`~fcc_env.control_task`: ``FCC-control-v0``, the closed loop with an economic reward;
   :mod:`~fcc_env.control_draws`: what its random episodes draw (the paper's faults, the whole catalogue by fault class, or the sensor faults);
 - :mod:`~fcc_env.vector_env`, :mod:`~fcc_env.control_vector`: native vector envs (N episodes in
-  one compiled loop) of ``FCC-v0``/``FCC-closedloop-v0`` and of ``FCC-control-v0``;
+  one compiled loop) of ``FCC-v0``/``FCC-closedloop-v0`` and of ``FCC-control-v0``, and
+  :mod:`~fcc_env.vector_threads`, the numba threads their step runs on;
 - :mod:`~fcc_env.plotting`, :mod:`~fcc_env.render`: figures and the env's ``rgb_array`` frame;
   :mod:`~fcc_env.dataset_schema`: units and roles in a dataset's Parquet schema;
 - :mod:`~fcc_env.generate`, :mod:`~fcc_env.demo`: the commands (the simulator's speed:

@@ -92,7 +92,8 @@ class FCCControlVectorEnv(VectorEnv):
     Keywords are :class:`~fcc_env.control_task.FCCControlEnv`'s (``economics``, ``scenario``
     defaulting to ``"random"``, and ``FCC-closedloop-v0``'s) plus ``max_episode_steps`` and
     ``threads`` (:class:`~fcc_env.vector_env.FCCVectorEnv`'s, which also warns when the limit
-    ends an episode before its fault onset, and whose module doc gives the thread policy). On an autoreset step an env's reward and terms are 0, as
+    ends an episode before its fault onset; the thread policy is :mod:`fcc_env.vector_threads`).
+    On an autoreset step an env's reward and terms are 0, as
     for a single env's reset.
     """
 

@@ -12,7 +12,7 @@ import pytest
 from test_vector_env import HOT_LOSS, assert_same
 
 import fcc_env
-from fcc_env.vector_env import MIN_ENVS_PER_THREAD, vector_threads
+from fcc_env.vector_threads import MIN_ENVS_PER_THREAD, vector_threads
 
 TWO_THREADS = pytest.mark.skipif(
     numba.config.NUMBA_NUM_THREADS < 2, reason="numba's pool has one thread on this machine"
