@@ -8,6 +8,8 @@
                       and actuator fault (the study's reference)
 ``sensor_policy``     the supervisor that corrects a loop's set point for a stuck or biased
                       transmitter (a frozen-reading check; a diagnoser that names a sensor fault)
+``hybrid_policy``     the fault-blind PPO agent, overridden by the sensor-correcting supervisor on
+                      the loops it judges faulty (``ppo+sensor-correcting``)
 ``posterior_policy``  the supervisor on a fault posterior (``mmae``): the candidate set points of
                       highest expected return, from a table of returns per hypothesis
 ``policy_registry``   the policies by name: :func:`register_policy`, :func:`make_policy`,

@@ -5,14 +5,18 @@ A policy is an object with ``name`` (its row in the table), ``reset(info)`` and
 ``act(obs, info)`` (:class:`evaluation.control.policies.Policy`); the registry holds, by a short
 name, what builds one: a class or a function. The built-ins are :data:`BUILTIN_POLICIES`:
 
-==============  ==================================================================================
-``program``     the operating program as it is (the action 0)
-``fixed``       the best fixed set points of the healthy plant
-``oracle``      knows the fault and its onset: the study's reference, always its last row
-``supervisor``  a diagnosis-driven supervisor: ``make_policy("supervisor", name="pca")``
-``ppo``         a saved PPO agent: ``make_policy("ppo", directory=DIR)``
-``posterior``   a supervisor on the ``mmae`` posterior: the set points of highest expected return
-==============  ==================================================================================
+=========================  ========================================================================
+``program``                the operating program as it is (the action 0)
+``fixed``                  the best fixed set points of the healthy plant
+``oracle``                 knows the fault and its onset: the study's reference, always its last row
+``supervisor``             a diagnosis-driven supervisor: ``make_policy("supervisor", name="pca")``
+``ppo``                    a saved PPO agent: ``make_policy("ppo", directory=DIR)``
+``posterior``              a supervisor on the ``mmae`` posterior: the set points of highest
+                           expected return
+``ppo+sensor-correcting``  a saved PPO agent whose set point on a loop the sensor-correcting
+                           supervisor judges faulty is the supervisor's:
+                           ``make_policy("ppo+sensor-correcting", directory=DIR)``
+=========================  ========================================================================
 
 A policy of your own joins with ``@register_policy("name")`` on its class (or on a function
 that returns one) in a module that ``python -m evaluation.control --import MODULE`` imports, and
@@ -94,6 +98,12 @@ BUILTIN_POLICIES: tuple[PolicySpec, ...] = (
         "evaluation.control.rl_policy:load_policy",
         "a saved PPO agent (policy.npz + policy.json)",
         needs="directory=DIR (python -m evaluation.control.rl evaluate --policy DIR)",
+    ),
+    PolicySpec(
+        "ppo+sensor-correcting",
+        "evaluation.control.hybrid_policy:ppo_with_sensor_correcting",
+        "a saved PPO agent, overridden on the loops the sensor-correcting supervisor judges",
+        needs="directory=DIR (a saved PPO agent, as for ppo)",
     ),
     PolicySpec(
         "posterior",

@@ -31,7 +31,10 @@ A judged loop stays rebuilt while the frozen or residual test holds; a diagnosis
 Only a loop whose optimum leaves room in its set-point range both ways is rebuilt
 (:func:`~evaluation.control.setpoints.correctable_loops`: the riser's optimum lies on its
 range's top, where the corrections upwards are clipped and a one-sided loop trips more often
-than the stuck one left alone).
+than the stuck one left alone). A loop that cannot be rebuilt but whose reading is frozen is
+**held** (``hold_frozen``): its set point becomes the frozen reading (clipped to its range), so
+the PI error is zero and the valve stays where it was when the transmitter stuck, instead of
+the integral winding the valve against a reading that no longer moves.
 """
 
 from __future__ import annotations
@@ -66,6 +69,8 @@ _LOOP_INDEX = [CLOSED_LOOP_CHANNELS.index(c) for c in LOOP_CHANNELS]
 #: the soft sensor's inputs (observation indices): the other measured channels and the valve command
 SOFT_SENSOR_INPUTS = [i for i, c in enumerate(CLOSED_LOOP_CHANNELS[:9]) if c not in LOOP_CHANNELS]
 _SP = [CLOSED_LOOP_CHANNELS.index(n) for n in ("T_rx_sp", "T_rg1_sp")]
+_SP_LOW = np.array([SETPOINT_RANGES[n].low for n in ("T_rx_sp", "T_rg1_sp")])
+_SP_HIGH = np.array([SETPOINT_RANGES[n].high for n in ("T_rx_sp", "T_rg1_sp")])
 #: training episodes of the soft sensor (never a test or validation seed)
 SOFT_SENSOR_SEEDS = range(1000, 1004)
 
@@ -85,8 +90,7 @@ class SoftSensor:
         """Least squares on healthy episodes of ``seeds`` whose set points step at random
         every 200 samples (module docstring)."""
         rows, targets = [], []
-        lo = np.array([SETPOINT_RANGES[n].low for n in ("T_rx_sp", "T_rg1_sp")])
-        hi = np.array([SETPOINT_RANGES[n].high for n in ("T_rx_sp", "T_rg1_sp")])
+        lo, hi = _SP_LOW, _SP_HIGH
         for seed in seeds:
             rng = np.random.default_rng(seed)
             env = gym.make(CONTROL_ENV_ID, scenario="nominal")
@@ -153,6 +157,8 @@ class SensorCorrectingSupervisor:
     arm_after: int = ARM_AFTER
     healthy: np.ndarray | None = None
     soft_sensor: SoftSensor | None = None
+    #: a frozen loop that cannot be rebuilt is held at its frozen reading (module docstring)
+    hold_frozen: bool = True
     _policy: SetpointPolicy = field(init=False, repr=False)
     _k: int = field(init=False, repr=False, default=0)
     _last: np.ndarray = field(init=False, repr=False)
@@ -162,6 +168,7 @@ class SensorCorrectingSupervisor:
     _latched: np.ndarray = field(init=False, repr=False)
     _judged: np.ndarray = field(init=False, repr=False)
     _correctable: np.ndarray = field(init=False, repr=False)
+    _held: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
         if self.healthy is None:
@@ -189,18 +196,27 @@ class SensorCorrectingSupervisor:
         self._error = np.zeros(2)
         self._latched = np.zeros(2, dtype=bool)
         self._judged = np.zeros(2, dtype=bool)
+        self._held = np.zeros(2, dtype=bool)
         if self.diagnoser is not None:
             self.diagnoser.reset()
         self._policy.reset(info)
 
     @property
     def judged(self) -> np.ndarray:
-        """Which loop transmitters (T_rx, T_rg1) the policy judges faulty now."""
-        return self._judged.copy()
+        """Which loop transmitters (T_rx, T_rg1) the policy judges faulty now and acts on:
+        rebuilt on the soft sensor, or held at a frozen reading."""
+        return self._judged | self._held
+
+    @property
+    def setpoints(self) -> np.ndarray:
+        """The set points (°C, ``[T_rx_sp, T_rg1_sp]``) the policy asks for after the last
+        ``act``."""
+        return self._target()
 
     def _target(self) -> np.ndarray:
         assert self.healthy is not None
-        return self.healthy + np.where(self._judged, self._error, 0.0)
+        target = self.healthy + np.where(self._judged, self._error, 0.0)
+        return np.where(self._held, np.clip(self._last, _SP_LOW, _SP_HIGH), target)
 
     def act(self, obs: np.ndarray, info: Mapping[str, Any]) -> np.ndarray:
         assert self.soft_sensor is not None
@@ -229,4 +245,5 @@ class SensorCorrectingSupervisor:
         frozen = self._repeats >= self.frozen_samples - 1
         judged = frozen | (np.abs(self._residual) > self.limit_C) | self._latched
         self._judged = judged & self._correctable
+        self._held = frozen & ~self._correctable & bool(self.hold_frozen)
         return self._policy.act(obs, info)

@@ -153,6 +153,32 @@ def test_sensor_policy_takes_a_bias_out_through_the_set_point():
     assert abs(moves[-1][0]) < 0.3
 
 
+@pytest.mark.parametrize(
+    ("hold", "stuck_at", "judged", "move"),
+    [(True, 541.0, True, -4.0), (True, 546.5, True, 0.0), (False, 541.0, False, 0.0)],
+)
+def test_a_frozen_loop_without_set_point_room_is_held_at_its_reading(hold, stuck_at, judged, move):
+    """The riser's optimum on its range's top (545 °C) leaves no room to rebuild the loop; its
+    frozen reading becomes its set point instead (clipped to the range), the PI error zero."""
+    healthy = np.array([545.0, 690.0])
+    policy = SensorCorrectingSupervisor(
+        healthy=healthy,
+        frozen_samples=4,
+        soft_sensor=_flat_sensor((545.0, 690.0)),
+        hold_frozen=hold,
+    )
+    policy.reset({})
+    rng = np.random.default_rng(4)
+    live = [(545.0 + rng.normal(), 690.0 + rng.normal()) for _ in range(5)]
+    stuck = [(stuck_at, 690.0 + rng.normal()) for _ in range(4)]
+    moves = _feed(policy, live + stuck[:3])
+    assert not policy.judged.any() and np.abs(moves).max() < 1e-5
+    moves = _feed(policy, stuck[3:])
+    assert policy.judged.tolist() == [judged, False]
+    assert moves[-1][0] == pytest.approx(move, abs=1e-5)
+    assert moves[-1][1] == pytest.approx(0.0, abs=1e-5)
+
+
 def test_sensor_policy_refuses_a_short_window():
     with pytest.raises(ValueError, match="frozen_samples=1"):
         SensorCorrectingSupervisor(
