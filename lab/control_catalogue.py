@@ -24,6 +24,12 @@ whether their intervals overlap.
     python lab/control_catalogue.py --loop-sensors --ppo /tmp/ppo_sensor --first 5300 --n 10 \
         --out /tmp/loop_ppo.jsonl
 
+``--hybrid`` (with ``--ppo DIR``) adds ``ppo+sensor-correcting``: the same agent, overridden by
+the sensor-correcting supervisor on the loops it judges faulty
+(:mod:`evaluation.control.hybrid_policy`); the report then adds, per class, its mean, its and
+the supervisor's paired gains over the agent, and whether each one's unpaired interval lies
+above the agent's.
+
 ``--diagnoser NAME`` adds a fourth policy, ``sensor-correcting+NAME``: the same supervisor
 with registered diagnoser NAME streamed in it (fitted on training seeds by
 :func:`evaluation.control.sensor_policy.fit_sensor_diagnoser`); the report then adds its
@@ -47,6 +53,8 @@ from evaluation.metrics.intervals import bootstrap_ci
 from fcc_env.control_draws import LOOP_CHANNELS, FaultClass, fault_class
 
 POLICIES = ("fixed", "sensor-correcting", "oracle")
+#: ``--hybrid``: the agent overridden by the supervisor on its judged loops
+HYBRID = "ppo+sensor-correcting"
 
 
 #: ``--loop-sensors``: the sensor faults that reach the process, each at its default size and
@@ -65,10 +73,16 @@ def run(
     diagnoser: str | None = None,
     diagnoser_only: bool = False,
     ppo: str | None = None,
+    hybrid: bool = False,
 ) -> None:
     policies = {name: make_policy(name) for name in POLICIES}
     if ppo:
         policies["ppo"] = make_policy("ppo", directory=ppo)
+    if hybrid:
+        if not ppo:
+            raise ValueError("hybrid=True needs ppo=DIR: allowed: --hybrid with --ppo DIR")
+        soft = policies["sensor-correcting"].soft_sensor  # one fit for both supervisors
+        policies[HYBRID] = make_policy(HYBRID, directory=ppo, soft_sensor=soft)
     if diagnoser:
         # diagnosis only: the frozen and residual checks can never fire
         off = {"frozen_samples": 10**9, "limit_C": 1e9} if diagnoser_only else {}
@@ -175,6 +189,8 @@ def report(paths: list[str]) -> None:
             )
     if any("ppo" in r for r in rows):
         _report_ppo(groups)
+    if any(HYBRID in r for r in rows):
+        _report_hybrid(groups)
     print(f"\n{len(rows)} episodes, {sum(r['cpu_s'] for r in rows):.0f} CPU s")
 
 
@@ -204,6 +220,32 @@ def _report_ppo(groups: dict[str, list[dict]]) -> None:
         )
 
 
+def _report_hybrid(groups: dict[str, list[dict]]) -> None:
+    """The hybrid beside the agent and the supervisor: means, each one's paired gain over the
+    agent, whether its unpaired interval lies above the agent's (the goal's "apart")."""
+    print(
+        f"\n| class | n | ppo | sensor-correcting | {HYBRID} | {HYBRID} − ppo | apart "
+        "| sensor-correcting − ppo | apart | trips ppo/s-c/hybrid |"
+    )
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    for name, g in groups.items():
+        g = [r for r in g if HYBRID in r]
+        if len(g) < 2:
+            continue
+        agent = np.array([r["ppo"] for r in g])
+        sup = np.array([r["sensor-correcting"] for r in g])
+        hyb = np.array([r[HYBRID] for r in g])
+        a, c, h = (bootstrap_ci(list(x)) for x in (agent, sup, hyb))
+        trips = "/".join(
+            str(sum(r[k + "_trip"] for r in g)) for k in ("ppo", "sensor-correcting", HYBRID)
+        )
+        print(
+            f"| {name} | {len(g)} | {_ci(agent)} | {_ci(sup)} | {_ci(hyb)} | {_ci(hyb - agent)} "
+            f"| {'yes' if h.low > a.high else 'no'} | {_ci(sup - agent)} "
+            f"| {'yes' if c.low > a.high else 'no'} | {trips} |"
+        )
+
+
 if __name__ == "__main__":
     ap = argparse.ArgumentParser()
     ap.add_argument("--first", type=int, default=5000)
@@ -226,7 +268,10 @@ if __name__ == "__main__":
         help="the fourth policy judges by the diagnosis alone (frozen and residual checks off)",
     )
     ap.add_argument("--ppo", default=None, help="a saved PPO agent's directory: policy ppo")
+    ap.add_argument("--hybrid", action="store_true", help=f"with --ppo: the policy {HYBRID} too")
     a = ap.parse_args()
+    if a.hybrid and not a.ppo:
+        raise SystemExit("--hybrid needs --ppo DIR (the agent it overrides)")
     if a.report:
         report(a.report)
     else:
@@ -240,4 +285,5 @@ if __name__ == "__main__":
             diagnoser=a.diagnoser,
             diagnoser_only=a.diagnoser_only,
             ppo=a.ppo,
+            hybrid=a.hybrid,
         )
