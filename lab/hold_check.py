@@ -53,7 +53,10 @@ def run(first: int, n: int, out: str, ppo: str | None) -> None:
         extra = {
             "ppo": make_policy("ppo", directory=ppo),
             "hybrid": make_policy(
-                "ppo+sensor-correcting", directory=ppo, soft_sensor=on.soft_sensor
+                "ppo+sensor-correcting",
+                directory=ppo,
+                soft_sensor=on.soft_sensor,
+                hold_frozen=True,
             ),
             "hybrid-nohold": make_policy(
                 "ppo+sensor-correcting",

@@ -71,9 +71,15 @@ class DiagnosisOverride:
 
 def ppo_with_sensor_correcting(directory: Path | str, **supervisor: Any) -> DiagnosisOverride:
     """The PPO agent saved in ``directory`` overridden by a
-    :class:`SensorCorrectingSupervisor` built with the keywords ``supervisor``."""
+    :class:`SensorCorrectingSupervisor` built with the keywords ``supervisor``.
+
+    The supervisor's ``hold_frozen`` is off unless asked for: on the loop it cannot rebuild
+    (the riser's, no set-point room) the agent, which sees the frozen reading beside its own
+    set point, did as well as the hold on validation seeds (lab/control-catalogue.md), so there
+    the diagnosis has nothing better to give it."""
     from evaluation.control.rl_policy import load_policy
 
+    supervisor.setdefault("hold_frozen", False)
     agent = load_policy(directory)
     return DiagnosisOverride(
         agent,

@@ -94,14 +94,14 @@ def test_the_hybrid_is_registered_and_loads_the_saved_agent(tmp_path):
     }
     rl.save_policy(tmp_path, rl.MLPPolicy(config, weights))
     sup = _supervisor()
-    policy = make_policy(
-        "ppo+sensor-correcting",
-        directory=tmp_path,
-        healthy=sup.healthy,
-        soft_sensor=sup.soft_sensor,
-    )
+    kw = {"healthy": sup.healthy, "soft_sensor": sup.soft_sensor}
+    policy = make_policy("ppo+sensor-correcting", directory=tmp_path, **kw)
     assert isinstance(policy, DiagnosisOverride)
     assert isinstance(policy.agent, rl.MLPPolicy) and policy.supervisor.frozen_samples == 5
+    # the agent keeps the loop the supervisor cannot rebuild unless the hold is asked for
+    assert policy.supervisor.hold_frozen is False
+    held = make_policy("ppo+sensor-correcting", directory=tmp_path, hold_frozen=True, **kw)
+    assert held.supervisor.hold_frozen is True
 
 
 def test_a_supervisor_without_judgments_is_refused():
