@@ -198,8 +198,8 @@ def main() -> None:
     missing = [p for p in ("leaderboard.json", "results.json") if not (where / p).is_file()]
     if missing:
         ap.error(f"--out {args.out}: {where} lacks {missing}; allowed: a goal_table.py --out")
-    text = (
-        detector_table(args.out, args.track) + "\n" + channel_tables(args.out, args.track, faults)
+    text = detector_table(args.out, args.track) + (
+        "\n" + channel_tables(args.out, args.track, faults) if faults else ""
     )
     (where / "channels.md").write_text(text)
     print(text)
