@@ -234,6 +234,11 @@ def _interval(d: dict | None) -> Interval:
 
 def table_from_json(path: Path) -> str:
     """The goal table again from a written track (``leaderboard.json``), without rerunning."""
+    return goal_table(*rows_from_json(path))
+
+
+def rows_from_json(path: Path) -> tuple[Track, list[TrackRow], TrackRow | None]:
+    """A written track (``leaderboard.json``) read back: its track, rows and optimal row."""
     data = json.loads(path.read_text())
     t = data["track"]
     track = TRACKS[t["name"]].replace(n_healthy=t["n_healthy"], n_faulty=t["n_faulty"])
@@ -262,7 +267,7 @@ def table_from_json(path: Path) -> str:
         for r in data["rows"]
     ]
     optimal = next((r for r in rows if r.label == data["optimal_reference"]), None)
-    return goal_table(track, rows, optimal)
+    return track, rows, optimal
 
 
 def parse_rounds(text: str) -> list[tuple[int, int]]:

@@ -393,6 +393,18 @@ def _lab_refuses(script: str, args: list[str], message: str) -> None:
 @pytest.mark.parametrize(
     ("args", "message"),
     [
+        (["--track", "nope"], "--track 'nope'; allowed: one of"),
+        (["--faults", "sensor-bias,f1"], "--faults ['f1']; allowed: classes of sensor"),
+        ([], "lacks ['leaderboard.json', 'results.json']; allowed: a goal_table.py --out"),
+    ],
+)
+def test_goal_channels_refuses_bad_flags_by_value_and_range(args, message, tmp_path) -> None:
+    _lab_refuses("goal_channels.py", ["--out", str(tmp_path), *args], message)
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
         (["--order", "0"], "'0'; allowed: an integer >= 1"),
         (["--window", "x"], "'x'; allowed: an integer >= 1"),
         (["--n-seeds", "-3"], "'-3'; allowed: an integer >= 1"),
