@@ -43,6 +43,7 @@ from evaluation.tracks.catalogue import TRACKS
 from evaluation.tracks.oracle import OracleConfig, PhysicalLimit
 from evaluation.tracks.track_data import TrackData
 from fcc_env.faults import NOMINAL
+from fcc_env.params import MEASUREMENT_NAMES
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
@@ -74,8 +75,8 @@ def _mean_ci(values: list[float], fmt: str) -> str:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--channel", default="T_ar")
-    ap.add_argument("--control", default="T_rx")
+    ap.add_argument("--channel", default="T_ar", choices=MEASUREMENT_NAMES)
+    ap.add_argument("--control", default="T_rx", choices=MEASUREMENT_NAMES)
     ap.add_argument("--kinds", default="sensor-bias,sensor-drift")
     ap.add_argument("--seed-start", type=int, default=5100)
     ap.add_argument("--faulty", type=int, default=10, help="episodes per kind, --channel")
@@ -94,7 +95,10 @@ def main() -> None:
     seeds = range(args.seed_start, args.seed_start + n_all)
     healthy = range(seeds.stop, seeds.stop + args.healthy)
     if set(calib) & set(seeds) | set(calib) & set(healthy):
-        raise ValueError(f"calibration seeds {calib} overlap the scored seeds {seeds}")
+        ap.error(
+            f"--calibration-start {args.calibration_start} puts calibration seeds {calib.start}..{calib.stop - 1} among "
+            f"the scored seeds {seeds.start}..{healthy.stop - 1}; allowed: a start outside them"
+        )
     forced = tuple(
         (s, args.channel if i < args.faulty else args.control) for i, s in enumerate(seeds)
     )
