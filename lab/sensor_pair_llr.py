@@ -5,7 +5,8 @@ episode (its drawn size and onset, the channel set to the one studied) is scored
 :func:`evaluation.tracks.sensor_bound.bias_profiles`: the exact model's log-likelihood of a
 bias on each channel from the known onset, size profiled. Prints per episode the nearest rival
 and ``LLR(true vs rival)`` per window, then per true channel the median and least LLR over
-the seeds against each rival. Record in ``lab/sensor-validation.md``.
+the seeds against each rival; ``LLR vs healthy`` (the true hypothesis against no fault) per
+window. Record in ``lab/sensor-validation.md``.
 
     PYTHONPATH=$PWD python lab/sensor_pair_llr.py --seeds 3 --channels T_fp,T_rx,R_ar,T_ar
 """
@@ -47,7 +48,7 @@ def main() -> None:
     grid = np.arange(lo, hi + step / 2, step)
     table: dict[str, list[dict[str, np.ndarray]]] = defaultdict(list)
     print("| true | seed | size | onset | b̂ (true hyp.) | nearest rival (b̂) | LLR per "
-          f"window {windows} | LLR vs healthy |")  # fmt: skip
+          f"window {windows} | LLR vs healthy per window |")  # fmt: skip
     print("|---|---|---|---|---|---|---|---|")
     for true in args.channels.split(","):
         for seed in range(args.seed_start, args.seed_start + args.seeds):
@@ -70,7 +71,7 @@ def main() -> None:
             print(
                 f"| {true} | {seed} | {spec.magnitude:.2f} | {onset} | {prof.size[i]:.2f} | "
                 f"{rival} ({prof.size[prof.channels.index(rival)]:.1f}) | {', '.join(f'{v:.1f}' for v in llr[rival])} | "
-                f"{vs_h[-1]:.0f} |",
+                f"{', '.join(f'{v:.1f}' for v in vs_h)} |",
                 flush=True,
             )
     print(f"\nPer true channel: median [least] over the seeds of LLR(true vs rival), window "
