@@ -44,7 +44,7 @@ from diagnosers.registry import register
 from diagnosers.sensors.glr_bank import GLRBank
 from diagnosers.sensors.loo_bank import LeaveOneOutBank
 from diagnosers.sensors.sensor_checks import KINDS, decide_run, new_state
-from fcc_common.validation import Integer, Real, check_params
+from fcc_common.validation import Integer, Options, Real, check_params
 from fcc_env.closed_loop import CLOSED_LOOP_CHANNELS
 from fcc_env.params import MEASUREMENT_NAMES, FCCParams
 
@@ -97,6 +97,10 @@ class SensorValidation(Diagnoser):
         glr_settle: samples of the bank's window before it says the kind (the residual's
             tests before: they know the level before the alarm, which tells a young drift),
             in [0, 100000]; default 300.
+        glr_names: what the bank names within its window, one of ``"both"`` (default: the
+            sensor, and the kind of the fault of that sensor) or ``"kind"`` (only the kind: the
+            sensor stays the slow rule's, which tells a T_ar bias from an R_ar one where the
+            bank's evidence for the two is within a few per cent).
 
     Attributes:
         classes_: the sensor-fault kinds among the labelled training faults.
@@ -122,6 +126,7 @@ class SensorValidation(Diagnoser):
         "glr_ramp": Real(0, 1e6),
         "glr_ratio": Real(1, 100),
         "glr_settle": Integer(0, 100_000),
+        "glr_names": Options(("both", "kind")),
     }
     DEFAULTS: ClassVar[dict[str, Any]] = {
         "params": None,
@@ -140,6 +145,7 @@ class SensorValidation(Diagnoser):
         "glr_ramp": 20.0,
         "glr_ratio": 1.0,
         "glr_settle": 300,
+        "glr_names": "both",
     }
     __init__ = keyword_init(DEFAULTS)
 
@@ -159,6 +165,7 @@ class SensorValidation(Diagnoser):
     glr_ramp: float
     glr_ratio: float
     glr_settle: int
+    glr_names: str
 
     @classmethod
     def fast_params(cls) -> dict[str, Any]:
@@ -256,9 +263,13 @@ class SensorValidation(Diagnoser):
         channel = np.empty(T, dtype=np.int64)
         s = self._state
         named, named_kind = np.full(T, -1, dtype=np.int64), np.zeros(T, dtype=np.int64)
+        rule_channel = None
         if self.glr_window > 0:
-            named, named_kind = self._glr_named(out, Y, s)
+            named, named_kind, rule_channel = self._glr_named(out, Y, s)
         self._decide(out, Y, s, (named, named_kind), signal, cons, slow, kind, channel)
+        if rule_channel is not None and self.glr_names == "kind":
+            # the trial run's channel is the slow rule's: naming changes no alarm or state
+            channel[:] = rule_channel
         return signal, cons, kind, channel, np.nan_to_num(out.dedicated), slow
 
     def _decide(self, out, Y, s, named, signal, cons, slow, kind, channel) -> None:
@@ -305,9 +316,10 @@ class SensorValidation(Diagnoser):
 
     def _glr_named(
         self, out, Y: np.ndarray, s: dict[str, np.ndarray]
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """Per sample, the channel the GLR bank names (−1 outside its windows) and the kind it
-        says (1 bias, 2 drift, 0 none: ``glr_ramp`` 0) of it: the bank starts
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Per sample, the channel the GLR bank names (−1 outside its windows), the kind it
+        says (1 bias, 2 drift, 0 none: ``glr_ramp`` 0) of it and the channel the rule names
+        without the bank (−1 while not alarmed): the bank starts
         from the all-sensor filter's prior at an alarm's first sample (the alarms of a trial
         run of the rule on a copy of the state: naming does not change them) and names the
         next ``glr_window`` samples."""
@@ -342,7 +354,7 @@ class SensorValidation(Diagnoser):
                 named_kind[k : k + n] = np.where(says, np.where(drift, 2, 1), 0)
             g["left"] -= n
             k += n
-        return named, named_kind
+        return named, named_kind, c1
 
     def _labels(self, kind: np.ndarray, channel: np.ndarray) -> tuple[np.ndarray, ...]:
         """Per sample: the diagnosis, the one-hot class scores and the sensor named."""
