@@ -7,6 +7,8 @@ fault's, never the diagnoser's output.
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 import pytest
 
@@ -52,6 +54,23 @@ def test_a_feed_temperature_bias_is_named_from_the_first_samples(fitted) -> None
     assert b is not None and fitted._glr["left"] == 0
     acc = b["acc"][fcc_env.MEASUREMENT_NAMES.index("T_fp")]
     assert -fitted.glr_offset * acc[0] / acc[1] == pytest.approx(5.0, rel=0.2)
+
+
+def test_glr_names_kind_takes_the_banks_kind_and_the_slow_rules_sensor(fitted) -> None:
+    """``glr_names="kind"``: the sensor named is the slow rule's (the bank off), sample for
+    sample, the kind the bank's (``"both"``), on a T_fp bias where the two rules name
+    different sensors early (the slow rule T_rx, lab/sensor-validation.md)."""
+    ep = _bias("T_fp", 5.0)
+    kind_only, slow = copy.deepcopy(fitted), copy.deepcopy(fitted)
+    kind_only.glr_names, slow.glr_window = "kind", 0
+    both_named = fitted.sensors(ep)
+    named = kind_only.sensors(ep)
+    assert not np.array_equal(both_named, slow.sensors(ep))  # else the test tells nothing
+    np.testing.assert_array_equal(named, slow.sensors(ep))
+    np.testing.assert_array_equal(kind_only.detect(ep).diagnosis, fitted.detect(ep).diagnosis)
+    kind_only.reset()
+    streamed = [(kind_only.update(y), kind_only.named_sensor)[1] for y in np.asarray(ep.y)]
+    assert streamed == list(named)
 
 
 def test_streaming_names_as_the_whole_record_does(fitted) -> None:
