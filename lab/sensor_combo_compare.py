@@ -7,9 +7,15 @@ on the same saved bank outputs. Per column and per true channel it prints the ki
 channel CDR and the both-right CDR (the share of alarmed samples after the onset whose kind,
 channel, or both are right) of each setting and their paired difference, each with a 95 %
 bootstrap (BCa) interval over the episodes, and the same with the T_ar episodes left out.
-It checks that the combination's sensor is the old rule's, sample for sample.
+It checks that the combination's sensor and alarms are the old rule's, sample for sample.
+
+``--affected G`` instead lists the records where ``glr_restart`` = G would start the bank
+afresh (an alarm after G quiet samples or more inside a window): only those change with it
+(the alarms do not depend on the bank), so deleting them from a copy of the records and
+running ``lab/sensor_kinds_lab.py --glr-restart G`` on the copy re-simulates only them.
 
     PYTHONPATH=$PWD python lab/sensor_combo_compare.py /tmp/cdrcombo/fresh
+    PYTHONPATH=$PWD python lab/sensor_combo_compare.py /tmp/cdrcombo/val --affected 200
 """
 
 from __future__ import annotations
@@ -57,10 +63,30 @@ def compare(directory: Path) -> dict[str, list[tuple]]:
         old_kind, old_channel, _ = decide(rec, p, lim)
         if not np.array_equal(old_channel, rec["channel"]):
             raise SystemExit(f"{path.name}: the combination's sensor is not the slow rule's")
+        if not np.array_equal(old_kind > 0, rec["kind"] > 0):
+            raise SystemExit(f"{path.name}: the combination's alarms are not the old rule's")
         old = _scores(old_kind, old_channel, onset, true, col)
         new = _scores(rec["kind"], rec["channel"], onset, true, col)
         rows[KIND_NAMES[col]].append((MEASUREMENT_NAMES[true], old, new))
     return rows
+
+
+def affected(directory: Path, quiet: int) -> list[str]:
+    """The faulty records where ``glr_restart`` = ``quiet`` restarts the bank (docstring)."""
+    window = int(load(directory, None)[0]["glr_window"])
+    names = []
+    for path in sorted(directory.glob("sensor-*-*.npz")):
+        a = np.load(path)["kind"] > 0
+        end, last = -1, None  # the window's end; the last alarmed sample
+        for k in np.flatnonzero(a):
+            new = last is None or k > last + 1
+            if new and k < end and k - last - 1 >= quiet:
+                names.append(path.name)
+                break
+            if new and k >= end:
+                end = k + window
+            last = k
+    return names
 
 
 def _table(title: str, groups: dict[str, list[tuple]]) -> None:
@@ -78,7 +104,11 @@ def _table(title: str, groups: dict[str, list[tuple]]) -> None:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("dir", type=Path)
+    ap.add_argument("--affected", type=int, default=None, help="glr_restart G: list records")
     args = ap.parse_args()
+    if args.affected is not None:
+        print("\n".join(affected(args.dir, args.affected)))
+        return
     rows = compare(args.dir)
     _table("Per column", dict(rows))
     _table(

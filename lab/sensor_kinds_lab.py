@@ -96,13 +96,18 @@ def main() -> None:
     ap.add_argument(
         "--glr-names", choices=("both", "kind"), default="both", help="sensor-validation's"
     )
+    ap.add_argument("--glr-restart", type=int, default=0, help="sensor-validation's")
     ap.add_argument("--healthy", type=int, default=0, help="healthy episodes: r_fd")
     args = ap.parse_args()
     if args.seed_start < 1000:
         raise SystemExit(f"--seed-start {args.seed_start}: test seeds 0-999 are not for the lab")
     c0 = time.process_time()
     track, data, det = fitted(
-        args.train, glr_window=args.glr_window, glr_ramp=args.glr_ramp, glr_names=args.glr_names
+        args.train,
+        glr_window=args.glr_window,
+        glr_ramp=args.glr_ramp,
+        glr_names=args.glr_names,
+        glr_restart=args.glr_restart,
     )
     args.out.mkdir(parents=True, exist_ok=True)
     stash = _recorder(det)
