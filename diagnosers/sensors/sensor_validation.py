@@ -104,7 +104,8 @@ class SensorValidation(Diagnoser):
         glr_restart: quiet samples (no alarm) before an alarm from which it starts the bank
             afresh within a window, in [0, 100000]; 0 (default) never: a window runs its
             ``glr_window`` samples from the alarm that began it, even a short false alarm's
-            before the fault.
+            before the fault (which then holds the fault's step for a ramp); 200 is the
+            setting measured in ``lab/sensor-validation.md``.
 
     Attributes:
         classes_: the sensor-fault kinds among the labelled training faults.
