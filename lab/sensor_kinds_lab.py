@@ -9,10 +9,14 @@ The healthy training records' bank outputs and the fitted limits are saved besid
 ``lab/sensor_kinds_replay.py`` re-scores the decision rule (``decide_run``) on the saved
 arrays in seconds instead of a bank run per episode. Prints the summary of
 ``lab/sensor_kinds_replay.py`` at the end. Validation seeds 5000.., fresh ones 6300..
-(never a test seed). Record in ``lab/sensor-validation.md``.
+(never a test seed). Record in ``lab/sensor-validation.md``. ``--healthy N`` also runs N
+healthy test-plant episodes from ``--seed-start`` and prints their false-alarm rate r_fd (the
+bank only names, so it is the same with it as without).
 
     PYTHONPATH=$PWD python lab/sensor_kinds_lab.py --faulty 40 --seed-start 5000 \
         --kinds sensor-bias --out /tmp/sk/val
+    PYTHONPATH=$PWD python lab/sensor_kinds_lab.py --faulty 40 --seed-start 6600 \
+        --kinds sensor-bias --glr-window 3000 --glr-ramp 20 --glr-names kind --out /tmp/sk/f
 """
 
 from __future__ import annotations
@@ -24,6 +28,9 @@ from pathlib import Path
 
 import numpy as np
 
+from evaluation.metrics.detection_metrics import r_fd
+from evaluation.metrics.intervals import bootstrap_ci
+from fcc_env import FaultSpec
 from fcc_env.params import MEASUREMENT_NAMES
 from lab.sensor_isolation_replay import fitted
 from lab.sensor_kinds_replay import KIND_NAMES, summarise
@@ -86,11 +93,22 @@ def main() -> None:
     ap.add_argument("--out", type=Path, required=True)
     ap.add_argument("--glr-window", type=int, default=0, help="sensor-validation's glr_window")
     ap.add_argument("--glr-ramp", type=float, default=0.0, help="sensor-validation's glr_ramp")
+    ap.add_argument(
+        "--glr-names", choices=("both", "kind"), default="both", help="sensor-validation's"
+    )
+    ap.add_argument("--glr-restart", type=int, default=0, help="sensor-validation's")
+    ap.add_argument("--healthy", type=int, default=0, help="healthy episodes: r_fd")
     args = ap.parse_args()
     if args.seed_start < 1000:
         raise SystemExit(f"--seed-start {args.seed_start}: test seeds 0-999 are not for the lab")
     c0 = time.process_time()
-    track, data, det = fitted(args.train, glr_window=args.glr_window, glr_ramp=args.glr_ramp)
+    track, data, det = fitted(
+        args.train,
+        glr_window=args.glr_window,
+        glr_ramp=args.glr_ramp,
+        glr_names=args.glr_names,
+        glr_restart=args.glr_restart,
+    )
     args.out.mkdir(parents=True, exist_ok=True)
     stash = _recorder(det)
     if not (args.out / "limits.npz").exists():
@@ -131,8 +149,22 @@ def main() -> None:
                 f"channel {cc if al.any() else np.nan:.3f}  ({time.process_time() - c0:.0f} s CPU)",
                 flush=True,
             )
+    if args.healthy:
+        _healthy(det, data, range(args.seed_start, args.seed_start + args.healthy))
     summarise(args.out, None)
     print(f"{time.process_time() - c0:.0f} s CPU (this process)")
+
+
+def _healthy(det, data, seeds: range) -> None:
+    """Print the false-alarm rate of ``det`` on healthy test-plant episodes of ``seeds``."""
+    rates = []
+    for seed in seeds:
+        [le] = data.simulate([seed], FaultSpec(), test=True)
+        alarm = det.detect(le.episode).alarm
+        rates.append(r_fd(alarm, alarm.size))
+        print(f"healthy {seed}: r_fd {rates[-1]:.4f}", flush=True)
+    iv = bootstrap_ci(rates, rng=0)
+    print(f"healthy r_fd over {len(rates)}: {iv.estimate:.4f} [{iv.low:.4f}, {iv.high:.4f}]")
 
 
 if __name__ == "__main__":

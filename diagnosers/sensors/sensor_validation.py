@@ -44,7 +44,7 @@ from diagnosers.registry import register
 from diagnosers.sensors.glr_bank import GLRBank
 from diagnosers.sensors.loo_bank import LeaveOneOutBank
 from diagnosers.sensors.sensor_checks import KINDS, decide_run, new_state
-from fcc_common.validation import Integer, Real, check_params
+from fcc_common.validation import Integer, Options, Real, check_params
 from fcc_env.closed_loop import CLOSED_LOOP_CHANNELS
 from fcc_env.params import MEASUREMENT_NAMES, FCCParams
 
@@ -97,6 +97,15 @@ class SensorValidation(Diagnoser):
         glr_settle: samples of the bank's window before it says the kind (the residual's
             tests before: they know the level before the alarm, which tells a young drift),
             in [0, 100000]; default 300.
+        glr_names: what the bank names within its window, one of ``"both"`` (default: the
+            sensor, and the kind of the fault of that sensor) or ``"kind"`` (only the kind: the
+            sensor stays the slow rule's, which tells a T_ar bias from an R_ar one where the
+            bank's evidence for the two is within a few per cent).
+        glr_restart: quiet samples (no alarm) before an alarm from which it starts the bank
+            afresh within a window, in [0, 100000]; 0 (default) never: a window runs its
+            ``glr_window`` samples from the alarm that began it, even a short false alarm's
+            before the fault (which then holds the fault's step for a ramp); 200 is the
+            setting measured in ``lab/sensor-validation.md``.
 
     Attributes:
         classes_: the sensor-fault kinds among the labelled training faults.
@@ -122,6 +131,8 @@ class SensorValidation(Diagnoser):
         "glr_ramp": Real(0, 1e6),
         "glr_ratio": Real(1, 100),
         "glr_settle": Integer(0, 100_000),
+        "glr_names": Options(("both", "kind")),
+        "glr_restart": Integer(0, 100_000),
     }
     DEFAULTS: ClassVar[dict[str, Any]] = {
         "params": None,
@@ -140,6 +151,8 @@ class SensorValidation(Diagnoser):
         "glr_ramp": 20.0,
         "glr_ratio": 1.0,
         "glr_settle": 300,
+        "glr_names": "both",
+        "glr_restart": 0,
     }
     __init__ = keyword_init(DEFAULTS)
 
@@ -159,6 +172,8 @@ class SensorValidation(Diagnoser):
     glr_ramp: float
     glr_ratio: float
     glr_settle: int
+    glr_names: str
+    glr_restart: int
 
     @classmethod
     def fast_params(cls) -> dict[str, Any]:
@@ -241,7 +256,7 @@ class SensorValidation(Diagnoser):
         self._named = ""
         self._M, self._P = self.bank_.start()
         self._state = new_state(self.bank_.n_filters, self.bank_.n_channels)
-        self._glr: dict[str, Any] = {"left": 0, "bank": None}
+        self._glr: dict[str, Any] = {"left": 0, "bank": None, "quiet": 0}
 
     def _checks(self, Y: np.ndarray) -> tuple[np.ndarray, ...]:
         """``(signal, consistency, kind, channel, dedicated residual, slow consistency)`` of the
@@ -256,9 +271,13 @@ class SensorValidation(Diagnoser):
         channel = np.empty(T, dtype=np.int64)
         s = self._state
         named, named_kind = np.full(T, -1, dtype=np.int64), np.zeros(T, dtype=np.int64)
+        rule_channel = None
         if self.glr_window > 0:
-            named, named_kind = self._glr_named(out, Y, s)
+            named, named_kind, rule_channel = self._glr_named(out, Y, s)
         self._decide(out, Y, s, (named, named_kind), signal, cons, slow, kind, channel)
+        if rule_channel is not None and self.glr_names == "kind":
+            # the trial run's channel is the slow rule's: naming changes no alarm or state
+            channel[:] = rule_channel
         return signal, cons, kind, channel, np.nan_to_num(out.dedicated), slow
 
     def _decide(self, out, Y, s, named, signal, cons, slow, kind, channel) -> None:
@@ -305,12 +324,15 @@ class SensorValidation(Diagnoser):
 
     def _glr_named(
         self, out, Y: np.ndarray, s: dict[str, np.ndarray]
-    ) -> tuple[np.ndarray, np.ndarray]:
-        """Per sample, the channel the GLR bank names (−1 outside its windows) and the kind it
-        says (1 bias, 2 drift, 0 none: ``glr_ramp`` 0) of it: the bank starts
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Per sample, the channel the GLR bank names (−1 outside its windows), the kind it
+        says (1 bias, 2 drift, 0 none: ``glr_ramp`` 0) of it and the channel the rule names
+        without the bank (−1 while not alarmed): the bank starts
         from the all-sensor filter's prior at an alarm's first sample (the alarms of a trial
         run of the rule on a copy of the state: naming does not change them) and names the
-        next ``glr_window`` samples."""
+        next ``glr_window`` samples; an alarm that starts after ``glr_restart`` quiet samples
+        or more starts it afresh (a window begun at a short false alarm would otherwise hold
+        a fault that starts later for a ramp)."""
         T, H, C = out.white.shape
         trial = {k: v.copy() for k, v in s.items()}
         sig, cn, sl = np.empty((T, 1 + 2 * C)), np.empty((T, H)), np.empty((T, H))
@@ -319,17 +341,21 @@ class SensorValidation(Diagnoser):
         self._decide(out, Y, trial, none, sig, cn, sl, k1, c1)
         alarm = k1 > 0
         starts = alarm & ~np.concatenate([[s["alarmed"][0] > 0], alarm[:-1]])
+        restart, self._glr["quiet"] = _restarts(alarm, starts, self._glr["quiet"], self.glr_restart)
         named, named_kind = none
         g, k = self._glr, 0
         while k < T:
-            if g["left"] <= 0:
+            if g["left"] <= 0 and not starts[k]:
                 nxt = np.flatnonzero(starts[k:])
                 if nxt.size == 0:
                     break
                 k += int(nxt[0])
+            if g["left"] <= 0 or restart[k]:
                 g["bank"] = self.glr_.start(out.prior_m[k], out.prior_p[k])
                 g["left"] = self.glr_window
             n = min(g["left"], T - k)
+            again = np.flatnonzero(restart[k + 1 : k + n])
+            n = int(again[0]) + 1 if again.size else n
             gain, ramp, _ = self.glr_.run(g["bank"], Y[k : k + n], out.white[k : k + n, 0])
             c = np.argmax(gain, axis=1)
             top2 = np.sort(gain, axis=1)[:, -2:]
@@ -342,7 +368,7 @@ class SensorValidation(Diagnoser):
                 named_kind[k : k + n] = np.where(says, np.where(drift, 2, 1), 0)
             g["left"] -= n
             k += n
-        return named, named_kind
+        return named, named_kind, c1
 
     def _labels(self, kind: np.ndarray, channel: np.ndarray) -> tuple[np.ndarray, ...]:
         """Per sample: the diagnosis, the one-hot class scores and the sensor named."""
@@ -426,6 +452,23 @@ class SensorValidation(Diagnoser):
                 raise ValueError(f"saved {key} must be {n} positive numbers, got {a.tolist()}")
             setattr(self, f"{key}_", a)
         self._finish()
+
+
+def _restarts(
+    alarm: np.ndarray, starts: np.ndarray, quiet_before: int, min_quiet: int
+) -> tuple[np.ndarray, int]:
+    """The alarm starts (bool ``starts``) after ``min_quiet`` quiet samples or more (none where
+    it is 0), given the quiet samples ``quiet_before`` the first sample, and the quiet samples
+    after the last."""
+    T = alarm.size
+    idx = np.arange(T)
+    last = np.maximum.accumulate(np.where(alarm, idx, -1))  # the last alarm at or before k
+    before = np.concatenate([[-1], last[:-1]])
+    quiet = np.where(before >= 0, idx - before - 1, idx + quiet_before)
+    after = T - 1 - int(last[-1]) if last[-1] >= 0 else quiet_before + T
+    if min_quiet <= 0:
+        return np.zeros(T, dtype=bool), after
+    return starts & (quiet >= min_quiet), after
 
 
 def _ewma(x: np.ndarray, lam: float) -> np.ndarray:
