@@ -15,11 +15,16 @@ relative reduction, p-value and estimate.
 from __future__ import annotations
 
 import argparse
+import sys
 import time
+from pathlib import Path
 
 import fcc_env
 from evaluation import discover as d
 from fcc_env import effects as fx
+
+# ``python lab/<script>.py`` puts lab/ first on the path, not the repository root
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from lab.discover_drift import N, closed_data
 
 

@@ -24,6 +24,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import sys
 from collections import defaultdict
 from collections.abc import Sequence
 from pathlib import Path
@@ -32,6 +33,9 @@ import numpy as np
 
 from evaluation.metrics.intervals import Interval, bootstrap_ci, limit_ratio_ci
 from evaluation.tracks.catalogue import TRACKS
+
+# ``python lab/<script>.py`` puts lab/ first on the path, not the repository root
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from lab.goal_table import BLIND_R_TD, R_TD_MARGIN, TIME_FACTOR, rows_from_json, verdict
 
 

@@ -17,7 +17,9 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 import time
+from pathlib import Path
 
 import gymnasium as gym
 import numpy as np
@@ -25,6 +27,9 @@ import numpy as np
 import fcc_env  # noqa: F401 (registers the envs)
 from evaluation.control.policy_registry import make_policy
 from evaluation.metrics.intervals import bootstrap_ci
+
+# ``python lab/<script>.py`` puts lab/ first on the path, not the repository root
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from lab.control_catalogue import LOOP_SENSOR_SCENARIOS
 
 

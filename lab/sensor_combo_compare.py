@@ -21,6 +21,7 @@ running ``lab/sensor_kinds_lab.py --glr-restart G`` on the copy re-simulates onl
 from __future__ import annotations
 
 import argparse
+import sys
 from collections import defaultdict
 from pathlib import Path
 
@@ -28,6 +29,9 @@ import numpy as np
 
 from evaluation.metrics.intervals import bootstrap_ci
 from fcc_env.params import MEASUREMENT_NAMES
+
+# ``python lab/<script>.py`` puts lab/ first on the path, not the repository root
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from lab.sensor_kinds_replay import KIND_NAMES, decide, load
 
 #: The scores per episode, in this order.

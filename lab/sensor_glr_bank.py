@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -27,6 +28,9 @@ import numpy as np
 from diagnosers.filters import FCCStateEstimator, UKFConfig
 from diagnosers.sensors.glr_bank import GLRBank
 from fcc_env.params import MEASUREMENT_NAMES, FCCParams
+
+# ``python lab/<script>.py`` puts lab/ first on the path, not the repository root
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from lab.sensor_kinds_replay import decide, load, score
 
 

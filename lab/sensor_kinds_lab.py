@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import sys
 import time
 from pathlib import Path
 
@@ -32,6 +33,9 @@ from evaluation.metrics.detection_metrics import r_fd
 from evaluation.metrics.intervals import bootstrap_ci
 from fcc_env import FaultSpec
 from fcc_env.params import MEASUREMENT_NAMES
+
+# ``python lab/<script>.py`` puts lab/ first on the path, not the repository root
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from lab.sensor_isolation_replay import fitted
 from lab.sensor_kinds_replay import KIND_NAMES, summarise
 
