@@ -199,3 +199,14 @@ def test_ukf_glr_refuses_an_unknown_sensor_direction_kind() -> None:
         diagnosers.make("ukf-glr", sensor_directions=["stuck"]).validate_params()
     with pytest.raises(ValueError, match="sensor_directions"):
         diagnosers.make("ukf-glr", sensor_directions="drift").validate_params()
+
+
+def test_sensor_fault_entries_name_each_kind_on_each_channel_and_refuse_others() -> None:
+    from diagnosers.filters.model_directions import sensor_fault_entries
+
+    assert sensor_fault_entries(["bias", "drift"], ["T_rx"]) == [
+        ("sensor-bias", "T_rx"),
+        ("sensor-drift", "T_rx"),
+    ]
+    with pytest.raises(ValueError, match=r"channel.*T_rx"):
+        sensor_fault_entries(["drift"], ["T_xx"])
