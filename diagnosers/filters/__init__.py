@@ -20,7 +20,8 @@ The rooms:
                        simulations (noise twins), never from fault data
 ``ukf_glr``            ``ukf-glr``, the grey-box detector: the fitted filter, a GLR per fault
                        direction and a variance CUSUM on its whitened innovations; its preset
-                       ``ukf-glr-robust`` (thermocouple lags, UA_1 and A_cr estimated)
+                       ``ukf-glr-robust`` (thermocouple lags, UA_1 and A_cr estimated) and
+                       ``ukf-glr-sensor`` (a sensor bias's and drift's direction per channel)
 ``stiction_ukf``       ``stiction-ukf``: a sticking valve by the excess variance of the model's
                        T_rx innovation about its mean (the command the valve does not follow)
 =====================  ===========================================================================

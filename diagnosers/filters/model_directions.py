@@ -13,6 +13,9 @@ the same as on real records (they run on noisy readings), which a noise-free run
 One direction per fault and window: a fault's signature is dynamic (f1 moves T_rx at once, f3
 builds over minutes while the filter's input walks absorb part of each fault), so a short and a
 long window each give one.
+
+A sensor fault is a fault of one channel's transmitter (``sensor-bias`` on ``T_rx``): its
+direction is simulated the same way, with the channel named (:func:`sensor_fault_entries`).
 """
 
 from __future__ import annotations
@@ -22,12 +25,44 @@ from collections.abc import Sequence
 import numpy as np
 
 from diagnosers.filters.state_estimator import FCCStateEstimator
-from fcc_common.validation import Integer, Real, check, invalid
+from fcc_common.validation import Integer, Options, Real, check, invalid
+from fcc_env.params import MEASUREMENT_NAMES
 from fcc_env.plant import PlantConfig
 from fcc_env.scenarios import FaultSpec, fault_definition
 from fcc_env.simulation import simulate_episodes
 
-__all__ = ["innovation_directions", "own_plant"]
+__all__ = [
+    "SENSOR_DIRECTION_KINDS",
+    "fault_label",
+    "innovation_directions",
+    "own_plant",
+    "sensor_fault_entries",
+]
+
+#: the sensor-fault kinds a detector can add a direction for on every measured channel (the
+#: registered ``sensor-<kind>`` faults that shift a reading; stuck, noise and dropout change its
+#: variance or freeze it, which no mean direction describes)
+SENSOR_DIRECTION_KINDS = ("bias", "drift")
+#: a fault to simulate: a registered fault's name, or a channel fault's (name, channel)
+FaultEntry = str | tuple[str, str]
+
+
+def sensor_fault_entries(
+    kinds: Sequence[str], channels: Sequence[str] = MEASUREMENT_NAMES
+) -> list[tuple[str, str]]:
+    """``(scenario, channel)`` of each sensor-fault kind (kind-major) on each of ``channels``:
+    the entries :func:`innovation_directions` takes for them; ``ValueError`` for a kind not in
+    :data:`SENSOR_DIRECTION_KINDS` or a channel not measured."""
+    for k in kinds:
+        check("sensor_directions", k, Options(SENSOR_DIRECTION_KINDS))
+    for c in channels:
+        check("channel", c, Options(MEASUREMENT_NAMES))
+    return [(f"sensor-{k}", c) for k in kinds for c in channels]
+
+
+def fault_label(fault: FaultEntry) -> str:
+    """A fault entry's name in signal names: ``f1``, ``sensor-drift@T_rx``."""
+    return fault if isinstance(fault, str) else f"{fault[0]}@{fault[1]}"
 
 
 def own_plant(est: FCCStateEstimator) -> PlantConfig:
@@ -46,7 +81,7 @@ def own_plant(est: FCCStateEstimator) -> PlantConfig:
 
 def innovation_directions(
     est: FCCStateEstimator,
-    faults: Sequence[str],
+    faults: Sequence[FaultEntry],
     *,
     seeds: Sequence[int],
     onset: int,
@@ -58,7 +93,8 @@ def innovation_directions(
 
     Args:
         est: the detector's filter; its parameters and noise are the simulated plant's.
-        faults: registered faults (:func:`fcc_env.fault_names`).
+        faults: registered faults (:func:`fcc_env.fault_names`), or a channel fault's
+            ``(scenario, channel)`` (:func:`sensor_fault_entries`).
         seeds: the simulations' seeds (the twins share each).
         onset: the faults' onset sample (after the filter has settled).
         windows: samples after the onset each direction averages.
@@ -78,8 +114,11 @@ def innovation_directions(
     healthy = _whitened(est, simulate_episodes(seeds, n, plant=plant).observations)
     out = np.zeros((len(faults) * len(windows), healthy.shape[-1]))
     for i, fault in enumerate(faults):
-        d = fault_definition(fault)
-        spec = FaultSpec(scenario=fault, onset=onset, magnitude=size * d.default_magnitude)
+        name, channel = (fault, None) if isinstance(fault, str) else fault
+        d = fault_definition(name)
+        spec = FaultSpec(
+            scenario=name, onset=onset, magnitude=size * d.default_magnitude, channel=channel
+        )
         faulty = _whitened(est, simulate_episodes(seeds, n, fault=spec, plant=plant).observations)
         for j, w in enumerate(windows):
             diff = faulty[:, onset : onset + w] - healthy[:, onset : onset + w]

@@ -36,7 +36,12 @@ from diagnosers.contract import Tier
 from diagnosers.detection import Decision, Detection
 from diagnosers.diagnoser import Diagnoser
 from diagnosers.episode.record import Episode
-from diagnosers.filters.model_directions import innovation_directions
+from diagnosers.filters.model_directions import (
+    SENSOR_DIRECTION_KINDS,
+    fault_label,
+    innovation_directions,
+    sensor_fault_entries,
+)
 from diagnosers.filters.parameter_fit import (
     estimate_noise_scale,
     filter_records,
@@ -68,7 +73,9 @@ __all__ = [
     "UKF_GLR_CONSTRAINTS",
     "UKF_GLR_DEFAULTS",
     "UKF_GLR_ROBUST",
+    "UKF_GLR_SENSOR",
     "UkfGLRRobust",
+    "UkfGLRSensor",
 ]
 
 #: The model states' prior std [filter units] when the plant differs per record: each record
@@ -106,6 +113,7 @@ UKF_GLR_DEFAULTS: dict[str, Any] = {
     "direction_size": 1.0,
     "bias_memory": None,
     "sensor_lags": None,
+    "sensor_directions": None,
 }
 #: their declarative constraints, checked in ``fit``
 UKF_GLR_CONSTRAINTS: dict[str, Any] = {
@@ -123,6 +131,7 @@ UKF_GLR_CONSTRAINTS: dict[str, Any] = {
     "direction_size": Real(0.0, 10.0, closed="right"),
     "bias_memory": (Integer(1, 100_000), None),
     "sensor_lags": (OptionSequence(LAG_CHANNELS), None),
+    "sensor_directions": (OptionSequence(SENSOR_DIRECTION_KINDS), None),
 }
 
 
@@ -167,8 +176,13 @@ class UKFGLR(Diagnoser):
         sensor_lags: thermocouples the filter reads through a first-order lag of unknown time
             constant, estimated online (``UKFConfig.sensor_lags``): ``None`` (default): none;
             a list of :data:`~diagnosers.filters.ukf_config.LAG_CHANNELS`.
+        sensor_directions: ``None`` (default): directions for ``faults`` only; a list of
+            sensor-fault kinds from :data:`~diagnosers.filters.model_directions.
+            SENSOR_DIRECTION_KINDS` (``["drift"]``, ``["bias", "drift"]``): also each kind's
+            direction on every measured channel (``sensor-drift`` on T_rx, …), from the same
+            own-model simulation, one GLR per kind, channel and window.
 
-    Decision arrays, names ``glr[fault,window]`` … and ``cusum[nis]``: ``signal`` the
+    Decision arrays, names ``glr[fault,window]`` (``glr[sensor-drift@T_rx,30]``) … and ``cusum[nis]``: ``signal`` the
     statistics, ``upper`` their limits, ``residual`` the matched innovations d_gᵀe_t and the NIS.
     """
 
@@ -193,6 +207,7 @@ class UKFGLR(Diagnoser):
     direction_size: float
     bias_memory: int | None
     sensor_lags: list[str] | None
+    sensor_directions: list[str] | None
 
     @classmethod
     def fast_params(cls) -> dict[str, Any]:
@@ -267,7 +282,7 @@ class UKFGLR(Diagnoser):
         self._build()
         self.directions_ = innovation_directions(
             self.estimator_,
-            self.faults_,
+            self.fault_entries_,
             seeds=self.direction_seeds,
             onset=self.direction_onset,
             windows=self.signature_windows,
@@ -294,6 +309,10 @@ class UKFGLR(Diagnoser):
             config = config.replace(**_online_changes(names))
         self.estimator_ = FCCStateEstimator(params, config)
         self.faults_ = tuple(self.faults) if self.faults is not None else fault_names()
+        self.fault_entries_ = (
+            *self.faults_,
+            *sensor_fault_entries(self.sensor_directions or (), MEASUREMENT_NAMES),
+        )
 
     def _new_stage(self) -> InnovationStage:
         return InnovationStage(
@@ -306,7 +325,7 @@ class UKFGLR(Diagnoser):
     def _finish(self) -> None:
         self.stage_ = self._new_stage()
         self.stage_.limits_ = self.limits_
-        pairs = [(f, w) for f in self.faults_ for w in self.signature_windows]
+        pairs = [(fault_label(f), w) for f in self.fault_entries_ for w in self.signature_windows]
         self.signal_names_ = (*(f"glr[{f},{w}]" for f, w in pairs), "cusum[nis]")
         self._lower = np.full(len(self.signal_names_), -np.inf)
 
@@ -337,11 +356,11 @@ class UKFGLR(Diagnoser):
         self.directions_ = np.asarray(state["directions"], dtype=np.float64)
         self.limits_ = np.asarray(state["limits"], dtype=np.float64)
         self._build()
-        n_sig = len(self.faults_) * len(self.signature_windows) + 1
+        n_sig = len(self.fault_entries_) * len(self.signature_windows) + 1
         if self.directions_.shape[0] != n_sig - 1 or self.limits_.shape != (n_sig,):
             raise ValueError(
                 f"{self.directions_.shape[0]} directions and {self.limits_.shape} limits for "
-                f"{len(self.faults_)} faults x {len(self.signature_windows)} windows"
+                f"{len(self.fault_entries_)} faults x {len(self.signature_windows)} windows"
             )
         self._finish()
 
@@ -396,5 +415,24 @@ UkfGLRRobust = preset(
     training plants differ: an undeclared stage-1 heat loss, a deactivating catalyst). On the
     ``mismatch`` track's validation seeds its healthy alarm share is 0.0019 against
     ``ukf-glr``'s 0.0098 (``lab/greybox-lab.md``, 2026-12-07); about twice its filter's cost.""",
+    module=__name__,
+)
+
+#: ``ukf-glr-sensor``'s changes: a bias and a drift direction on every measured channel, and a
+#: lower false-alarm target: the 16 more GLRs' limits, set on the training records, let more
+#: alarms through on new healthy records than the 4 process faults' do (``lab/fault-tracks.md``)
+UKF_GLR_SENSOR: dict[str, Any] = {
+    "sensor_directions": list(SENSOR_DIRECTION_KINDS),
+    "false_alarm_target": 0.001,
+}
+
+UkfGLRSensor = preset(
+    "ukf-glr-sensor",
+    UKFGLR,
+    UKF_GLR_SENSOR,
+    """``ukf-glr`` that also tests for a transmitter fault on each measured channel: besides each
+    process fault's direction, a sensor bias's and a sensor drift's direction on every channel
+    (``sensor_directions``), each from its own fitted model like the others, at half the
+    false-alarm target.""",
     module=__name__,
 )

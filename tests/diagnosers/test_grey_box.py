@@ -24,7 +24,7 @@ from diagnosers.filters import UKFConfig
 from diagnosers.filters.parameter_fit import estimate_noise_scale, fit_augmented
 from diagnosers.filters.ukf_glr import UKFGLR
 from diagnosers.stages.innovation_stage import InnovationStage, union_limits, variance_llr
-from fcc_env.params import FCCParams
+from fcc_env.params import MEASUREMENT_NAMES, FCCParams
 from fcc_env.uncertainty import PlantUncertainty
 
 GREY = [n for n in diagnosers.available() if diagnosers.diagnoser_class(n).tier == Tier.GREY_BOX]
@@ -175,3 +175,38 @@ def test_ukf_glr_refuses_episodes_without_the_models_channels() -> None:
         diagnosers.make("ukf-glr", **UKFGLR.fast_params()).fit([cut])
     with pytest.raises(ValueError, match="fit_parameters"):
         diagnosers.make("ukf-glr", fit_parameters=None, fit_method="ml").fit([ep])
+
+
+def test_ukf_glr_sensor_directions_add_one_glr_per_kind_channel_and_window(tmp_path: Any) -> None:
+    b = fcc_env.simulate_episodes([1000], 600)
+    params = {**UKFGLR.fast_params(), "faults": ["f1"], "sensor_directions": ["drift"]}
+    det = diagnosers.make("ukf-glr", **params).fit(Episode.from_batch(b))
+    n_ch = len(MEASUREMENT_NAMES)
+    assert det.directions_.shape == (1 + n_ch, n_ch)  # f1, then a drift per channel (1 window)
+    assert "glr[sensor-drift@T_rx,30]" in det.signal_names_
+    # each channel's drift moves its own channel's innovation most (open loop: no controller
+    # spreads it)
+    drifts = det.directions_[1:]
+    assert list(np.abs(drifts).argmax(axis=1)) == list(range(n_ch))
+    back = diagnosers.Diagnoser.load(det.save(tmp_path / "det"))
+    assert np.array_equal(back.directions_, det.directions_)
+    ep = Episode.from_batch(b)[0]
+    assert np.array_equal(back.detect(ep).signal, det.detect(ep).signal)
+
+
+def test_ukf_glr_refuses_an_unknown_sensor_direction_kind() -> None:
+    with pytest.raises(ValueError, match=r"sensor_directions.*bias.*drift"):
+        diagnosers.make("ukf-glr", sensor_directions=["stuck"]).validate_params()
+    with pytest.raises(ValueError, match="sensor_directions"):
+        diagnosers.make("ukf-glr", sensor_directions="drift").validate_params()
+
+
+def test_sensor_fault_entries_name_each_kind_on_each_channel_and_refuse_others() -> None:
+    from diagnosers.filters.model_directions import sensor_fault_entries
+
+    assert sensor_fault_entries(["bias", "drift"], ["T_rx"]) == [
+        ("sensor-bias", "T_rx"),
+        ("sensor-drift", "T_rx"),
+    ]
+    with pytest.raises(ValueError, match=r"channel.*T_rx"):
+        sensor_fault_entries(["drift"], ["T_xx"])
