@@ -30,6 +30,7 @@ from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
+from scipy.stats import binomtest
 
 from evaluation.metrics.intervals import Interval, bootstrap_ci, limit_ratio_ci
 from evaluation.tracks.catalogue import TRACKS
@@ -39,14 +40,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from lab.goal_table import BLIND_R_TD, R_TD_MARGIN, TIME_FACTOR, rows_from_json, verdict
 
 
-def wilson(k: int, n: int, z: float = 1.96) -> str:
-    """``k/n`` with its 95 % Wilson score interval."""
+def wilson(k: int, n: int) -> str:
+    """``k/n`` with its 95 % Wilson score interval (scipy's, the lab scripts' hand copies
+    aside)."""
     if n == 0:
         return "–"
-    p = k / n
-    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
-    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
-    return f"{k}/{n} [{max(centre - half, 0.0):.2f}, {min(centre + half, 1.0):.2f}]"
+    ci = binomtest(k, n).proportion_ci(confidence_level=0.95, method="wilson")
+    return f"{k}/{n} [{ci.low:.2f}, {ci.high:.2f}]"
 
 
 def _ci(iv: Interval, fmt: str) -> str:
