@@ -182,8 +182,9 @@ class UKFGLR(Diagnoser):
             direction on every measured channel (``sensor-drift`` on T_rx, …), from the same
             own-model simulation, one GLR per kind, channel and window.
 
-    Decision arrays, names ``glr[fault,window]`` (``glr[sensor-drift@T_rx,30]``) … and ``cusum[nis]``: ``signal`` the
-    statistics, ``upper`` their limits, ``residual`` the matched innovations d_gᵀe_t and the NIS.
+    Decision arrays, names ``glr[fault,window]`` (``glr[sensor-drift@T_rx,30]``) … and
+    ``cusum[nis]``: ``signal`` the statistics, ``upper`` their limits, ``residual`` the matched
+    innovations d_gᵀe_t and the NIS.
     """
 
     DEFAULTS: ClassVar[dict[str, Any]] = UKF_GLR_DEFAULTS

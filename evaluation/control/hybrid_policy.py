@@ -24,14 +24,11 @@ from typing import Any
 
 import numpy as np
 
-from evaluation.control.policies import Policy
+from evaluation.control.policies import Policy, setpoint_action
 from evaluation.control.sensor_policy import SensorCorrectingSupervisor
-from fcc_env.closed_loop import CLOSED_LOOP_CHANNELS
 from fcc_env.env import SETPOINT_ACTION_SCALE
 
 __all__ = ["DiagnosisOverride", "ppo_with_sensor_correcting"]
-
-_SP = [CLOSED_LOOP_CHANNELS.index(n) for n in ("T_rx_sp", "T_rg1_sp")]
 
 
 @dataclass
@@ -60,10 +57,9 @@ class DiagnosisOverride:
         self.supervisor.reset(info)
 
     def act(self, obs: np.ndarray, info: Mapping[str, Any]) -> np.ndarray:
-        program = np.asarray(obs, dtype=np.float64)[_SP] - self._move
         agent = np.asarray(self.agent.act(obs, info), dtype=np.float64)
         self.supervisor.act(obs, info)  # its tests read every sample, its action is not used
-        wanted = np.clip((self.supervisor.setpoints - program) / SETPOINT_ACTION_SCALE, -1, 1)
+        wanted = setpoint_action(obs, self._move, self.supervisor.setpoints)
         action = np.where(self.supervisor.judged, wanted, agent)
         self._move = action * SETPOINT_ACTION_SCALE
         return action.astype(np.float32)

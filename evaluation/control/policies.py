@@ -44,9 +44,19 @@ __all__ = [
     "fault_setpoints",
     "fixed_setpoints",
     "robust_setpoints",
+    "setpoint_action",
 ]
 
 _SP = [CLOSED_LOOP_CHANNELS.index(n) for n in ("T_rx_sp", "T_rg1_sp")]
+
+
+def setpoint_action(obs: np.ndarray, move: np.ndarray, target: np.ndarray) -> np.ndarray:
+    """The action (in [-1, 1]) that asks for the set points ``target`` (°C, ``[T_rx_sp,
+    T_rg1_sp]``), given the observation ``obs`` after the last step and the ``move`` (°C) that
+    step applied: the program's own set points are the observed ones less that move, and the
+    action moves them by at most ``SETPOINT_ACTION_SCALE`` (the env's contract)."""
+    program = np.asarray(obs, dtype=np.float64)[_SP] - move
+    return np.clip((np.asarray(target, dtype=np.float64) - program) / SETPOINT_ACTION_SCALE, -1, 1)
 
 
 class Policy(Protocol):
@@ -86,10 +96,7 @@ class SetpointPolicy:
         self._move, self._k, self._info0 = np.zeros(2), 0, dict(info)
 
     def act(self, obs: np.ndarray, info: Mapping[str, Any]) -> np.ndarray:
-        program = np.asarray(obs, dtype=np.float64)[_SP] - self._move
-        action = np.clip(
-            (self.target(self._k, self._info0) - program) / SETPOINT_ACTION_SCALE, -1, 1
-        )
+        action = setpoint_action(obs, self._move, self.target(self._k, self._info0))
         self._move = action * SETPOINT_ACTION_SCALE
         self._k += 1
         return action.astype(np.float32)

@@ -46,7 +46,7 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from evaluation.control.policies import ARM_AFTER, SetpointPolicy
+from evaluation.control.policies import ARM_AFTER, SetpointPolicy, setpoint_action
 from evaluation.control.setpoints import best_setpoints, correctable_loops
 from fcc_env.closed_loop import CLOSED_LOOP_CHANNELS
 from fcc_env.control_draws import LOOP_CHANNELS, FaultClass, fault_class
@@ -68,7 +68,6 @@ _T_RG1_STATE = 4  # the stage-1 bed temperature in the state (spec §1)
 _LOOP_INDEX = [CLOSED_LOOP_CHANNELS.index(c) for c in LOOP_CHANNELS]
 #: the soft sensor's inputs (observation indices): the other measured channels and the valve command
 SOFT_SENSOR_INPUTS = [i for i, c in enumerate(CLOSED_LOOP_CHANNELS[:9]) if c not in LOOP_CHANNELS]
-_SP = [CLOSED_LOOP_CHANNELS.index(n) for n in ("T_rx_sp", "T_rg1_sp")]
 _SP_LOW = np.array([SETPOINT_RANGES[n].low for n in ("T_rx_sp", "T_rg1_sp")])
 _SP_HIGH = np.array([SETPOINT_RANGES[n].high for n in ("T_rx_sp", "T_rg1_sp")])
 #: training episodes of the soft sensor (never a test or validation seed)
@@ -99,8 +98,7 @@ class SoftSensor:
             for k in range(n_steps):
                 if k % 200 == 0:
                     target = rng.uniform(lo, hi)
-                program = np.asarray(obs, dtype=np.float64)[_SP] - move
-                action = np.clip((target - program) / SETPOINT_ACTION_SCALE, -1.0, 1.0)
+                action = setpoint_action(obs, move, target)
                 move = action * SETPOINT_ACTION_SCALE
                 obs, _, terminated, truncated, info = env.step(action)
                 rows.append(np.asarray(obs, dtype=np.float64)[SOFT_SENSOR_INPUTS])
