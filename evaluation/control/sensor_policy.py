@@ -169,6 +169,8 @@ class SensorCorrectingSupervisor:
     _held: np.ndarray = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
+        if not isinstance(self.hold_frozen, (bool, np.bool_)):
+            raise ValueError(f"hold_frozen={self.hold_frozen!r}: allowed: True or False")
         if self.healthy is None:
             self.healthy = best_setpoints().setpoints
         if self.soft_sensor is None:

@@ -186,6 +186,13 @@ def test_sensor_policy_refuses_a_short_window():
         )
 
 
+def test_sensor_policy_refuses_a_hold_that_is_not_a_bool():
+    with pytest.raises(ValueError, match=r"hold_frozen='no': allowed: True or False"):
+        SensorCorrectingSupervisor(
+            healthy=np.zeros(2), hold_frozen="no", soft_sensor=_flat_sensor((0.0, 0.0))
+        )
+
+
 def test_soft_sensor_tracks_the_true_temperatures():
     sensor = SoftSensor.fit(seeds=[1000], n_steps=1500)
     env = gym.make("FCC-control-v0", scenario="nominal")
